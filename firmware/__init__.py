@@ -1,0 +1,1 @@
+"""Firmware of the ankle-foot prosthesis: runs against hal interfaces only."""

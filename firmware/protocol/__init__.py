@@ -1,0 +1,1 @@
+"""Wire codecs shared by firmware, device models and host tools (stdlib + crcmod only)."""

@@ -1,0 +1,1 @@
+"""Hardware abstraction layer: peripheral interfaces and their backends."""

@@ -1,0 +1,1 @@
+"""Host-side tools: the `pafp` command line."""

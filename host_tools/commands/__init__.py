@@ -1,0 +1,1 @@
+"""One module per `pafp` subcommand, each with `register(subparsers)`."""

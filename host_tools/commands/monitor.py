@@ -1,0 +1,19 @@
+"""`pafp monitor`: decode a live telemetry stream (not implemented yet: issue 6)."""
+
+from __future__ import annotations
+
+import argparse
+
+from host_tools.commands.unavailable import not_yet
+
+HELP = "decode a live telemetry stream [not implemented yet]"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Accept any arguments until the real command lands."""
+    parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Refuse to run, naming the issue that will provide this command."""
+    return not_yet("monitor", "issue 6")

@@ -1,0 +1,1 @@
+"""The kernel: clocks, cooperative fixed-priority scheduler, trace, statistics, analysis."""
