@@ -1,0 +1,266 @@
+"""BNO08x UART-RVC frames: codec for one 19-byte frame and a streaming, resynchronising decoder.
+
+Wire format (BNO080 datasheet 1000-3927 §1.3.5.2; see shared PROTOCOLS.md D.2): ``AA AA`` header,
+index (uint8), yaw/pitch/roll (int16 little-endian, 0.01 degree), x/y/z acceleration (int16 LE,
+milli-g), motion intent (byte 15), motion request (byte 16), reserved (byte 17, sent as 0) and a
+checksum = sum of bytes 2..17 mod 256. 115200 baud 8N1, 100 Hz, output only.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+from dataclasses import dataclass
+from typing import NamedTuple
+
+logger = logging.getLogger(__name__)
+
+RVC_HEADER: bytes = b"\xaa\xaa"
+RVC_FRAME_LEN: int = 19
+RVC_BAUD: int = 115200
+RVC_RATE_HZ: int = 100
+MG_TO_MPS2: float = 0.00980665  # 1 milli-g in m/s^2 (standard gravity 9.80665 m/s^2 / 1000)
+CENTIDEG_TO_RAD: float = math.pi / 18000.0  # one LSB of yaw/pitch/roll (0.01 degree) in radians
+BANNER_START: int = 0x25  # '%': every boot banner line of the BNO08x starts with it (datasheet §5.1)
+MAX_BANNER_LINE: int = 128  # longest banner line accepted before the '%' is treated as junk
+
+_INT16_MIN, _INT16_MAX = -32768, 32767
+_SNAP_LSB = 1e-6  # a scaled value this close to an integer is that integer (float round-off, not data)
+_BODY = struct.Struct("<B6hBBB")  # bytes 2..17: index, yaw, pitch, roll, ax, ay, az, MI, MR, reserved
+_PRINTABLE = frozenset(range(0x20, 0x7F)) | {0x09}
+_LINE_END = frozenset({0x0A, 0x0D})
+
+
+class RvcRaw(NamedTuple):
+    """One RVC frame in wire units: angles in 0.01 degree, accelerations in milli-g."""
+
+    index: int
+    yaw_cdeg: int
+    pitch_cdeg: int
+    roll_cdeg: int
+    accel_x_mg: int
+    accel_y_mg: int
+    accel_z_mg: int
+    motion_intent: int = 0
+    motion_request: int = 0
+
+
+def rvc_checksum(body: bytes) -> int:
+    """Checksum of an RVC frame: the sum of bytes 2..17 (the 16 bytes after the header) mod 256."""
+    return sum(body) & 0xFF
+
+
+def pack_raw(raw: RvcRaw) -> bytes:
+    """Build the 19 wire bytes from wire-unit values; ValueError names any value out of its range."""
+    for name in ("index", "motion_intent", "motion_request"):
+        value = getattr(raw, name)
+        if not 0 <= value <= 0xFF:
+            raise ValueError(f"{name}={value} is out of range: uint8 allows 0..255")
+    for name in RvcRaw._fields[1:7]:
+        value = getattr(raw, name)
+        if not _INT16_MIN <= value <= _INT16_MAX:
+            raise ValueError(f"{name}={value} is out of range: int16 allows {_INT16_MIN}..{_INT16_MAX}")
+    body = _BODY.pack(*raw, 0)
+    return RVC_HEADER + body + bytes((rvc_checksum(body),))
+
+
+def unpack_raw(frame: bytes) -> RvcRaw:
+    """Parse 19 wire bytes into wire-unit values; ValueError on a bad length, header or checksum."""
+    if len(frame) != RVC_FRAME_LEN:
+        raise ValueError(f"RVC frame length {len(frame)} is invalid: must be exactly {RVC_FRAME_LEN} bytes")
+    if frame[:2] != RVC_HEADER:
+        raise ValueError(f"RVC header {frame[:2].hex(' ')} is invalid: must be aa aa")
+    body = frame[2:18]
+    expected = rvc_checksum(body)
+    if frame[18] != expected:
+        raise ValueError(f"RVC checksum 0x{frame[18]:02x} is wrong: bytes 2..17 sum to 0x{expected:02x}")
+    *values, _reserved = _BODY.unpack(body)
+    return RvcRaw(*values)
+
+
+def _to_lsb(name: str, value_si: float, lsb_si: float, unit: str) -> int:
+    """Scale an SI value to integer LSBs, truncating toward zero; ValueError if it does not fit int16."""
+    if not math.isfinite(value_si):
+        raise ValueError(f"{name}={value_si} is not a finite number")
+    scaled = value_si / lsb_si
+    nearest = round(scaled)
+    lsb = nearest if abs(scaled - nearest) <= _SNAP_LSB else math.trunc(scaled)
+    if not _INT16_MIN <= lsb <= _INT16_MAX:
+        raise ValueError(
+            f"{name}={value_si} is out of range: int16 wire field allows "
+            f"{_INT16_MIN * lsb_si:.6g}..{_INT16_MAX * lsb_si:.6g} {unit}"
+        )
+    return lsb
+
+
+@dataclass(frozen=True)
+class RvcFrame:
+    """One UART-RVC report in SI units (angles in rad, accelerations in m/s^2, gravity included)."""
+
+    index: int
+    yaw_rad: float
+    pitch_rad: float
+    roll_rad: float
+    accel_x_mps2: float
+    accel_y_mps2: float
+    accel_z_mps2: float
+    motion_intent: int = 0
+    motion_request: int = 0
+
+    @classmethod
+    def from_raw(cls, raw: RvcRaw) -> RvcFrame:
+        """Convert wire units to SI (exactly invertible by to_raw)."""
+        return cls(
+            index=raw.index,
+            yaw_rad=raw.yaw_cdeg * CENTIDEG_TO_RAD,
+            pitch_rad=raw.pitch_cdeg * CENTIDEG_TO_RAD,
+            roll_rad=raw.roll_cdeg * CENTIDEG_TO_RAD,
+            accel_x_mps2=raw.accel_x_mg * MG_TO_MPS2,
+            accel_y_mps2=raw.accel_y_mg * MG_TO_MPS2,
+            accel_z_mps2=raw.accel_z_mg * MG_TO_MPS2,
+            motion_intent=raw.motion_intent,
+            motion_request=raw.motion_request,
+        )
+
+    def to_raw(self) -> RvcRaw:
+        """Convert to wire units, truncating toward zero; ValueError names a value that does not fit."""
+        return RvcRaw(
+            index=self.index,
+            yaw_cdeg=_to_lsb("yaw_rad", self.yaw_rad, CENTIDEG_TO_RAD, "rad"),
+            pitch_cdeg=_to_lsb("pitch_rad", self.pitch_rad, CENTIDEG_TO_RAD, "rad"),
+            roll_cdeg=_to_lsb("roll_rad", self.roll_rad, CENTIDEG_TO_RAD, "rad"),
+            accel_x_mg=_to_lsb("accel_x_mps2", self.accel_x_mps2, MG_TO_MPS2, "m/s^2"),
+            accel_y_mg=_to_lsb("accel_y_mps2", self.accel_y_mps2, MG_TO_MPS2, "m/s^2"),
+            accel_z_mg=_to_lsb("accel_z_mps2", self.accel_z_mps2, MG_TO_MPS2, "m/s^2"),
+            motion_intent=self.motion_intent,
+            motion_request=self.motion_request,
+        )
+
+    def encode(self) -> bytes:
+        """Encode as the 19 wire bytes (header, fields, reserved 0, checksum).
+
+        >>> RvcFrame(42, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0).encode().hex(" ")
+        'aa aa 2a 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 2a'
+        """
+        return pack_raw(self.to_raw())
+
+    @classmethod
+    def from_bytes(cls, frame: bytes) -> RvcFrame:
+        """Decode exactly one 19-byte frame; ValueError on a bad length, header or checksum."""
+        return cls.from_raw(unpack_raw(frame))
+
+
+def from_bytes(frame: bytes) -> RvcFrame:
+    """Decode exactly one 19-byte frame (same as RvcFrame.from_bytes)."""
+    return RvcFrame.from_bytes(frame)
+
+
+@dataclass
+class RvcStats:
+    """Counters of an RvcDecoder: each input byte is in a frame, banner_bytes, dropped_bytes or pending."""
+
+    frames: int = 0
+    bytes_in: int = 0
+    dropped_bytes: int = 0
+    checksum_errors: int = 0
+    banner_bytes: int = 0
+    lost_frames: int = 0
+
+
+class RvcDecoder:
+    """Streaming UART-RVC decoder: sliding-window resync, banner skipping, bounded buffer, never raises."""
+
+    def __init__(self) -> None:
+        """Start with empty counters and an empty buffer."""
+        self.stats = RvcStats()
+        self._buf = bytearray()
+        self._last_index: int | None = None
+        self._after_banner = False
+
+    def feed(self, data: bytes) -> list[RvcFrame]:
+        """Consume bytes and return the frames they complete (the buffer never exceeds MAX_BANNER_LINE)."""
+        self.stats.bytes_in += len(data)
+        buf = self._buf
+        buf += data
+        frames: list[RvcFrame] = []
+        i, n = 0, len(buf)
+        while i < n:
+            byte = buf[i]
+            if byte == 0xAA:
+                if n - i < RVC_FRAME_LEN:
+                    if n - i == 1 or buf[i + 1] == 0xAA:
+                        break  # maybe the start of a frame: wait for the rest
+                elif buf[i + 1] == 0xAA:
+                    if rvc_checksum(buf[i + 2 : i + 18]) == buf[i + 18]:
+                        frames.append(self._accept(bytes(buf[i : i + RVC_FRAME_LEN])))
+                        i += RVC_FRAME_LEN
+                        continue
+                    self.stats.checksum_errors += 1
+                self._drop(1)  # slide the window by one byte: 0xAA may also be a data byte
+                i += 1
+            elif byte == BANNER_START or (self._after_banner and byte in _LINE_END):
+                line_len = self._banner_line_len(buf, i, n)
+                if line_len is None:
+                    break  # a banner line still arriving
+                if line_len == 0:
+                    self._drop(1)
+                    i += 1
+                else:
+                    self.stats.banner_bytes += line_len
+                    self._after_banner = True
+                    i += line_len
+            else:
+                nxt = self._next_candidate(buf, i + 1, n)
+                self._drop(nxt - i)
+                i = nxt
+        del buf[:i]
+        return frames
+
+    def reset(self) -> None:
+        """Forget buffered bytes and the last index (counters are kept)."""
+        self._buf.clear()
+        self._last_index = None
+        self._after_banner = False
+
+    def _accept(self, frame: bytes) -> RvcFrame:
+        """Count a good frame, its index gap, and convert it."""
+        self._after_banner = False
+        msg = RvcFrame.from_raw(unpack_raw(frame))
+        if self._last_index is not None:
+            gap = (msg.index - self._last_index - 1) % 256
+            if gap:
+                logger.debug("RVC index jumped %d -> %d: %d frames lost", self._last_index, msg.index, gap)
+            self.stats.lost_frames += gap
+        self._last_index = msg.index
+        self.stats.frames += 1
+        return msg
+
+    def _drop(self, count: int) -> None:
+        """Count junk bytes."""
+        self._after_banner = False
+        self.stats.dropped_bytes += count
+
+    def _banner_line_len(self, buf: bytearray, i: int, n: int) -> int | None:
+        """Length of the banner line (or line-end run) at i; 0 if it is not one, None if incomplete."""
+        if buf[i] in _LINE_END:
+            j = i
+            while j < n and buf[j] in _LINE_END:
+                j += 1
+            return j - i
+        end = min(n, i + MAX_BANNER_LINE)
+        for j in range(i + 1, end):
+            b = buf[j]
+            if b in _LINE_END:
+                return j + 1 - i
+            if b not in _PRINTABLE:
+                return 0
+        return None if end == n and n - i < MAX_BANNER_LINE else 0
+
+    @staticmethod
+    def _next_candidate(buf: bytearray, start: int, n: int) -> int:
+        """Index of the next byte at or after start that could begin a frame or a banner line."""
+        a = buf.find(0xAA, start)
+        p = buf.find(BANNER_START, start)
+        hits = [k for k in (a, p) if k >= 0]
+        return min(hits) if hits else n
