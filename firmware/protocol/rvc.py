@@ -81,17 +81,16 @@ def unpack_raw(frame: bytes) -> RvcRaw:
 
 def _to_lsb(name: str, value_si: float, lsb_si: float, unit: str) -> int:
     """Scale an SI value to integer LSBs, truncating toward zero; ValueError if it does not fit int16."""
-    if not math.isfinite(value_si):
-        raise ValueError(f"{name}={value_si} is not a finite number")
     scaled = value_si / lsb_si
-    nearest = round(scaled)
-    lsb = nearest if abs(scaled - nearest) <= _SNAP_LSB else math.trunc(scaled)
-    if not _INT16_MIN <= lsb <= _INT16_MAX:
-        raise ValueError(
-            f"{name}={value_si} is out of range: int16 wire field allows "
-            f"{_INT16_MIN * lsb_si:.6g}..{_INT16_MAX * lsb_si:.6g} {unit}"
-        )
-    return lsb
+    if math.isfinite(scaled):
+        nearest = round(scaled)
+        lsb = nearest if abs(scaled - nearest) <= _SNAP_LSB else math.trunc(scaled)
+        if _INT16_MIN <= lsb <= _INT16_MAX:
+            return lsb
+    raise ValueError(
+        f"{name}={value_si} is out of range: the int16 wire field allows "
+        f"{_INT16_MIN * lsb_si:.6g}..{_INT16_MAX * lsb_si:.6g} {unit}"
+    )
 
 
 @dataclass(frozen=True)
@@ -217,8 +216,14 @@ class RvcDecoder:
         del buf[:i]
         return frames
 
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes held back waiting for the rest of a frame or banner line (always < MAX_BANNER_LINE)."""
+        return len(self._buf)
+
     def reset(self) -> None:
-        """Forget buffered bytes and the last index (counters are kept)."""
+        """Drop buffered bytes (counted in dropped_bytes) and forget the last index."""
+        self.stats.dropped_bytes += len(self._buf)
         self._buf.clear()
         self._last_index = None
         self._after_banner = False
