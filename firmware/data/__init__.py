@@ -1,0 +1,1 @@
+"""Data packaged with the firmware: the normative ankle-angle curve used as the gait reference."""
