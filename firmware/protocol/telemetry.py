@@ -1,0 +1,359 @@
+"""Telemetry records streamed MCU -> host (921600 baud UART): versioned, extensible, COBS framed, CRC-16.
+
+Frame on the wire: ``COBS(payload) 00``; payload = ``version(u8) field_count(u8) fields... crc16``,
+fields little-endian in the fixed order of RECORD_SPECS, CRC-16/CCITT-FALSE (poly 0x1021, init
+0xFFFF) over version..last field, stored little-endian. Byte-by-byte description: docs/telemetry.md.
+A writer may append fields (count > known): readers ignore them. A reader that knows more fields
+than a record carries fills the missing ones with their defaults. Version 1 records always carry
+at least the BASE_FIELD_COUNT base fields.
+"""
+
+from __future__ import annotations
+
+import binascii
+import logging
+import math
+import struct
+from collections.abc import Sequence
+from dataclasses import MISSING, dataclass, field, fields
+from enum import IntEnum
+from typing import NamedTuple
+
+from firmware.protocol.cobs import cobs_decode, cobs_encode
+
+logger = logging.getLogger(__name__)
+
+TELEMETRY_VERSION: int = 1
+SUPPORTED_VERSIONS: frozenset[int] = frozenset({TELEMETRY_VERSION})
+TELEMETRY_BAUD: int = 921600
+MAX_PAYLOAD_LEN: int = 253  # keeps a COBS frame at <= 254 bytes + delimiter
+MAX_ENCODED_LEN: int = MAX_PAYLOAD_LEN + 1
+_HEADER = struct.Struct("<BB")
+_CRC = struct.Struct("<H")
+_INT_RANGES = {"B": (0, 0xFF, "uint8"), "I": (0, 0xFFFF_FFFF, "uint32"), "Q": (0, 2**64 - 1, "uint64")}
+_SEQ_MOD = 2**32
+_F32_MAX = 3.4028234663852886e38
+
+
+class SupervisorState(IntEnum):
+    """State of the safety supervisor."""
+
+    INIT = 0
+    RUN = 1
+    SAFE = 2
+
+
+class FaultReason(IntEnum):
+    """Why the supervisor entered (or stays in) the safe state; NONE while running."""
+
+    NONE = 0
+    ANGLE_LIMIT = 1
+    CURRENT_LIMIT = 2
+    MOTOR_TIMEOUT = 3
+    IMU_TIMEOUT = 4
+    SENSOR_DISAGREEMENT = 5
+    MOTOR_FAULT = 6
+    DEADLINE_MISSES = 7
+    ESTOP = 8
+    WATCHDOG = 9
+    TASK_OVERRUN = 10
+    LINK_LOST = 11
+
+
+def _wire(fmt: str, default: object = MISSING) -> object:
+    """Dataclass field carrying its struct format character (the wire type)."""
+    return field(default=default, metadata={"fmt": fmt})
+
+
+@dataclass(frozen=True)
+class TelemetryRecord:
+    """One telemetry sample (version 1 fields, SI units; floats travel as float32)."""
+
+    seq: int = _wire("I")  # type: ignore[assignment]
+    time_cycles: int = _wire("Q")  # type: ignore[assignment]
+    reference_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
+    encoder_angle_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
+    imu_pitch_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
+    fused_angle_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
+    velocity_rad_s: float = _wire("f", 0.0)  # type: ignore[assignment]
+    current_cmd_a: float = _wire("f", 0.0)  # type: ignore[assignment]
+    current_meas_a: float = _wire("f", 0.0)  # type: ignore[assignment]
+    torque_est_nm: float = _wire("f", 0.0)  # type: ignore[assignment]
+    supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)  # type: ignore[assignment]
+    fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)  # type: ignore[assignment]
+    deadline_misses: int = _wire("I", 0)  # type: ignore[assignment]
+
+
+class FieldSpec(NamedTuple):
+    """One wire field: name, struct format character (little-endian, no padding) and reader default."""
+
+    name: str
+    fmt: str
+    default: int | float = 0
+
+
+RECORD_SPECS: tuple[FieldSpec, ...] = tuple(
+    FieldSpec(f.name, f.metadata["fmt"], 0 if f.default is MISSING else f.default)
+    for f in fields(TelemetryRecord)
+)
+RECORD_FIELDS: tuple[str, ...] = tuple(s.name for s in RECORD_SPECS)
+BASE_FIELD_COUNT: int = len(RECORD_SPECS)  # every version-1 record carries at least these
+_RECORD_BODY = struct.Struct("<" + "".join(s.fmt for s in RECORD_SPECS))
+RECORD_PAYLOAD_LEN: int = _HEADER.size + _RECORD_BODY.size + _CRC.size  # 54 bytes
+RECORD_FRAME_LEN: int = RECORD_PAYLOAD_LEN + 2  # + COBS code byte + 0x00 delimiter = 56 bytes
+
+
+def _deg_name(name: str) -> str:
+    """CSV column holding the degree version of an angle column (``x_rad`` -> ``x_deg``)."""
+    return name.replace("_rad", "_deg", 1)
+
+
+_ANGLE_FIELDS = ("reference_rad", "encoder_angle_rad", "imu_pitch_rad", "fused_angle_rad", "velocity_rad_s")
+RECORD_COLUMNS: tuple[str, ...] = tuple(
+    col
+    for name in RECORD_FIELDS
+    for col in (
+        (name, _deg_name(name)) if name in _ANGLE_FIELDS
+        else (name, name + "_name") if name in ("supervisor_state", "fault_reason")
+        else (name,)
+    )
+)
+
+
+class FrameError(ValueError):
+    """A telemetry frame that cannot be decoded (bad COBS, length or field count)."""
+
+
+class CrcError(FrameError):
+    """A telemetry frame whose CRC-16 does not match its contents."""
+
+
+class UnknownVersionError(FrameError):
+    """A telemetry frame with a valid CRC but a version this reader does not know."""
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
+
+    >>> hex(crc16(b"123456789"))
+    '0x29b1'
+    """
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
+def _explain_pack_error(values: Sequence[int | float], specs: Sequence[FieldSpec]) -> ValueError:
+    """Build the ValueError naming the first value its wire type cannot hold."""
+    for spec, value in zip(specs, values, strict=True):
+        if spec.fmt == "f":
+            try:
+                struct.pack("<f", value)
+            except (struct.error, OverflowError, TypeError):
+                return ValueError(f"{spec.name}={value!r} is out of range: float32 allows |x| <= {_F32_MAX}")
+        else:
+            lo, hi, kind = _INT_RANGES[spec.fmt]
+            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+                return ValueError(f"{spec.name}={value!r} is out of range: {kind} allows integers {lo}..{hi}")
+    return ValueError(f"cannot pack {list(values)!r} as {[s.fmt for s in specs]}")
+
+
+def encode_payload(
+    values: Sequence[int | float], specs: Sequence[FieldSpec] = RECORD_SPECS, version: int = TELEMETRY_VERSION
+) -> bytes:
+    """Build an unframed payload (version, count, fields, CRC); ValueError names a value out of range."""
+    if len(values) != len(specs) or not 0 < len(specs) <= 255:
+        raise ValueError(f"{len(values)} values for {len(specs)} fields: need one per field, 1..255 fields")
+    if not 0 <= version <= 255:
+        raise ValueError(f"version={version} is out of range: uint8 allows 0..255")
+    body_fmt = "<" + "".join(s.fmt for s in specs)
+    try:
+        body = struct.pack(body_fmt, *values)
+    except (struct.error, OverflowError, TypeError):
+        raise _explain_pack_error(values, specs) from None
+    data = _HEADER.pack(version, len(specs)) + body
+    if len(data) + _CRC.size > MAX_PAYLOAD_LEN:
+        raise ValueError(f"payload of {len(data) + _CRC.size} bytes is too long: at most {MAX_PAYLOAD_LEN}")
+    return data + _CRC.pack(crc16(data))
+
+
+def frame_payload(payload: bytes) -> bytes:
+    """Frame a payload for the wire: COBS-encode it and append the 0x00 delimiter."""
+    return cobs_encode(payload) + b"\x00"
+
+
+def encode_record(rec: TelemetryRecord) -> bytes:
+    """Encode a record as its full wire frame (RECORD_FRAME_LEN bytes, 0x00-terminated)."""
+    values = [getattr(rec, name) for name in RECORD_FIELDS]
+    try:
+        body = _RECORD_BODY.pack(*values)
+    except (struct.error, OverflowError, TypeError):
+        raise _explain_pack_error(values, RECORD_SPECS) from None
+    data = _HEADER.pack(TELEMETRY_VERSION, BASE_FIELD_COUNT) + body
+    return frame_payload(data + _CRC.pack(crc16(data)))
+
+
+def decode_payload(payload: bytes, specs: Sequence[FieldSpec] = RECORD_SPECS) -> dict[str, int | float]:
+    """Decode an unframed payload into {name: value} for `specs`; FrameError subclasses on bad input."""
+    if len(payload) < _HEADER.size + _CRC.size:
+        raise FrameError(f"payload of {len(payload)} bytes is too short: at least {_HEADER.size + _CRC.size}")
+    data, (crc,) = payload[:-2], _CRC.unpack(payload[-2:])
+    if crc16(data) != crc:
+        raise CrcError(f"CRC 0x{crc:04x} does not match the contents (0x{crc16(data):04x})")
+    version, count = _HEADER.unpack_from(data)
+    if version not in SUPPORTED_VERSIONS:
+        raise UnknownVersionError(f"version {version} is unknown: known {sorted(SUPPORTED_VERSIONS)}")
+    if count < BASE_FIELD_COUNT:
+        raise FrameError(f"field count {count} is invalid: version {version} has at least {BASE_FIELD_COUNT}")
+    known = min(count, len(specs))
+    fmt = "<" + "".join(s.fmt for s in specs[:known])
+    size, body_len = struct.calcsize(fmt), len(data) - _HEADER.size
+    extra = count - known  # fields of a newer writer, each at least one byte
+    fits = body_len == size if extra == 0 else body_len >= size + extra
+    if not fits:
+        raise FrameError(f"{body_len} field bytes do not fit {count} fields ({size} for the first {known})")
+    values = struct.unpack_from(fmt, data, _HEADER.size)
+    out = {s.name: v for s, v in zip(specs, values, strict=False)}
+    out.update({s.name: s.default for s in specs[known:]})
+    return out
+
+
+def _enum_or_int(enum: type[IntEnum], value: int) -> IntEnum | int:
+    """The enum member for a known code, else the plain int (a newer writer's code)."""
+    try:
+        return enum(value)
+    except ValueError:
+        return value
+
+
+def record_from_values(values: dict[str, int | float]) -> TelemetryRecord:
+    """Build a record from decoded field values (unknown enum codes stay plain ints)."""
+    kw = {name: values[name] for name in RECORD_FIELDS}
+    kw["supervisor_state"] = _enum_or_int(SupervisorState, int(kw["supervisor_state"]))
+    kw["fault_reason"] = _enum_or_int(FaultReason, int(kw["fault_reason"]))
+    return TelemetryRecord(**kw)  # type: ignore[arg-type]
+
+
+def decode_frame(frame: bytes) -> TelemetryRecord:
+    """Decode one frame (COBS bytes, with or without the trailing 0x00); FrameError on bad input."""
+    encoded = frame[:-1] if frame.endswith(b"\x00") else frame
+    try:
+        payload = cobs_decode(encoded)
+    except ValueError as exc:
+        raise FrameError(str(exc)) from None
+    return record_from_values(decode_payload(payload))
+
+
+def record_to_row(rec: TelemetryRecord) -> dict[str, int | float | str]:
+    """One CSV row (keys = RECORD_COLUMNS): SI values, plus ``*_deg`` columns and enum names."""
+    row: dict[str, int | float | str] = {}
+    for name in RECORD_FIELDS:
+        value = getattr(rec, name)
+        if name in _ANGLE_FIELDS:
+            row[name] = value
+            row[_deg_name(name)] = math.degrees(value)
+        elif isinstance(value, IntEnum):
+            row[name], row[name + "_name"] = int(value), value.name
+        elif name in ("supervisor_state", "fault_reason"):
+            row[name], row[name + "_name"] = value, f"UNKNOWN_{value}"
+        else:
+            row[name] = value
+    return row
+
+
+@dataclass
+class TelemetryStats:
+    """Counters of a TelemetryDecoder: each input byte is in a record, dropped_bytes or pending."""
+
+    records: int = 0
+    bytes_in: int = 0
+    dropped_bytes: int = 0
+    crc_errors: int = 0
+    bad_frames: int = 0
+    lost_records: int = 0
+    unknown_versions: int = 0
+    sequence_resets: int = 0
+
+
+class TelemetryDecoder:
+    """Streaming decoder: splits on 0x00, decodes each frame, counts every failure; never raises."""
+
+    def __init__(self) -> None:
+        """Start with empty counters and an empty buffer."""
+        self.stats = TelemetryStats()
+        self._buf = bytearray()
+        self._discarding = False  # inside an overlong frame: drop until the next delimiter
+        self._last_seq: int | None = None
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes of an unfinished frame held back (never more than MAX_ENCODED_LEN)."""
+        return len(self._buf)
+
+    def feed(self, data: bytes) -> list[TelemetryRecord]:
+        """Consume bytes and return the records whose frames they complete."""
+        self.stats.bytes_in += len(data)
+        records: list[TelemetryRecord] = []
+        start, n = 0, len(data)
+        while start <= n:
+            end = data.find(b"\x00", start)
+            piece = data[start:] if end < 0 else data[start:end]
+            if self._discarding:
+                self.stats.dropped_bytes += len(piece)
+            elif len(self._buf) + len(piece) > MAX_ENCODED_LEN:
+                logger.debug("telemetry frame longer than %d bytes: dropping it", MAX_ENCODED_LEN)
+                self.stats.bad_frames += 1
+                self.stats.dropped_bytes += len(self._buf) + len(piece)
+                self._buf.clear()
+                self._discarding = True
+            else:
+                self._buf += piece
+            if end < 0:
+                break
+            if self._discarding:
+                self.stats.dropped_bytes += 1
+                self._discarding = False
+            else:
+                rec = self._decode(bytes(self._buf))
+                self._buf.clear()
+                if rec is not None:
+                    records.append(rec)
+            start = end + 1
+        return records
+
+    def reset(self) -> None:
+        """Drop buffered bytes (counted in dropped_bytes) and forget the last sequence number."""
+        self.stats.dropped_bytes += len(self._buf)
+        self._buf.clear()
+        self._discarding = False
+        self._last_seq = None
+
+    def _decode(self, encoded: bytes) -> TelemetryRecord | None:
+        """Decode one delimited frame (its delimiter included in the byte counts) or count why not."""
+        if not encoded:
+            self.stats.dropped_bytes += 1  # idle delimiter
+            return None
+        try:
+            rec = decode_frame(encoded)
+        except UnknownVersionError:
+            self.stats.unknown_versions += 1
+        except CrcError:
+            self.stats.crc_errors += 1
+        except FrameError as exc:
+            logger.debug("bad telemetry frame: %s", exc)
+            self.stats.bad_frames += 1
+        else:
+            self._count_sequence(rec.seq)
+            self.stats.records += 1
+            return rec
+        self.stats.dropped_bytes += len(encoded) + 1
+        return None
+
+    def _count_sequence(self, seq: int) -> None:
+        """Add sequence gaps to lost_records; a step backwards (restart, repeat) is a reset."""
+        if self._last_seq is not None:
+            gap = (seq - self._last_seq - 1) % _SEQ_MOD
+            if gap < _SEQ_MOD // 2:
+                self.stats.lost_records += gap
+            else:
+                logger.debug("telemetry seq went back %d -> %d", self._last_seq, seq)
+                self.stats.sequence_resets += 1
+        self._last_seq = seq
