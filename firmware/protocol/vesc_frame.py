@@ -1,0 +1,229 @@
+"""VESC / CubeMars UART framing: CRC-16/XMODEM, frame encoder and a resynchronising streaming decoder.
+
+Frame layout (PROTOCOLS.md A.1, vedderb/bldc ``comm/packet.c``)::
+
+    short (payload 1..255):    02 | LEN            | PAYLOAD | CRC_HI CRC_LO | 03
+    long  (payload 256..512):  03 | LEN_HI LEN_LO  | PAYLOAD | CRC_HI CRC_LO | 03
+
+The CRC is CRC-16/XMODEM (poly 0x1021, init 0, no reflection) over the payload only, high byte first.
+This module knows nothing about message meanings: :class:`FrameDecoder` hands each CRC-valid payload to a
+per-command-id decode function given by the caller (see :mod:`firmware.protocol.vesc`).
+"""
+
+from __future__ import annotations
+
+import binascii
+import logging
+import re
+import struct
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
+from typing import Generic, TypeVar
+
+import crcmod
+
+__all__ = [
+    "END_BYTE",
+    "MAX_FRAME_LEN",
+    "PACKET_MAX_PL_LEN",
+    "START_LONG",
+    "START_SHORT",
+    "DecoderStats",
+    "FrameDecoder",
+    "ShortPayloadError",
+    "crc16",
+    "crc16_reference",
+    "encode_frame",
+]
+
+_log = logging.getLogger(__name__)
+
+START_SHORT = 0x02
+"""Start byte of a frame with a one-byte length (payload 1..255 bytes)."""
+START_LONG = 0x03
+"""Start byte of a frame with a two-byte length (payload 256..512 bytes)."""
+END_BYTE = 0x03
+"""Last byte of every frame."""
+PACKET_MAX_PL_LEN = 512
+"""Largest payload VESC >= 3.67 accepts (``comm/packet.h``)."""
+MAX_FRAME_LEN = PACKET_MAX_PL_LEN + 6
+"""Largest frame on the wire: long header (3) + payload + CRC (2) + end byte (1)."""
+
+crc16_reference: Callable[[bytes], int] = crcmod.mkCrcFun(0x11021, initCrc=0, rev=False, xorOut=0)
+"""CRC-16/XMODEM as defined by crcmod: the definition the fast :func:`crc16` is tested against."""
+
+_crc_hqx = binascii.crc_hqx
+_SHORT_HEAD = struct.Struct(">BB")
+_LONG_HEAD = struct.Struct(">BH")
+_TAIL = struct.Struct(">HB")
+_START_RE = re.compile(b"[\x02\x03]")
+
+
+def crc16(data: bytes) -> int:
+    """Return the CRC-16/XMODEM of ``data`` (VESC ``crc16()``; equal to :data:`crc16_reference`).
+
+    >>> hex(crc16(b"123456789"))
+    '0x31c3'
+    """
+    return _crc_hqx(data, 0)
+
+
+def encode_frame(payload: bytes) -> bytes:
+    """Wrap ``payload`` (command id first) in a complete frame: start, length, payload, CRC, end byte.
+
+    >>> encode_frame(bytes([4])).hex(" ")
+    '02 01 04 40 84 03'
+    """
+    n = len(payload)
+    if n <= 255:
+        if n == 0:
+            raise ValueError(f"payload length 0 is outside the allowed range [1, {PACKET_MAX_PL_LEN}]")
+        head = _SHORT_HEAD.pack(START_SHORT, n)
+    elif n <= PACKET_MAX_PL_LEN:
+        head = _LONG_HEAD.pack(START_LONG, n)
+    else:
+        raise ValueError(f"payload length {n} is outside the allowed range [1, {PACKET_MAX_PL_LEN}]")
+    payload = bytes(payload)
+    return head + payload + _TAIL.pack(_crc_hqx(payload, 0), END_BYTE)
+
+
+class ShortPayloadError(ValueError):
+    """A payload is too short (or malformed) for its command id; the decoder counts and skips it."""
+
+
+@dataclass(slots=True)
+class DecoderStats:
+    """Counters of a :class:`FrameDecoder`; bytes_in == frame bytes + dropped_bytes + buffered."""
+
+    frames: int = 0
+    """CRC-valid frames consumed (including unknown ids and short payloads)."""
+    bytes_in: int = 0
+    """Bytes fed to the decoder."""
+    dropped_bytes: int = 0
+    """Bytes discarded while resynchronising (not part of any CRC-valid frame)."""
+    crc_errors: int = 0
+    """Candidate frames with a correct end byte but a wrong CRC."""
+    bad_end_bytes: int = 0
+    """Candidate frames whose end byte was not 0x03 (checked before the CRC)."""
+    unknown_ids: int = 0
+    """CRC-valid frames with a command id this decoder has no message for (returned as Unknown)."""
+    short_payloads: int = 0
+    """CRC-valid frames whose payload was too short or malformed for their id (skipped)."""
+
+    def as_dict(self) -> dict[str, int]:
+        """Return the counters as a plain dict."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+M = TypeVar("M")
+
+
+class FrameDecoder(Generic[M]):
+    """Streaming VESC frame decoder: feed bytes in any chunking, get decoded messages out; never raises.
+
+    Resynchronisation follows the VESC receiver (PROTOCOLS.md A.1): a 0x02 start with LEN 0, a 0x03 start
+    with LEN < 255 or LEN > 512, a wrong end byte or a wrong CRC each drop ONE byte and the scan restarts at
+    the next offset. A candidate frame that is not complete yet is kept until more bytes arrive (there is no
+    inter-byte timeout, as in VESC >= 5.03), so at most one frame minus one byte, < ``MAX_FRAME_LEN``, is
+    held between calls. The end byte is checked before the CRC (cheaper); a candidate failing both counts as
+    a bad end byte.
+
+    ``table`` maps a command id to a function turning the payload (command byte included) into a message;
+    it may raise :class:`ShortPayloadError`, which is counted and the frame skipped. Ids missing from the
+    table are handed to ``unknown(command_id, data)`` and counted in ``stats.unknown_ids``.
+    """
+
+    def __init__(
+        self,
+        table: Mapping[int, Callable[[bytes], M]],
+        unknown: Callable[[int, bytes], M],
+    ) -> None:
+        """Create a decoder dispatching payloads through ``table`` (see the class docstring)."""
+        self._table: dict[int, Callable[[bytes], M]] = dict(table)
+        self._unknown = unknown
+        self._buf = b""
+        self.stats = DecoderStats()
+
+    @property
+    def buffered(self) -> int:
+        """Number of bytes held back as the start of a possible frame (always < MAX_FRAME_LEN)."""
+        return len(self._buf)
+
+    def reset(self) -> None:
+        """Forget any partially received frame (the dropped bytes are counted); keep the statistics."""
+        self.stats.dropped_bytes += len(self._buf)
+        self._buf = b""
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[M]:
+        """Consume ``data`` and return the messages of every complete valid frame, in stream order."""
+        stats = self.stats
+        stats.bytes_in += len(data)
+        buf = self._buf + bytes(data) if self._buf else bytes(data)
+        n = len(buf)
+        pos = 0
+        out: list[M] = []
+        append = out.append
+        table = self._table
+        crc = _crc_hqx
+        search = _START_RE.search
+        frames = dropped = crc_errors = bad_end = unknown = short = 0
+        while pos < n:
+            b = buf[pos]
+            if b == START_SHORT:
+                if pos + 1 >= n:
+                    break
+                length = buf[pos + 1]
+                if not length:
+                    pos += 1
+                    dropped += 1
+                    continue
+                start = pos + 2
+            elif b == START_LONG:
+                if pos + 2 >= n:
+                    break
+                length = (buf[pos + 1] << 8) | buf[pos + 2]
+                if length < 255 or length > PACKET_MAX_PL_LEN:
+                    pos += 1
+                    dropped += 1
+                    continue
+                start = pos + 3
+            else:
+                match = search(buf, pos)
+                nxt = match.start() if match is not None else n
+                dropped += nxt - pos
+                pos = nxt
+                continue
+            end = start + length
+            if end + 3 > n:
+                break  # incomplete candidate: wait for more bytes
+            if buf[end + 2] != END_BYTE:
+                bad_end += 1
+                dropped += 1
+                pos += 1
+                continue
+            payload = buf[start:end]
+            if crc(payload, 0) != (buf[end] << 8) | buf[end + 1]:
+                crc_errors += 1
+                dropped += 1
+                pos += 1
+                continue
+            pos = end + 3
+            frames += 1
+            decode = table.get(payload[0])
+            if decode is None:
+                unknown += 1
+                append(self._unknown(payload[0], payload[1:]))
+                continue
+            try:
+                append(decode(payload))
+            except ShortPayloadError as exc:
+                short += 1
+                _log.debug("skipped frame: %s", exc)
+        self._buf = buf[pos:] if pos else buf
+        stats.frames += frames
+        stats.dropped_bytes += dropped
+        stats.crc_errors += crc_errors
+        stats.bad_end_bytes += bad_end
+        stats.unknown_ids += unknown
+        stats.short_payloads += short
+        return out
