@@ -1,0 +1,277 @@
+"""The MCU's peripherals as small abstract classes; the firmware is handed a `Board` of them.
+
+In the manner of python-can's ``BusABC``: the checks and bookkeeping shared by every backend
+(argument validation, error counters, the closed state) live here once, and each backend supplies
+a few tiny hooks (``_send``, ``_receive``, ``_rx_count``, ...). The firmware imports this module
+only; it never imports a backend.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from hal.errors import HalError
+
+__all__ = [
+    "Board",
+    "DigitalIn",
+    "DigitalOut",
+    "EncoderTimer",
+    "Uart",
+    "UartErrors",
+    "Watchdog",
+]
+
+_MAX_BAUD = 20_000_000
+
+
+@dataclass
+class UartErrors:
+    """Error counters of one UART since it was opened (a snapshot when read through `Uart.errors`).
+
+    overrun: overrun events (STM32 ORE): a run of consecutive received bytes lost because the
+    receive buffer was full counts once; rx_lost: every received byte lost that way;
+    framing/noise: bytes received with a framing error (FE) or noise flag (NF);
+    tx_dropped: bytes that `Uart.write` refused because the transmit queue was full.
+    """
+
+    overrun: int = 0
+    framing: int = 0
+    noise: int = 0
+    tx_dropped: int = 0
+    rx_lost: int = 0
+
+    def total(self) -> int:
+        """All error events and lost bytes added up (0 means a clean link)."""
+        return self.overrun + self.framing + self.noise + self.tx_dropped + self.rx_lost
+
+
+class Uart(ABC):
+    """A UART as the firmware sees it: non-blocking, bounded transmit queue, receive buffer.
+
+    ``write`` never blocks: it accepts what fits in the transmit queue and refuses (and counts)
+    the rest, so a logger can drop records instead of stalling a control task. ``read`` returns
+    only the bytes that have arrived by now.
+    """
+
+    def __init__(self, baud: int, name: str = "uart") -> None:
+        """Validate the baud rate and set up the shared error counters."""
+        if isinstance(baud, bool) or not isinstance(baud, int) or not 0 < baud <= _MAX_BAUD:
+            raise ValueError(f"baud {baud!r} out of range: an int in 1..{_MAX_BAUD}")
+        self._baud = baud
+        self.name = name
+        self._errors = UartErrors()
+        self._closed = False
+
+    @property
+    def baud(self) -> int:
+        """The configured baud rate in bit/s."""
+        return self._baud
+
+    @property
+    def closed(self) -> bool:
+        """True once `close` has been called."""
+        return self._closed
+
+    @property
+    def errors(self) -> UartErrors:
+        """A snapshot of the error counters, brought up to date first."""
+        if not self._closed:
+            self._refresh_errors()
+        return dataclasses.replace(self._errors)
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        """Queue bytes without blocking; return how many were accepted (the refused rest is counted)."""
+        self._check_open()
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise TypeError(f"write() takes bytes, bytearray or memoryview, not {type(data).__name__}")
+        payload = bytes(data)
+        if not payload:
+            return 0
+        accepted = self._send(payload)
+        if not 0 <= accepted <= len(payload):
+            raise HalError(f"{self.name}: backend accepted {accepted} of {len(payload)} bytes")
+        self._errors.tx_dropped += len(payload) - accepted
+        return accepted
+
+    def tx_free(self) -> int:
+        """Bytes the transmit queue can accept right now."""
+        self._check_open()
+        return self._tx_space()
+
+    def read(self, max_bytes: int = -1) -> bytes:
+        """Return up to max_bytes received bytes (-1: all) that have arrived by now; never blocks."""
+        self._check_open()
+        if isinstance(max_bytes, bool) or not isinstance(max_bytes, int) or max_bytes < -1:
+            raise ValueError(f"max_bytes {max_bytes!r} out of range: -1 (all) or an int >= 0")
+        if max_bytes == 0:
+            return b""
+        return self._receive(max_bytes)
+
+    def in_waiting(self) -> int:
+        """Number of received bytes ready to be read now."""
+        self._check_open()
+        return self._rx_count()
+
+    def close(self) -> None:
+        """Release the port; further use raises HalError. Closing twice is harmless."""
+        if not self._closed:
+            self._closed = True
+            self._close()
+
+    def __enter__(self) -> Uart:
+        """Use the UART as a context manager that closes it on exit."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close on leaving the with-block."""
+        self.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise HalError(f"{self.name}: UART is closed")
+
+    # Backend hooks -------------------------------------------------------------------------
+    @abstractmethod
+    def _send(self, data: bytes) -> int:
+        """Hand non-empty data to the line; return the number of leading bytes accepted."""
+
+    @abstractmethod
+    def _receive(self, max_bytes: int) -> bytes:
+        """Return up to max_bytes (-1: all) received bytes."""
+
+    @abstractmethod
+    def _rx_count(self) -> int:
+        """Number of received bytes ready now."""
+
+    @abstractmethod
+    def _tx_space(self) -> int:
+        """Free space in the transmit queue now."""
+
+    def _refresh_errors(self) -> None:  # noqa: B027 (optional hook)
+        """Bring ``self._errors`` up to date (backends with lazily computed counters override)."""
+
+    def _close(self) -> None:  # noqa: B027 (optional hook)
+        """Release backend resources."""
+
+
+class EncoderTimer(ABC):
+    """A general-purpose timer in quadrature encoder mode (STM32 TIMx with SMS = 011, x4).
+
+    CNT is an unsigned ``bits``-wide register counting 0..ARR and wrapping; the firmware does its
+    own wrap-safe arithmetic, e.g. ``(int16_t)(cnt - prev)``.
+    """
+
+    def __init__(self, bits: int = 16, arr: int | None = None) -> None:
+        """Validate the counter width (16 or 32) and the auto-reload value (default 2**bits - 1)."""
+        if bits not in (16, 32):
+            raise ValueError(f"bits {bits!r} not supported: 16 (TIM1/3/4/8) or 32 (TIM2/5)")
+        top = (1 << bits) - 1
+        if arr is None:
+            arr = top
+        if isinstance(arr, bool) or not isinstance(arr, int) or not 1 <= arr <= top:
+            raise ValueError(f"arr {arr!r} out of range: an int in 1..{top} for a {bits}-bit timer")
+        self._bits = bits
+        self._arr = arr
+
+    @property
+    def bits(self) -> int:
+        """Counter width in bits (16 or 32)."""
+        return self._bits
+
+    @property
+    def arr(self) -> int:
+        """Auto-reload value: CNT counts 0..arr and wraps."""
+        return self._arr
+
+    @abstractmethod
+    def cnt(self) -> int:
+        """The CNT register now, in 0..arr."""
+
+    @abstractmethod
+    def counting_down(self) -> bool:
+        """The DIR bit (TIMx_CR1 bit 4): True if the last count change was downwards."""
+
+    def set_cnt(self, value: int) -> None:
+        """Write the CNT register (``__HAL_TIM_SET_COUNTER``); value in 0..arr."""
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= self._arr:
+            raise ValueError(f"CNT value {value!r} out of range: an int in 0..{self._arr}")
+        self._write_cnt(value)
+
+    @abstractmethod
+    def _write_cnt(self, value: int) -> None:
+        """Backend hook for `set_cnt` with a validated value."""
+
+
+class Watchdog(ABC):
+    """The independent watchdog as the firmware sees it: kick it or the MCU resets."""
+
+    @abstractmethod
+    def kick(self) -> None:
+        """Reload the watchdog counter (IWDG_KR = 0xAAAA)."""
+
+
+class DigitalIn(ABC):
+    """A digital input pin (the e-stop switch)."""
+
+    @abstractmethod
+    def read(self) -> bool:
+        """The pin level now (True = high)."""
+
+
+class DigitalOut(ABC):
+    """A digital output pin (the status LED): shared level bookkeeping, a tiny drive hook."""
+
+    def __init__(self, initial: bool = False) -> None:
+        """Start at the given level."""
+        self._level = bool(initial)
+
+    @property
+    def level(self) -> bool:
+        """The level last written."""
+        return self._level
+
+    def write(self, level: bool) -> None:
+        """Drive the pin to level."""
+        level = bool(level)
+        self._drive(level)
+        self._level = level
+
+    def toggle(self) -> None:
+        """Invert the pin level."""
+        self.write(not self._level)
+
+    @abstractmethod
+    def _drive(self, level: bool) -> None:
+        """Backend hook: put the level on the pin (called before the new level is remembered)."""
+
+
+@dataclass(frozen=True)
+class Board:
+    """Everything the firmware is handed at start-up: its peripherals and the cycle clock."""
+
+    motor_uart: Uart
+    imu_uart: Uart
+    telemetry_uart: Uart
+    encoder: EncoderTimer
+    estop: DigitalIn
+    led: DigitalOut
+    watchdog: Watchdog
+    now_cycles: Callable[[], int]
+    f_cpu_hz: int
+
+    def __post_init__(self) -> None:
+        """Check the clock frequency."""
+        if isinstance(self.f_cpu_hz, bool) or not isinstance(self.f_cpu_hz, int) or self.f_cpu_hz <= 0:
+            raise ValueError(f"f_cpu_hz {self.f_cpu_hz!r} out of range: a positive int")
+
+    def ticks_ms(self) -> int:
+        """Milliseconds since reset, as HAL_GetTick() reports them with a 1 kHz SysTick."""
+        return self.now_cycles() * 1000 // self.f_cpu_hz
+
+    def uarts(self) -> dict[str, Uart]:
+        """The three UARTs by role name (motor, imu, telemetry)."""
+        return {"motor": self.motor_uart, "imu": self.imu_uart, "telemetry": self.telemetry_uart}

@@ -1,0 +1,86 @@
+"""Interrupt sources of the virtual MCU, in the shape the RTOS scheduler counts as interference.
+
+The RTOS (which imports nothing of ours) asks each source ``count_in(t0, t1)``: how many times it
+fires in the half-open cycle window [t0, t1), with non-decreasing t0. This module gives that shape
+a name for type checking and a small base class that validates the windows.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_left
+from collections.abc import Callable, Iterable
+from typing import Protocol, runtime_checkable
+
+__all__ = ["EventTimesInterrupt", "InterruptSource", "InterruptSourceBase"]
+
+_COMPACT_AT = 4096
+
+
+@runtime_checkable
+class InterruptSource(Protocol):
+    """An interrupt: its name, the cycles one service costs, and its firings in a window."""
+
+    name: str
+    cost_cycles: int
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """Number of firings in the cycle window [t0, t1)."""
+        ...
+
+
+class InterruptSourceBase:
+    """Shared checks for interrupt sources: a name, a cost and monotone, well-formed windows."""
+
+    def __init__(self, name: str, cost_cycles: int) -> None:
+        """Validate and keep the name and the per-firing cost in cycles."""
+        if isinstance(cost_cycles, bool) or not isinstance(cost_cycles, int) or cost_cycles < 0:
+            raise ValueError(f"cost_cycles {cost_cycles!r} out of range: an int >= 0")
+        if not name:
+            raise ValueError("an interrupt source needs a non-empty name")
+        self.name = name
+        self.cost_cycles = cost_cycles
+        self._last_t0 = 0
+
+    def _check_window(self, t0: int, t1: int) -> None:
+        if t0 < 0 or t1 < t0:
+            raise ValueError(f"window [{t0}, {t1}) invalid: need 0 <= t0 <= t1")
+        if t0 < self._last_t0:
+            raise ValueError(f"window start {t0} goes back before {self._last_t0}: t0 must not decrease")
+        self._last_t0 = t0
+
+    def __repr__(self) -> str:
+        """Name and cost."""
+        return f"{type(self).__name__}(name={self.name!r}, cost_cycles={self.cost_cycles})"
+
+
+class EventTimesInterrupt(InterruptSourceBase):
+    """Fires once at each recorded event time (e.g. each received byte's stop-bit end).
+
+    Event times are pushed in non-decreasing order by the peripheral; ``before_count`` (if given)
+    is called with t1 first so that the peripheral can bring its world up to t1.
+    """
+
+    def __init__(
+        self, name: str, cost_cycles: int, before_count: Callable[[int], None] | None = None
+    ) -> None:
+        """Start with no recorded events."""
+        super().__init__(name, cost_cycles)
+        self._times: list[int] = []
+        self._lo = 0
+        self._before_count = before_count
+
+    def add_times(self, times: Iterable[int]) -> None:
+        """Record event times (non-decreasing, and not earlier than those already recorded)."""
+        self._times.extend(times)
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """Number of recorded events with t0 <= time < t1."""
+        self._check_window(t0, t1)
+        if self._before_count is not None:
+            self._before_count(t1)
+        lo = bisect_left(self._times, t0, self._lo)
+        if lo >= _COMPACT_AT:
+            del self._times[:lo]
+            lo = 0
+        self._lo = lo
+        return bisect_left(self._times, t1, lo) - lo
