@@ -18,13 +18,18 @@ def cobs_encode(data: bytes) -> bytes:
     '02 11 03 22 33'
     """
     out = bytearray()
-    for segment in bytes(data).split(b"\x00"):
+    segments = bytes(data).split(b"\x00")
+    last = len(segments) - 1
+    for k, segment in enumerate(segments):
+        full_runs = False
         while len(segment) >= _MAX_RUN:
             out.append(0xFF)
             out += segment[:_MAX_RUN]
             segment = segment[_MAX_RUN:]
-        out.append(len(segment) + 1)
-        out += segment
+            full_runs = True
+        if k < last or segment or not full_runs:  # a final 0xFF group needs no empty group after it
+            out.append(len(segment) + 1)
+            out += segment
     return bytes(out)
 
 
