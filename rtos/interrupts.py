@@ -1,0 +1,143 @@
+"""Interrupt sources and the exact interference they add to a running job."""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Iterable, Iterator, Sequence
+from typing import Protocol, runtime_checkable
+
+MAX_FIXED_POINT_STEPS = 1_000_000
+
+
+@runtime_checkable
+class InterruptSource(Protocol):
+    """Anything that fires interrupts: a name, the cycles of one service routine, and a firing count.
+
+    ``count_in(t0, t1)`` returns how many times it fires in [t0, t1). Callers promise non-decreasing
+    ``t0`` across calls, so a lazy source may advance its world to ``t1`` and forget the past.
+    """
+
+    name: str
+    cost_cycles: int
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """Number of firings in [t0, t1)."""
+        ...
+
+
+def _check_cost(name: str, cost: object) -> int:
+    """Return ``cost`` if it is an int >= 0, else raise ValueError naming the source."""
+    if isinstance(cost, bool) or not isinstance(cost, int) or cost < 0:
+        raise ValueError(f"interrupt {name!r}: cost must be an int >= 0 cycles, got {cost!r}")
+    return cost
+
+
+class PeriodicInterrupt:
+    """An interrupt that fires at ``offset + k * period`` for k = 0, 1, ... (e.g. SysTick).
+
+    >>> PeriodicInterrupt("systick", period=1000, cost=80).count_in(0, 2500)
+    3
+    """
+
+    def __init__(self, name: str, period: int, cost: int, offset: int = 0) -> None:
+        """Check and store the firing pattern; ``period`` is also the minimum inter-arrival time."""
+        if isinstance(period, bool) or not isinstance(period, int) or period <= 0:
+            raise ValueError(f"interrupt {name!r}: period must be an int >= 1 cycles, got {period!r}")
+        if isinstance(offset, bool) or not isinstance(offset, int) or offset < 0:
+            raise ValueError(f"interrupt {name!r}: offset must be an int >= 0 cycles, got {offset!r}")
+        self.name = name
+        self.period = period
+        self.cost_cycles = _check_cost(name, cost)
+        self.offset = offset
+
+    def _fired_before(self, t: int) -> int:
+        """Number of firings in [0, t)."""
+        if t <= self.offset:
+            return 0
+        return -((self.offset - t) // self.period)
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """Number of firings in [t0, t1)."""
+        if t1 <= t0:
+            return 0
+        return self._fired_before(t1) - self._fired_before(t0)
+
+    def __repr__(self) -> str:
+        """Show the firing pattern."""
+        return f"PeriodicInterrupt({self.name!r}, period={self.period}, cost={self.cost_cycles}, " \
+            f"offset={self.offset})"
+
+
+class TimestampedInterrupt:
+    """An interrupt that fires at given, sorted cycle times, read lazily from any iterable.
+
+    >>> irq = TimestampedInterrupt("uart_rx", cost=120, times=[10, 20, 20, 35])
+    >>> irq.count_in(0, 20), irq.count_in(20, 100)
+    (1, 3)
+    """
+
+    def __init__(self, name: str, cost: int, times: Iterable[int]) -> None:
+        """Store the source; ``times`` must be non-decreasing."""
+        self.name = name
+        self.cost_cycles = _check_cost(name, cost)
+        self._times: Iterator[int] = iter(times)
+        self._buf: list[int] = []
+        self._lo = 0
+        self._exhausted = False
+
+    def _pull_until(self, t: int) -> None:
+        """Buffer firing times until one >= t is seen or the iterable ends."""
+        buf = self._buf
+        while not self._exhausted and (not buf or buf[-1] < t):
+            try:
+                nxt = next(self._times)
+            except StopIteration:
+                self._exhausted = True
+                return
+            if buf and nxt < buf[-1]:
+                raise ValueError(f"interrupt {self.name!r}: times must be non-decreasing, got {nxt} "
+                                 f"after {buf[-1]}")
+            buf.append(nxt)
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """Number of firings in [t0, t1); ``t0`` must not decrease between calls."""
+        if t1 <= t0:
+            return 0
+        self._pull_until(t1)
+        buf = self._buf
+        lo = bisect.bisect_left(buf, t0, self._lo)
+        if lo > 4096:  # forget the past so memory stays bounded
+            del buf[:lo]
+            lo = 0
+        self._lo = lo
+        return bisect.bisect_left(buf, t1, lo) - lo
+
+
+def solve_finish(start: int, cost: int, sources: Sequence[InterruptSource], counts: list[int]) -> int:
+    """Return the least f with f = start + cost + sum_i cost_i * count_i(start, f), adding counts in place.
+
+    ``counts[i]`` is incremented by the number of firings of ``sources[i]`` inside the job.
+
+    >>> solve_finish(0, 100, [PeriodicInterrupt("t", period=30, cost=10)], [0])
+    150
+    """
+    finish = start + cost
+    n = len(sources)
+    fired = [0] * n
+    for _ in range(MAX_FIXED_POINT_STEPS):
+        extra = 0
+        for j in range(n):
+            src = sources[j]
+            k = src.count_in(start, finish)
+            fired[j] = k
+            extra += k * src.cost_cycles
+        nxt = start + cost + extra
+        if nxt == finish:
+            for j in range(n):
+                counts[j] += fired[j]
+            return finish
+        finish = nxt
+    raise RuntimeError(
+        f"interrupt load never lets the job started at cycle {start} finish: the sources "
+        f"{[s.name for s in sources]} saturate the CPU"
+    )

@@ -1,0 +1,316 @@
+"""The cooperative (non-preemptive) fixed-priority scheduler: one heap of releases, one ready bitmask."""
+
+from __future__ import annotations
+
+import logging
+import random
+from collections.abc import Callable, Iterable
+from heapq import heappop, heappush
+
+from rtos.clock import Clock, VirtualClock
+from rtos.interrupts import InterruptSource, solve_finish
+from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
+from rtos.task import Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
+from rtos.trace import Trace
+from rtos.watchdog import Watchdog
+
+log = logging.getLogger(__name__)
+
+_SHIFT = 8  # heap keys are (ready_cycle << _SHIFT) | priority rank
+_MASK = (1 << _SHIFT) - 1
+_FAR = 1 << 200  # later than any event
+_LATE = OverrunPolicy.LATE
+_FAULT = OverrunPolicy.FAULT
+
+
+class Scheduler:
+    """Runs tasks cooperatively: at each scheduling point the highest-priority ready job runs to completion.
+
+    In virtual time (``VirtualClock``) a job's finish is ``start + cost`` plus the cycles of every
+    interrupt firing while it runs (solved exactly); when nothing is ready, time jumps to the next
+    release or watchdog deadline. With a ``WallClock`` the same loop waits for absolute wall times and
+    measures each job instead (interrupt sources are then not modelled).
+
+    >>> s = Scheduler([Task("fast", 1, period=10, cost=3), Task("slow", 2, period=25, cost=8)])
+    >>> s.run_until(100)
+    >>> s.stats["fast"].jobs, s.stats["slow"].worst_response
+    (10, 11)
+    """
+
+    def __init__(
+        self,
+        tasks: Iterable[Task],
+        clock: Clock | None = None,
+        *,
+        interrupts: Iterable[InterruptSource] = (),
+        trace: Trace | None = None,
+        on_fault: Callable[[Fault], None] | None = None,
+        seed: int = 0,
+    ) -> None:
+        """Set up the tasks (priorities unique, smaller = higher); ``clock`` defaults to 1 MHz virtual."""
+        self.clock: Clock = clock if clock is not None else VirtualClock(1_000_000)
+        self._tasks = by_priority(tasks)
+        if len(self._tasks) > _MASK + 1:
+            raise ValueError(f"at most {_MASK + 1} tasks are supported, got {len(self._tasks)}")
+        self._interrupts: list[InterruptSource] = list(interrupts)
+        for src in self._interrupts:
+            if not isinstance(src, InterruptSource):
+                raise ValueError(f"{src!r} is not an InterruptSource (name, cost_cycles, count_in)")
+        self.trace = trace
+        if trace is not None:
+            trace.task_names = [t.name for t in self._tasks]
+        self.on_fault = on_fault
+        self._rng = random.Random(seed)
+        self._now = 0
+        self._stop = False
+        self._started = False
+        self._watchdogs: list[Watchdog] = []
+        self.stats: dict[str, TaskStats] = {t.name: TaskStats(t.name) for t in self._tasks}
+        self._stat_list = [self.stats[t.name] for t in self._tasks]
+        self._irq_in_job = [0] * len(self._interrupts)
+        self._irq_idle = [0] * len(self._interrupts)
+        self._jobs = [Job(t) for t in self._tasks]
+        self._heap: list[int] = []
+        self._mask = 0
+        self._prev = -1  # rank of the job that ran last (-1: the CPU was idle)
+        self._prev_job = -1
+        self._nrel: list[int] = []
+        self._nnext: list[int] = []
+        self._ready: list[int] = []
+        self._blocked: list[Blocker | None] = [None] * len(self._tasks)
+        for i, t in enumerate(self._tasks):
+            self._nrel.append(t.offset)
+            self._nnext.append(t.offset + t.period)
+            ready = t.offset + (self._rng.randint(0, t.jitter) if t.jitter else 0)
+            self._ready.append(ready)
+            heappush(self._heap, (ready << _SHIFT) | i)
+
+    @property
+    def now(self) -> int:
+        """Current time in cycles (during a job body: the job's start)."""
+        return self._now
+
+    @property
+    def tasks(self) -> list[Task]:
+        """The tasks, highest priority first."""
+        return list(self._tasks)
+
+    @property
+    def watchdogs(self) -> list[Watchdog]:
+        """The attached watchdogs."""
+        return list(self._watchdogs)
+
+    def add_watchdog(self, watchdog: Watchdog) -> Watchdog:
+        """Attach ``watchdog``: it is armed now and its kicks use this scheduler's ``now``."""
+        watchdog.bind(self)
+        self._watchdogs.append(watchdog)
+        return watchdog
+
+    def request_stop(self) -> None:
+        """Stop ``run_until`` at the next scheduling point (the running job completes first)."""
+        self._stop = True
+
+    def run_for(self, cycles: int, progress: Callable[[float], None] | None = None) -> None:
+        """Run for ``cycles`` more cycles (see ``run_until``)."""
+        self.run_until(self._now + cycles, progress)
+
+    def utilisation(self) -> Utilisation:
+        """CPU utilisation from cycle 0 to now: busy cycles per task and per interrupt source."""
+        return Utilisation(
+            elapsed_cycles=self._now,
+            task_cycles={s.name: s.busy_cycles for s in self._stat_list},
+            interrupt_cycles={s.name: s.busy_cycles for s in self.interrupt_stats()},
+        )
+
+    def interrupt_stats(self) -> list[InterruptStats]:
+        """Firings per interrupt source so far, split into in-job and idle."""
+        out = []
+        for j, src in enumerate(self._interrupts):
+            st = InterruptStats(src.name, src.cost_cycles)
+            st.in_jobs, st.while_idle = self._irq_in_job[j], self._irq_idle[j]
+            out.append(st)
+        return out
+
+    def _wd_due(self) -> int:
+        """Earliest watchdog deadline, or _FAR."""
+        dues = [w.due for w in self._watchdogs if w.due is not None]
+        return min(dues) if dues else _FAR
+
+    def _fire_watchdogs(self, now: int) -> int:
+        """Fire, in time order, every watchdog reset due at or before ``now``; return the next deadline."""
+        self._now = now
+        while True:
+            due = self._wd_due()
+            if due > now:
+                return due
+            wd = next(w for w in self._watchdogs if w.due == due)
+            t = wd.expire()
+            log.info("watchdog reset at cycle %d", t)
+            if self.trace is not None:
+                self.trace.add_event("watchdog_reset", t, "watchdog")
+
+    def _overrun_fault(self, fault: Fault) -> None:
+        """Record a FAULT-policy overrun and hand it to ``on_fault`` (or raise OverrunError)."""
+        self._stat_list[next(i for i, t in enumerate(self._tasks) if t.name == fault.task)].faults += 1
+        if self.trace is not None:
+            self.trace.add_event("fault", fault.time, fault.task, fault.job)
+        log.warning("overrun fault: %s", fault)
+        if self.on_fault is None:
+            raise OverrunError(fault)
+        self.on_fault(fault)
+
+    def run_until(self, t_end: int, progress: Callable[[float], None] | None = None) -> None:
+        """Run every job that can start before cycle ``t_end``; then ``now`` is ``max(t_end, last finish)``.
+
+        A job started before ``t_end`` runs to completion even if it ends later. ``progress(fraction)``
+        is called about every 1 % of the span and once with 1.0 at the end (unless stopped).
+        """
+        if isinstance(t_end, bool) or not isinstance(t_end, int):
+            raise ValueError(f"t_end must be an int number of cycles, got {t_end!r}")
+        if t_end < self._now:
+            raise ValueError(f"t_end {t_end} is in the past (now = {self._now} cycles)")
+        clock = self.clock
+        realtime = clock.realtime
+        if not self._started:
+            self._started = True
+            clock.start(self._now)
+        self._stop = False
+        tasks, stats, jobs = self._tasks, self._stat_list, self._jobs
+        periods = [t.period for t in tasks]
+        deadlines = [t.relative_deadline for t in tasks]
+        costs = [None if callable(t.cost) else t.cost for t in tasks]
+        bodies = [t.body for t in tasks]
+        jitters = [t.jitter for t in tasks]
+        nrel, nnext, ready, blocked = self._nrel, self._nnext, self._ready, self._blocked
+        heap, trace, rng = self._heap, self.trace, self._rng
+        irqs = [] if realtime else self._interrupts
+        irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
+        wd_due = self._wd_due()
+        now, mask, prev, prev_job = self._now, self._mask, self._prev, self._prev_job
+        t_begin = now
+        span = max(1, t_end - t_begin)
+        step = max(1, span // 100)
+        next_progress = t_begin + step if progress is not None else _FAR
+        stopped = False
+        while True:
+            if now >= wd_due:
+                wd_due = self._fire_watchdogs(now)
+                if self._stop:
+                    stopped = True
+                    break
+            if now >= next_progress:
+                self._now = now
+                progress(min(1.0, (now - t_begin) / span))  # type: ignore[misc]
+                next_progress = now + step
+                if self._stop:
+                    stopped = True
+                    break
+            lim = (now << _SHIFT) | _MASK
+            while heap and heap[0] <= lim:
+                key = heappop(heap)
+                i = key & _MASK
+                mask |= 1 << i
+                if prev > i and (key >> _SHIFT) < now:
+                    blocked[i] = Blocker(tasks[prev].name, prev_job, now - (key >> _SHIFT))
+            if now >= t_end:
+                break
+            if not mask:  # idle: jump to the next release, watchdog deadline or the end
+                target = heap[0] >> _SHIFT if heap else _FAR
+                if wd_due < target:
+                    target = wd_due
+                if target > t_end:
+                    target = t_end
+                for j, src in enumerate(irqs):
+                    irq_idle[j] += src.count_in(now, target)
+                now = clock.wait_until(target) if realtime else target
+                prev = -1
+                continue
+            i = (mask & -mask).bit_length() - 1
+            mask ^= 1 << i
+            r = nrel[i]
+            task = tasks[i]
+            k = (r - task.offset) // periods[i]
+            start = now
+            body = bodies[i]
+            result = None
+            if body is not None:
+                job = jobs[i]
+                job.index, job.release, job.ready, job.start = k, r, ready[i], start
+                self._now = start
+                result = body(job)
+                if self._watchdogs:
+                    wd_due = self._wd_due()
+            c = costs[i]
+            if c is None:
+                c = task.cost(result)  # type: ignore[operator]
+                if type(c) is not int or c < 0:
+                    raise ValueError(
+                        f"task {task.name!r}: cost model returned {c!r}; need an int >= 0 cycles")
+            if realtime:
+                f = max(start, clock.now_cycles())
+                c = f - start
+            elif irqs:
+                f = solve_finish(start, c, irqs, irq_in_job)
+            else:
+                f = start + c
+            st = stats[i]
+            resp = f - r
+            st.jobs += 1
+            st.response_sum += resp
+            st.busy_cycles += c
+            if resp > st.worst:
+                st.worst = resp
+                st.worst_job = k
+                st.worst_blocker = blocked[i]
+            if resp < st.best:
+                st.best = resp
+            d = start - r
+            if d > st.delay_max:
+                st.delay_max = d
+            if d < st.delay_min:
+                st.delay_min = d
+            blocked[i] = None
+            if resp > deadlines[i]:
+                st.deadline_misses += 1
+                st.miss_streak += 1
+                if st.miss_streak > st.longest_miss_streak:
+                    st.longest_miss_streak = st.miss_streak
+                if trace is not None:
+                    trace.add_event("deadline_miss", r + deadlines[i], task.name, k)
+            elif st.miss_streak:
+                st.miss_streak = 0
+            if trace is not None:
+                trace.add_job(task.name, k, r, ready[i], start, f)
+            # the task's next job: releases that came while this one was pending or running overran
+            nxt = nnext[i]
+            fault = None
+            if nxt < f:
+                period = periods[i]
+                n = (f - 1 - nxt) // period + 1
+                if task.overrun is _LATE:
+                    st.skipped += n - 1
+                    nnext[i] = nxt + n * period
+                else:
+                    st.skipped += n
+                    if task.overrun is _FAULT:
+                        fault = Fault(nxt, task.name, k, n)
+                    nxt += n * period
+                    nnext[i] = nxt + period
+            else:
+                nnext[i] = nxt + periods[i]
+            nrel[i] = nxt
+            a = nxt + rng.randint(0, jitters[i]) if jitters[i] else nxt
+            ready[i] = a
+            heappush(heap, (a << _SHIFT) | i)
+            prev, prev_job, now = i, k, f
+            if fault is not None:
+                self._now = now
+                self._overrun_fault(fault)
+            if self._stop:
+                stopped = True
+                break
+        if not stopped and now < t_end:
+            now = t_end
+        self._now, self._mask, self._prev, self._prev_job = now, mask, prev, prev_job
+        if progress is not None and not stopped:
+            progress(1.0)

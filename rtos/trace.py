@@ -1,0 +1,122 @@
+"""Optional job trace in a bounded ring buffer, exported as CSV or Chrome trace-event JSON (Perfetto)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections import deque
+from pathlib import Path
+from typing import NamedTuple, TextIO
+
+JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish")
+
+
+class JobRecord(NamedTuple):
+    """One job as it ran: nominal release, ready (release + jitter), start and finish, in cycles."""
+
+    task: str
+    job: int
+    release: int
+    ready: int
+    start: int
+    finish: int
+
+
+class TraceEvent(NamedTuple):
+    """An instant: ``kind`` is "watchdog_reset", "fault" or "deadline_miss"; ``source`` names who."""
+
+    kind: str
+    time: int
+    source: str
+    job: int
+
+
+class Trace:
+    """Keeps the last ``maxlen`` jobs and the last ``maxlen`` instant events.
+
+    >>> tr = Trace(maxlen=2)
+    >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
+    >>> [r.job for r in tr.jobs()]
+    [1, 2]
+    """
+
+    def __init__(self, maxlen: int = 100_000) -> None:
+        """Create an empty trace holding at most ``maxlen`` jobs and ``maxlen`` events."""
+        if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
+            raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
+        self._jobs: deque[tuple[str, int, int, int, int, int]] = deque(maxlen=maxlen)
+        self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
+        self.task_names: list[str] = []
+
+    def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int) -> None:
+        """Record one job."""
+        self._jobs.append((task, job, release, ready, start, finish))
+
+    def add_event(self, kind: str, time: int, source: str, job: int = -1) -> None:
+        """Record one instant event."""
+        self._events.append((kind, time, source, job))
+
+    def jobs(self) -> list[JobRecord]:
+        """The recorded jobs, oldest first."""
+        return [JobRecord(*r) for r in self._jobs]
+
+    def events(self) -> list[TraceEvent]:
+        """The recorded instant events, oldest first."""
+        return [TraceEvent(*e) for e in self._events]
+
+    def clear(self) -> None:
+        """Forget every record."""
+        self._jobs.clear()
+        self._events.clear()
+
+    def write_csv(self, out: TextIO) -> None:
+        """Write the jobs as CSV with a header row (times in cycles)."""
+        w = csv.writer(out, lineterminator="\n")
+        w.writerow(JOB_COLUMNS)
+        w.writerows(self._jobs)
+
+    def to_csv(self) -> str:
+        """Return the jobs as CSV text."""
+        buf = io.StringIO()
+        self.write_csv(buf)
+        return buf.getvalue()
+
+    def to_chrome(self, f_cpu_hz: int) -> dict[str, list[dict[str, object]]]:
+        """Return a Chrome trace-event document: one "X" event per job (ts/dur in µs), one tid per task."""
+        if f_cpu_hz <= 0:
+            raise ValueError(f"f_cpu_hz must be > 0 Hz, got {f_cpu_hz!r}")
+        us = 1e6 / f_cpu_hz
+        names = list(self.task_names)
+        for r in self._jobs:
+            if r[0] not in names:
+                names.append(r[0])
+        tid = {n: k + 1 for k, n in enumerate(names)}
+        out: list[dict[str, object]] = [
+            {"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": "rtos"}},
+        ]
+        for n in names:
+            out.append({"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}})
+            out.append({"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n],
+                        "args": {"sort_index": tid[n]}})
+        for task, job, release, ready, start, finish in self._jobs:
+            out.append({
+                "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
+                "ts": start * us, "dur": (finish - start) * us,
+                "args": {"job": job, "release_cycles": release, "ready_cycles": ready,
+                         "response_cycles": finish - release},
+            })
+        for kind, time, source, job in self._events:
+            out.append({
+                "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
+                "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": job},
+            })
+        return {"traceEvents": out}
+
+    def write_chrome(self, path: str | Path, f_cpu_hz: int) -> None:
+        """Write the Chrome trace-event JSON to ``path`` (open it in Perfetto or chrome://tracing)."""
+        Path(path).write_text(json.dumps(self.to_chrome(f_cpu_hz)), encoding="utf-8")
+
+    def __len__(self) -> int:
+        """Number of recorded jobs."""
+        return len(self._jobs)
