@@ -1,0 +1,185 @@
+"""The plant's inner loop: fixed-step RK4 on (angle, velocity) with an exact first-order current lag.
+
+Everything here works on plain floats in local variables (numpy on 2-element states is slower). The
+torque terms arrive pre-divided by the output inertia, so the right-hand side is an acceleration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+
+class Coefficients(NamedTuple):
+    """Constants of one plant configuration; torques are divided by the output inertia (1/s^2 units)."""
+
+    inv_j: float  # 1 / J_total [1/(kg m^2)]
+    kto: float  # ankle torque per ampere / J
+    ks: float  # spring stiffness term (-k_l / J), 0 without spring
+    c0: float  # constant torque / J (spring preload -k_l*theta0)
+    kd: float  # viscous damping / J
+    mg: float  # gravity moment / J
+    psi0: float  # angle of the COM line from the downward vertical at theta = 0
+    lo: float  # plantarflexion stop [rad]
+    hi: float  # dorsiflexion stop [rad]
+    kst: float  # stop stiffness / J
+    cst: float  # stop damping / J
+    tc: float  # kinetic Coulomb friction / J
+    tsx: float  # static friction / J
+    tau: float  # current-loop time constant [s]
+    ker: float  # back-EMF per output rad/s over R: Ke*N/R [A s/rad]
+    bscale: float  # N / brake speed scale: tanh argument per output rad/s
+
+
+class Drive(NamedTuple):
+    """Motor-driver inputs, constant between input events."""
+
+    target_a: float  # commanded q-axis current (already clamped to the peak current)
+    brake_a: float  # regenerative brake current magnitude; 0 = current mode
+    v_over_r: float  # bus voltage / R: the back-EMF current limit (inf when unpowered)
+
+
+def static_accel(c: Coefficients, th: float, i: float, ext: float) -> float:
+    """Acceleration at rest (omega = 0) without friction: decides sticking and breakaway."""
+    a = c.kto * i + ext * c.inv_j + c.c0 + c.ks * th - c.mg * math.sin(th + c.psi0)
+    if th > c.hi:
+        a -= c.kst * (th - c.hi)
+    elif th < c.lo:
+        a -= c.kst * (th - c.lo)
+    return a
+
+
+def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) -> float:
+    """Acceleration of the ankle for angle, velocity, current, external torque and friction mode."""
+    if s == 0:
+        a = static_accel(c, th, i, ext)
+        if -c.tsx <= a <= c.tsx:
+            return 0.0
+        return a - c.tc if a > 0 else a + c.tc
+    a = c.kto * i + ext * c.inv_j + c.c0 - c.tc * s + c.ks * th - c.mg * math.sin(th + c.psi0) - c.kd * w
+    if th > c.hi:
+        x = c.kst * (th - c.hi) + c.cst * w
+        if x > 0.0:
+            a -= x
+    elif th < c.lo:
+        x = c.kst * (th - c.lo) + c.cst * w
+        if x < 0.0:
+            a -= x
+    return a
+
+
+def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int], t_base: float, k_first: int,
+              n: int, h: float, ea: float, eb: float, fn: Callable[[float], float] | None
+              ) -> tuple[float, float, float, int]:
+    """Take n RK4 steps of size h; step j starts at t_base + (k_first + j) * h.
+
+    state = (theta, omega, i_q, s) with s the friction mode: +1/-1 sliding that way, 0 stuck.
+    External torque is ea + eb * t, or fn(t) at the stage times when fn is given.
+    """
+    th, w, i, s = state
+    (inv_j, kto, ks, c0, kd, mg, psi0, lo, hi, kst, cst, tc, tsx, tau, ker, bscale) = c
+    tgt, brake, vr = d
+    sin = math.sin
+    hh = 0.5 * h
+    h6 = h / 6.0
+    e1 = math.exp(-h / tau)
+    eh = math.exp(-hh / tau)
+    timed = fn is not None or eb != 0.0
+    x1 = x2 = x4 = ea * inv_j
+    for kk in range(k_first, k_first + n):
+        if timed:
+            t = t_base + kk * h
+            if fn is None:
+                x1 = (ea + eb * t) * inv_j
+                x2 = x1 + eb * hh * inv_j
+                x4 = x1 + eb * h * inv_j
+            else:
+                x1 = fn(t) * inv_j
+                x2 = fn(t + hh) * inv_j
+                x4 = fn(t + h) * inv_j
+        # motor driver: target (brake opposes rotation), back-EMF voltage limit, exact first-order lag
+        tg = -brake * math.tanh(w * bscale) if brake else tgt
+        lim = vr - ker * w
+        if tg > lim:
+            tg = lim
+        else:
+            lim -= vr + vr
+            if tg < lim:
+                tg = lim
+        dev = i - tg
+        i_m = tg + dev * eh
+        i_e = tg + dev * e1
+        if s == 0:  # stuck: stays until the static torque exceeds breakaway
+            a = kto * i + x1 + c0 + ks * th - mg * sin(th + psi0)
+            if th > hi:
+                a -= kst * (th - hi)
+            elif th < lo:
+                a -= kst * (th - lo)
+            if -tsx <= a <= tsx:
+                i = i_e
+                continue
+            s = 1 if a > 0.0 else -1
+        f = c0 - tc * s
+        u1 = kto * i + f + x1
+        u2 = kto * i_m + f + x2
+        u4 = kto * i_e + f + x4
+        a1 = u1 + ks * th - mg * sin(th + psi0) - kd * w
+        if th > hi:
+            x = kst * (th - hi) + cst * w
+            if x > 0.0:
+                a1 -= x
+        elif th < lo:
+            x = kst * (th - lo) + cst * w
+            if x < 0.0:
+                a1 -= x
+        th2 = th + hh * w
+        w2 = w + hh * a1
+        a2 = u2 + ks * th2 - mg * sin(th2 + psi0) - kd * w2
+        if th2 > hi:
+            x = kst * (th2 - hi) + cst * w2
+            if x > 0.0:
+                a2 -= x
+        elif th2 < lo:
+            x = kst * (th2 - lo) + cst * w2
+            if x < 0.0:
+                a2 -= x
+        th3 = th + hh * w2
+        w3 = w + hh * a2
+        a3 = u2 + ks * th3 - mg * sin(th3 + psi0) - kd * w3
+        if th3 > hi:
+            x = kst * (th3 - hi) + cst * w3
+            if x > 0.0:
+                a3 -= x
+        elif th3 < lo:
+            x = kst * (th3 - lo) + cst * w3
+            if x < 0.0:
+                a3 -= x
+        th4 = th + h * w3
+        w4 = w + h * a3
+        a4 = u4 + ks * th4 - mg * sin(th4 + psi0) - kd * w4
+        if th4 > hi:
+            x = kst * (th4 - hi) + cst * w4
+            if x > 0.0:
+                a4 -= x
+        elif th4 < lo:
+            x = kst * (th4 - lo) + cst * w4
+            if x < 0.0:
+                a4 -= x
+        th += h6 * (w + 2.0 * (w2 + w3) + w4)
+        w += h6 * (a1 + 2.0 * (a2 + a3) + a4)
+        i = i_e
+        if w * s <= 0.0:  # velocity reached or crossed zero inside the step: stick or reverse
+            a = kto * i + x4 + c0 + ks * th - mg * sin(th + psi0)
+            if th > hi:
+                a -= kst * (th - hi)
+            elif th < lo:
+                a -= kst * (th - lo)
+            if -tsx <= a <= tsx:
+                s = 0
+                w = 0.0
+            elif w != 0.0:
+                s = 1 if w > 0.0 else -1
+            else:
+                s = 1 if a > 0.0 else -1
+    return th, w, i, s

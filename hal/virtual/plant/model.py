@@ -1,0 +1,339 @@
+"""The lazily integrated plant: AK60-6 motor and driver, 6:1 gearbox, belt, foot, and a bench fixture."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, suspended
+from hal.virtual.plant.integrator import Coefficients, Drive, accel, integrate
+from hal.virtual.plant.params import PlantParams, load_plant_params
+
+logger = logging.getLogger(__name__)
+
+#: Largest integration step allowed (10 kHz).
+MAX_STEP_S = 1e-4
+#: Input events closer than this to the committed time or a grid point are taken as happening there.
+EVENT_SNAP_S = 1e-10
+_UNPOWERED_V_OVER_R = 1e300  # no back-EMF clamp with the bridge open (current is forced to zero)
+
+
+@dataclass(frozen=True)
+class PlantState:
+    """Everything observable of the plant at one instant (SI, ankle/output side unless named motor)."""
+
+    t_s: float
+    output_angle_rad: float
+    output_velocity_rad_s: float
+    output_accel_rad_s2: float
+    motor_angle_rad: float
+    motor_velocity_rad_s: float
+    current_q_a: float
+    current_command_a: float
+    motor_torque_nm: float  # electromagnetic torque on the rotor, Kt * i_q
+    output_torque_nm: float  # the motor's torque delivered at the ankle, Kt * i_q * N * efficiency
+    external_torque_nm: float
+    energy_j: float
+    powered: bool
+    stuck: bool
+    in_contact: bool
+
+
+class Plant:
+    """Motor + transmission + foot on a fixture, integrated lazily at fixed steps up to each query time.
+
+    Times never go back: every query and input takes a time >= the latest time seen so far.
+    """
+
+    def __init__(self, params: PlantParams | None = None, fixture: Fixture | None = None, *,
+                 initial_angle_rad: float = 0.0, initial_velocity_rad_s: float = 0.0,
+                 start_time_s: float = 0.0, step_s: float = MAX_STEP_S,
+                 motor_angle_offset_rad: float = 0.0) -> None:
+        """Build the plant at rest-state values given; the fixture defaults to SUSPENDED."""
+        self.params = params if params is not None else load_plant_params()
+        self.fixture = fixture if fixture is not None else suspended()
+        p = self.params
+        if not (math.isfinite(step_s) and 0.0 < step_s <= MAX_STEP_S):
+            raise ValueError(f"step_s = {step_s!r} outside the allowed range (0, {MAX_STEP_S}] (>= 10 kHz)")
+        if not (math.isfinite(initial_angle_rad) and p.stop_min_rad <= initial_angle_rad <= p.stop_max_rad):
+            raise ValueError(f"initial_angle_rad = {initial_angle_rad!r} outside the range of motion "
+                             f"[{p.stop_min_rad}, {p.stop_max_rad}]")
+        finite_args = {"initial_velocity_rad_s": initial_velocity_rad_s, "start_time_s": start_time_s,
+                       "motor_angle_offset_rad": motor_angle_offset_rad}
+        for name, value in finite_args.items():
+            if not math.isfinite(value):
+                raise ValueError(f"{name} = {value!r} must be finite")
+        self.step_s = step_s
+        self.motor_angle_offset_rad = motor_angle_offset_rad
+        fx = self.fixture
+        load_lever = p.load_lever_m
+        self.output_inertia_kg_m2 = p.output_inertia_kg_m2 + fx.load_mass_kg * load_lever**2
+        self._gravity_moment_nm = p.gravity_m_s2 * (
+            p.foot_mass_kg * p.foot_com_distance_m + fx.load_mass_kg * load_lever)
+        self._spring_k = p.spring_stiffness_nm_per_rad if fx.has_spring else 0.0
+        self._spring_offset = (p.spring_offset_rad if fx.spring_offset_rad is None else fx.spring_offset_rad)
+        inv_j = 1.0 / self.output_inertia_kg_m2
+        self._c = Coefficients(
+            inv_j=inv_j, kto=p.output_torque_per_amp_nm * inv_j, ks=-self._spring_k * inv_j,
+            c0=-self._spring_k * self._spring_offset * inv_j, kd=p.foot_damping_nm_s_per_rad * inv_j,
+            mg=self._gravity_moment_nm * inv_j, psi0=p.com_angle_at_zero_rad,
+            lo=p.stop_min_rad, hi=p.stop_max_rad,
+            kst=p.stop_stiffness_nm_per_rad * inv_j, cst=p.stop_damping_nm_s_per_rad * inv_j,
+            tc=p.coulomb_friction_nm * inv_j, tsx=p.static_friction_nm * inv_j, tau=p.current_time_constant_s,
+            ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
+            bscale=p.total_ratio / p.brake_speed_scale_rad_s)
+        self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
+        # committed state at time self._t (on the grid t0 + k*dt when self._on_grid)
+        self._t0 = start_time_s
+        self._k = 0
+        self._t = start_time_s
+        self._on_grid = True
+        self._latest = start_time_s
+        w0 = initial_velocity_rad_s
+        self._x: tuple[float, float, float, int] = (initial_angle_rad, w0, 0.0, (w0 > 0) - (w0 < 0))
+        self._powered = fx.powered
+        self._command_a = 0.0
+        self._brake_a = 0.0
+        self._drive = self._make_drive()
+        self._cache: tuple[float, tuple[float, float, float, int]] | None = None
+        lever = p.toe_lever_m if fx.toe_lever_m is None else fx.toe_lever_m
+        self._set_load(fx.torque_nm if fx.toe_force_n is None else _scaled_load(fx.toe_force_n, lever))
+
+    # ----------------------------------------------------------------- inputs
+    def set_current_command(self, current_a: float, t_s: float) -> None:
+        """From t_s on, command this q-axis current (clamped to the peak current); ignored when unpowered."""
+        if not math.isfinite(current_a):
+            raise ValueError(f"current_a = {current_a!r} must be finite")
+        self._commit_event(t_s)
+        peak = self.params.peak_current_a
+        self._command_a = min(peak, max(-peak, current_a))
+        self._brake_a = 0.0
+        if not self._powered:
+            logger.debug("current command %.3f A at %.6f s ignored: driver unpowered", current_a, t_s)
+            self._command_a = 0.0
+        self._drive = self._make_drive()
+
+    def set_brake_current(self, current_a: float, t_s: float) -> None:
+        """From t_s on, brake: a current of this magnitude opposes rotation (regenerative brake)."""
+        if not math.isfinite(current_a):
+            raise ValueError(f"current_a = {current_a!r} must be finite")
+        self._commit_event(t_s)
+        self._brake_a = min(self.params.peak_current_a, abs(current_a)) if self._powered else 0.0
+        self._command_a = 0.0
+        self._drive = self._make_drive()
+
+    def set_powered(self, on: bool, t_s: float) -> None:
+        """Power the driver on or off at t_s; off opens the bridge: current 0 at once, commands ignored."""
+        self._commit_event(t_s)
+        self._powered = bool(on)
+        self._command_a = 0.0
+        self._brake_a = 0.0
+        if not self._powered:
+            th, w, _, s = self._x
+            self._x = (th, w, 0.0, s)
+        self._drive = self._make_drive()
+
+    def set_external_torque(self, load: Load, t_s: float) -> None:
+        """From t_s on, replace the external ankle torque: None, a constant, a TorqueProfile or f(t)."""
+        self._commit_event(t_s)
+        self._set_load(load)
+
+    # ---------------------------------------------------------------- queries
+    def advance_to(self, t_s: float) -> None:
+        """Commit whole steps up to the last grid point <= t_s (the state at t_s itself is not committed)."""
+        self._check_time(t_s)
+        self._commit_grid(t_s)
+
+    def state_at(self, t_s: float) -> PlantState:
+        """All observables at time t_s (>= every time seen so far)."""
+        th, w, i, s = self._state_tuple(t_s)
+        p = self.params
+        ext = self._ext_value(t_s)
+        a = accel(self._c, th, w, i, ext, s)
+        n = p.total_ratio
+        lo, hi = p.stop_min_rad, p.stop_max_rad
+        return PlantState(
+            t_s=t_s, output_angle_rad=th, output_velocity_rad_s=w, output_accel_rad_s2=a,
+            motor_angle_rad=n * th + self.motor_angle_offset_rad, motor_velocity_rad_s=n * w, current_q_a=i,
+            current_command_a=self._command_a, motor_torque_nm=p.kt_nm_per_a * i,
+            output_torque_nm=p.output_torque_per_amp_nm * i, external_torque_nm=ext,
+            energy_j=self._energy(th, w), powered=self._powered, stuck=s == 0 and a == 0.0,
+            in_contact=not lo <= th <= hi)
+
+    def output_angle_rad(self, t_s: float) -> float:
+        """Ankle angle at t_s, dorsiflexion positive [rad]."""
+        return self._state_tuple(t_s)[0]
+
+    def output_velocity_rad_s(self, t_s: float) -> float:
+        """Ankle angular velocity at t_s [rad/s]."""
+        return self._state_tuple(t_s)[1]
+
+    def output_accel_rad_s2(self, t_s: float) -> float:
+        """Ankle angular acceleration at t_s [rad/s^2]."""
+        th, w, i, s = self._state_tuple(t_s)
+        return accel(self._c, th, w, i, self._ext_value(t_s), s)
+
+    def motor_angle_rad(self, t_s: float) -> float:
+        """Rotor mechanical angle at t_s: N * ankle angle + offset [rad]."""
+        return self.params.total_ratio * self._state_tuple(t_s)[0] + self.motor_angle_offset_rad
+
+    def motor_velocity_rad_s(self, t_s: float) -> float:
+        """Rotor mechanical speed at t_s [rad/s]."""
+        return self.params.total_ratio * self._state_tuple(t_s)[1]
+
+    def current_q_a(self, t_s: float) -> float:
+        """q-axis current at t_s [A]."""
+        return self._state_tuple(t_s)[2]
+
+    def motor_torque_nm(self, t_s: float) -> float:
+        """Electromagnetic torque on the rotor at t_s, Kt * i_q [N m]."""
+        return self.params.kt_nm_per_a * self._state_tuple(t_s)[2]
+
+    def energy_j(self, t_s: float) -> float:
+        """Mechanical energy at t_s: kinetic + gravity + spring + stop-contact potential [J]."""
+        th, w, _, _ = self._state_tuple(t_s)
+        return self._energy(th, w)
+
+    @property
+    def latest_time_s(self) -> float:
+        """The latest time seen by a query or input; earlier times are refused."""
+        return self._latest
+
+    @property
+    def powered(self) -> bool:
+        """Whether the motor driver is powered."""
+        return self._powered
+
+    # -------------------------------------------------------------- internals
+    def _make_drive(self) -> Drive:
+        """Driver inputs for the integrator from the current mode."""
+        v_over_r = self._v_over_r if self._powered else _UNPOWERED_V_OVER_R
+        return Drive(self._command_a, self._brake_a, v_over_r)
+
+    def _set_load(self, load: Load) -> None:
+        """Install an external torque load (profile segments, a function, or a constant)."""
+        self._cache = None
+        self._fn: Callable[[float], float] | None = None
+        self._profile: TorqueProfile | None = None
+        self._ea, self._eb, self._t_break = 0.0, 0.0, math.inf
+        if load is None:
+            return
+        if isinstance(load, TorqueProfile):
+            self._profile = load
+            self._ea, self._eb, self._t_break = load.segment(self._t)
+        elif callable(load):
+            self._fn = load
+        elif isinstance(load, (int, float)) and math.isfinite(load):
+            self._ea = float(load)
+        else:
+            raise ValueError(f"external torque load {load!r} must be None, a finite number, a TorqueProfile "
+                             "or a callable f(t_s)")
+
+    def _ext_value(self, t_s: float) -> float:
+        """External torque at t_s [N m]."""
+        if self._fn is not None:
+            return float(self._fn(t_s))
+        return self._ea + self._eb * t_s
+
+    def _energy(self, th: float, w: float) -> float:
+        """Kinetic + potential energy for angle and velocity."""
+        p = self.params
+        e = 0.5 * self.output_inertia_kg_m2 * w * w
+        e -= self._gravity_moment_nm * math.cos(th + p.com_angle_at_zero_rad)
+        e += 0.5 * self._spring_k * (th + self._spring_offset) ** 2
+        over = 0.0
+        if th > p.stop_max_rad:
+            over = th - p.stop_max_rad
+        elif th < p.stop_min_rad:
+            over = th - p.stop_min_rad
+        return e + 0.5 * p.stop_stiffness_nm_per_rad * over * over
+
+    def _check_time(self, t_s: float) -> None:
+        """Refuse non-finite times and times before the latest one seen."""
+        if not math.isfinite(t_s):
+            raise ValueError(f"time t_s = {t_s!r} must be finite")
+        if t_s < self._latest:
+            raise ValueError(f"time t_s = {t_s!r} is in the past: the plant has already been queried or "
+                             f"driven at {self._latest!r} s; times must be >= {self._latest!r}")
+        self._latest = t_s
+
+    def _state_tuple(self, t_s: float) -> tuple[float, float, float, int]:
+        """State at t_s: commit whole steps, then a partial step from a copy (not committed)."""
+        cache = self._cache
+        if cache is not None and cache[0] == t_s:
+            return cache[1]
+        self._check_time(t_s)
+        self._commit_grid(t_s)
+        h = t_s - self._t
+        x = self._x
+        if h > 0.0:
+            x = integrate(self._c, self._drive, x, self._t, 0, 1, h, self._ea, self._eb, self._fn)
+        self._cache = (t_s, x)
+        return x
+
+    def _commit_event(self, t_s: float) -> None:
+        """Commit the state exactly to t_s (to the grid point if within EVENT_SNAP_S) before an input."""
+        self._check_time(t_s)
+        self._commit_grid(t_s + EVENT_SNAP_S)
+        if t_s - self._t > EVENT_SNAP_S:
+            self._commit_partial(t_s, on_grid=False)
+        self._cache = None
+
+    def _commit_partial(self, t_end: float, on_grid: bool) -> None:
+        """Commit one step from the committed time to t_end (< one grid step away)."""
+        self._x = integrate(self._c, self._drive, self._x, self._t, 0, 1, t_end - self._t,
+                            self._ea, self._eb, self._fn)
+        self._t = t_end
+        self._on_grid = on_grid
+        if on_grid:
+            self._k += 1
+        self._after_commit()
+
+    def _after_commit(self) -> None:
+        """Move to the next segment of a piecewise-linear load once its breakpoint is reached."""
+        if self._profile is not None and self._t >= self._t_break:
+            self._ea, self._eb, self._t_break = self._profile.segment(self._t)
+
+    def _commit_grid(self, t_s: float) -> None:
+        """Commit whole grid steps (and load breakpoints) up to t_s."""
+        dt, t0 = self.step_s, self._t0
+        while True:
+            nxt = t0 + (self._k + 1) * dt
+            if self._t_break < nxt:
+                if self._t_break > t_s:
+                    return
+                if self._t_break > self._t:
+                    self._commit_partial(self._t_break, on_grid=False)
+                else:
+                    self._after_commit()
+                continue
+            if nxt > t_s:
+                return
+            if not self._on_grid:
+                self._commit_partial(nxt, on_grid=True)
+                continue
+            limit = min(t_s, self._t_break)
+            k = self._k
+            n = int((limit - t0) / dt) - k
+            while n > 0 and t0 + (k + n) * dt > limit:
+                n -= 1
+            while t0 + (k + n + 1) * dt <= limit:
+                n += 1
+            self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb, self._fn)
+            self._k = k + n
+            self._t = t0 + self._k * dt
+            self._after_commit()
+
+
+def _scaled_load(load: Load, factor: float) -> Load:
+    """A toe-force load turned into an ankle-torque load by the lever arm."""
+    if load is None:
+        return None
+    if isinstance(load, TorqueProfile):
+        return load.scaled(factor)
+    if callable(load):
+        fn = load
+        return lambda t_s: factor * fn(t_s)
+    return factor * float(load)

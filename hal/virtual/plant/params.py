@@ -1,0 +1,239 @@
+"""Plant parameters (motor, driver, transmission, foot, friction, stops, spring bench) and their loader."""
+
+from __future__ import annotations
+
+import logging
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+logger = logging.getLogger(__name__)
+
+#: Name of the packaged profile in the repository's ``profiles/`` directory.
+DEFAULT_PROFILE_NAME = "plant_ak60_6.toml"
+
+# field name -> (TOML table, lowest allowed, highest allowed). Ranges are plausibility bounds, wide
+# enough for other motors/feet but tight enough to catch unit slips (g*cm^2 vs kg*m^2, mOhm vs Ohm).
+_RANGES: dict[str, tuple[str, float, float]] = {
+    "supply_voltage_v": ("motor", 1.0, 100.0),
+    "kv_rpm_per_v": ("motor", 1.0, 5000.0),
+    "kt_nm_per_a": ("motor", 1e-3, 2.0),
+    "ke_v_s_per_rad": ("motor", 1e-3, 2.0),
+    "phase_resistance_ohm": ("motor", 1e-3, 100.0),
+    "phase_inductance_h": ("motor", 1e-7, 1e-1),
+    "pole_pairs": ("motor", 1, 100),
+    "rotor_inertia_kg_m2": ("motor", 1e-8, 1e-2),
+    "peak_current_a": ("motor", 0.1, 500.0),
+    "current_time_constant_s": ("driver", 1e-6, 0.1),
+    "brake_speed_scale_rad_s": ("driver", 1e-3, 1e3),
+    "gearbox_ratio": ("transmission", 1.0, 1000.0),
+    "belt_ratio": ("transmission", 0.1, 100.0),
+    "belt_driver_pitch_diameter_m": ("transmission", 1e-3, 1.0),
+    "belt_driven_pitch_diameter_m": ("transmission", 1e-3, 1.0),
+    "gearbox_efficiency": ("transmission", 0.1, 1.0),
+    "belt_efficiency": ("transmission", 0.1, 1.0),
+    "actuator_output_inertia_kg_m2": ("transmission", 0.0, 1.0),
+    "ankle_pulley_inertia_kg_m2": ("transmission", 0.0, 1.0),
+    "foot_inertia_kg_m2": ("foot", 1e-5, 10.0),
+    "foot_mass_kg": ("foot", 0.0, 50.0),
+    "foot_com_distance_m": ("foot", 0.0, 1.0),
+    "foot_damping_nm_s_per_rad": ("foot", 0.0, 100.0),
+    "gravity_m_s2": ("foot", 0.0, 30.0),
+    "com_angle_at_zero_rad": ("foot", -math.pi, math.pi),
+    "toe_lever_m": ("foot", 0.01, 1.0),
+    "actuator_backdrive_torque_nm": ("friction", 0.0, 100.0),
+    "coulomb_friction_nm": ("friction", 0.0, 100.0),
+    "stop_min_rad": ("stops", -math.pi, 0.0),
+    "stop_max_rad": ("stops", 0.0, math.pi),
+    "stop_stiffness_nm_per_rad": ("stops", 0.0, 1e6),
+    "stop_damping_nm_s_per_rad": ("stops", 0.0, 1e4),
+    "spring_rate_n_per_m": ("spring_bench", 0.0, 1e6),
+    "spring_lever_m": ("spring_bench", 0.0, 1.0),
+    "spring_offset_rad": ("spring_bench", -math.pi, math.pi),
+    "load_masses_kg": ("spring_bench", 0.0, 100.0),
+    "load_lever_m": ("spring_bench", 0.0, 1.0),
+}
+
+#: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
+BELT_RATIO_TOLERANCE = 0.02
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Physical parameters of motor, driver, gearbox, belt, foot and bench, in SI units."""
+
+    supply_voltage_v: float
+    kv_rpm_per_v: float
+    kt_nm_per_a: float
+    ke_v_s_per_rad: float
+    phase_resistance_ohm: float
+    phase_inductance_h: float
+    pole_pairs: int
+    rotor_inertia_kg_m2: float
+    peak_current_a: float
+    current_time_constant_s: float
+    brake_speed_scale_rad_s: float
+    gearbox_ratio: float
+    belt_ratio: float
+    belt_driver_pitch_diameter_m: float
+    belt_driven_pitch_diameter_m: float
+    gearbox_efficiency: float
+    belt_efficiency: float
+    actuator_output_inertia_kg_m2: float
+    ankle_pulley_inertia_kg_m2: float
+    foot_inertia_kg_m2: float
+    foot_mass_kg: float
+    foot_com_distance_m: float
+    foot_damping_nm_s_per_rad: float
+    gravity_m_s2: float
+    com_angle_at_zero_rad: float
+    toe_lever_m: float
+    actuator_backdrive_torque_nm: float
+    coulomb_friction_nm: float
+    stop_min_rad: float
+    stop_max_rad: float
+    stop_stiffness_nm_per_rad: float
+    stop_damping_nm_s_per_rad: float
+    spring_rate_n_per_m: float
+    spring_lever_m: float
+    spring_offset_rad: float
+    load_masses_kg: tuple[float, ...]
+    load_lever_m: float
+
+    def __post_init__(self) -> None:
+        """Check every value against its allowed range and the cross-field rules."""
+        validate_plant_params(self)
+
+    @property
+    def total_ratio(self) -> float:
+        """Motor revolutions per ankle revolution, N = gearbox_ratio * belt_ratio."""
+        return self.gearbox_ratio * self.belt_ratio
+
+    @property
+    def efficiency(self) -> float:
+        """Transmission efficiency from rotor to ankle (gearbox times belt)."""
+        return self.gearbox_efficiency * self.belt_efficiency
+
+    @property
+    def output_torque_per_amp_nm(self) -> float:
+        """Ankle torque per ampere of q-axis current: Kt * N * efficiency."""
+        return self.kt_nm_per_a * self.total_ratio * self.efficiency
+
+    @property
+    def reflected_inertia_kg_m2(self) -> float:
+        """Transmission inertia seen at the ankle: J_m N^2 + J_out belt^2 + J_pulley."""
+        return (
+            self.rotor_inertia_kg_m2 * self.total_ratio**2
+            + self.actuator_output_inertia_kg_m2 * self.belt_ratio**2
+            + self.ankle_pulley_inertia_kg_m2
+        )
+
+    @property
+    def foot_output_inertia_kg_m2(self) -> float:
+        """Foot inertia about the ankle axis: J_c + m d^2."""
+        return self.foot_inertia_kg_m2 + self.foot_mass_kg * self.foot_com_distance_m**2
+
+    @property
+    def output_inertia_kg_m2(self) -> float:
+        """Total inertia at the ankle without bench load: foot plus reflected transmission."""
+        return self.foot_output_inertia_kg_m2 + self.reflected_inertia_kg_m2
+
+    @property
+    def gravity_moment_nm(self) -> float:
+        """Largest gravity torque of the foot, m g d."""
+        return self.foot_mass_kg * self.gravity_m_s2 * self.foot_com_distance_m
+
+    @property
+    def static_friction_nm(self) -> float:
+        """Breakaway friction at the ankle: the actuator's back-drive torque times the belt ratio."""
+        return self.actuator_backdrive_torque_nm * self.belt_ratio
+
+    @property
+    def spring_stiffness_nm_per_rad(self) -> float:
+        """Bench spring as a torsional stiffness at the ankle, k_l = k * lever^2."""
+        return self.spring_rate_n_per_m * self.spring_lever_m**2
+
+
+def _range_error(key: str, value: object, lo: float, hi: float, where: str = "") -> ValueError:
+    """Build the ValueError that names a bad parameter, its value and the allowed range."""
+    table = _RANGES[key][0] if key in _RANGES else "?"
+    suffix = f" in {where}" if where else ""
+    return ValueError(
+        f"plant parameter {table}.{key} = {value!r} is outside the allowed range [{lo}, {hi}]{suffix}")
+
+
+def validate_plant_params(p: PlantParams) -> None:
+    """Raise ValueError naming the key, value and allowed range of the first bad parameter."""
+    for f in fields(p):
+        table, lo, hi = _RANGES[f.name]
+        value = getattr(p, f.name)
+        values = value if isinstance(value, tuple) else (value,)
+        for v in values:
+            bad_type = isinstance(v, bool) or not isinstance(v, (int, float))
+            if bad_type or not math.isfinite(v) or not lo <= v <= hi:
+                raise _range_error(f.name, value, lo, hi)
+        if f.name == "pole_pairs" and not isinstance(value, int):
+            raise ValueError(
+                f"plant parameter {table}.pole_pairs = {value!r} must be an integer in [{lo}, {hi}]")
+    if p.coulomb_friction_nm > p.static_friction_nm:
+        raise ValueError(
+            f"plant parameter friction.coulomb_friction_nm = {p.coulomb_friction_nm!r} must not exceed the "
+            f"static friction actuator_backdrive_torque_nm * belt_ratio = {p.static_friction_nm!r} "
+            f"(allowed range [0, {p.static_friction_nm}])"
+        )
+    diameter_ratio = p.belt_driven_pitch_diameter_m / p.belt_driver_pitch_diameter_m
+    lo_r, hi_r = diameter_ratio * (1 - BELT_RATIO_TOLERANCE), diameter_ratio * (1 + BELT_RATIO_TOLERANCE)
+    if not lo_r <= p.belt_ratio <= hi_r:
+        raise ValueError(
+            f"plant parameter transmission.belt_ratio = {p.belt_ratio!r} disagrees with the pitch diameters "
+            f"(ratio {diameter_ratio:.4f}); allowed range [{lo_r:.4f}, {hi_r:.4f}]"
+        )
+    if p.stop_min_rad >= p.stop_max_rad:
+        raise ValueError(
+            f"plant parameter stops.stop_min_rad = {p.stop_min_rad!r} must be below "
+            f"stop_max_rad = {p.stop_max_rad!r}"
+        )
+
+
+def default_profile_path() -> Path:
+    """Path of the packaged profile: ``<repo>/profiles/plant_ak60_6.toml``."""
+    return Path(__file__).resolve().parents[3] / "profiles" / DEFAULT_PROFILE_NAME
+
+
+def plant_params_from_mapping(data: dict[str, Any], where: str = "") -> PlantParams:
+    """Build PlantParams from a TOML-shaped mapping of tables; ValueError names missing/unknown keys."""
+    at = f" {where}" if where else ""
+    values: dict[str, Any] = {}
+    for table_name, table in data.items():
+        if not isinstance(table, dict):
+            raise ValueError(f"plant profile{at}: top-level key {table_name!r} must be a table")
+        for key, value in table.items():
+            spec = _RANGES.get(key)
+            if spec is None or spec[0] != table_name:
+                raise ValueError(f"plant profile{at}: unknown key {table_name}.{key}")
+            if isinstance(value, list):
+                value = tuple(value)
+            elif isinstance(value, int) and not isinstance(value, bool) and key != "pole_pairs":
+                value = float(value)
+            values[key] = value
+    missing = [f"{_RANGES[n][0]}.{n}" for n in _RANGES if n not in values]
+    if missing:
+        raise ValueError(f"plant profile{at}: missing keys {', '.join(missing)}")
+    if not isinstance(values["load_masses_kg"], tuple):
+        lo, hi = _RANGES["load_masses_kg"][1:]
+        raise _range_error("load_masses_kg", values["load_masses_kg"], lo, hi, where)
+    try:
+        return PlantParams(**values)
+    except ValueError as exc:
+        raise ValueError(f"{exc} in {where}" if where else str(exc)) from None
+
+
+def load_plant_params(path: str | Path | None = None) -> PlantParams:
+    """Load and validate a plant profile (default: the packaged AK60-6 profile)."""
+    profile = Path(path) if path is not None else default_profile_path()
+    with profile.open("rb") as fh:
+        data = tomllib.load(fh)
+    logger.debug("loaded plant profile %s", profile)
+    return plant_params_from_mapping(data, where=str(profile))
