@@ -20,9 +20,10 @@ class ByteLine:
     """When each byte sent on one wire ends, bytes going back to back at a fixed baud.
 
     A byte lasts ``bits_per_byte * f_cpu_hz / baud`` cycles, an exact rational. Bytes queued
-    while the line is busy continue the current burst, and the end of the k-th byte of a burst
-    that started at cycle s is ``s + ceil(k * bits * f_cpu / baud)``: no rounding drift however
-    long the burst. A byte queued while the line is idle starts a new burst at its own time.
+    while the line is busy (before its exact rational end) continue the current burst, and the
+    end of the k-th byte of a burst that started at cycle s is ``s + ceil(k * bits * f_cpu / baud)``:
+    no rounding drift however long the burst. A byte queued while the line is idle starts a new
+    burst at its own (integer) cycle.
 
     >>> line = ByteLine(168_000_000, 921_600)
     >>> ends = line.schedule(78, start_cycles=1000)
@@ -56,8 +57,8 @@ class ByteLine:
             raise ValueError(f"n_bytes {n_bytes!r} out of range: >= 0")
         if start_cycles < 0:
             raise ValueError(f"start_cycles {start_cycles!r} out of range: >= 0")
-        if start_cycles > self.busy_until:
-            self._origin = start_cycles
+        if start_cycles * self._den > self._origin * self._den + self._count * self._num:
+            self._origin = start_cycles  # the line is idle (exactly) before start_cycles: new burst
             self._count = 0
         first = self._count + 1
         ends = [self._origin + ceil_div(k * self._num, self._den) for k in range(first, first + n_bytes)]

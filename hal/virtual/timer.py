@@ -19,7 +19,8 @@ class VirtualEncoderTimer(EncoderTimer):
     counts = floor(polarity * angle_rad(t) * counts_per_rev / 2*pi) + offset, CNT = counts mod (ARR+1).
     floor makes every count boundary belong to the count above it, in both directions (angle 0
     reads 0, a hair below 0 reads ARR). The DIR bit follows the most recent change of counts seen
-    between two reads (hardware updates it at every edge; lazily, only reads are observed).
+    between two reads, starting from the reset value 0 (hardware updates it at every edge; lazily,
+    only the reads are observed).
 
     >>> enc = VirtualEncoderTimer(lambda: 0, lambda t: -math.tau / 4000)
     >>> enc.cnt(), enc.arr
@@ -46,7 +47,7 @@ class VirtualEncoderTimer(EncoderTimer):
         self.counts_per_rev = counts_per_rev
         self.polarity = polarity
         self._offset = 0
-        self._last: int | None = None
+        self._last = 0  # CNT reset value: the counter starts at 0 with DIR = 0
         self._down = False
         self._update_events = 0
 
@@ -65,7 +66,7 @@ class VirtualEncoderTimer(EncoderTimer):
     def _sample(self) -> int:
         counts = self.counts_at(self._now())
         last = self._last
-        if last is not None and counts != last:
+        if counts != last:
             modulus = self._arr + 1
             self._down = counts < last
             self._update_events += abs(counts // modulus - last // modulus)
