@@ -1,0 +1,150 @@
+"""The safety supervisor: limits, timeouts and faults latch the firmware into a safe state.
+
+The supervisor is pure logic: the tasks hand it what they saw (`SafetyInputs`) once per control
+period, and it answers with the state and, in the safe state, what the motor must be told (zero
+current first, then the brake). A trip latches: only `reset` (a power cycle) leaves SAFE.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+from firmware.protocol.telemetry import FaultReason, SupervisorState
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FaultReason", "SafetyInputs", "SafetyLimits", "SafeCommand", "Supervisor", "SupervisorState"]
+
+
+@dataclass(frozen=True)
+class SafetyLimits:
+    """Thresholds of the supervisor (SI units); defaults follow the firmware's requirements."""
+
+    angle_min_rad: float = math.radians(-28.0)
+    angle_max_rad: float = math.radians(25.0)
+    current_limit_a: float = 20.0
+    motor_timeout_s: float = 0.020
+    imu_timeout_s: float = 0.050
+    disagreement_rad: float = math.radians(6.0)
+    deadline_miss_streak: int = 3
+    startup_grace_s: float = 0.5
+    brake_delay_s: float = 0.010
+    brake_current_a: float = 2.0
+
+    def __post_init__(self) -> None:
+        """Reject limits that cannot describe a working supervisor."""
+        if not self.angle_min_rad < self.angle_max_rad:
+            raise ValueError(
+                f"angle limits ({self.angle_min_rad}, {self.angle_max_rad}) rad: min must be below max"
+            )
+        for name in ("current_limit_a", "motor_timeout_s", "imu_timeout_s", "disagreement_rad",
+                     "startup_grace_s", "brake_current_a"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} {value!r} out of range: a finite number > 0")
+        if not 0 <= self.brake_delay_s <= 1.0:
+            raise ValueError(f"brake_delay_s {self.brake_delay_s!r} out of range: 0..1 s")
+        if self.deadline_miss_streak < 1:
+            raise ValueError(f"deadline_miss_streak {self.deadline_miss_streak!r} out of range: >= 1")
+
+
+@dataclass
+class SafetyInputs:
+    """What the supervisor looks at in one check (times in seconds since boot, None = never)."""
+
+    now_s: float
+    angle_rad: float
+    current_meas_a: float = 0.0
+    last_motor_reply_s: float | None = None
+    last_imu_frame_s: float | None = None
+    disagreement_rad: float = 0.0
+    motor_fault_code: int = 0
+    deadline_miss_streak: int = 0
+    estop_pressed: bool = False
+    link_lost: bool = False
+
+
+@dataclass(frozen=True)
+class SafeCommand:
+    """What the motor is told in the safe state: `brake` False = zero current, True = brake current."""
+
+    brake: bool
+    current_a: float
+
+
+class Supervisor:
+    """Latched safety state machine: INIT until the sensors speak, RUN, then SAFE on any fault."""
+
+    def __init__(self, limits: SafetyLimits | None = None) -> None:
+        """Start in INIT with no fault."""
+        self.limits = limits or SafetyLimits()
+        self.state = SupervisorState.INIT
+        self.reason = FaultReason.NONE
+        self.tripped_at_s: float | None = None
+        self.trips = 0
+
+    @property
+    def healthy(self) -> bool:
+        """True while not in the safe state (the watchdog may be kicked)."""
+        return self.state is not SupervisorState.SAFE
+
+    def trip(self, reason: FaultReason, now_s: float) -> None:
+        """Latch the safe state for `reason` (a second trip keeps the first reason)."""
+        if self.state is SupervisorState.SAFE:
+            return
+        self.state = SupervisorState.SAFE
+        self.reason = reason
+        self.tripped_at_s = now_s
+        self.trips += 1
+        log.warning("safe state at %.4f s: %s", now_s, reason.name)
+
+    def check(self, x: SafetyInputs) -> SupervisorState:
+        """Evaluate every rule once; return the (possibly new) state."""
+        if self.state is SupervisorState.SAFE:
+            return self.state
+        reason = self._first_fault(x)
+        if reason is not FaultReason.NONE:
+            self.trip(reason, x.now_s)
+        elif self.state is SupervisorState.INIT and x.last_motor_reply_s is not None \
+                and x.last_imu_frame_s is not None:
+            self.state = SupervisorState.RUN
+        return self.state
+
+    def safe_command(self, now_s: float) -> SafeCommand:
+        """In SAFE: zero current for `brake_delay_s` after the trip, then the brake."""
+        tripped = self.tripped_at_s if self.tripped_at_s is not None else now_s
+        if now_s - tripped >= self.limits.brake_delay_s:
+            return SafeCommand(brake=True, current_a=self.limits.brake_current_a)
+        return SafeCommand(brake=False, current_a=0.0)
+
+    def _first_fault(self, x: SafetyInputs) -> FaultReason:
+        """The highest-ranked fault present in `x`, or NONE."""
+        lim = self.limits
+        if x.estop_pressed:
+            return FaultReason.ESTOP
+        if x.link_lost:
+            return FaultReason.LINK_LOST
+        if x.motor_fault_code:
+            return FaultReason.MOTOR_FAULT
+        if x.deadline_miss_streak >= lim.deadline_miss_streak:
+            return FaultReason.DEADLINE_MISSES
+        if self._stale(x.last_motor_reply_s, x.now_s, lim.motor_timeout_s):
+            return FaultReason.MOTOR_TIMEOUT
+        if self._stale(x.last_imu_frame_s, x.now_s, lim.imu_timeout_s):
+            return FaultReason.IMU_TIMEOUT
+        if self.state is SupervisorState.RUN:
+            if not lim.angle_min_rad <= x.angle_rad <= lim.angle_max_rad:
+                return FaultReason.ANGLE_LIMIT
+            if abs(x.current_meas_a) > lim.current_limit_a:
+                return FaultReason.CURRENT_LIMIT
+            if x.disagreement_rad > lim.disagreement_rad:
+                return FaultReason.SENSOR_DISAGREEMENT
+        return FaultReason.NONE
+
+    def _stale(self, last_s: float | None, now_s: float, timeout_s: float) -> bool:
+        """True if a source has been silent too long (never heard counts after the start-up grace)."""
+        if last_s is None:
+            return now_s > self.limits.startup_grace_s
+        return now_s - last_s > timeout_s
