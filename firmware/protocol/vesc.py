@@ -19,9 +19,10 @@ layout in :mod:`firmware.protocol.vesc_values`; everything public is re-exported
 from __future__ import annotations
 
 import math
+import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
-from functools import partial
 from typing import ClassVar, Literal, Self
 
 from firmware.protocol.vesc_frame import (
@@ -46,6 +47,7 @@ __all__ = [
 ]
 
 Direction = Literal["to-motor", "from-motor"]
+_INT32 = struct.Struct(">i")
 
 
 class DetectMode(IntEnum):
@@ -248,10 +250,25 @@ class RotorPosition(Message):
     @classmethod
     def from_payload(cls, payload: bytes, scale: float = 1e4) -> Self:
         """Decode a payload with the given wire scale; ShortPayloadError when shorter than 5 bytes."""
-        if len(payload) < 5:
-            raise ShortPayloadError(f"RotorPosition needs 5 payload bytes, got {len(payload)}")
-        raw = int.from_bytes(payload[1:5], "big", signed=True)
-        return cls(raw / (scale * 180.0 / math.pi), scale)
+        return cls.payload_decoder(scale)(payload)
+
+    @classmethod
+    def payload_decoder(cls, scale: float = 1e4) -> Callable[[bytes], Self]:
+        """Return a fast payload decoder for the wire scale ``scale`` (used by :class:`Decoder`)."""
+        divisor = scale * 180.0 / math.pi
+        unpack = _INT32.unpack_from
+        new = object.__new__
+
+        def decode(payload: bytes) -> Self:
+            try:
+                (raw,) = unpack(payload, 1)
+            except struct.error:
+                raise ShortPayloadError(f"RotorPosition needs 5 payload bytes, got {len(payload)}") from None
+            obj = new(cls)
+            obj.__dict__.update(position_rad=raw / divisor, scale=scale)
+            return obj
+
+        return decode
 
     @classmethod
     def from_degrees(cls, position_deg: float, scale: float = 1e4) -> Self:
@@ -337,11 +354,10 @@ class Decoder(FrameDecoder[Message]):
         self.selective_mask_echo = selective_mask_echo
         self.selective_mask = selective_mask
         if direction == "to-motor":
-            table = {cid: cls.from_payload for cid, cls in MESSAGES_TO_MOTOR.items()}
+            table = {cid: cls.payload_decoder() for cid, cls in MESSAGES_TO_MOTOR.items()}
         else:
-            table = {cid: cls.from_payload for cid, cls in MESSAGES_FROM_MOTOR.items()}
-            rotor = partial(RotorPosition.from_payload, scale=self.rotor_position_scale)
-            table[CommandId.ROTOR_POSITION] = rotor
+            table = {cid: cls.payload_decoder() for cid, cls in MESSAGES_FROM_MOTOR.items()}
+            table[CommandId.ROTOR_POSITION] = RotorPosition.payload_decoder(self.rotor_position_scale)
             if not selective_mask_echo:
                 table[CommandId.GET_VALUES_SELECTIVE] = self._selective_without_echo
         super().__init__(table, Unknown)

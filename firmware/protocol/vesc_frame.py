@@ -139,10 +139,17 @@ class FrameDecoder(Generic[M]):
         unknown: Callable[[int, bytes], M],
     ) -> None:
         """Create a decoder dispatching payloads through ``table`` (see the class docstring)."""
-        self._table: dict[int, Callable[[bytes], M]] = dict(table)
         self._unknown = unknown
+        self._table: tuple[Callable[[bytes], M], ...] = tuple(
+            table.get(i, self._decode_unknown) for i in range(256)
+        )
         self._buf = b""
         self.stats = DecoderStats()
+
+    def _decode_unknown(self, payload: bytes) -> M:
+        """Table entry of every id without a decode function: count it and wrap it with ``unknown``."""
+        self.stats.unknown_ids += 1
+        return self._unknown(payload[0], bytes(payload[1:]))
 
     @property
     def buffered(self) -> int:
@@ -156,6 +163,9 @@ class FrameDecoder(Generic[M]):
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[M]:
         """Consume ``data`` and return the messages of every complete valid frame, in stream order."""
+        # Hot loop: literals instead of the module constants (2 = START_SHORT, 3 = START_LONG = END_BYTE,
+        # 512 = PACKET_MAX_PL_LEN), counters in locals, one slice per frame; reading a header byte past
+        # the end of the buffer (IndexError) means the candidate is incomplete.
         stats = self.stats
         stats.bytes_in += len(data)
         buf = self._buf + bytes(data) if self._buf else bytes(data)
@@ -166,64 +176,56 @@ class FrameDecoder(Generic[M]):
         table = self._table
         crc = _crc_hqx
         search = _START_RE.search
-        frames = dropped = crc_errors = bad_end = unknown = short = 0
-        while pos < n:
-            b = buf[pos]
-            if b == START_SHORT:
-                if pos + 1 >= n:
-                    break
-                length = buf[pos + 1]
-                if not length:
-                    pos += 1
-                    dropped += 1
+        dropped = crc_errors = bad_end = short = 0
+        try:
+            while pos < n:
+                b = buf[pos]
+                if b == 2:
+                    length = buf[pos + 1]
+                    if not length:
+                        pos += 1
+                        dropped += 1
+                        continue
+                    start = pos + 2
+                elif b == 3:
+                    length = (buf[pos + 1] << 8) | buf[pos + 2]
+                    if length < 255 or length > 512:
+                        pos += 1
+                        dropped += 1
+                        continue
+                    start = pos + 3
+                else:
+                    match = search(buf, pos)
+                    nxt = match.start() if match is not None else n
+                    dropped += nxt - pos
+                    pos = nxt
                     continue
-                start = pos + 2
-            elif b == START_LONG:
-                if pos + 2 >= n:
-                    break
-                length = (buf[pos + 1] << 8) | buf[pos + 2]
-                if length < 255 or length > PACKET_MAX_PL_LEN:
-                    pos += 1
+                end = start + length
+                if end + 3 > n:
+                    break  # incomplete candidate: wait for more bytes
+                if buf[end + 2] != 3:
+                    bad_end += 1
                     dropped += 1
+                    pos += 1
                     continue
-                start = pos + 3
-            else:
-                match = search(buf, pos)
-                nxt = match.start() if match is not None else n
-                dropped += nxt - pos
-                pos = nxt
-                continue
-            end = start + length
-            if end + 3 > n:
-                break  # incomplete candidate: wait for more bytes
-            if buf[end + 2] != END_BYTE:
-                bad_end += 1
-                dropped += 1
-                pos += 1
-                continue
-            payload = buf[start:end]
-            if crc(payload, 0) != (buf[end] << 8) | buf[end + 1]:
-                crc_errors += 1
-                dropped += 1
-                pos += 1
-                continue
-            pos = end + 3
-            frames += 1
-            decode = table.get(payload[0])
-            if decode is None:
-                unknown += 1
-                append(self._unknown(payload[0], payload[1:]))
-                continue
-            try:
-                append(decode(payload))
-            except ShortPayloadError as exc:
-                short += 1
-                _log.debug("skipped frame: %s", exc)
+                payload = buf[start:end]
+                if crc(payload, 0) != (buf[end] << 8) | buf[end + 1]:
+                    crc_errors += 1
+                    dropped += 1
+                    pos += 1
+                    continue
+                pos = end + 3
+                try:
+                    append(table[payload[0]](payload))
+                except ShortPayloadError as exc:
+                    short += 1
+                    _log.debug("skipped frame: %s", exc)
+        except IndexError:
+            pass  # header of the candidate at pos not complete yet
         self._buf = buf[pos:] if pos else buf
-        stats.frames += frames
+        stats.frames += len(out) + short
         stats.dropped_bytes += dropped
         stats.crc_errors += crc_errors
         stats.bad_end_bytes += bad_end
-        stats.unknown_ids += unknown
         stats.short_payloads += short
         return out

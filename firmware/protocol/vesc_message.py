@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
-from operator import truediv
 from typing import Any, ClassVar, Self
 
 from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
@@ -122,20 +122,28 @@ class Message:
     _WIRE: ClassVar[tuple[WireField, ...]] = ()
     _STRUCT: ClassVar[struct.Struct] = struct.Struct(">B")
     _ARGS: ClassVar[struct.Struct] = struct.Struct(">")
-    _NAMES: ClassVar[tuple[str, ...]] = ()
-    _DIVISORS: ClassVar[tuple[float, ...]] = ()
-    _INT_INDEX: ClassVar[tuple[int, ...]] = ()
+    _decode: ClassVar[Callable[[bytes], Any] | None] = None
+    _INDEX: ClassVar[dict[str, int]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Precompile the struct and conversion tables of a subclass that declares ``_WIRE``."""
+        """Precompile the structs and the payload decoder of a subclass using the generic codec."""
         super().__init_subclass__(**kwargs)
-        if "_WIRE" in cls.__dict__:
-            wire = cls._WIRE
-            cls._STRUCT = struct.Struct(">B" + "".join(f.code for f in wire))
-            cls._ARGS = struct.Struct(">" + "".join(f.code for f in wire))
-            cls._NAMES = tuple(f.name for f in wire)
-            cls._DIVISORS = tuple(f.divisor for f in wire)
-            cls._INT_INDEX = tuple(i for i, f in enumerate(wire) if f.is_int)
+        cls._STRUCT = struct.Struct(">B" + "".join(f.code for f in cls._WIRE))
+        cls._ARGS = struct.Struct(">" + "".join(f.code for f in cls._WIRE))
+        cls._INDEX = {f.name: i for i, f in enumerate(cls._WIRE)}
+        cls._decode = None if "from_payload" in cls.__dict__ else staticmethod(_make_decoder(cls))
+
+    def __getattr__(self, name: str) -> Any:
+        """Convert a field of a lazily decoded message from its wire integer, on first access only."""
+        if name.startswith("__"):
+            raise AttributeError(name)
+        index = self._INDEX.get(name)
+        raws = self.__dict__.get("_raws")
+        if index is None or raws is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        value = self._WIRE[index].from_raw(raws[index])
+        self.__dict__[name] = value
+        return value
 
     def payload(self) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
@@ -148,23 +156,73 @@ class Message:
     @classmethod
     def from_payload(cls, payload: bytes) -> Self:
         """Decode a payload (command id byte first); raise ShortPayloadError when it is too short."""
-        try:
-            raws = cls._ARGS.unpack_from(payload, 1)
-        except struct.error:
-            raise ShortPayloadError(
-                f"{cls.__name__} needs {cls._STRUCT.size} payload bytes, got {len(payload)}"
-            ) from None
-        values = list(map(truediv, raws, cls._DIVISORS))
-        for i in cls._INT_INDEX:
-            values[i] = raws[i]
-        return cls._build(cls._NAMES, values)
+        if not payload:
+            raise ShortPayloadError(f"{cls.__name__} payload is empty")
+        if payload[0] != cls.COMMAND_ID:
+            raise ValueError(f"payload id {payload[0]} is not {cls.__name__}'s id {cls.COMMAND_ID}")
+        assert cls._decode is not None
+        return cls._decode(payload)
 
     @classmethod
-    def _build(cls, names: tuple[str, ...], values: Any) -> Self:
-        """Create an instance from already-valid field values without running the dataclass __init__."""
-        obj = object.__new__(cls)
-        obj.__dict__.update(zip(names, values, strict=True))
+    def payload_decoder(cls) -> Callable[[bytes], Self]:
+        """Return the fastest function turning a payload of this class's id into a message (for Decoder)."""
+        return cls._decode if cls._decode is not None else cls.from_payload
+
+
+def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
+    """Build the payload decoder of a generic message class (closures: the decoder's hot path).
+
+    Instances are created without the dataclass ``__init__`` (values from the wire are valid by
+    construction), so message classes using the generic codec must not use ``slots=True``. A message
+    with several fields keeps the unpacked integers and converts each field on first access: decoding a
+    73-byte GET_VALUES reply then costs one ``struct.unpack_from`` instead of 23 float conversions.
+    """
+    unpack = cls._ARGS.unpack_from
+    size = cls._STRUCT.size
+    new = object.__new__
+    names = tuple(f.name for f in cls._WIRE)
+    divisors = tuple(f.divisor for f in cls._WIRE)
+    int_index = tuple(i for i, f in enumerate(cls._WIRE) if f.is_int)
+
+    def short(payload: bytes) -> ShortPayloadError:
+        return ShortPayloadError(f"{cls.__name__} needs {size} payload bytes, got {len(payload)}")
+
+    def decode_none(payload: bytes) -> Any:
+        return new(cls)
+
+    def decode_one_int(payload: bytes) -> Any:
+        try:
+            (raw,) = unpack(payload, 1)
+        except struct.error:
+            raise short(payload) from None
+        obj = new(cls)
+        obj.__dict__[name] = raw
         return obj
+
+    def decode_one(payload: bytes) -> Any:
+        try:
+            (raw,) = unpack(payload, 1)
+        except struct.error:
+            raise short(payload) from None
+        obj = new(cls)
+        obj.__dict__[name] = raw / divisor
+        return obj
+
+    def decode_many(payload: bytes) -> Any:
+        try:
+            raws = unpack(payload, 1)
+        except struct.error:
+            raise short(payload) from None
+        obj = new(cls)
+        obj.__dict__["_raws"] = raws  # fields are converted on first access (Message.__getattr__)
+        return obj
+
+    if not names:
+        return decode_none
+    if len(names) > 1:
+        return decode_many
+    (name,), (divisor,) = names, divisors
+    return decode_one_int if int_index else decode_one
 
 
 @dataclass(frozen=True)
