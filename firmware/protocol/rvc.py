@@ -177,7 +177,7 @@ class RvcDecoder:
         self._last_index: int | None = None
         self._after_banner = False
 
-    def feed(self, data: bytes) -> list[RvcFrame]:
+    def feed(self, data: bytes | bytearray | memoryview) -> list[RvcFrame]:
         """Consume bytes and return the frames they complete (the buffer never exceeds MAX_BANNER_LINE)."""
         self.stats.bytes_in += len(data)
         buf = self._buf

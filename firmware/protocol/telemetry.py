@@ -17,7 +17,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from enum import IntEnum
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from firmware.protocol.cobs import cobs_decode, cobs_encode
 
@@ -60,7 +60,7 @@ class FaultReason(IntEnum):
     LINK_LOST = 11
 
 
-def _wire(fmt: str, default: object = MISSING) -> object:
+def _wire(fmt: str, default: Any = MISSING) -> Any:
     """Dataclass field carrying its struct format character (the wire type)."""
     return field(default=default, metadata={"fmt": fmt})
 
@@ -69,19 +69,19 @@ def _wire(fmt: str, default: object = MISSING) -> object:
 class TelemetryRecord:
     """One telemetry sample (version 1 fields, SI units; floats travel as float32)."""
 
-    seq: int = _wire("I")  # type: ignore[assignment]
-    time_cycles: int = _wire("Q")  # type: ignore[assignment]
-    reference_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
-    encoder_angle_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
-    imu_pitch_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
-    fused_angle_rad: float = _wire("f", 0.0)  # type: ignore[assignment]
-    velocity_rad_s: float = _wire("f", 0.0)  # type: ignore[assignment]
-    current_cmd_a: float = _wire("f", 0.0)  # type: ignore[assignment]
-    current_meas_a: float = _wire("f", 0.0)  # type: ignore[assignment]
-    torque_est_nm: float = _wire("f", 0.0)  # type: ignore[assignment]
-    supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)  # type: ignore[assignment]
-    fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)  # type: ignore[assignment]
-    deadline_misses: int = _wire("I", 0)  # type: ignore[assignment]
+    seq: int = _wire("I")
+    time_cycles: int = _wire("Q")
+    reference_rad: float = _wire("f", 0.0)
+    encoder_angle_rad: float = _wire("f", 0.0)
+    imu_pitch_rad: float = _wire("f", 0.0)
+    fused_angle_rad: float = _wire("f", 0.0)
+    velocity_rad_s: float = _wire("f", 0.0)
+    current_cmd_a: float = _wire("f", 0.0)
+    current_meas_a: float = _wire("f", 0.0)
+    torque_est_nm: float = _wire("f", 0.0)
+    supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)
+    fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)
+    deadline_misses: int = _wire("I", 0)
 
 
 class FieldSpec(NamedTuple):
@@ -288,8 +288,10 @@ class TelemetryDecoder:
         """Bytes of an unfinished frame held back (never more than MAX_ENCODED_LEN)."""
         return len(self._buf)
 
-    def feed(self, data: bytes) -> list[TelemetryRecord]:
+    def feed(self, data: bytes | bytearray | memoryview) -> list[TelemetryRecord]:
         """Consume bytes and return the records whose frames they complete."""
+        if not isinstance(data, bytes):
+            data = bytes(data)
         self.stats.bytes_in += len(data)
         records: list[TelemetryRecord] = []
         start, n = 0, len(data)
