@@ -4,6 +4,10 @@ Wire format (BNO080 datasheet 1000-3927 §1.3.5.2; see shared PROTOCOLS.md D.2):
 index (uint8), yaw/pitch/roll (int16 little-endian, 0.01 degree), x/y/z acceleration (int16 LE,
 milli-g), motion intent (byte 15), motion request (byte 16), reserved (byte 17, sent as 0) and a
 checksum = sum of bytes 2..17 mod 256. 115200 baud 8N1, 100 Hz, output only.
+
+SI -> wire truncates toward zero (like a C cast), after snapping a scaled value within 1e-6 LSB of an
+integer to that integer: float round-off of a decoded value must not push it one LSB down, so every
+decoded frame re-encodes to the same bytes (tests check all 65536 int16 values).
 """
 
 from __future__ import annotations
