@@ -144,3 +144,14 @@ def test_vesc_both_directions(tmp_path, capsys):
     code, _, _ = run_cli(capsys, "--protocol", "vesc", "--csv", str(out), from_motor)
     row = next(csv.DictReader(out.open(newline="")))
     assert row["type"] == "Values" and float(row["pid_pos_deg"]) == pytest.approx(math.degrees(0.5), rel=1e-3)
+
+
+def test_vesc_unknown_ids_and_bytes_fields_become_hex(tmp_path, capsys):
+    vesc = pytest.importorskip("firmware.protocol.vesc")
+    data = vesc.encode_frame(b"\x63\x01\x02") + vesc.FwVersion(1, 2, "AK60").encode()
+    path = write(tmp_path, "rx.bin", data)
+    code, lines, _ = run_cli(capsys, "--protocol", "vesc", path)
+    assert code == 0
+    assert lines[0] == {"type": "Unknown", "command_id": 0x63, "data": "0102"}
+    assert lines[1]["type"] == "FwVersion" and lines[1]["hw_name"] == "AK60" and lines[1]["uuid"] == "00" * 12
+    assert lines[-1]["summary"]["unknown_ids"] == 1
