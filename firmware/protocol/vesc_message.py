@@ -14,13 +14,13 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import IntEnum
 from typing import Any, ClassVar, Self
 
 from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
 
-__all__ = ["CommandId", "Message", "Unknown", "WireField"]
+__all__ = ["CommandId", "Message", "Unknown", "WireField", "lazy_fields", "to_raw"]
 
 _RANGES: dict[str, tuple[int, int, str]] = {
     "b": (-(1 << 7), (1 << 7) - 1, "int8"),
@@ -167,6 +167,18 @@ class Message:
     def payload_decoder(cls) -> Callable[[bytes], Self]:
         """Return the fastest function turning a payload of this class's id into a message (for Decoder)."""
         return cls._decode if cls._decode is not None else cls.from_payload
+
+
+def lazy_fields(cls: type[Message]) -> type[Message]:
+    """Class decorator put above ``@dataclass``: drop class-level field defaults (``__init__`` keeps them).
+
+    A lazily decoded message holds only its wire integers; a default left on the class would be found by
+    attribute lookup before :meth:`Message.__getattr__` could convert the field.
+    """
+    for f in fields(cls):  # type: ignore[arg-type]
+        if f.name in cls.__dict__:
+            delattr(cls, f.name)
+    return cls
 
 
 def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
