@@ -1,0 +1,202 @@
+"""The application that would be flashed: the task table and the task bodies.
+
+Tasks (smaller priority number = higher priority), all released together each control period so
+that, cooperatively, one period runs: encoder -> supervisor -> control -> motor; the IMU, logger and
+watchdog tasks run at lower rates. Costs are cycle estimates from the firmware profile (to calibrate
+with DWT->CYCCNT on a real board). The firmware is handed a `Board`; it never imports a backend.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from firmware.config import FirmwareConfig
+from firmware.control.estimation import AngleEstimator
+from firmware.control.filters import ButterworthLowPass
+from firmware.control.pid import CascadeController, feedforward_current_a
+from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
+from firmware.drivers.encoder import EncoderDriver
+from firmware.drivers.imu import ImuDriver
+from firmware.drivers.motor import MotorDriver
+from firmware.logger import TelemetryLogger
+from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
+from hal.interfaces import Board
+from rtos import Job, OverrunPolicy, Task
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Firmware", "KernelHealth"]
+
+KernelHealth = Callable[[], tuple[int, int]]
+"""Returns (total deadline misses, longest current miss streak) as the RTOS sees them."""
+
+
+@dataclass
+class ControlOutput:
+    """What the control task decided this period (read by the motor, logger and report)."""
+
+    reference_rad: float = 0.0
+    current_cmd_a: float = 0.0
+    brake: bool = False
+    fused_angle_rad: float = 0.0
+    torque_est_nm: float = 0.0
+
+
+class Firmware:
+    """The prosthesis firmware bound to `board`: build it, then hand `tasks` to the RTOS."""
+
+    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None,
+                 kernel_health: KernelHealth | None = None) -> None:
+        """Bind drivers to the board's peripherals and build the controller."""
+        self.board = board
+        self.config = c = config
+        self.f_cpu_hz = board.f_cpu_hz
+        self.ts_s = 1.0 / c.control_hz
+        self.reference = reference or GaitReference.normative(stride_s=c.stride_s)
+        self.encoder = EncoderDriver(board.encoder, self.ts_s, velocity_cutoff_hz=c.velocity_cutoff_hz)
+        self.imu = ImuDriver(board.imu_uart)
+        self.motor = MotorDriver(board.motor_uart, full_every=max(1, c.control_hz // c.full_values_hz))
+        self.logger = TelemetryLogger(board.telemetry_uart)
+        self.supervisor = Supervisor(c.safety)
+        self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
+        self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, 100.0)
+                           if c.imu_lowpass_hz > 0 else None)
+        self.cascade = CascadeController(c.position_gains, c.velocity_gains, self.ts_s,
+                                         c.current_limit_a, c.velocity_limit_rad_s)
+        self.kernel_health: KernelHealth = kernel_health or (lambda: (0, 0))
+        self.out = ControlOutput()
+        self.imu_pitch_rad = 0.0
+        self.gait_start_s: float | None = None
+        self._trajectory: Trajectory | None = None
+        self._new_imu = False
+        self._heartbeat = 0
+        self._kicked_heartbeat = -1
+        self.watchdog_resets = 0
+        self.tasks = self._task_table()
+
+    # The task table ---------------------------------------------------------------------------
+    def _task_table(self) -> list[Task]:
+        c, f = self.config, self.f_cpu_hz
+
+        def task(name: str, prio: int, hz: int, body: Callable[[Job], object]) -> Task:
+            return Task(name, prio, period=f // hz, cost=c.cost(name), body=body,
+                        overrun=OverrunPolicy.SKIP)
+
+        return [
+            task("encoder", 1, c.control_hz, self._encoder_task),
+            task("supervisor", 2, c.control_hz, self._supervisor_task),
+            task("control", 3, c.control_hz, self._control_task),
+            task("motor", 4, c.control_hz, self._motor_task),
+            task("imu", 5, c.imu_poll_hz, self._imu_task),
+            task("logger", 6, c.logger_hz, self._logger_task),
+            task("watchdog", 7, c.watchdog_kick_hz, self._watchdog_task),
+        ]
+
+    def seconds(self, cycles: int) -> float:
+        """Convert a cycle count of the board's clock to seconds."""
+        return cycles / self.f_cpu_hz
+
+    # Task bodies -------------------------------------------------------------------------------
+    def _encoder_task(self, job: Job) -> None:
+        self.encoder.sample()
+
+    def _imu_task(self, job: Job) -> int:
+        before = self.imu.decoder.stats.bytes_in
+        if self.imu.poll(self.seconds(job.start)):
+            pitch = self.imu.pitch_rad
+            self.imu_pitch_rad = self.imu_filter.step(pitch) if self.imu_filter else pitch
+            self._new_imu = True
+        return self.imu.decoder.stats.bytes_in - before
+
+    def _supervisor_task(self, job: Job) -> None:
+        now_s = self.seconds(job.start)
+        misses, streak = self.kernel_health()
+        self.supervisor.check(SafetyInputs(
+            now_s=now_s,
+            angle_rad=self.out.fused_angle_rad,
+            current_meas_a=self.motor.feedback.current_a,
+            last_motor_reply_s=self.motor.feedback.received_s,
+            last_imu_frame_s=self.imu.last_frame_s,
+            disagreement_rad=self.estimator.disagreement_rad if self.estimator.seeded else 0.0,
+            motor_fault_code=self.motor.feedback.fault,
+            deadline_miss_streak=streak,
+            estop_pressed=self.board.estop.read(),
+        ))
+
+    def _control_task(self, job: Job) -> None:
+        now_s = self.seconds(job.start)
+        self._heartbeat += 1
+        imu = self.imu_pitch_rad if self._new_imu else None
+        self._new_imu = False
+        fused = self.estimator.update(self.encoder.angle_rad, imu)
+        out = self.out
+        out.fused_angle_rad = fused
+        state = self.supervisor.state
+        if state is SupervisorState.SAFE:
+            cmd = self.supervisor.safe_command(now_s)
+            out.current_cmd_a, out.brake = cmd.current_a, cmd.brake
+            self.cascade.reset()
+            return
+        if state is SupervisorState.INIT or not self.estimator.seeded:
+            out.current_cmd_a, out.brake, out.reference_rad = 0.0, False, fused
+            return
+        if self._trajectory is None:  # first RUN period: glide to the gait's first angle, then walk
+            ramp = self.config.startup_ramp_s
+            self._trajectory = MinimumJerk(fused, self.reference.angle_rad(0.0), ramp, now_s)
+            self.gait_start_s = now_s + ramp
+        gait_t = now_s - self.gait_start_s
+        ref = self._trajectory.sample(now_s) if gait_t < 0 else self.reference.sample(gait_t)
+        ff = feedforward_current_a(ref[0], ref[2], self.config.feedforward_params) \
+            if self.config.feedforward else 0.0
+        out.reference_rad = ref[0]
+        out.current_cmd_a = self.cascade.update(ref[0], ref[1], fused, self.encoder.velocity_rad_s, ff)
+        out.brake = False
+
+    def _motor_task(self, job: Job) -> int:
+        now_s = self.seconds(job.start)
+        before = self.motor.decoder.stats.bytes_in
+        self.motor.poll(now_s)
+        written = self.motor.send(self.out.current_cmd_a, now_s, brake=self.out.brake)
+        p = self.config.feedforward_params
+        self.out.torque_est_nm = (self.motor.feedback.current_a * p.torque_constant_nm_per_a
+                                  * p.gear_ratio * p.efficiency)
+        return written + self.motor.decoder.stats.bytes_in - before
+
+    def _logger_task(self, job: Job) -> int:
+        out, sup = self.out, self.supervisor
+        return self.logger.log(
+            job.start,
+            reference_rad=out.reference_rad,
+            encoder_angle_rad=self.encoder.angle_rad,
+            imu_pitch_rad=self.imu_pitch_rad,
+            fused_angle_rad=out.fused_angle_rad,
+            velocity_rad_s=self.encoder.velocity_rad_s,
+            current_cmd_a=out.current_cmd_a,
+            current_meas_a=self.motor.feedback.current_a,
+            torque_est_nm=out.torque_est_nm,
+            supervisor_state=int(sup.state),
+            fault_reason=int(sup.reason),
+            deadline_misses=self.kernel_health()[0],
+        )
+
+    def _watchdog_task(self, job: Job) -> None:
+        if self._heartbeat != self._kicked_heartbeat:  # the control loop ran since the last kick
+            self._kicked_heartbeat = self._heartbeat
+            self.board.watchdog.kick()
+        led = self.board.led
+        if self.supervisor.state is SupervisorState.SAFE:
+            led.write(True)
+        elif job.index % 50 == 0:
+            led.toggle()
+
+    # Events from outside the task table ----------------------------------------------------------
+    def on_watchdog_reset(self, t_cycles: int) -> None:
+        """The IWDG fired: count it and latch the safe state (a real MCU would reboot into INIT)."""
+        self.watchdog_resets += 1
+        self.supervisor.trip(FaultReason.WATCHDOG, self.seconds(t_cycles))
+
+    def on_task_fault(self, task_name: str, t_cycles: int) -> None:
+        """A task overran its budget under the FAULT policy: latch the safe state."""
+        self.supervisor.trip(FaultReason.TASK_OVERRUN, self.seconds(t_cycles))

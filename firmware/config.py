@@ -1,0 +1,116 @@
+"""Firmware configuration from a TOML profile (rates, gains, safety limits, cycle costs)."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from firmware.control.pid import FeedforwardParams, PidGains
+from firmware.safety import SafetyLimits
+
+__all__ = ["DEFAULT_PROFILE", "CostModel", "FirmwareConfig", "load_firmware_config"]
+
+DEFAULT_PROFILE = Path(__file__).resolve().parents[1] / "profiles" / "firmware.toml"
+
+
+@dataclass(frozen=True)
+class CostModel:
+    """Cycles of one job: `base + per_byte * bytes handled` (an estimate to calibrate with DWT->CYCCNT)."""
+
+    base: int
+    per_byte: int = 0
+
+    def __call__(self, handled: object) -> int:
+        """Price a job from what its body returned (bytes handled, or None)."""
+        return self.base + self.per_byte * (handled if isinstance(handled, int) else 0)
+
+
+@dataclass(frozen=True)
+class FirmwareConfig:
+    """Everything the firmware is configured with; see profiles/firmware.toml."""
+
+    control_hz: int = 1000
+    imu_poll_hz: int = 500
+    logger_hz: int = 500
+    watchdog_kick_hz: int = 100
+    full_values_hz: int = 10
+    current_limit_a: float = 12.0
+    velocity_limit_rad_s: float = 8.0
+    feedforward: bool = True
+    imu_lowpass_hz: float = 0.0
+    imu_lowpass_order: int = 2
+    estimator_offset_tau_s: float = 2.0
+    velocity_cutoff_hz: float = 80.0
+    stride_s: float = 1.1
+    startup_ramp_s: float = 0.5
+    position_gains: PidGains = PidGains(6.0, 2.0, 0.02, 0.004)
+    velocity_gains: PidGains = PidGains(1.0, 10.0)
+    feedforward_params: FeedforwardParams = FeedforwardParams(0.0322, 1.176, 0.150, 0.078, 27.6, 0.85)
+    safety: SafetyLimits = SafetyLimits()
+    task_cycles: dict[str, CostModel] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Check the rates divide sensibly into the control rate."""
+        for name in ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or not 1 <= value <= 10_000:
+                raise ValueError(f"{name} {value!r} out of range: an int in 1..10000 Hz")
+        if self.full_values_hz > self.control_hz:
+            raise ValueError(
+                f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
+
+    def cost(self, task: str) -> CostModel:
+        """The cost model of `task` (a small default if the profile does not name it)."""
+        return self.task_cycles.get(task, CostModel(500))
+
+    def with_changes(self, **changes: Any) -> FirmwareConfig:
+        """A copy with some fields replaced (e.g. gains from `pafp tune`)."""
+        from dataclasses import replace
+
+        return replace(self, **changes)
+
+
+def _gains(table: dict[str, Any], where: str) -> PidGains:
+    try:
+        return PidGains(**table)
+    except TypeError as e:
+        raise ValueError(f"[{where}] in the firmware profile: {e}") from None
+
+
+def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
+    """Read a firmware profile (default: profiles/firmware.toml); errors name the file and the key."""
+    p = Path(path) if path is not None else DEFAULT_PROFILE
+    try:
+        doc = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ValueError(f"cannot read firmware profile {p}: {e.strerror or e}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"firmware profile {p} is not valid TOML: {e}") from None
+    try:
+        rates, ctl, saf = doc.get("rates_hz", {}), doc.get("control", {}), doc.get("safety", {})
+        ctl = dict(ctl)
+        pos, vel = ctl.pop("position", {}), ctl.pop("velocity", {})
+        limits = SafetyLimits(
+            angle_min_rad=math.radians(saf.get("angle_min_deg", -30.0)),
+            angle_max_rad=math.radians(saf.get("angle_max_deg", 30.0)),
+            disagreement_rad=math.radians(saf.get("disagreement_deg", 6.0)),
+            **{k: v for k, v in saf.items() if not k.endswith("_deg")},
+        )
+        return FirmwareConfig(
+            control_hz=rates.get("control", 1000),
+            imu_poll_hz=rates.get("imu_poll", 500),
+            logger_hz=rates.get("logger", 500),
+            watchdog_kick_hz=rates.get("watchdog_kick", 100),
+            full_values_hz=rates.get("full_values", 10),
+            position_gains=_gains(pos, "control.position"),
+            velocity_gains=_gains(vel, "control.velocity"),
+            feedforward_params=FeedforwardParams(**doc.get("feedforward", {})),
+            safety=limits,
+            task_cycles={k: CostModel(**v) for k, v in doc.get("task_cycles", {}).items()},
+            **ctl,
+        )
+    except TypeError as e:
+        raise ValueError(f"firmware profile {p}: unknown or missing key ({e})") from None

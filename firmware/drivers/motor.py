@@ -1,0 +1,148 @@
+"""AK60-6 motor driver: commands and feedback through the VESC codec, with reply accounting.
+
+Each control tick the motor task calls `poll` (decode what arrived), then `send` (one write with the
+current or brake command followed by a feedback request). Feedback normally comes from
+GET_VALUES_SELECTIVE with a small mask, so command + request + reply fit one period at 921600 baud;
+every `full_every`-th request is a full GET_VALUES (temperatures, voltage); its 78-byte reply takes
+most of a period at 921600 baud, so the next period sends its command without a request.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from firmware.protocol.vesc import (
+    Decoder,
+    GetValues,
+    GetValuesSelective,
+    SetCurrent,
+    SetCurrentBrake,
+    Values,
+    ValuesSelective,
+)
+from hal.interfaces import Uart
+
+__all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "selective_reply_bytes"]
+
+# avg_iq (bit 5), erpm (7), fault (15), pid_pos (16): 18-byte payload, 23 bytes on the wire.
+FEEDBACK_MASK = (1 << 5) | (1 << 7) | (1 << 15) | (1 << 16)
+_FIELD_BYTES = {0: 2, 1: 2, 6: 2, 8: 2, 15: 1, 17: 1, 18: 6, 21: 1}
+
+
+def selective_reply_bytes(mask: int, mask_echo: bool = True) -> int:
+    """Bytes on the wire of a GET_VALUES_SELECTIVE reply for `mask` (frame overhead included)."""
+    payload = 1 + (4 if mask_echo else 0)
+    payload += sum(_FIELD_BYTES.get(bit, 4) for bit in range(22) if mask >> bit & 1)
+    return payload + 5
+
+
+@dataclass
+class MotorFeedback:
+    """The latest feedback from the motor (SI units); `received_s` None until the first reply."""
+
+    current_a: float = 0.0
+    erpm: int = 0
+    position_rad: float = 0.0
+    fault: int = 0
+    temp_motor_c: float = math.nan
+    temp_fet_c: float = math.nan
+    v_in_v: float = math.nan
+    received_s: float | None = None
+    age_s: float = math.nan
+
+
+@dataclass
+class MotorLinkStats:
+    """Accounting of the motor link: requests, replies, and what went wrong."""
+
+    requests: int = 0
+    replies: int = 0
+    full_replies: int = 0
+    missing_replies: int = 0
+    stale_replies: int = 0
+    tx_refused: int = 0
+    max_age_s: float = 0.0
+
+
+class MotorDriver:
+    """Talks to the AK60-6 over `uart`; owns no timing: callers pass the time in seconds."""
+
+    def __init__(self, uart: Uart, *, full_every: int = 100, feedback_mask: int = FEEDBACK_MASK) -> None:
+        """Prepare the codec and the constant request frames."""
+        if full_every < 0:
+            raise ValueError(f"full_every {full_every!r} out of range: >= 0 (0 = never)")
+        self.uart = uart
+        self.full_every = full_every
+        self.decoder = Decoder("from-motor")
+        self.feedback = MotorFeedback()
+        self.stats = MotorLinkStats()
+        self._selective_request = GetValuesSelective(feedback_mask).encode()
+        self._full_request = GetValues().encode()
+        self._pending_since: float | None = None
+        self._count = 0
+        self._skip_request = False
+
+    def poll(self, now_s: float) -> int:
+        """Decode every byte that has arrived; return the number of feedback replies taken."""
+        data = self.uart.read()
+        if not data:
+            return 0
+        taken = 0
+        fb = self.feedback
+        for msg in self.decoder.feed(data):
+            if isinstance(msg, ValuesSelective):
+                v = msg.values
+                fb.current_a = v.get("avg_iq_a", fb.current_a)
+                fb.erpm = v.get("erpm", fb.erpm)
+                fb.position_rad = v.get("pid_pos_rad", fb.position_rad)
+                fb.fault = v.get("fault", fb.fault)
+            elif isinstance(msg, Values):
+                fb.current_a, fb.erpm, fb.position_rad = msg.avg_iq_a, msg.erpm, msg.pid_pos_rad
+                fb.fault, fb.temp_motor_c, fb.temp_fet_c = msg.fault, msg.temp_motor_c, msg.temp_fet_c
+                fb.v_in_v = msg.v_in_v
+                self.stats.full_replies += 1
+            else:
+                continue
+            taken += 1
+            self._reply(now_s)
+        return taken
+
+    def _reply(self, now_s: float) -> None:
+        """Book one reply: its age against the outstanding request, or stale if none was outstanding."""
+        st = self.stats
+        if self._pending_since is None:
+            st.stale_replies += 1
+            return
+        st.replies += 1
+        age = now_s - self._pending_since
+        self.feedback.age_s = age
+        self.feedback.received_s = now_s
+        if age > st.max_age_s:
+            st.max_age_s = age
+        self._pending_since = None
+
+    def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
+        """Write the current (or brake) command, then a feedback request; return bytes written."""
+        command = SetCurrentBrake(current_a) if brake else SetCurrent(current_a)
+        frame = command.encode()
+        if request and self._skip_request:  # a full reply is still on the wire: let it finish
+            request, self._skip_request = False, False
+        if request:
+            if self._pending_since is not None:
+                self.stats.missing_replies += 1
+            full = self.full_every and self._count % self.full_every == 0
+            frame += self._full_request if full else self._selective_request
+            self._skip_request = bool(full)
+            self._count += 1
+            self.stats.requests += 1
+            self._pending_since = now_s
+        written = self.uart.write(frame)
+        if written < len(frame):
+            self.stats.tx_refused += 1
+        return written
+
+    @property
+    def crc_errors(self) -> int:
+        """Frames the codec rejected for a bad CRC."""
+        return self.decoder.stats.crc_errors

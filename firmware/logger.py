@@ -1,0 +1,34 @@
+"""Telemetry logger: one framed record per call on the telemetry UART, never blocking the loop.
+
+If the transmit queue cannot take a whole record, the record is dropped and counted; its sequence
+number is still consumed, so the host sees the loss as a sequence gap.
+"""
+
+from __future__ import annotations
+
+from firmware.protocol.telemetry import TelemetryRecord, encode_record
+from hal.interfaces import Uart
+
+__all__ = ["TelemetryLogger"]
+
+
+class TelemetryLogger:
+    """Writes `TelemetryRecord`s to `uart`; counts records sent and dropped."""
+
+    def __init__(self, uart: Uart) -> None:
+        """Bind the telemetry UART; the first record gets sequence number 0."""
+        self.uart = uart
+        self.seq = 0
+        self.sent = 0
+        self.dropped = 0
+
+    def log(self, time_cycles: int, **fields: float | int) -> int:
+        """Frame and queue one record; return bytes written (0 if dropped for lack of room)."""
+        frame = encode_record(TelemetryRecord(seq=self.seq & 0xFFFFFFFF, time_cycles=time_cycles, **fields))
+        self.seq += 1
+        if self.uart.tx_free() < len(frame):
+            self.dropped += 1
+            return 0
+        self.uart.write(frame)
+        self.sent += 1
+        return len(frame)
