@@ -1,0 +1,44 @@
+"""Plots of a run (matplotlib, Agg backend: works without a display)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from host_tools.metrics import StrideSet  # noqa: E402
+
+__all__ = ["plot_tracking"]
+
+
+def plot_tracking(path: Path, strides: StrideSet, band: tuple[np.ndarray, np.ndarray, np.ndarray],
+                  t_s: np.ndarray, current_cmd_a: np.ndarray, current_meas_a: np.ndarray,
+                  error_deg: np.ndarray, title: str) -> None:
+    """Angle vs % gait (each stride, their mean, the normative mean +- 1 SD); current and error vs time."""
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 8), constrained_layout=True)
+    pct, mean, sd = band
+    ax1.fill_between(pct, mean - sd, mean + sd, color="0.85", label="normative mean ± 1 SD")
+    ax1.plot(pct, mean, color="0.4", lw=1.2, ls="--", label="normative mean")
+    for k, a in enumerate(strides.angles_deg):
+        ax1.plot(strides.percent, a, color="tab:blue", lw=0.6, alpha=0.5, label="each stride" if k == 0 else None)
+    if len(strides.angles_deg):
+        ax1.plot(strides.percent, strides.angles_deg.mean(axis=0), color="tab:blue", lw=2.2, label="mean of strides")
+        ax1.plot(strides.percent, strides.reference_deg[0], color="tab:red", lw=1.2, label="reference")
+    ax1.set(xlabel="gait cycle (%)", ylabel="ankle angle (deg, dorsiflexion +)", title=title, xlim=(0, 100))
+    ax1.grid(alpha=0.3)
+    ax1.legend(loc="lower left", fontsize=8)
+    ax2.plot(t_s, current_cmd_a, lw=0.8, label="commanded current (A)")
+    ax2.plot(t_s, current_meas_a, lw=0.8, label="measured current (A)")
+    ax2.set(xlabel="time (s)", ylabel="motor current (A)")
+    ax2.grid(alpha=0.3)
+    ax3 = ax2.twinx()
+    ax3.plot(t_s, error_deg, color="tab:green", lw=0.8, label="tracking error (deg)")
+    ax3.set_ylabel("tracking error (deg)")
+    lines = ax2.get_lines() + ax3.get_lines()
+    ax2.legend(lines, [ln.get_label() for ln in lines], loc="upper right", fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

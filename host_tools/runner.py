@@ -1,0 +1,167 @@
+"""Runs the firmware on the virtual bench: build the world, the RTOS and the firmware, run, collect.
+
+This is the composition root of virtual mode: the only place that knows the firmware, the virtual
+bench and the kernel together. The firmware gets a `Board`; the kernel gets the firmware's tasks and
+the bench's interrupt sources; a zero-cost bench probe (lowest priority, not part of the firmware)
+samples the plant's true angle for the tracking metrics.
+"""
+
+from __future__ import annotations
+
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from hal.virtual.bench import VirtualBench
+
+from firmware.app import Firmware
+from firmware.config import FirmwareConfig, load_firmware_config
+from firmware.control.reference import GaitReference
+from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
+from rtos.analysis import TaskBound, response_time_bounds
+
+__all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "run_virtual"]
+
+PROFILES = Path(__file__).resolve().parents[1] / "profiles"
+PROBE_HZ = 500
+WATCHDOG_TIMEOUT_S = 0.050
+
+
+def board_profile(name: str = "stm32f4") -> dict:
+    """Load profiles/board_<name>.toml (clock and interrupt costs)."""
+    path = PROFILES / f"board_{name}.toml"
+    if not path.exists():
+        choices = sorted(p.stem.removeprefix("board_") for p in PROFILES.glob("board_*.toml"))
+        raise ValueError(f"board profile {name!r} not found: choose one of {choices}")
+    return tomllib.loads(path.read_text(encoding="utf-8"))
+
+
+@dataclass
+class RunConfig:
+    """What to run: strides of gait on the suspended-foot bench, link speed, profiles, seed."""
+
+    strides: int = 10
+    baud: int = 921600
+    seed: int = 0
+    board: str = "stm32f4"
+    firmware: FirmwareConfig | None = None
+    reference_csv: Path | None = None
+    settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
+    trace_capacity: int = 200_000
+    setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
+    max_duration_s: float | None = None
+
+    def __post_init__(self) -> None:
+        """Reject values the bench cannot run."""
+        if not isinstance(self.strides, int) or not 1 <= self.strides <= 10_000:
+            raise ValueError(f"strides {self.strides!r} out of range: an int in 1..10000")
+        if not isinstance(self.baud, int) or not 9600 <= self.baud <= 3_000_000:
+            raise ValueError(f"baud {self.baud!r} out of range: an int in 9600..3000000")
+
+
+@dataclass
+class Probe:
+    """Samples of the run at PROBE_HZ: time, reference, true and estimated angles, currents."""
+
+    t_s: list[float] = field(default_factory=list)
+    reference_rad: list[float] = field(default_factory=list)
+    true_angle_rad: list[float] = field(default_factory=list)
+    fused_angle_rad: list[float] = field(default_factory=list)
+    current_cmd_a: list[float] = field(default_factory=list)
+    current_meas_a: list[float] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The samples as numpy arrays."""
+        return {k: np.asarray(v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class RunResult:
+    """Everything a report needs from one run."""
+
+    config: RunConfig
+    firmware: Firmware
+    bench: VirtualBench
+    scheduler: Scheduler
+    bounds: list[TaskBound]
+    probe: Probe
+    telemetry: bytes
+    sim_time_s: float
+    wall_time_s: float
+    gait_start_s: float | None
+
+
+def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
+    """The task set with each cost model replaced by its worst case (bytes handled at most)."""
+    return [replace(t, cost=t.cost(max_bytes.get(t.name, 0)) if callable(t.cost) else t.cost, body=None)
+            for t in fw.tasks]
+
+
+@dataclass(frozen=True)
+class _Sporadic:
+    name: str
+    period: int
+    cost_cycles: int
+
+
+def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None) -> RunResult:
+    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides."""
+    board_cfg = board_profile(cfg.board)
+    f_cpu = int(board_cfg["f_cpu_hz"])
+    isr = dict(board_cfg.get("isr_cycles", {}))
+    fw_cfg = cfg.firmware or load_firmware_config()
+    reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
+                 else GaitReference.normative(stride_s=fw_cfg.stride_s))
+    clock = VirtualClock(f_cpu)
+    holder: dict[str, Scheduler] = {}
+    bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed)
+    sched_ref: list[Scheduler] = []
+
+    def kernel_health() -> tuple[int, int]:
+        if not sched_ref:
+            return 0, 0
+        stats = sched_ref[0].stats.values()
+        return sum(s.deadline_misses for s in stats), max(s.miss_streak for s in stats)
+
+    fw = Firmware(bench.board, fw_cfg, reference=reference, kernel_health=kernel_health)
+    probe = Probe()
+    plant = bench.plant
+
+    def probe_body(job) -> None:  # bench instrument, not firmware: zero cycles, lowest priority
+        t = job.start / f_cpu
+        out = fw.out
+        probe.t_s.append(t)
+        probe.reference_rad.append(out.reference_rad)
+        probe.true_angle_rad.append(plant.output_angle_rad(t))
+        probe.fused_angle_rad.append(out.fused_angle_rad)
+        probe.current_cmd_a.append(out.current_cmd_a)
+        probe.current_meas_a.append(fw.motor.feedback.current_a)
+
+    probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
+    interrupts = bench.interrupt_sources(isr)
+    trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
+    sched = Scheduler([*fw.tasks, probe_task], clock, interrupts=interrupts, trace=trace,
+                      on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
+    holder["s"] = sched
+    sched_ref.append(sched)
+    wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
+    sched.add_watchdog(wd)
+    bench.attach_watchdog(wd)
+    if cfg.setup:
+        cfg.setup(bench, fw)
+
+    sim_s = cfg.max_duration_s or (cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05)
+    wall0 = time.perf_counter()
+    sched.run_until(int(sim_s * f_cpu), progress=progress)
+    wall = time.perf_counter() - wall0
+
+    max_bytes = {"motor": 128, "imu": 128, "logger": 64}
+    byte_cycles = {name: (10 * f_cpu) // u.baud for name, u in bench.board.uarts().items()}
+    sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr.get("uart_rx_byte", 0))) for n, c in byte_cycles.items()]
+    sporadic.append(_Sporadic("systick", f_cpu // int(board_cfg.get("systick_hz", 1000)), int(isr.get("systick", 0))))
+    bounds = response_time_bounds(_analysis_tasks(fw, max_bytes), sporadic)
+    return RunResult(cfg, fw, bench, sched, bounds, probe, bench.telemetry_bytes(), sched.now / f_cpu, wall,
+                     fw.gait_start_s)
