@@ -9,7 +9,15 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from hal.virtual.plant import Plant, PlantParams, PlantState, load_plant_params, spring_bench, suspended
+from hal.virtual.plant import (
+    Plant,
+    PlantParams,
+    PlantState,
+    impulse,
+    load_plant_params,
+    spring_bench,
+    suspended,
+)
 
 P = load_plant_params()
 
@@ -221,7 +229,8 @@ def run_in_small_pieces(plant: Plant, t_end: float) -> PlantState:
     return plant.state_at(t_end)
 
 
-@pytest.mark.parametrize("fixture", [suspended(), spring_bench(0.68)], ids=["suspended", "spring"])
+@pytest.mark.parametrize("fixture", [suspended(), spring_bench(0.68), impulse(15.0, 0.0042, 0.02071)],
+                         ids=["suspended", "spring", "impulse"])
 def test_one_call_and_many_small_calls_give_bitwise_identical_states(fixture: object) -> None:
     t_end = 0.3456789
     a = run_in_one_go(Plant(P, fixture, initial_angle_rad=0.1), t_end)  # type: ignore[arg-type]

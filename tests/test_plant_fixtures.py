@@ -48,6 +48,8 @@ def test_fixture_validation_names_the_value() -> None:
         spring_bench(-1.0)
     with pytest.raises(ValueError, match=r"toe_lever_m = 0\.0.*allowed range"):
         backdrive([(0.0, 1.0)], toe_lever_m=0.0)
+    with pytest.raises(ValueError, match="either torque_nm or toe_force_n"):
+        Fixture(FixtureKind.BACKDRIVE, torque_nm=1.0, toe_force_n=2.0)
     with pytest.raises(ValueError, match="step_s"):
         Plant(P, suspended(), step_s=2e-4)
     with pytest.raises(ValueError, match="initial_angle_rad"):

@@ -99,6 +99,8 @@ class Fixture:
                 f"fixture load_mass_kg = {self.load_mass_kg!r} outside the allowed range [0, 100]")
         if self.toe_lever_m is not None and not (0.0 < self.toe_lever_m <= 1.0):
             raise ValueError(f"fixture toe_lever_m = {self.toe_lever_m!r} outside the allowed range (0, 1]")
+        if self.torque_nm is not None and self.toe_force_n is not None:
+            raise ValueError("fixture takes either torque_nm or toe_force_n, not both")
         if self.spring_offset_rad is not None and not abs(self.spring_offset_rad) <= math.pi:
             raise ValueError(
                 f"fixture spring_offset_rad = {self.spring_offset_rad!r} outside the allowed range [-pi, pi]"

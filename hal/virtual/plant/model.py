@@ -85,11 +85,10 @@ class Plant:
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
             bscale=p.total_ratio / p.brake_speed_scale_rad_s)
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
-        # committed state at time self._t (on the grid t0 + k*dt when self._on_grid)
+        # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
         self._t0 = start_time_s
         self._k = 0
         self._t = start_time_s
-        self._on_grid = True
         self._latest = start_time_s
         w0 = initial_velocity_rad_s
         self._x: tuple[float, float, float, int] = (initial_angle_rad, w0, 0.0, (w0 > 0) - (w0 < 0))
@@ -274,57 +273,46 @@ class Plant:
         return x
 
     def _commit_event(self, t_s: float) -> None:
-        """Commit the state exactly to t_s (to the grid point if within EVENT_SNAP_S) before an input."""
+        """Commit the state exactly to t_s (snapped to a grid point within EVENT_SNAP_S) before an input."""
         self._check_time(t_s)
         self._commit_grid(t_s + EVENT_SNAP_S)
         if t_s - self._t > EVENT_SNAP_S:
-            self._commit_partial(t_s, on_grid=False)
+            self._commit_partial(t_s)
         self._cache = None
 
-    def _commit_partial(self, t_end: float, on_grid: bool) -> None:
-        """Commit one step from the committed time to t_end (< one grid step away)."""
+    def _commit_partial(self, t_end: float) -> None:
+        """Commit one short step to t_end (< one step away) and restart the step grid there."""
         self._x = integrate(self._c, self._drive, self._x, self._t, 0, 1, t_end - self._t,
                             self._ea, self._eb, self._fn)
-        self._t = t_end
-        self._on_grid = on_grid
-        if on_grid:
-            self._k += 1
-        self._after_commit()
-
-    def _after_commit(self) -> None:
-        """Move to the next segment of a piecewise-linear load once its breakpoint is reached."""
-        if self._profile is not None and self._t >= self._t_break:
-            self._ea, self._eb, self._t_break = self._profile.segment(self._t)
+        self._t0 = self._t = t_end
+        self._k = 0
 
     def _commit_grid(self, t_s: float) -> None:
-        """Commit whole grid steps (and load breakpoints) up to t_s."""
-        dt, t0 = self.step_s, self._t0
+        """Commit whole steps of the grid t0 + k*dt up to t_s, and profile breakpoints <= t_s."""
+        dt = self.step_s
         while True:
-            nxt = t0 + (self._k + 1) * dt
-            if self._t_break < nxt:
-                if self._t_break > t_s:
-                    return
-                if self._t_break > self._t:
-                    self._commit_partial(self._t_break, on_grid=False)
-                else:
-                    self._after_commit()
-                continue
-            if nxt > t_s:
+            t0, k, tb = self._t0, self._k, self._t_break
+            if t_s < t0 + (k + 1) * dt and t_s < tb:
                 return
-            if not self._on_grid:
-                self._commit_partial(nxt, on_grid=True)
-                continue
-            limit = min(t_s, self._t_break)
-            k = self._k
+            limit = t_s if t_s < tb else tb
             n = int((limit - t0) / dt) - k
             while n > 0 and t0 + (k + n) * dt > limit:
                 n -= 1
             while t0 + (k + n + 1) * dt <= limit:
                 n += 1
-            self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb, self._fn)
-            self._k = k + n
-            self._t = t0 + self._k * dt
-            self._after_commit()
+            if n > 0:
+                self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb, self._fn)
+                self._k = k + n
+                self._t = t0 + self._k * dt
+            if tb > t_s:
+                return
+            # a breakpoint of the load profile: commit exactly to it, restart the grid, next segment
+            if tb > self._t:
+                self._commit_partial(tb)
+            else:
+                self._t0, self._k = self._t, 0
+            assert self._profile is not None
+            self._ea, self._eb, self._t_break = self._profile.segment(self._t)
 
 
 def _scaled_load(load: Load, factor: float) -> Load:
