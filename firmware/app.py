@@ -148,7 +148,7 @@ class Firmware:
             self.gait_start_s = now_s + ramp
         gait_t = now_s - self.gait_start_s
         ref = self._trajectory.sample(now_s) if gait_t < 0 else self.reference.sample(gait_t)
-        ff = feedforward_current_a(ref[0], ref[2], self.config.feedforward_params) \
+        ff = feedforward_current_a(ref[0] + self.config.com_angle_rad, ref[2], self.config.feedforward_params) \
             if self.config.feedforward else 0.0
         out.reference_rad = ref[0]
         out.current_cmd_a = self.cascade.update(ref[0], ref[1], fused, self.encoder.velocity_rad_s, ff)

@@ -46,6 +46,7 @@ class FirmwareConfig:
     velocity_cutoff_hz: float = 80.0
     stride_s: float = 1.1
     startup_ramp_s: float = 0.5
+    com_angle_rad: float = math.pi / 2
     position_gains: PidGains = PidGains(6.0, 2.0, 0.02, 0.004)
     velocity_gains: PidGains = PidGains(1.0, 10.0)
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0322, 1.176, 0.150, 0.078, 27.6, 0.85)
