@@ -1,19 +1,43 @@
-"""`pafp bench`: reproduce the report's bench-top tests (not implemented yet: issue 7)."""
+"""`pafp bench`: reproduce the report's plant-level bench-top tests and compare with its figures."""
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import sys
+from pathlib import Path
 
-from host_tools.commands.unavailable import not_yet
+from host_tools.benchtests import TESTS
+from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
-HELP = "reproduce the report's bench-top tests [not implemented yet]"
+HELP = "reproduce the report's bench-top tests (uncontrolled, backdrive, fast-response, loading, all)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Accept any arguments until the real command lands."""
-    parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    """Register TEST, --out, --seed and --quick."""
+    parser.add_argument("test", choices=[*TESTS, "all"], help="which bench test to run, or all")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="directory for the PNG, CSV, JSON and Markdown outputs (none written if omitted)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the trial variation (default 0)")
+    parser.add_argument("--quick", action="store_true", help="shorter runs and fewer trials")
+
+
+def _run_one(name: str, seed: int, quick: bool) -> BenchResult:
+    """Run one test; a test whose module is missing gives a row saying so instead of a number."""
+    try:
+        module = importlib.import_module(f"host_tools.benchtests.{TESTS[name]}")
+    except ImportError as exc:
+        return BenchResult(name, [Figure("(not available)", "", "", None, None, f"not available: {exc}")])
+    return module.run(seed=seed, quick=quick)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Refuse to run, naming the issue that will provide this command."""
-    return not_yet("bench", "issue 7")
+    """Run the selected test(s), write outputs if --out is given, print the comparison table."""
+    names = list(TESTS) if args.test == "all" else [args.test]
+    results = [_run_one(n, args.seed, args.quick) for n in names]
+    if args.out is not None:
+        for r in results:
+            for path in write_outputs(r, args.out):
+                print(f"wrote {path}", file=sys.stderr)
+    print(markdown_table(results), end="")
+    return 0

@@ -1,0 +1,11 @@
+"""Plant-level reproductions of the report's bench-top tests (`pafp bench`)."""
+
+from __future__ import annotations
+
+#: Test name -> module under host_tools.benchtests (each has run(seed=..., quick=...) -> BenchResult).
+TESTS: dict[str, str] = {
+    "uncontrolled": "uncontrolled",
+    "backdrive": "backdrive",
+    "fast-response": "fast_response",
+    "loading": "loading",
+}

@@ -1,0 +1,113 @@
+"""Shared output of the bench tests: result record, comparison table, PNG/CSV/JSON/Markdown writers."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["BenchResult", "Figure", "markdown_table", "write_outputs"]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One compared figure: the report's value (text and number), the emulated value, and a note."""
+
+    name: str
+    unit: str
+    report_text: str
+    report_value: float | None
+    emulated_value: float | None
+    note: str = ""
+
+    @property
+    def difference(self) -> float | None:
+        """Emulated minus report value, when both are numbers."""
+        if self.report_value is None or self.emulated_value is None:
+            return None
+        return self.emulated_value - self.report_value
+
+    def as_dict(self) -> dict[str, object]:
+        """The row as a JSON-ready mapping."""
+        return {"name": self.name, "unit": self.unit, "report": self.report_text,
+                "report_value": self.report_value, "emulated": self.emulated_value,
+                "difference": self.difference, "note": self.note}
+
+
+#: Draws the test's plot onto a fresh matplotlib figure.
+Plotter = Callable[[object], None]
+
+
+@dataclass
+class BenchResult:
+    """What one bench test produced: compared figures, data columns for the CSV, and a plotter."""
+
+    test: str
+    figures: list[Figure]
+    columns: dict[str, np.ndarray] = field(default_factory=dict)
+    plotter: Plotter | None = None
+    parameters: dict[str, object] = field(default_factory=dict)
+
+
+def _fmt(value: float | None) -> str:
+    """A number for the table (4 significant digits), or a dash."""
+    if value is None or not math.isfinite(value):
+        return "—"
+    return f"{value:.4g}"
+
+
+def markdown_table(results: list[BenchResult]) -> str:
+    """A Markdown table with one row per figure of every result: report, emulated, difference, note."""
+    lines = ["| test | figure | unit | report | emulated | difference | note |",
+             "|---|---|---|---|---|---|---|"]
+    for r in results:
+        for f in r.figures:
+            lines.append(f"| {r.test} | {f.name} | {f.unit} | {f.report_text} | {_fmt(f.emulated_value)} | "
+                         f"{_fmt(f.difference)} | {f.note} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(result: BenchResult, out_dir: Path) -> list[Path]:
+    """Write <test>.png, <test>.csv, <test>.json and <test>.md into out_dir; return their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = result.test.replace("-", "_")
+    paths = [out_dir / f"{stem}.{ext}" for ext in ("png", "csv", "json", "md")]
+    fig = plt.figure(figsize=(9, 7), layout="constrained")
+    if result.plotter is not None:
+        result.plotter(fig)
+    fig.savefig(paths[0], dpi=110)
+    plt.close(fig)
+    names = list(result.columns)
+    n = max((len(v) for v in result.columns.values()), default=0)
+    with paths[1].open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(names)
+        for k in range(n):
+            w.writerow([_cell(result.columns[c], k) for c in names])
+    doc = {"test": result.test, "parameters": result.parameters,
+           "figures": [f.as_dict() for f in result.figures]}
+    paths[2].write_text(json.dumps(doc, indent=2, default=float) + "\n")
+    paths[3].write_text(f"# Bench test `{result.test}`\n\n" + markdown_table([result]))
+    return paths
+
+
+def _cell(column: np.ndarray, k: int) -> str:
+    """One CSV cell: repr-exact float, int, or empty past the column's end."""
+    if k >= len(column):
+        return ""
+    v = column[k]
+    if isinstance(v, (np.integer, int)):
+        return str(int(v))
+    if isinstance(v, (np.floating, float)):
+        return repr(float(v))
+    return str(v)
