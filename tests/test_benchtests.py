@@ -1,10 +1,11 @@
 """Plant-level bench tests of the report (`pafp bench`): each checked against the report's figure."""
 
 import json
+import math
 
 import pytest
 
-from host_tools.benchtests import backdrive, uncontrolled
+from host_tools.benchtests import backdrive, fast_response, uncontrolled
 from host_tools.cli import main
 
 
@@ -58,3 +59,16 @@ def test_backdrive_is_seeded():
     b = backdrive.run(seed=7, trials=1).parameters["peaks_nm"]
     c = backdrive.run(seed=8, trials=1).parameters["peaks_nm"]
     assert a == b and a != c
+
+
+def test_fast_response_rises_within_report_bound_without_ringing():
+    # report: rise time under 1 s, little overshoot, no oscillation. Tolerances: rise < 1 s (the
+    # report's bound); overshoot into the stop < 10 % of the peak excursion ("little"); "no oscillation"
+    # read as at most one bounce on the stop and settled to 2 % within 1 s of the push.
+    r = fast_response.run()
+    m = r.parameters
+    assert 0.0 < m["rise_s"] < 1.0
+    assert m["overshoot_pct"] < 10.0
+    assert m["rebounds"] <= 1
+    assert m["settling_s"] < 1.0
+    assert math.degrees(m["peak_rad"]) > 5.0  # the push really moved the foot
