@@ -7,10 +7,10 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from rtos.analysis import constant_cost
+from rtos.analysis import constant_cost, response_time_bounds
 from rtos.interrupts import PeriodicInterrupt
 from rtos.scheduler import Scheduler
-from rtos.task import Fault, Task, by_priority
+from rtos.task import Fault, OverrunPolicy, Task, by_priority
 
 
 @dataclass(frozen=True)
@@ -95,12 +95,14 @@ class Observation:
 def emulation_horizon(
     tasks: Sequence[Task], interrupts: Sequence[PeriodicInterrupt] = (), max_jobs: int = 200_000
 ) -> tuple[int, int, bool]:
-    """Return (horizon, hyperperiod, capped): one hyperperiod plus the longest deadline and cost.
+    """Return (horizon, hyperperiod, capped): one hyperperiod plus the longest deadline, busy period and cost.
 
     The horizon is cut so that about ``max_jobs`` jobs are run per pattern; ``capped`` says if it was.
     """
     hyper = math.lcm(*(t.period for t in tasks), *(s.period for s in interrupts))
-    horizon = 2 + hyper + max(t.relative_deadline + t.jitter for t in tasks) + sum(
+    busy = max((b.busy_period or 0 for b in response_time_bounds(tasks, interrupts, blocking="discrete")),
+               default=0)
+    horizon = 2 + hyper + max(max(t.relative_deadline + t.jitter for t in tasks), busy) + sum(
         constant_cost(t) for t in tasks)
     rate = sum(1 / t.period for t in tasks)
     if horizon * rate <= max_jobs:
@@ -114,9 +116,15 @@ def observe_worst(
     *,
     max_jobs: int = 200_000,
     seed: int = 0,
+    overrun: OverrunPolicy | None = OverrunPolicy.QUEUE,
 ) -> Observation:
-    """Emulate the task set (bodies removed) under every release pattern; keep each task's worst response."""
-    bare = [dataclasses.replace(t, body=None, cost=constant_cost(t)) for t in tasks]
+    """Emulate the task set (bodies removed) under every release pattern; keep each task's worst response.
+
+    By default every task queues its releases (``OverrunPolicy.QUEUE``), as the analysis assumes;
+    pass ``overrun=None`` to keep each task's own policy.
+    """
+    bare = [dataclasses.replace(t, body=None, cost=constant_cost(t), overrun=overrun or t.overrun)
+            for t in tasks]
     horizon, hyper, capped = emulation_horizon(bare, interrupts, max_jobs)
     patterns = release_patterns(bare, interrupts)
     worst: dict[str, int | None] = {t.name: None for t in bare}

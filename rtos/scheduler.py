@@ -21,6 +21,7 @@ _MASK = (1 << _SHIFT) - 1
 _FAR = 1 << 200  # later than any event
 _LATE = OverrunPolicy.LATE
 _FAULT = OverrunPolicy.FAULT
+_QUEUE = OverrunPolicy.QUEUE
 
 
 class Scheduler:
@@ -284,7 +285,7 @@ class Scheduler:
             # the task's next job: releases that came while this one was pending or running overran
             nxt = nnext[i]
             fault = None
-            if nxt < f:
+            if nxt < f and task.overrun is not _QUEUE:
                 period = periods[i]
                 n = (f - 1 - nxt) // period + 1
                 if task.overrun is _LATE:

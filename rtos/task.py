@@ -17,6 +17,7 @@ class OverrunPolicy(enum.Enum):
     SKIP = "skip"  # drop the release and count it
     LATE = "late"  # keep at most one pending release and run it late; drop (and count) the others
     FAULT = "fault"  # drop the release and report a Fault to the scheduler's on_fault handler
+    QUEUE = "queue"  # keep every release (a backlog counter): late jobs run back to back, as the analysis assumes
 
 
 @dataclass(frozen=True, eq=False)
