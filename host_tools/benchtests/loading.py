@@ -1,0 +1,146 @@
+"""Loading: spring bench (215 N/m at 0.15 m) with 0.68/1.08/1.48 kg, the cascade PID tracking theta0 sin(wt).
+
+Protocol (docs/bench.md): the plant on the spring_bench fixture (T_l = -k_l (theta + theta0), the load
+hung at 0.15 m) is driven at 1 kHz by firmware.control.pid.CascadeController with the gains of
+profiles/firmware.toml, fed the plant's true angle and velocity (no encoder/IMU, no RTOS, no UART),
+its current command applied at once with plant.set_current_command. Reference theta0 sin(wt),
+theta0 = pi/6. The report gives no w: we take the w at which the spring's peak mechanical power
+k_l theta0^2 w max((1 + sin)cos) equals the report's 1.5 W target, w = 0.871 rad/s (period 7.2 s).
+Electrical power (estimate): P = i^2 R + Ke w_m i (copper loss plus back-EMF power; R phase-to-phase,
+Ke line-to-line as in the profile); supply current = P / V_supply. The figures skip the first
+SETTLE_S = 0.5 s (the foot is released onto spring and load at t = 0: a start transient).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from firmware.control.pid import CascadeController, PidGains
+from hal.virtual.plant import Plant, PlantParams, load_plant_params, spring_bench
+from host_tools.benchtests.output import BenchResult, Figure
+
+logger = logging.getLogger(__name__)
+
+SAMPLE_S = 1e-3
+#: The start (foot released onto the spring and load at t = 0) is excluded from the figures.
+SETTLE_S = 0.5
+REPORT_TARGET_TORQUE_NM = 5.068
+REPORT_TARGET_POWER_W = 1.5
+REPORT_CURRENT_A = (-0.2, 0.7)
+REPORT_PEAK_TORQUE_NM = 10.0
+REPORT_ELECTRICAL_PEAK_W = 0.39
+_PROFILE = Path(__file__).resolve().parents[2] / "profiles" / "firmware.toml"
+
+
+def omega_for_power(p: PlantParams, power_w: float = REPORT_TARGET_POWER_W) -> float:
+    """The w [rad/s] at which the spring's peak mechanical power k_l theta0^2 w max((1+s)c) is power_w."""
+    shape = 1.5 * math.sqrt(3.0) / 2.0  # max of (1 + sin x) cos x, at sin x = 1/2
+    return power_w / (p.spring_stiffness_nm_per_rad * p.spring_offset_rad**2 * shape)
+
+
+def controller_from_profile(path: Path = _PROFILE) -> CascadeController:
+    """The firmware's cascade (gains, limits) from profiles/firmware.toml at 1 kHz."""
+    cfg = tomllib.loads(path.read_text())["control"]
+    pos, vel = cfg["position"], cfg["velocity"]
+    return CascadeController(PidGains(**pos), PidGains(**vel), SAMPLE_S,
+                             current_limit_a=cfg["current_limit_a"], velocity_limit_rad_s=cfg["velocity_limit_rad_s"])
+
+
+def run_load(p: PlantParams, load_kg: float, omega_rad_s: float, periods: float) -> dict[str, np.ndarray]:
+    """Track theta0 sin(wt) on the spring bench with one load; sampled signals at 1 kHz."""
+    plant = Plant(p, spring_bench(load_kg), initial_angle_rad=0.0)
+    ctl = controller_from_profile()
+    theta0 = p.spring_offset_rad
+    n = int(round(periods * 2 * math.pi / omega_rad_s / SAMPLE_S))
+    out = {k: np.empty(n) for k in ("t_s", "ref_rad", "angle_rad", "velocity_rad_s", "current_a",
+                                    "torque_nm", "spring_torque_nm")}
+    for k in range(n):
+        t = k * SAMPLE_S
+        s = plant.state_at(t)
+        ref = theta0 * math.sin(omega_rad_s * t)
+        ref_vel = theta0 * omega_rad_s * math.cos(omega_rad_s * t)
+        plant.set_current_command(ctl.update(ref, ref_vel, s.output_angle_rad, s.output_velocity_rad_s), t)
+        for key, v in (("t_s", t), ("ref_rad", ref), ("angle_rad", s.output_angle_rad),
+                       ("velocity_rad_s", s.output_velocity_rad_s), ("current_a", s.current_q_a),
+                       ("torque_nm", s.output_torque_nm),
+                       ("spring_torque_nm", p.spring_stiffness_nm_per_rad * (s.output_angle_rad + theta0))):
+            out[key][k] = v
+    w_m = out["velocity_rad_s"] * p.total_ratio
+    i = out["current_a"]
+    out["electrical_power_w"] = i * i * p.phase_resistance_ohm + p.ke_v_s_per_rad * w_m * i
+    out["supply_current_a"] = out["electrical_power_w"] / p.supply_voltage_v
+    out["spring_power_w"] = out["spring_torque_nm"] * out["velocity_rad_s"]
+    return out
+
+
+def per_period_peak_mean(t_s: np.ndarray, x: np.ndarray, period_s: float) -> float:
+    """Mean over whole periods of each period's maximum of x."""
+    idx = np.floor(t_s / period_s + 1e-9).astype(int)
+    peaks = [x[idx == j].max() for j in range(int(idx.max()) + 1) if np.sum(idx == j) > 0.9 * period_s / SAMPLE_S]
+    return float(np.mean(peaks)) if peaks else float(np.max(x))
+
+
+def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
+        periods: float | None = None) -> BenchResult:
+    """Run the three loads; compare the 1.48 kg run (after SETTLE_S) with the report's figures."""
+    del seed
+    p = params if params is not None else load_plant_params()
+    omega = omega_for_power(p)
+    n_periods = periods if periods is not None else (1.0 if quick else 2.0)
+    period_s = 2 * math.pi / omega
+    runs = {m: run_load(p, m, omega, n_periods) for m in p.load_masses_kg}
+    full = runs[max(runs)]
+    keep = full["t_s"] >= SETTLE_S
+    heavy = {k: v[keep] for k, v in full.items()}
+    track_rms_deg = float(np.degrees(np.sqrt(np.mean((heavy["angle_rad"] - heavy["ref_rad"]) ** 2))))
+    figures = [
+        Figure("peak spring torque, 1.48 kg", "N*m", "5.068 (target)", REPORT_TARGET_TORQUE_NM,
+               float(heavy["spring_torque_nm"].max()), f"tracking error rms {track_rms_deg:.2f} deg"),
+        Figure("peak spring mechanical power, 1.48 kg", "W", "1.5 (target)", REPORT_TARGET_POWER_W,
+               float(heavy["spring_power_w"].max()), f"w = {omega:.3f} rad/s chosen from this target"),
+        Figure("min motor current, 1.48 kg", "A", "-0.2 (measured)", REPORT_CURRENT_A[0],
+               float(heavy["current_a"].min()), "q-axis current; report likely a different current"),
+        Figure("max motor current, 1.48 kg", "A", "0.7 (measured)", REPORT_CURRENT_A[1],
+               float(heavy["current_a"].max()),
+               f"supply current P/V: {heavy['supply_current_a'].min():.2f}..{heavy['supply_current_a'].max():.2f} A"),
+        Figure("peak motor torque at the ankle, 1.48 kg", "N*m", "10", REPORT_PEAK_TORQUE_NM,
+               float(np.abs(heavy["torque_nm"]).max()), "Kt i N eta"),
+        Figure("mean per-period peak electrical power, 1.48 kg", "W", "0.39", REPORT_ELECTRICAL_PEAK_W,
+               per_period_peak_mean(heavy["t_s"] - SETTLE_S, heavy["electrical_power_w"], period_s),
+               "i^2 R + Ke w_m i"),
+    ]
+    for m, r in runs.items():
+        logger.info("loading %.2f kg: peak torque %.2f N m, current %.2f..%.2f A", m,
+                    np.abs(r["torque_nm"]).max(), r["current_a"].min(), r["current_a"].max())
+
+    def plot(fig: object) -> None:
+        axes = fig.subplots(4, 1, sharex=True)  # type: ignore[attr-defined]
+        for m, r in runs.items():
+            axes[0].plot(r["t_s"], r["current_a"], lw=0.9, label=f"{m:g} kg")
+            axes[1].plot(r["t_s"], r["velocity_rad_s"], lw=0.9)
+            axes[2].plot(r["t_s"], r["torque_nm"], lw=0.9)
+            axes[3].plot(r["t_s"], r["electrical_power_w"], lw=0.9)
+        axes[2].axhline(REPORT_PEAK_TORQUE_NM, color="0.5", ls="--", lw=0.8, label="report peak 10 N·m")
+        axes[0].axhspan(*REPORT_CURRENT_A, color="0.85", label="report −0.2…0.7 A")
+        for ax, lab in zip(axes, ("current [A]", "ω [rad/s]", "torque [N·m]", "P_elec [W]"), strict=True):
+            ax.set_ylabel(lab)
+            ax.legend(fontsize=7, loc="upper right") if ax.get_legend_handles_labels()[0] else None
+        axes[0].set_title(f"Loading bench, θ = π/6·sin({omega:.3f} t), cascade PID at 1 kHz")
+        axes[-1].set_xlabel("time [s]")
+
+    columns: dict[str, np.ndarray] = {"t_s": full["t_s"]}
+    for m, r in runs.items():
+        for key in ("ref_rad", "angle_rad", "velocity_rad_s", "current_a", "torque_nm", "electrical_power_w"):
+            columns[f"{key}_{m:g}kg"] = r[key]
+    return BenchResult("loading", figures, columns, plot,
+                       {"omega_rad_s": omega, "periods": n_periods, "theta0_rad": p.spring_offset_rad,
+                        "tracking_rms_deg_1.48kg": track_rms_deg, "settle_s": SETTLE_S,
+                        "supply_current_a_1.48kg": [float(heavy["supply_current_a"].min()),
+                                                    float(heavy["supply_current_a"].max())],
+                        "peak_torque_nm": {f"{m:g}": float(np.abs(r["torque_nm"][r["t_s"] >= SETTLE_S]).max())
+                                           for m, r in runs.items()}})
