@@ -137,12 +137,15 @@ class Scheduler:
         dues = [w.due for w in self._watchdogs if w.due is not None]
         return min(dues) if dues else _FAR
 
-    def _fire_watchdogs(self, now: int) -> int:
-        """Fire, in time order, every watchdog reset due at or before ``now``; return the next deadline."""
+    def _fire_watchdogs(self, now: int, t_end: int) -> int:
+        """Fire, in time order, every watchdog reset due at or before ``now`` and before ``t_end``.
+
+        Returns the next deadline.
+        """
         self._now = now
         while True:
             due = self._wd_due()
-            if due > now:
+            if due > now or due >= t_end:
                 return due
             wd = next(w for w in self._watchdogs if w.due == due)
             t = wd.expire()
@@ -194,8 +197,8 @@ class Scheduler:
         next_progress = t_begin + step if progress is not None else _FAR
         stopped = False
         while True:
-            if now >= wd_due:
-                wd_due = self._fire_watchdogs(now)
+            if now >= wd_due and wd_due < t_end:
+                wd_due = self._fire_watchdogs(now, t_end)
                 if self._stop:
                     stopped = True
                     break

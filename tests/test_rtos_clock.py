@@ -1,0 +1,67 @@
+"""Clocks: conversions, and the wall clock's drift-free absolute releases (fake and real time)."""
+
+from __future__ import annotations
+
+import pytest
+
+from rtos import OverrunPolicy, Scheduler, Task, VirtualClock, WallClock
+
+
+def test_virtual_clock_conversions_and_validation():
+    c = VirtualClock(168_000_000)
+    assert c.to_cycles(1e-3) == 168_000 and c.to_seconds(84_000_000) == 0.5
+    assert c.wait_until(123) == 123 and not c.realtime
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="f_cpu_hz"):
+            VirtualClock(bad)  # type: ignore[arg-type]
+
+
+class FakeTime:
+    """Nanosecond clock whose sleep overshoots by 300 µs and whose every read costs 1 µs."""
+
+    def __init__(self):
+        self.t = 5_000_000_000
+        self.sleeps = 0
+
+    def time_ns(self):
+        self.t += 1_000
+        return self.t
+
+    def sleep(self, s):
+        self.sleeps += 1
+        self.t += int(s * 1e9) + 300_000
+
+
+def test_wall_clock_targets_are_absolute_so_errors_do_not_accumulate():
+    fake = FakeTime()
+    clock = WallClock(1_000_000, time_ns=fake.time_ns, sleep=fake.sleep)
+    clock.start(0)
+    anchor = fake.t
+    for k in range(1, 2001):
+        got = clock.wait_until(k * 1000)  # 1 kHz
+        late_ns = fake.t - (anchor + k * 1_000_000)
+        assert 0 <= late_ns <= 3_000  # a few fake reads late, never the summed overshoots
+        assert got - k * 1000 <= 3
+    assert fake.sleeps == 0  # 1 ms period == spin window: pure spinning with the default spin_s
+
+
+def test_wall_clock_sleeps_then_spins():
+    fake = FakeTime()
+    clock = WallClock(1_000_000, spin_s=0.001, time_ns=fake.time_ns, sleep=fake.sleep)
+    clock.start(0)
+    anchor = fake.t
+    clock.wait_until(50_000)  # 50 ms: sleep ~49 ms (+0.3 ms overshoot), then spin the rest
+    assert fake.sleeps == 1 and 0 <= fake.t - (anchor + 50_000_000) <= 2_000
+
+
+def test_wall_clock_1khz_task_for_2s_is_released_2000_times():
+    starts = []
+    task = Task("tick", 1, period=1000, cost=0, overrun=OverrunPolicy.LATE,
+                body=lambda job: starts.append(job.start))
+    s = Scheduler([task], WallClock(1_000_000))
+    s.run_until(2_000_000)
+    st = s.stats["tick"]
+    assert abs(st.jobs + st.skipped - 2000) <= 1
+    assert st.jobs >= 1990
+    # no drift: the last job starts within a few ms of its absolute release time
+    assert 0 <= starts[-1] - 1000 * (len(starts) - 1 + st.skipped) < 5_000

@@ -1,0 +1,69 @@
+"""Job trace: bounded ring buffer, CSV, Chrome trace-event JSON with instant events."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import pytest
+
+from rtos import Fault, OverrunPolicy, Scheduler, Task, Trace, VirtualClock, Watchdog
+
+
+def _traced_run():
+    tr = Trace(maxlen=1000)
+    tasks = [Task("ctrl", 1, 1000, deadline=300, cost=200, offset=100),
+             Task("log", 2, 2000, cost=450, overrun=OverrunPolicy.FAULT)]
+    faults: list[Fault] = []
+    s = Scheduler(tasks, VirtualClock(1_000_000), trace=tr, on_fault=faults.append)
+    s.add_watchdog(Watchdog(1500))
+    s.run_until(4000)
+    return s, tr
+
+
+def test_ring_buffer_keeps_the_last_jobs_only():
+    tr = Trace(maxlen=5)
+    s = Scheduler([Task("x", 1, 10, cost=1)], trace=tr)
+    s.run_until(1000)
+    assert len(tr) == 5 and [j.job for j in tr.jobs()] == [95, 96, 97, 98, 99]
+
+
+def test_csv_has_header_and_one_row_per_job():
+    s, tr = _traced_run()
+    rows = list(csv.reader(io.StringIO(tr.to_csv())))
+    assert rows[0] == ["task", "job", "release", "ready", "start", "finish"]
+    assert len(rows) - 1 == sum(st.jobs for st in s.stats.values())
+    assert rows[1] == ["log", "0", "0", "0", "0", "450"]
+
+
+def test_chrome_trace_has_complete_events_per_task_and_instants():
+    s, tr = _traced_run()
+    doc = json.loads(json.dumps(tr.to_chrome(1_000_000)))
+    events = doc["traceEvents"]
+    jobs = [e for e in events if e["ph"] == "X"]
+    assert len(jobs) == len(tr.jobs())
+    tids = {e["name"]: e["tid"] for e in jobs}
+    assert tids == {"ctrl": 1, "log": 2}  # one thread per task, in priority order
+    first_ctrl = next(e for e in jobs if e["name"] == "ctrl")
+    assert (first_ctrl["ts"], first_ctrl["dur"]) == (450.0, 200.0)  # µs at 1 MHz
+    names = {e["args"]["name"] for e in events if e["ph"] == "M" and e["name"] == "thread_name"}
+    assert names == {"ctrl", "log"}
+    kinds = {e["cat"] for e in events if e["ph"] == "i"}
+    assert kinds == {"deadline_miss", "watchdog_reset"}
+    miss = next(e for e in events if e["ph"] == "i" and e["cat"] == "deadline_miss")
+    assert miss["ts"] == 400.0 and miss["tid"] == tids["ctrl"]
+
+
+def test_fault_events_are_traced(tmp_path):
+    tr = Trace()
+    s = Scheduler([Task("x", 1, 10, cost=15, overrun=OverrunPolicy.FAULT)], trace=tr,
+                  on_fault=lambda f: None)
+    s.run_until(30)
+    events = [(e.kind, e.time, e.source, e.job) for e in tr.events()]
+    assert events[:2] == [("deadline_miss", 10, "x", 0), ("fault", 10, "x", 0)]
+    path = tmp_path / "t.json"
+    tr.write_chrome(path, 168_000_000)
+    doc = json.loads(path.read_text())
+    x = [e for e in doc["traceEvents"] if e["ph"] == "X"]
+    assert x[0]["dur"] == pytest.approx(15 / 168)
