@@ -49,7 +49,7 @@ def _ticks(value: Any, what: str, per_unit: Fraction, unit: str, minimum: int) -
     if value < 0 or (minimum > 0 and value == 0):
         rule = "> 0" if minimum > 0 else ">= 0"
         raise ValueError(f"{what} must be {rule} {unit}, got {value!r}")
-    ticks = Fraction(value) * per_unit
+    ticks = (Fraction(repr(value)) if isinstance(value, float) else Fraction(value)) * per_unit  # decimal
     if ticks.denominator != 1:
         raise ValueError(f"{what} = {value!r} {unit} is not a whole number of ticks "
                          f"({float(per_unit)} ticks per {unit})")
