@@ -74,7 +74,7 @@ class Scheduler:
         self._heap: list[int] = []
         self._mask = 0
         self._prev = -1  # rank of the job that ran last (-1: the CPU was idle)
-        self._prev_job = -1
+        self._prev_release = 0  # its nominal release
         self._nrel: list[int] = []
         self._nnext: list[int] = []
         self._ready: list[int] = []
@@ -153,6 +153,24 @@ class Scheduler:
             if self.trace is not None:
                 self.trace.add_event("watchdog_reset", t, "watchdog")
 
+    def _overrun(self, i: int, release: int, nxt: int, finish: int) -> Fault | None:
+        """Apply task ``i``'s policy to its releases in [nxt, finish); set its next job; maybe a Fault."""
+        task, st = self._tasks[i], self._stat_list[i]
+        period = task.period
+        n = (finish - 1 - nxt) // period + 1
+        fault = None
+        if task.overrun is _LATE:  # keep the first as the pending job, drop the others
+            st.skipped += n - 1
+            self._nnext[i] = nxt + n * period
+        else:
+            st.skipped += n
+            if task.overrun is _FAULT:
+                fault = Fault(nxt, task.name, (release - task.offset) // period, n)
+            nxt += n * period
+            self._nnext[i] = nxt + period
+        self._nrel[i] = nxt
+        return fault
+
     def _overrun_fault(self, fault: Fault) -> None:
         """Record a FAULT-policy overrun and hand it to ``on_fault`` (or raise OverrunError)."""
         self._stat_list[next(i for i, t in enumerate(self._tasks) if t.name == fault.task)].faults += 1
@@ -185,27 +203,29 @@ class Scheduler:
         costs = [None if callable(t.cost) else t.cost for t in tasks]
         bodies = [t.body for t in tasks]
         jitters = [t.jitter for t in tasks]
+        offsets = [t.offset for t in tasks]
+        plain = [t.overrun is not _QUEUE for t in tasks]  # policies that drop releases
         nrel, nnext, ready, blocked = self._nrel, self._nnext, self._ready, self._blocked
         heap, trace, rng = self._heap, self.trace, self._rng
         irqs = [] if realtime else self._interrupts
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
-        now, mask, prev, prev_job = self._now, self._mask, self._prev, self._prev_job
+        now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         t_begin = now
         span = max(1, t_end - t_begin)
         step = max(1, span // 100)
         next_progress = t_begin + step if progress is not None else _FAR
+        next_check = min(wd_due, next_progress)  # the earlier of the two slow-path instants
         stopped = False
         while True:
-            if now >= wd_due and wd_due < t_end:
-                wd_due = self._fire_watchdogs(now, t_end)
-                if self._stop:
-                    stopped = True
-                    break
-            if now >= next_progress:
-                self._now = now
-                progress(min(1.0, (now - t_begin) / span))  # type: ignore[misc]
-                next_progress = now + step
+            if now >= next_check:
+                if now >= wd_due and wd_due < t_end:
+                    wd_due = self._fire_watchdogs(now, t_end)
+                if now >= next_progress:
+                    self._now = now
+                    progress(min(1.0, (now - t_begin) / span))  # type: ignore[misc]
+                    next_progress = now + step
+                next_check = min(wd_due, next_progress)
                 if self._stop:
                     stopped = True
                     break
@@ -215,7 +235,8 @@ class Scheduler:
                 i = key & _MASK
                 mask |= 1 << i
                 if prev > i and (key >> _SHIFT) < now:
-                    blocked[i] = Blocker(tasks[prev].name, prev_job, now - (key >> _SHIFT))
+                    blocked[i] = Blocker(tasks[prev].name, (nrel_prev - offsets[prev]) // periods[prev],
+                                         now - (key >> _SHIFT))
             if now >= t_end:
                 break
             if not mask:  # idle: jump to the next release, watchdog deadline or the end
@@ -224,32 +245,34 @@ class Scheduler:
                     target = wd_due
                 if target > t_end:
                     target = t_end
-                for j, src in enumerate(irqs):
-                    irq_idle[j] += src.count_in(now, target)
+                if irqs:
+                    for j, src in enumerate(irqs):
+                        irq_idle[j] += src.count_in(now, target)
                 now = clock.wait_until(target) if realtime else target
                 prev = -1
                 continue
             i = (mask & -mask).bit_length() - 1
             mask ^= 1 << i
             r = nrel[i]
-            task = tasks[i]
-            k = (r - task.offset) // periods[i]
             start = now
             body = bodies[i]
             result = None
             if body is not None:
                 job = jobs[i]
-                job.index, job.release, job.ready, job.start = k, r, ready[i], start
+                job.index, job.release, job.ready, job.start = (r - offsets[i]) // periods[i], r, ready[i], start
                 self._now = start
                 result = body(job)
                 if self._watchdogs:
                     wd_due = self._wd_due()
+                    next_check = min(wd_due, next_progress)
+                if self._stop:
+                    stopped = True
             c = costs[i]
             if c is None:
-                c = task.cost(result)  # type: ignore[operator]
+                c = tasks[i].cost(result)  # type: ignore[operator]
                 if type(c) is not int or c < 0:
                     raise ValueError(
-                        f"task {task.name!r}: cost model returned {c!r}; need an int >= 0 cycles")
+                        f"task {tasks[i].name!r}: cost model returned {c!r}; need an int >= 0 cycles")
             if realtime:
                 f = max(start, clock.now_cycles())
                 c = f - start
@@ -264,7 +287,7 @@ class Scheduler:
             st.busy_cycles += c
             if resp > st.worst:
                 st.worst = resp
-                st.worst_job = k
+                st.worst_job = (r - offsets[i]) // periods[i]
                 st.worst_blocker = blocked[i]
             if resp < st.best:
                 st.best = resp
@@ -280,41 +303,32 @@ class Scheduler:
                 if st.miss_streak > st.longest_miss_streak:
                     st.longest_miss_streak = st.miss_streak
                 if trace is not None:
-                    trace.add_event("deadline_miss", r + deadlines[i], task.name, k)
+                    trace.add_event("deadline_miss", r + deadlines[i], tasks[i].name,
+                                    (r - offsets[i]) // periods[i])
             elif st.miss_streak:
                 st.miss_streak = 0
             if trace is not None:
-                trace.add_job(task.name, k, r, ready[i], start, f)
+                trace.add_job(tasks[i].name, (r - offsets[i]) // periods[i], r, ready[i], start, f)
             # the task's next job: releases that came while this one was pending or running overran
             nxt = nnext[i]
-            fault = None
-            if nxt < f and task.overrun is not _QUEUE:
-                period = periods[i]
-                n = (f - 1 - nxt) // period + 1
-                if task.overrun is _LATE:
-                    st.skipped += n - 1
-                    nnext[i] = nxt + n * period
-                else:
-                    st.skipped += n
-                    if task.overrun is _FAULT:
-                        fault = Fault(nxt, task.name, k, n)
-                    nxt += n * period
-                    nnext[i] = nxt + period
+            if nxt < f and plain[i]:
+                fault = self._overrun(i, r, nxt, f)
+                nxt = nrel[i]
+                if fault is not None:
+                    self._now = f
+                    self._overrun_fault(fault)
+                    stopped = stopped or self._stop
             else:
                 nnext[i] = nxt + periods[i]
-            nrel[i] = nxt
+                nrel[i] = nxt
             a = nxt + rng.randint(0, jitters[i]) if jitters[i] else nxt
             ready[i] = a
             heappush(heap, (a << _SHIFT) | i)
-            prev, prev_job, now = i, k, f
-            if fault is not None:
-                self._now = now
-                self._overrun_fault(fault)
-            if self._stop:
-                stopped = True
+            prev, nrel_prev, now = i, r, f
+            if stopped:
                 break
         if not stopped and now < t_end:
             now = t_end
-        self._now, self._mask, self._prev, self._prev_job = now, mask, prev, prev_job
+        self._now, self._mask, self._prev, self._prev_release = now, mask, prev, nrel_prev
         if progress is not None and not stopped:
             progress(1.0)
