@@ -1,0 +1,180 @@
+"""The virtual bench: the virtual MCU's peripherals wired to one shared plant and the device models.
+
+``VirtualBench`` is what the firmware runs against in virtual mode. It builds, on one cycle clock:
+the motor UART with the AK60-6 driver model, the IMU UART with the BNO08x (UART-RVC), the telemetry
+UART with a recording sink (the laptop), the encoder timer reading the ankle through the encoder mount,
+the e-stop input, the status LED and the watchdog; all devices share one :class:`Plant` on a fixture
+and are advanced in time order by one :class:`~hal.virtual.devices.world.World`. It hands the
+firmware a :class:`~hal.interfaces.Board`, the scheduler its interrupt sources, and tests their
+fault-injection handles (``motor_uart.inject_garbage``, ``imu.silence``, ``motor.inject_fault``,
+``estop.set_at``). It also serves as the ``SimContext`` of ``hal.binding`` for ``sim://`` bindings.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart
+from hal.virtual.devices.ak60 import Ak60
+from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.devices.bno08x import Bno08x, Bno08xConfig
+from hal.virtual.devices.encoder import EncoderMount
+from hal.virtual.devices.sink import ByteSink
+from hal.virtual.devices.world import PlantView, World
+from hal.virtual.irq import InterruptSourceBase
+from hal.virtual.mcu import VirtualMcu
+from hal.virtual.plant import Fixture, Plant, PlantParams, backdrive, spring_bench, suspended
+
+__all__ = ["FIXTURES", "VirtualBench", "fixture_by_name"]
+
+log = logging.getLogger(__name__)
+
+FIXTURES: Mapping[str, Callable[[], Fixture]] = {
+    "suspended": suspended,
+    "spring_bench": spring_bench,
+    "spring_bench_1.08kg": lambda: spring_bench(1.08),
+    "spring_bench_1.48kg": lambda: spring_bench(1.48),
+    "unpowered": lambda: backdrive([(0.0, 0.0)]),
+}
+"""Fixtures that need no arguments, by name (``--fixture`` on the command line)."""
+
+_MODELS = {"motor": "ak60-6", "imu": "bno08x", "telemetry": ""}
+
+
+def fixture_by_name(name: str) -> Fixture:
+    """The fixture called name (see FIXTURES); ValueError naming the choices otherwise."""
+    try:
+        return FIXTURES[name]()
+    except KeyError:
+        raise ValueError(f"fixture {name!r} unknown: choose one of {sorted(FIXTURES)}") from None
+
+
+class VirtualBench:
+    """Virtual MCU + one shared plant + AK60-6 + BNO08x + encoder + telemetry sink, e-stop, LED, watchdog.
+
+    ``clock_now()`` gives the present CPU cycle (the scheduler's ``now``); it is not called while the
+    bench is built. Times on the bench are integer cycles of ``f_cpu_hz``.
+    """
+
+    def __init__(
+        self,
+        clock_now: Callable[[], int],
+        f_cpu_hz: int,
+        *,
+        fixture: Fixture | str | None = None,
+        motor_baud: int = 921_600,
+        imu_baud: int = 115_200,
+        telemetry_baud: int = 921_600,
+        seed: int = 0,
+        plant_params: PlantParams | None = None,
+        initial_angle_rad: float = 0.0,
+        motor_config: Ak60Config | None = None,
+        imu_config: Bno08xConfig | None = None,
+        encoder_offset_rad: float = 0.0,
+        encoder_counts_per_rev: int = 4000,
+        encoder_bits: int = 16,
+        encoder_arr: int | None = None,
+        encoder_polarity: int = 1,
+        systick_hz: int = 1000,
+        rx_buffer_size: int = 256,
+        tx_queue_size: int = 256,
+        estop_initial: bool = False,
+    ) -> None:
+        """Build the bench at cycle 0 (see the class docstring); the plant starts at rest at initial_angle_rad."""
+        self.f_cpu_hz = f_cpu_hz
+        self.seed = seed
+        self.mcu = mcu = VirtualMcu(clock_now, f_cpu_hz, systick_hz)
+        fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
+        raw_plant = Plant(plant_params, fx, initial_angle_rad=initial_angle_rad)
+        self.world = world = World(raw_plant, f_cpu_hz)
+        self.plant = PlantView(world)
+        """The shared plant; queries and inputs through it first run the device events before their time."""
+        self.motor_uart = mcu.uart("motor", motor_baud, rx_buffer_size, tx_queue_size)
+        self.imu_uart = mcu.uart("imu", imu_baud, rx_buffer_size, tx_queue_size)
+        self.telemetry_uart = mcu.uart("telemetry", telemetry_baud, rx_buffer_size, tx_queue_size)
+        self.motor = Ak60(world, motor_config, link=self.motor_uart)
+        self.imu = Bno08x(world, imu_config, seed=seed, link=self.imu_uart)
+        self.telemetry = ByteSink()
+        self.motor_uart.connect(self.motor)
+        self.imu_uart.connect(self.imu)
+        self.telemetry_uart.connect(self.telemetry)
+        self.encoder_mount = EncoderMount(world, encoder_offset_rad)
+        self.encoder = mcu.encoder_timer(self.encoder_mount.angle_rad, "encoder", encoder_counts_per_rev,
+                                         encoder_bits, encoder_arr, encoder_polarity)
+        self.estop = mcu.digital_in("estop", estop_initial)
+        self.led = mcu.digital_out("led")
+        self._watchdog_target: Any = None
+        self.watchdog = mcu.watchdog(self._forward_kick)
+        self.board: Board = mcu.board(self.motor_uart, self.imu_uart, self.telemetry_uart, self.encoder,
+                                      self.estop, self.led, self.watchdog)
+        """The peripherals handed to the firmware."""
+
+    # ------------------------------------------------------------------ wiring
+    def attach_watchdog(self, watchdog: Any) -> None:
+        """Forward the firmware's watchdog kicks to watchdog.kick() (the RTOS watchdog); None detaches."""
+        if watchdog is not None and not callable(getattr(watchdog, "kick", None)):
+            raise TypeError(f"watchdog {watchdog!r} has no kick() method")
+        self._watchdog_target = watchdog
+
+    def _forward_kick(self) -> None:
+        if self._watchdog_target is not None:
+            self._watchdog_target.kick()
+
+    def interrupt_sources(self, isr_cycles: Mapping[str, int]) -> list[InterruptSourceBase]:
+        """Interrupt sources for the scheduler: one RX source per UART (per byte), SysTick, encoder wraps.
+
+        isr_cycles is the board profile's ``[isr_cycles]`` table: ``uart_rx_byte`` and ``systick`` are
+        required, ``timer_update`` optional (no encoder-wrap source without it). Call this once.
+        """
+        missing = [k for k in ("uart_rx_byte", "systick") if k not in isr_cycles]
+        if missing:
+            raise ValueError(f"isr_cycles lacks {missing}: need uart_rx_byte and systick (cycles per ISR), "
+                             "timer_update optional")
+        timer = isr_cycles.get("timer_update")
+        return self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]),
+                                          None if timer is None else int(timer))
+
+    # -------------------------------------------------------------------- time
+    def seconds(self, cycles: int) -> float:
+        """Convert cycles to seconds."""
+        return cycles / self.f_cpu_hz
+
+    def cycles(self, t_s: float) -> int:
+        """Convert seconds to the nearest cycle."""
+        return self.world.ticks(t_s)
+
+    def advance_to(self, t_cycles: int) -> None:
+        """Run every device event up to t_cycles (reads of the peripherals do this by themselves)."""
+        self.world.advance_to(t_cycles)
+
+    def telemetry_bytes(self) -> bytes:
+        """Every byte the firmware wrote to the telemetry UART (for telemetry.bin)."""
+        return self.telemetry.received()
+
+    # ------------------------------------------------- SimContext of hal.binding
+    def virtual_uart(self, role: str, model: str, baud: int) -> Uart:
+        """The bench UART of role (motor/imu/telemetry) if model and baud match how it was built."""
+        uarts = {"motor": self.motor_uart, "imu": self.imu_uart, "telemetry": self.telemetry_uart}
+        if role not in uarts:
+            raise ValueError(f"role {role!r} has no UART on the bench: one of {sorted(uarts)}")
+        if model not in ("", _MODELS[role]):
+            raise ValueError(f"{role} UART serves {_MODELS[role] or 'the telemetry sink'!r}, not {model!r}")
+        uart = uarts[role]
+        if baud != uart.baud:
+            raise ValueError(f"{role} UART was built at {uart.baud} baud, not {baud}: pass {role}_baud to "
+                             "VirtualBench")
+        return uart
+
+    def virtual_encoder(self, role: str, model: str) -> EncoderTimer:
+        """The encoder timer on the output pulley."""
+        return self.encoder
+
+    def virtual_digital_in(self, role: str, model: str) -> DigitalIn:
+        """The e-stop input."""
+        return self.estop
+
+    def virtual_digital_out(self, role: str, model: str) -> DigitalOut:
+        """The status LED."""
+        return self.led

@@ -1,0 +1,451 @@
+"""CubeMars AK60-6 in servo mode over UART: a VESC-protocol device model on the shared plant.
+
+The model is a :class:`~hal.virtual.uart.UartPeer` and a :class:`~hal.virtual.devices.world.World`
+device. Bytes from the MCU are kept with their stop-bit end times and fed to the codec's streaming
+decoder only when the world reaches them; a frame can only complete on an ``03`` end byte, so the
+bytes are fed in slices that end at each ``03`` and every decoded message gets the exact end time of
+the byte that completed it (as on the real driver, a frame hidden behind a false long-frame header is
+only seen once the decoder has rejected that header). A request at tick ``t`` samples the plant at
+``t`` and its reply starts at ``t + reply_latency``. Conventions (docs/devices.md):
+
+* currents: the q-axis current is the plant's (it already models the FOC lag and the 22.7 A clamp);
+  SET_CURRENT_REL is relative to that peak; HANDBRAKE acts as a brake current;
+* ERPM = rotor rpm x 14; tachometer = 6 steps per electrical revolution since power-up;
+* ``pid_pos`` = the actuator's output angle (rotor angle / 6, the planetary's output, before the belt)
+  in degrees, multi-turn (single-turn 0..360 after SET_POS_SINGLE), minus the origin set by
+  SET_POS_ORIGIN; ROTOR_POSITION streams it (SET_DETECT 4) at ``rotor_position_scale``;
+* the command timeout, faults and the fault stop time follow VESC's ``mc_interface``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+from firmware.protocol.vesc import (
+    VALUES_FIELDS,
+    Decoder,
+    DetectMode,
+    FwVersion,
+    GetFwVersion,
+    GetValues,
+    GetValuesSelective,
+    OriginMode,
+    RotorPosition,
+    SetCurrent,
+    SetCurrentBrake,
+    SetCurrentRel,
+    SetDetect,
+    SetDuty,
+    SetHandbrake,
+    SetPos,
+    SetPosMulti,
+    SetPosOrigin,
+    SetPosSingle,
+    SetPosSpd,
+    SetRpm,
+    Values,
+    encode_frame,
+)
+from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode
+from hal.virtual.devices.ak60_meter import Ak60Meter
+from hal.virtual.devices.ak60_values import ValueSource
+from hal.virtual.devices.world import NEVER, Link, World
+
+__all__ = ["Ak60", "Ak60Stats", "DriveMode"]
+
+log = logging.getLogger(__name__)
+
+_QUERIES = (GetValues, GetValuesSelective, GetFwVersion)
+
+
+class DriveMode(Enum):
+    """What drives the current command."""
+
+    RELEASED = "released"
+    CURRENT = "current"
+    BRAKE = "brake"
+    LOOP = "loop"
+
+
+@dataclass
+class Ak60Stats:
+    """Counters of the driver model."""
+
+    commands: int = 0
+    requests: int = 0
+    replies: int = 0
+    stream_frames: int = 0
+    timeouts: int = 0
+    faults: int = 0
+    ignored_commands: int = 0
+    bytes_out: int = 0
+
+
+class Ak60:
+    """The AK60-6 driver speaking VESC servo-mode packets on one UART, driving the world's plant."""
+
+    def __init__(self, world: World, config: Ak60Config | None = None, *, link: Link | None = None) -> None:
+        """Build the driver on world's plant; connect its transmit side with ``link`` (or ``connect``)."""
+        self.world = world
+        self.config = cfg = config if config is not None else Ak60Config()
+        self.plant = plant = world.plant
+        self.params = p = plant.params
+        self.link = link
+        self.decoder = Decoder("to-motor")
+        self.stats = Ak60Stats()
+        self.loops = InnerLoops(cfg, p)
+        t0_s = plant.latest_time_s
+        self._angle = plant.motor_angle_rad(t0_s)
+        self._velocity = plant.motor_velocity_rad_s(t0_s)
+        self.meter = Ak60Meter(cfg, p, t0_s, self._angle, plant.current_q_a(t0_s), self._velocity)
+        self._latency = world.ticks(cfg.reply_latency_s)
+        self._stream_period = max(1, world.ticks(cfg.stream_period_s))
+        self._loop_period = max(1, world.ticks(cfg.inner_loop_period_s))
+        self._timeout = world.ticks(cfg.timeout_s)
+        self._fault_stop = world.ticks(cfg.fault_stop_time_s)
+        self.mode = DriveMode.RELEASED
+        self.fault = 0
+        self.timed_out = False
+        self.single_turn = False
+        self.origin_deg = 0.0
+        self.detect_mode: int = DetectMode.NONE
+        self._applied: tuple[DriveMode, float] = (DriveMode.CURRENT, 0.0)
+        self._brake_a = 0.0
+        self._sampled_at = -1
+        self._next_target: float | None = None
+        # received bytes not yet fed to the decoder, with their end times; _rx_at is the end time of
+        # the next 03 byte (a frame can only complete there), _rx_idx its index
+        self._rx = bytearray()
+        self._ends: list[int] = []
+        self._fed = 0
+        self._rx_idx = -1
+        self._rx_at = NEVER
+        self._timeout_at = NEVER
+        self._loop_at = NEVER
+        self._stream_at = NEVER
+        self._fault_until = NEVER
+        self._actions: list[tuple[int, int, Callable[[int], None]]] = []
+        self._seq = 0
+        self.next_event = NEVER
+        self.values = ValueSource(self)
+        self._handlers: dict[type, Callable[[Any, int], None]] = {
+            SetCurrent: lambda m, t: self._drive_current(m.current_a, t),
+            SetCurrentRel: lambda m, t: self._drive_current(m.current_rel * p.peak_current_a, t),
+            SetCurrentBrake: lambda m, t: self._drive_brake(m.current_a, t),
+            SetHandbrake: lambda m, t: self._drive_brake(m.current_a, t),
+            SetDuty: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_duty(m.duty, i, w)),
+            SetRpm: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_speed(m.erpm, i, w)),
+            SetPos: lambda m, t: self._drive_position(m.position_rad, 0, 0, t),
+            SetPosSpd: lambda m, t: self._drive_position(m.position_rad, m.erpm, m.accel_erpm_per_s, t),
+            SetDetect: self._on_set_detect,
+            SetPosOrigin: self._on_set_origin,
+            SetPosMulti: lambda m, t: setattr(self, "single_turn", False),
+            SetPosSingle: lambda m, t: setattr(self, "single_turn", True),
+            GetValues: self._on_get_values,
+            GetValuesSelective: self._on_selective,
+            GetFwVersion: lambda m, t: self._reply(
+                FwVersion(cfg.fw_major, cfg.fw_minor, cfg.hw_name, cfg.uuid), t),
+        }
+        world.add(self)
+
+    # ---------------------------------------------------------------- UART peer
+    def connect(self, link: Link | None) -> None:
+        """Send replies through link (None: replies are built and dropped)."""
+        self.link = link
+
+    def on_bytes(self, data: bytes, end_times_cycles: Sequence[int]) -> None:
+        """Keep bytes from the MCU with their stop-bit end times; they are decoded when the world gets there."""
+        if len(data) != len(end_times_cycles):
+            raise ValueError(f"{len(data)} bytes but {len(end_times_cycles)} end times: need one per byte")
+        base = len(self._rx)
+        self._rx += data
+        self._ends.extend(end_times_cycles)
+        if self._rx_idx < 0:
+            j = self._rx.find(3, base)
+            if j >= 0:
+                self._rx_idx, self._rx_at = j, self._ends[j]
+                if self._rx_at < self.next_event:
+                    self.next_event = self._rx_at
+
+    def advance_to(self, t_cycles: int) -> None:
+        """Bring the whole world (this driver included) up to t_cycles."""
+        self.world.advance_to(t_cycles)
+
+    # ------------------------------------------------------------ fault injection
+    def inject_fault(self, code: int, t_s: float, duration_s: float | None = None) -> None:
+        """At t_s raise fault ``code`` (1..255, see FaultCode): motor released, reported, held duration_s."""
+        if isinstance(code, bool) or not isinstance(code, int) or not 1 <= code <= 255:
+            raise ValueError(f"fault code {code!r} out of range: an int in 1..255 (FaultCode)")
+        hold = self._fault_stop if duration_s is None else self._check_duration(duration_s)
+        self._schedule(t_s, lambda t: self._raise_fault(code, t, hold))
+
+    def set_supply_voltage(self, voltage_v: float, t_s: float) -> None:
+        """From t_s on, the supply behind the source resistance is voltage_v (e.g. to provoke UNDER_VOLTAGE)."""
+        if not (math.isfinite(voltage_v) and 0.0 <= voltage_v <= 100.0):
+            raise ValueError(f"voltage_v = {voltage_v!r} out of range [0, 100] V")
+        self._schedule(t_s, lambda t: setattr(self.meter, "v_supply_v", float(voltage_v)))
+
+    def _check_duration(self, duration_s: float) -> int:
+        if not (math.isfinite(duration_s) and duration_s > 0.0):
+            raise ValueError(f"duration_s = {duration_s!r} out of range: finite and > 0")
+        return max(1, self.world.ticks(duration_s))
+
+    def _schedule(self, t_s: float, action: Callable[[int], None]) -> None:
+        t = self.world.ticks(t_s)
+        if t <= self.world.now:
+            raise ValueError(f"t_s = {t_s!r} is in the past: the world is already at "
+                             f"{self.world.seconds(self.world.now)!r} s")
+        self._seq += 1
+        heapq.heappush(self._actions, (t, self._seq, action))
+        self._update_next()
+
+    # --------------------------------------------------------------- world device
+    def _update_next(self) -> None:
+        nxt = min(self._rx_at, self._timeout_at, self._loop_at, self._stream_at, self._fault_until)
+        if self._actions and self._actions[0][0] < nxt:
+            nxt = self._actions[0][0]
+        self.next_event = nxt
+
+    def run_event(self) -> None:
+        """Run everything scheduled at ``next_event``: actions, frames, timers; the plant is sampled once."""
+        t = self.next_event
+        actions = self._actions
+        while actions and actions[0][0] <= t:
+            heapq.heappop(actions)[2](t)
+        if self._fault_until <= t:
+            self.fault, self._fault_until = 0, NEVER
+        if self._rx_at <= t:
+            self._receive(t)
+        if self._timeout_at <= t:
+            self._timeout_at, self.timed_out = NEVER, True
+            self.stats.timeouts += 1
+            log.debug("ak60: command timeout at %.6f s, motor released", self.world.seconds(t))
+            self._release(t)
+        if self._loop_at <= t:
+            self._loop_tick(t)
+        if self._stream_at <= t:
+            self._stream_tick(t)
+        self._sample(t)
+        if not self.fault:
+            self._check_limits(t)
+        self._update_next()
+
+    def _sample(self, t: int) -> None:
+        """Sample the plant at t once (after any input at t: the state at t is the same, and cheaper).
+
+        The meter integrates the interval ending at t with the target held over it; a target set by a
+        command at t before the sample waits in ``_next_target`` and takes over after it.
+        """
+        if self._sampled_at == t:
+            return
+        self._sampled_at = t
+        t_s = t / self.world.f_hz
+        plant = self.plant
+        i = plant.current_q_a(t_s)
+        self._velocity = w = plant.motor_velocity_rad_s(t_s)
+        self._angle = plant.motor_angle_rad(t_s)
+        meter = self.meter
+        meter.sample(t_s, i, w, self._angle)
+        if self._next_target is not None:
+            meter.target_a, self._next_target = self._next_target, None
+        if self.mode is DriveMode.BRAKE:
+            meter.target_a = self._brake_target()
+
+    def _brake_target(self) -> float:
+        if not self.plant.powered:
+            return 0.0
+        return -self._brake_a * math.tanh(self._velocity / self.params.brake_speed_scale_rad_s)
+
+    def _target(self, current_a: float, t: int) -> None:
+        """From t on the q current heads for current_a (clamped to the peak; 0 when unpowered)."""
+        peak = self.params.peak_current_a
+        value = max(-peak, min(peak, current_a)) if self.plant.powered else 0.0
+        if self._sampled_at == t:
+            self.meter.target_a = value
+        else:
+            self._next_target = value
+
+    def _receive(self, t: int) -> None:
+        end = self._rx_idx + 1
+        messages = self.decoder.feed(memoryview(self._rx)[self._fed : end])
+        self._fed = end
+        if end == len(self._rx):
+            self._rx.clear()
+            self._ends.clear()
+            self._fed, self._rx_idx, self._rx_at = 0, -1, NEVER
+        else:
+            if self._fed > 4096:
+                del self._rx[: self._fed]
+                del self._ends[: self._fed]
+                self._fed = 0
+            j = self._rx.find(3, self._fed)
+            self._rx_idx, self._rx_at = (j, self._ends[j]) if j >= 0 else (-1, NEVER)
+        handlers = self._handlers
+        for msg in messages:
+            handler = handlers.get(type(msg))
+            if handler is None:
+                continue  # Unknown ids are counted by the decoder and ignored
+            if isinstance(msg, _QUERIES):
+                self.stats.requests += 1
+            else:
+                self.stats.commands += 1
+                self._timeout_at = t + self._timeout if self._timeout else NEVER
+                self.timed_out = False
+            handler(msg, t)
+
+    # ------------------------------------------------------------------- driving
+    def _apply(self, mode: DriveMode, current_a: float, t: int) -> None:
+        """Put a current (or brake) command on the plant unless it is the one already there."""
+        if self._applied == (mode, current_a):
+            return
+        self._applied = (mode, current_a)
+        t_s = t / self.world.f_hz
+        if mode is DriveMode.BRAKE:
+            self.plant.set_brake_current(current_a, t_s)
+        else:
+            self.plant.set_current_command(current_a, t_s)
+
+    def _accepts(self) -> bool:
+        if self.fault:
+            self.stats.ignored_commands += 1
+            return False
+        return True
+
+    def _drive_current(self, current_a: float, t: int) -> None:
+        if self._accepts():
+            self.mode, self._loop_at = DriveMode.CURRENT, NEVER
+            self._apply(DriveMode.CURRENT, current_a, t)
+            self._target(current_a, t)
+
+    def _drive_brake(self, current_a: float, t: int) -> None:
+        if self._accepts():
+            self.mode, self._loop_at = DriveMode.BRAKE, NEVER
+            self._brake_a = min(abs(current_a), self.params.peak_current_a)
+            self._apply(DriveMode.BRAKE, self._brake_a, t)
+            if self._sampled_at == t:
+                self.meter.target_a = self._brake_target()
+
+    def _drive_loop(self, t: int, start: Callable[[float, float], None]) -> None:
+        if self._accepts():
+            self._sample(t)
+            start(self.meter.current_a, self._velocity)
+            self.mode = DriveMode.LOOP
+            self._loop_tick(t, first=True)
+
+    def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
+        self._sample(t)
+        target_deg = math.degrees(position_rad)
+        gear = self.params.gearbox_ratio
+        if self.single_turn:
+            delta = (target_deg - self.pid_pos_deg() + 180.0) % 360.0 - 180.0
+            rotor_target = self._angle + math.radians(delta) * gear
+        else:
+            rotor_target = math.radians(target_deg + self.origin_deg) * gear
+        self._drive_loop(t, lambda i, w: self.loops.start_position(rotor_target, i, w, erpm, accel))
+
+    def _loop_tick(self, t: int, first: bool = False) -> None:
+        if self.mode is not DriveMode.LOOP:
+            self._loop_at = NEVER
+            return
+        self._sample(t)
+        dt_s = self._loop_period / self.world.f_hz
+        current = self.loops.current_a(dt_s, self._angle, self._velocity, self.meter.v_in_v)
+        self._apply(DriveMode.CURRENT, current, t)
+        self._target(current, t)
+        self._loop_at = t + self._loop_period
+
+    def _release(self, t: int) -> None:
+        self.mode, self._loop_at = DriveMode.RELEASED, NEVER
+        self._apply(DriveMode.CURRENT, 0.0, t)
+        self._target(0.0, t)
+
+    # -------------------------------------------------------------------- faults
+    def _raise_fault(self, code: int, t: int, hold_ticks: int) -> None:
+        self.fault = code
+        self._fault_until = t + hold_ticks
+        self.stats.faults += 1
+        log.info("ak60: fault %d at %.6f s", code, self.world.seconds(t))
+        self._release(t)
+
+    def _check_limits(self, t: int) -> None:
+        cfg, m = self.config, self.meter
+        if abs(m.current_a) > cfg.abs_max_current_a:
+            code = 4  # ABS_OVER_CURRENT
+        elif m.temp_fet_c > cfg.temp_fet_max_c:
+            code = 5  # OVER_TEMP_FET
+        elif m.temp_motor_c > cfg.temp_motor_max_c:
+            code = 6  # OVER_TEMP_MOTOR
+        elif m.v_in_v < cfg.min_input_voltage_v:
+            code = 2  # UNDER_VOLTAGE
+        else:
+            return
+        self._raise_fault(code, t, self._fault_stop)
+
+    # ----------------------------------------------------------------- reporting
+    def pid_pos_deg(self) -> float:
+        """Actuator output angle (rotor / 6) in degrees at the last sample, minus the origin."""
+        deg = math.degrees(self._angle / self.params.gearbox_ratio) - self.origin_deg
+        return deg % 360.0 if self.single_turn else deg
+
+    def position_error_deg(self) -> float:
+        """Position-loop error (target - present) in pid_pos degrees; 0 outside position mode."""
+        if self.mode is not DriveMode.LOOP or self.loops.mode is not LoopMode.POSITION:
+            return 0.0
+        return math.degrees((self.loops.position_target_rad - self._angle) / self.params.gearbox_ratio)
+
+    def _on_set_origin(self, msg: SetPosOrigin, t: int) -> None:
+        self._sample(t)
+        if msg.mode == OriginMode.RESTORE_DEFAULT:
+            self.origin_deg = 0.0
+        else:
+            self.origin_deg = math.degrees(self._angle / self.params.gearbox_ratio)
+
+    def _on_set_detect(self, msg: SetDetect, t: int) -> None:
+        streams = msg.mode in (DetectMode.ENCODER, DetectMode.PID_POS, DetectMode.PID_POS_ERROR)
+        if streams and self._stream_at == NEVER:
+            self._stream_at = t + self._stream_period
+        elif not streams:
+            self._stream_at = NEVER
+        self.detect_mode = msg.mode
+
+    def _stream_tick(self, t: int) -> None:
+        self._sample(t)
+        mode = self.detect_mode
+        if mode == DetectMode.ENCODER:
+            deg = math.degrees(self._angle) % 360.0
+        elif mode == DetectMode.PID_POS_ERROR:
+            deg = self.position_error_deg()
+        else:
+            deg = self.pid_pos_deg()
+        scale = self.config.rotor_position_scale
+        limit = (2**31 - 1) / scale
+        deg = max(-limit, min(limit, deg))
+        self._send(RotorPosition(math.radians(deg), scale).encode(), t)
+        self.stats.stream_frames += 1
+        self._stream_at = t + self._stream_period
+
+    def _on_selective(self, msg: GetValuesSelective, t: int) -> None:
+        self._sample(t)
+        payload = self.values.selective_payload(msg.mask, self.config.selective_mask_echo)
+        self._send(encode_frame(payload), t + self._latency)
+        self.stats.replies += 1
+
+    def _on_get_values(self, msg: GetValues, t: int) -> None:
+        self._sample(t)
+        self._reply(Values(**self.values.read(VALUES_FIELDS)), t)
+
+    def _reply(self, message: Any, t: int) -> None:
+        self._send(message.encode(), t + self._latency)
+        self.stats.replies += 1
+
+    def _send(self, frame: bytes, start: int) -> None:
+        self.stats.bytes_out += len(frame)
+        if self.link is not None:
+            self.link.transmit_to_mcu(frame, start)

@@ -1,0 +1,127 @@
+"""Settings of the AK60-6 driver model: link behaviour, inner-loop gains, supply, thermal model, limits.
+
+Values marked [I] are our assumptions (CubeMars publishes none of them); the others cite their source.
+See docs/devices.md for the reasoning behind each number.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+__all__ = ["Ak60Config"]
+
+# field -> (lowest, highest) allowed; checked in __post_init__
+_RANGES: dict[str, tuple[float, float]] = {
+    "reply_latency_s": (0.0, 0.1),
+    "timeout_s": (0.0, 3600.0),
+    "rotor_position_scale": (1.0, 1e7),
+    "stream_period_s": (1e-4, 10.0),
+    "controller_id": (0, 255),
+    "fw_major": (0, 255),
+    "fw_minor": (0, 255),
+    "inner_loop_period_s": (1e-5, 0.1),
+    "speed_kp_a_s_per_rad": (0.0, 100.0),
+    "speed_ki_a_per_rad": (0.0, 1e4),
+    "position_kp_per_s": (0.0, 1e4),
+    "pos_speed_erpm": (1.0, 1e6),
+    "pos_accel_erpm_per_s": (1.0, 1e8),
+    "max_duty": (0.0, 1.0),
+    "source_resistance_ohm": (0.0, 10.0),
+    "min_input_voltage_v": (0.0, 100.0),
+    "abs_max_current_a": (0.1, 1000.0),
+    "fault_stop_time_s": (0.0, 60.0),
+    "ambient_c": (-40.0, 100.0),
+    "winding_heat_capacity_j_per_k": (0.01, 1e5),
+    "winding_thermal_resistance_k_per_w": (0.01, 1e3),
+    "fet_heat_capacity_j_per_k": (0.01, 1e5),
+    "fet_thermal_resistance_k_per_w": (0.01, 1e3),
+    "fet_resistance_ohm": (0.0, 1.0),
+    "temp_fet_max_c": (0.0, 300.0),
+    "temp_motor_max_c": (0.0, 300.0),
+}
+
+
+@dataclass(frozen=True)
+class Ak60Config:
+    """Everything about the AK60-6 driver model that is not plant physics (SI units, degC)."""
+
+    reply_latency_s: float = 50e-6
+    """[I] from the stop bit of a request's last byte to the start bit of the reply's first byte."""
+    timeout_s: float = 1.0
+    """Command timeout: VESC ``APPCONF_TIMEOUT_MSEC`` 1000; the motor is released (0 A) after it."""
+    rotor_position_scale: float = 1e4
+    """ROTOR_POSITION wire scale (degrees x 1e4, the CubeMars manual capture; VESC uses 1e5)."""
+    stream_period_s: float = 0.010
+    """Period of the unsolicited ROTOR_POSITION frames after SET_DETECT 4 (manual p.41, VESC main.c)."""
+    selective_mask_echo: bool = True
+    """GET_VALUES_SELECTIVE reply repeats the mask (VESC); False = the manual example's form."""
+    controller_id: int = 0x7E
+    """Reported in GET_VALUES byte 58 (0x7E in the manual's p.41 capture)."""
+    fw_major: int = 3
+    """[I] FW_VERSION reply (CubeMars values are undocumented; a short 3.x-style reply)."""
+    fw_minor: int = 65
+    """[I] FW_VERSION minor."""
+    hw_name: str = "AK60-6"
+    """[I] FW_VERSION hardware name."""
+    uuid: bytes = b"pafp-ak60-6\x00"
+    """[I] FW_VERSION 12-byte UUID."""
+    inner_loop_period_s: float = 1e-3
+    """[I] period of the driver's own duty/speed/position loops (they produce the current command)."""
+    speed_kp_a_s_per_rad: float = 0.1
+    """[I] speed PI: amperes per rad/s of motor-side speed error (about 20 Hz bandwidth on the bench)."""
+    speed_ki_a_per_rad: float = 2.5
+    """[I] speed PI: amperes per rad of integrated motor-side speed error."""
+    position_kp_per_s: float = 30.0
+    """[I] position P: motor-side speed reference (rad/s) per rad of motor-side position error."""
+    pos_speed_erpm: float = 12000.0
+    """Default position-mode speed limit (manual p.32: 12000 ERPM)."""
+    pos_accel_erpm_per_s: float = 40000.0
+    """Default position-mode acceleration limit (manual p.32: 40000 ERPM/s)."""
+    max_duty: float = 0.95
+    """Largest duty cycle (VESC ``l_max_duty`` 0.95)."""
+    source_resistance_ohm: float = 0.05
+    """[I] supply and wiring resistance: v_in sags by R_src x input current."""
+    min_input_voltage_v: float = 8.0
+    """UNDER_VOLTAGE below this input voltage (VESC ``l_min_vin`` 8 V)."""
+    abs_max_current_a: float = 30.0
+    """[I] ABS_OVER_CURRENT above this |i_q| (the plant clamps at 22.7 A, so only injection trips it)."""
+    fault_stop_time_s: float = 0.5
+    """A fault holds this long, commands ignored, motor released (VESC ``MCCONF_M_FAULT_STOP_TIME`` 500 ms)."""
+    ambient_c: float = 25.0
+    """[I] ambient and initial temperature."""
+    winding_heat_capacity_j_per_k: float = 25.0
+    """[I] winding node: ~65 g of copper x 385 J/(kg K)."""
+    winding_thermal_resistance_k_per_w: float = 7.6
+    """[I] winding to ambient: 65 K rise at the rated 6.5 A (8.5 W in 0.202 ohm); tau = 190 s."""
+    fet_heat_capacity_j_per_k: float = 2.0
+    """[I] MOSFETs and their copper pour."""
+    fet_thermal_resistance_k_per_w: float = 10.0
+    """[I] MOSFETs to ambient (tau = 20 s)."""
+    fet_resistance_ohm: float = 0.01
+    """[I] conduction resistance of the bridge in the current path (two 5 mOhm switches)."""
+    temp_fet_max_c: float = 100.0
+    """OVER_TEMP_FET above this (VESC ``l_temp_fet_end`` 100 degC; VESC derates from 85, not modelled)."""
+    temp_motor_max_c: float = 100.0
+    """OVER_TEMP_MOTOR above this (VESC ``l_temp_motor_end`` 100 degC)."""
+
+    def __post_init__(self) -> None:
+        """Check every number against its allowed range."""
+        for f in fields(self):
+            if f.name not in _RANGES:
+                continue
+            lo, hi = _RANGES[f.name]
+            value = getattr(self, f.name)
+            bad = isinstance(value, bool) or not isinstance(value, (int, float))
+            if bad or not math.isfinite(value) or not lo <= value <= hi:
+                raise ValueError(f"Ak60Config.{f.name} = {value!r} is outside the allowed range [{lo}, {hi}]")
+        if len(self.uuid) != 12:
+            raise ValueError(f"Ak60Config.uuid must be exactly 12 bytes, got {len(self.uuid)}")
+        if "\0" in self.hw_name or not self.hw_name.isprintable():
+            raise ValueError(f"Ak60Config.hw_name = {self.hw_name!r} must be printable text without NUL")
+
+    @property
+    def thermal_time_constants_s(self) -> tuple[float, float]:
+        """(winding, FET) first-order time constants, C x R_th."""
+        return (self.winding_heat_capacity_j_per_k * self.winding_thermal_resistance_k_per_w,
+                self.fet_heat_capacity_j_per_k * self.fet_thermal_resistance_k_per_w)

@@ -1,0 +1,116 @@
+"""The AK60-6 driver's own duty, speed and position loops: each turns a set-point into a q-current command.
+
+CubeMars does not publish its loops or gains; these are simple, documented stand-ins (docs/devices.md):
+
+* duty ``d``: the current the bridge voltage would drive through the DC-equivalent motor,
+  ``i = (d V_in - Ke w_m) / R``;
+* speed (SET_RPM): PI on the motor-side speed, ``i = Kp e + Ki integral(e)``, integral clamped to the
+  peak current (anti-windup), output clamped to +-peak;
+* position (SET_POS, SET_POS_SPD): P on the motor-side angle giving a speed reference, limited to the
+  speed limit and slewed at the acceleration limit (a trapezoidal move), then the speed PI.
+
+Everything is motor side (rotor rad, rad/s); ERPM = rotor rpm x pole pairs. Entering a loop is bumpless:
+the integral starts at the present current and the speed reference at the present speed.
+"""
+
+from __future__ import annotations
+
+import math
+from enum import Enum
+
+from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.plant import PlantParams
+
+__all__ = ["InnerLoops", "LoopMode", "erpm_to_rad_s"]
+
+
+class LoopMode(Enum):
+    """Which inner loop makes the current command."""
+
+    DUTY = "duty"
+    SPEED = "speed"
+    POSITION = "position"
+
+
+def erpm_to_rad_s(erpm: float, pole_pairs: int) -> float:
+    """Electrical RPM to motor-side mechanical rad/s.
+
+    >>> round(erpm_to_rad_s(14 * 60, 14), 6)  # 60 rotor rpm
+    6.283185
+    """
+    return erpm / pole_pairs * math.tau / 60.0
+
+
+class InnerLoops:
+    """Set-points and state of the driver's inner loops; ``current_a`` is called once per loop period."""
+
+    def __init__(self, cfg: Ak60Config, params: PlantParams) -> None:
+        """Take the gains from cfg and the motor constants from params."""
+        self.kp = cfg.speed_kp_a_s_per_rad
+        self.ki = cfg.speed_ki_a_per_rad
+        self.kp_pos = cfg.position_kp_per_s
+        self.max_duty = cfg.max_duty
+        self.default_speed_erpm = cfg.pos_speed_erpm
+        self.default_accel_erpm_s = cfg.pos_accel_erpm_per_s
+        self.r_ohm = params.phase_resistance_ohm
+        self.ke = params.ke_v_s_per_rad
+        self.peak_a = params.peak_current_a
+        self.pole_pairs = params.pole_pairs
+        self.mode = LoopMode.DUTY
+        self.duty = 0.0
+        self.speed_target_rad_s = 0.0
+        self.position_target_rad = 0.0
+        self.max_speed_rad_s = 0.0
+        self.max_accel_rad_s2 = 0.0
+        self.speed_ref_rad_s = 0.0
+        self.integral_a = 0.0
+
+    def _clamp(self, current_a: float) -> float:
+        peak = self.peak_a
+        return peak if current_a > peak else -peak if current_a < -peak else current_a
+
+    def _enter(self, mode: LoopMode, current_a: float, motor_velocity_rad_s: float) -> None:
+        if self.mode is not mode or mode is LoopMode.DUTY:
+            self.integral_a = self._clamp(current_a)
+            self.speed_ref_rad_s = motor_velocity_rad_s
+        self.mode = mode
+
+    def start_duty(self, duty: float, current_a: float, motor_velocity_rad_s: float) -> None:
+        """Duty-cycle mode (SET_DUTY), duty limited to +-max_duty."""
+        self._enter(LoopMode.DUTY, current_a, motor_velocity_rad_s)
+        self.duty = max(-self.max_duty, min(self.max_duty, duty))
+
+    def start_speed(self, erpm: float, current_a: float, motor_velocity_rad_s: float) -> None:
+        """Speed mode (SET_RPM) towards erpm."""
+        self._enter(LoopMode.SPEED, current_a, motor_velocity_rad_s)
+        self.speed_target_rad_s = erpm_to_rad_s(erpm, self.pole_pairs)
+
+    def start_position(self, target_rad: float, current_a: float, motor_velocity_rad_s: float,
+                       speed_erpm: float = 0.0, accel_erpm_per_s: float = 0.0) -> None:
+        """Position mode towards the rotor angle target_rad; speed/accel <= 0 take the defaults."""
+        self._enter(LoopMode.POSITION, current_a, motor_velocity_rad_s)
+        self.position_target_rad = target_rad
+        speed = abs(speed_erpm) if speed_erpm else self.default_speed_erpm
+        accel = abs(accel_erpm_per_s) if accel_erpm_per_s else self.default_accel_erpm_s
+        self.max_speed_rad_s = erpm_to_rad_s(speed, self.pole_pairs)
+        self.max_accel_rad_s2 = erpm_to_rad_s(accel, self.pole_pairs)
+
+    def current_a(self, dt_s: float, motor_angle_rad: float, motor_velocity_rad_s: float,
+                  v_in_v: float) -> float:
+        """One loop period: the q-current command for the present rotor angle, speed and bus voltage."""
+        w = motor_velocity_rad_s
+        if self.mode is LoopMode.DUTY:
+            return self._clamp((self.duty * v_in_v - self.ke * w) / self.r_ohm)
+        if self.mode is LoopMode.POSITION:
+            vmax = self.max_speed_rad_s
+            want = self.kp_pos * (self.position_target_rad - motor_angle_rad)
+            want = vmax if want > vmax else -vmax if want < -vmax else want
+            step = self.max_accel_rad_s2 * dt_s
+            ref = self.speed_ref_rad_s
+            ref = min(want, ref + step) if want > ref else max(want, ref - step)
+            self.speed_ref_rad_s = ref
+        else:
+            self.speed_ref_rad_s = self.speed_target_rad_s
+        err = self.speed_ref_rad_s - w
+        self.integral_a = self._clamp(self.integral_a + self.ki * err * dt_s)
+        return self._clamp(self.kp * err + self.integral_a)

@@ -1,0 +1,153 @@
+"""What the AK60-6 driver measures between two looks at the plant: averages, counters, supply, temperatures.
+
+The driver model samples the plant at each of its events (a request or command arriving, an inner-loop
+tick, a streaming tick, the timeout). Between two samples the q-axis current follows the plant's
+first-order lag towards the target held over the interval, ``i(s) = g + (i0 - g) e^(-s/tau)``, so its
+integral and the integral of its square are computed exactly; products with the speed use the
+trapezoidal rule. Electrical model: the report's DC equivalent, ``v_q = R i + Ke w_m``, input power
+``(R + R_fet) i^2 + Ke w_m i`` drawn from a supply of ``V_s`` behind ``R_src``. Temperatures: one
+first-order node each for the winding (``R i^2``) and the MOSFETs (``R_fet i^2``), exact for the
+interval's mean power. Averages are read and reset like VESC's ``mc_interface_read_reset_avg_*``: time
+averages over the span since the previous read (VESC averages its 20-30 kHz samples; same thing).
+"""
+
+from __future__ import annotations
+
+import math
+
+from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.plant import PlantParams
+
+__all__ = ["Ak60Meter", "tach_steps"]
+
+_TACH_PER_E_REV = 6  # tachometer steps per electrical revolution (VESC mcpwm_foc.c, 60 deg resolution)
+_QUANTITIES = {"current": 1, "iq": 1, "input_current": 2, "vq": 3}
+
+
+def tach_steps(motor_angle_rad: float, pole_pairs: int) -> int:
+    """Tachometer steps of a rotor angle: 6 per electrical revolution, floor (so 0 rad is step 0).
+
+    >>> tach_steps(2 * math.pi, 14), tach_steps(-1e-9, 14)
+    (84, -1)
+    """
+    return math.floor(motor_angle_rad * pole_pairs * _TACH_PER_E_REV / math.tau)
+
+
+class Ak60Meter:
+    """Running integrals of the driver's electrical quantities between samples of the plant."""
+
+    def __init__(self, cfg: Ak60Config, params: PlantParams, t_s: float, motor_angle_rad: float,
+                 current_a: float = 0.0, motor_velocity_rad_s: float = 0.0) -> None:
+        """Start at time t_s with the plant's state then; temperatures at ambient, counters at zero."""
+        self.r_ohm = params.phase_resistance_ohm
+        self.r_fet_ohm = cfg.fet_resistance_ohm
+        self.ke = params.ke_v_s_per_rad
+        self.tau_s = params.current_time_constant_s
+        self.pole_pairs = params.pole_pairs
+        self.max_duty = cfg.max_duty
+        self.r_src_ohm = cfg.source_resistance_ohm
+        self.v_supply_v = params.supply_voltage_v
+        self.ambient_c = cfg.ambient_c
+        self._rth_w = cfg.winding_thermal_resistance_k_per_w
+        self._rth_f = cfg.fet_thermal_resistance_k_per_w
+        self._tau_w, self._tau_f = cfg.thermal_time_constants_s
+        self.t_s = t_s
+        self.current_a = current_a
+        self.motor_velocity_rad_s = motor_velocity_rad_s
+        self.target_a = 0.0
+        """Current target held from the last sample on (set by the driver after each event)."""
+        self.temp_motor_c = cfg.ambient_c
+        self.temp_fet_c = cfg.ambient_c
+        self.v_in_v = self.v_supply_v
+        self.input_current_a = 0.0
+        self.amp_seconds = 0.0
+        self.amp_seconds_charged = 0.0
+        self.watt_seconds = 0.0
+        self.watt_seconds_charged = 0.0
+        self._tach0 = tach_steps(motor_angle_rad, self.pole_pairs)
+        self._tach_last = self._tach0
+        self.tachometer = 0
+        self.tachometer_abs = 0
+        # cumulative integrals since start: [time, q current, input current, v_q]; averages are read
+        # against the totals remembered at each quantity's previous read (each resets on its own, as
+        # VESC's read-and-reset functions do)
+        self._totals = [0.0, 0.0, 0.0, 0.0]
+        self._marks: dict[str, tuple[float, float]] = {}
+
+    def sample(self, t_s: float, current_a: float, motor_velocity_rad_s: float, motor_angle_rad: float) -> None:
+        """Take the plant's values at t_s (>= the previous sample) and integrate the interval since then."""
+        dt = t_s - self.t_s
+        i1, w1 = current_a, motor_velocity_rad_s
+        if dt > 0.0:
+            i0, w0, g = self.current_a, self.motor_velocity_rad_s, self.target_a
+            d = i0 - g
+            tau = self.tau_s
+            e = math.exp(-dt / tau)
+            int_i = g * dt + d * tau * (1.0 - e)
+            int_i2 = g * g * dt + 2.0 * g * d * tau * (1.0 - e) + d * d * 0.5 * tau * (1.0 - e * e)
+            int_wi = 0.5 * dt * (w0 * i0 + w1 * i1)
+            int_w = 0.5 * dt * (w0 + w1)
+            mean_i2 = int_i2 / dt
+            power_w = ((self.r_ohm + self.r_fet_ohm) * int_i2 + self.ke * int_wi) / dt
+            i_in = self._input_current(power_w)
+            v_in = self.v_supply_v - self.r_src_ohm * i_in
+            self.input_current_a, self.v_in_v = i_in, v_in
+            tot = self._totals
+            tot[0] += dt
+            tot[1] += int_i
+            tot[2] += i_in * dt
+            tot[3] += self.r_ohm * int_i + self.ke * int_w
+            if i_in >= 0.0:
+                self.amp_seconds += i_in * dt
+                self.watt_seconds += v_in * i_in * dt
+            else:
+                self.amp_seconds_charged -= i_in * dt
+                self.watt_seconds_charged -= v_in * i_in * dt
+            ss_w = self.ambient_c + self.r_ohm * mean_i2 * self._rth_w
+            self.temp_motor_c = ss_w + (self.temp_motor_c - ss_w) * math.exp(-dt / self._tau_w)
+            ss_f = self.ambient_c + self.r_fet_ohm * mean_i2 * self._rth_f
+            self.temp_fet_c = ss_f + (self.temp_fet_c - ss_f) * math.exp(-dt / self._tau_f)
+        self.t_s = max(self.t_s, t_s)
+        self.current_a, self.motor_velocity_rad_s = i1, w1
+        steps = tach_steps(motor_angle_rad, self.pole_pairs)
+        self.tachometer_abs += abs(steps - self._tach_last)
+        self._tach_last = steps
+        self.tachometer = steps - self._tach0
+
+    def _input_current(self, power_w: float) -> float:
+        """Input current drawing power_w from V_s behind R_src: R i^2 - V i + P = 0, smaller root."""
+        v, r = self.v_supply_v, self.r_src_ohm
+        if r == 0.0:
+            return power_w / v
+        disc = v * v - 4.0 * r * power_w
+        if disc < 0.0:  # more than the supply can deliver: the maximum-power point
+            return v / (2.0 * r)
+        return (v - math.sqrt(disc)) / (2.0 * r)
+
+    @property
+    def vq_v(self) -> float:
+        """q-axis voltage now (DC equivalent): R i + Ke w_m."""
+        return self.r_ohm * self.current_a + self.ke * self.motor_velocity_rad_s
+
+    @property
+    def duty(self) -> float:
+        """Duty cycle now: v_q / v_in, limited to +-max_duty."""
+        d = self.vq_v / self.v_in_v if self.v_in_v > 0.0 else 0.0
+        return max(-self.max_duty, min(self.max_duty, d))
+
+    def read_reset(self, quantity: str) -> float:
+        """Time average of quantity ('current', 'input_current', 'iq', 'vq') since its last read; reset it.
+
+        'current' and 'iq' are the same signal (i_d = 0) but, as in VESC, each has its own reset. With no
+        time elapsed since the previous read the present value is returned.
+        """
+        index = _QUANTITIES.get(quantity)
+        if index is None:
+            raise ValueError(f"quantity {quantity!r} unknown: one of {sorted(_QUANTITIES)}")
+        tot = self._totals
+        span0, sum0 = self._marks.get(quantity, (0.0, 0.0))
+        self._marks[quantity] = (tot[0], tot[index])
+        span = tot[0] - span0
+        if span > 0.0:
+            return (tot[index] - sum0) / span
+        return (self.current_a, self.input_current_a, self.vq_v)[index - 1]

@@ -1,0 +1,41 @@
+"""The quadrature encoder on the ankle's output pulley, bound to the plant through the world.
+
+The encoder is incremental: its zero is wherever the foot was at power-up. The timer in encoder mode
+(:class:`~hal.virtual.timer.VirtualEncoderTimer`) asks for the shaft angle at the instant the firmware
+reads CNT; this mount answers with the plant's ankle angle then, after running every device event
+before that instant (so the plant's time never goes back), relative to the power-up angle plus a
+mounting offset.
+"""
+
+from __future__ import annotations
+
+import math
+
+from hal.virtual.devices.world import World
+
+__all__ = ["EncoderMount"]
+
+
+class EncoderMount:
+    """Shaft angle of the output encoder: ``theta(t) - theta(power-up) + offset_rad``, in radians.
+
+    >>> from hal.virtual.plant import Plant
+    >>> mount = EncoderMount(World(Plant(initial_angle_rad=0.3), 1000))
+    >>> mount.angle_rad(0)
+    0.0
+    """
+
+    def __init__(self, world: World, offset_rad: float = 0.0) -> None:
+        """Mount on world's plant; the angle reads offset_rad at the plant's present time."""
+        if not math.isfinite(offset_rad):
+            raise ValueError(f"offset_rad = {offset_rad!r} must be finite")
+        self.world = world
+        self.offset_rad = offset_rad
+        plant = world.plant
+        self.zero_rad = plant.output_angle_rad(plant.latest_time_s)
+
+    def angle_rad(self, t_cycles: int) -> float:
+        """The encoder shaft angle at tick t_cycles (the callable a VirtualEncoderTimer takes)."""
+        world = self.world
+        world.advance_to(t_cycles)
+        return world.plant.output_angle_rad(t_cycles / world.f_hz) - self.zero_rad + self.offset_rad

@@ -1,0 +1,146 @@
+"""The device world: one shared plant and the device models around it, advanced in global time order.
+
+Every device model (AK60-6, BNO08x, encoder) reads or drives the same lazily integrated
+:class:`~hal.virtual.plant.Plant`, and the plant only accepts times that never go back. The world
+keeps that promise: each device announces the time of its next internal event (``next_event``, in
+integer ticks of ``f_hz``; :data:`NEVER` when idle) and ``World.advance_to(t)`` runs every event up to
+``t`` across all devices in time order (ties: in the order the devices were added). A device's own
+``advance_to`` (the UART-peer hook) just asks the world. Time is an integer count of ticks: CPU cycles
+on the virtual bench, nanoseconds (``f_hz = 10**9``) when a device runs on the wall clock.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any, Protocol
+
+from hal.virtual.plant import Plant
+
+__all__ = ["NEVER", "Link", "PlantView", "World", "WorldDevice"]
+
+log = logging.getLogger(__name__)
+
+NEVER = 1 << 62
+"""``next_event`` of a device with nothing scheduled (later than any reachable tick)."""
+
+
+class Link(Protocol):
+    """Where a device's bytes go: the MCU side of a UART (``VirtualUart`` has this method)."""
+
+    def transmit_to_mcu(self, data: bytes, start_cycles: int) -> list[int]:
+        """Send data starting at start_cycles (or when the line frees up); return the end times."""
+        ...
+
+
+class WorldDevice(Protocol):
+    """A device model living in a :class:`World`."""
+
+    next_event: int
+
+    def run_event(self) -> None:
+        """Run the device's event scheduled at ``next_event`` and update ``next_event``."""
+        ...
+
+
+class World:
+    """One plant, one time base, and the devices whose events are merged in time order.
+
+    >>> w = World(Plant(initial_angle_rad=0.1), 1_000_000)
+    >>> w.advance_to(500); w.now, round(w.seconds(1500), 6)
+    (500, 0.0015)
+    """
+
+    def __init__(self, plant: Plant, f_hz: int) -> None:
+        """Wrap ``plant`` with a time base of ``f_hz`` ticks per second."""
+        if isinstance(f_hz, bool) or not isinstance(f_hz, int) or f_hz <= 0:
+            raise ValueError(f"f_hz {f_hz!r} out of range: a positive int (ticks per second)")
+        self.plant = plant
+        self.f_hz = f_hz
+        self._devices: list[Any] = []
+        self._now = -1
+        self._busy = False
+
+    @property
+    def now(self) -> int:
+        """The tick up to which every device event has been run (-1 before the first advance)."""
+        return self._now
+
+    def add(self, device: WorldDevice) -> None:
+        """Register a device; its events run from the next ``advance_to`` on."""
+        if not hasattr(device, "next_event") or not callable(getattr(device, "run_event", None)):
+            raise TypeError(f"device {device!r} lacks next_event and run_event()")
+        self._devices.append(device)
+
+    def seconds(self, ticks: int) -> float:
+        """Convert ticks to seconds."""
+        return ticks / self.f_hz
+
+    def ticks(self, t_s: float) -> int:
+        """Convert seconds to the nearest tick; ValueError for a non-finite time."""
+        if not math.isfinite(t_s):
+            raise ValueError(f"time t_s = {t_s!r} must be finite")
+        return math.floor(t_s * self.f_hz + 0.5)
+
+    def advance_to(self, t: int) -> None:
+        """Run every device event scheduled at or before tick ``t``, earliest first."""
+        if self._busy:  # a device event asked for the time it is already at
+            return
+        self._busy = True
+        try:
+            devices = self._devices
+            while True:
+                best = None
+                best_t = t + 1
+                for dev in devices:
+                    nxt = dev.next_event
+                    if nxt < best_t:
+                        best, best_t = dev, nxt
+                if best is None:
+                    break
+                if best_t > self._now:
+                    self._now = best_t
+                best.run_event()
+            if t > self._now:
+                self._now = t
+        finally:
+            self._busy = False
+
+
+class PlantView:
+    """The shared plant as seen from outside the world: every query or input first advances the world.
+
+    A bench probe or a test may read ``plant.output_angle_rad(t_s)`` directly; through this view the
+    device events before ``t_s`` run first, so the plant never sees a device input in its past.
+    Everything else (``params``, ``fixture``, ``latest_time_s``, ...) is passed through unchanged.
+    """
+
+    _TIMED = frozenset({
+        "advance_to", "state_at", "output_angle_rad", "output_velocity_rad_s", "output_accel_rad_s2",
+        "motor_angle_rad", "motor_velocity_rad_s", "current_q_a", "motor_torque_nm", "energy_j",
+        "set_current_command", "set_brake_current", "set_powered", "set_external_torque",
+    })
+
+    def __init__(self, world: World) -> None:
+        """View the plant of ``world``."""
+        self._world = world
+
+    @property
+    def raw(self) -> Plant:
+        """The plant itself (bypasses the ordering: only for code that already advanced the world)."""
+        return self._world.plant
+
+    def __getattr__(self, name: str) -> Any:
+        """Pass attributes through; wrap the timed methods so that the world advances first."""
+        attr = getattr(self._world.plant, name)
+        if name not in self._TIMED:
+            return attr
+        world = self._world
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t_s = kwargs["t_s"] if "t_s" in kwargs else args[-1]
+            world.advance_to(world.ticks(t_s))
+            return attr(*args, **kwargs)
+
+        timed.__doc__ = attr.__doc__
+        return timed
