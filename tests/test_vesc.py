@@ -10,6 +10,7 @@ import math
 import pickle
 import random
 import sys
+import types
 
 import pytest
 
@@ -413,10 +414,11 @@ def test_reset_and_buffered() -> None:
     assert decoder.stats.as_dict()["bytes_in"] == 6 + 4 + 10
 
 
-def test_lazily_decoded_classes_have_no_class_level_field_defaults() -> None:
-    for cls in [*MESSAGES_TO_MOTOR.values(), *MESSAGES_FROM_MOTOR.values()]:
-        if len(cls._WIRE) > 1:
-            assert not {f.name for f in cls._WIRE} & set(vars(cls)), cls.__name__
+def test_message_fields_are_slots_without_class_level_defaults() -> None:
+    for cls in [*MESSAGES_TO_MOTOR.values(), *MESSAGES_FROM_MOTOR.values(), Unknown]:
+        for f in dataclasses.fields(cls):
+            assert isinstance(vars(cls)[f.name], types.MemberDescriptorType), (cls.__name__, f.name)
+    assert not hasattr(SetCurrent(1.0), "__dict__") and not hasattr(Values(), "__dict__")
 
 
 def test_command_ids_match_the_table() -> None:

@@ -332,6 +332,7 @@ def test_memory_bounded_on_long_adversarial_garbage() -> None:
 @given(payload=st.binary(max_size=600))
 def test_crc_equals_crc_hqx_and_crcmod(payload: bytes) -> None:
     assert crc16(payload) == binascii.crc_hqx(payload, 0) == crc16_reference(payload)
+    assert crc16(payload + crc16(payload).to_bytes(2, "big")) == 0  # the residue the decoder checks
 
 
 @given(payload=st.binary(min_size=1, max_size=512))

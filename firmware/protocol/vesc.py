@@ -34,7 +34,7 @@ from firmware.protocol.vesc_frame import (
     crc16,
     encode_frame,
 )
-from firmware.protocol.vesc_message import CommandId, Message, Unknown, WireField, to_raw
+from firmware.protocol.vesc_message import CommandId, Message, Unknown, WireField, field_setter, to_raw
 from firmware.protocol.vesc_values import FIELDS, VALUES_FIELDS, FaultCode, Values, ValuesSelective
 
 __all__ = [
@@ -74,28 +74,28 @@ class OriginMode(IntEnum):
 # --- host -> motor ----------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class GetFwVersion(Message):
     """COMM_FW_VERSION request (0), no arguments."""
 
     COMMAND_ID: ClassVar[int] = CommandId.FW_VERSION
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class GetValues(Message):
     """COMM_GET_VALUES request (4), no arguments; the motor answers with :class:`Values`."""
 
     COMMAND_ID: ClassVar[int] = CommandId.GET_VALUES
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Alive(Message):
     """COMM_ALIVE (30), no arguments: resets the driver's command timeout."""
 
     COMMAND_ID: ClassVar[int] = CommandId.ALIVE
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetDuty(Message):
     """COMM_SET_DUTY (5): duty cycle as a fraction (-1..1); wire int32 x 100000."""
 
@@ -104,7 +104,7 @@ class SetDuty(Message):
     duty: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetCurrent(Message):
     """COMM_SET_CURRENT (6): q-axis current in A; wire int32 mA."""
 
@@ -113,7 +113,7 @@ class SetCurrent(Message):
     current_a: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetCurrentBrake(Message):
     """COMM_SET_CURRENT_BRAKE (7): braking current in A; wire int32 mA."""
 
@@ -122,7 +122,7 @@ class SetCurrentBrake(Message):
     current_a: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetRpm(Message):
     """COMM_SET_RPM (8): speed in electrical RPM (mechanical RPM x pole pairs); wire int32."""
 
@@ -131,7 +131,7 @@ class SetRpm(Message):
     erpm: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetPos(Message):
     """COMM_SET_POS (9): position in rad; wire int32 degrees x 1e6 (90 deg = pi/2 -> 05 5D 4A 80)."""
 
@@ -145,7 +145,7 @@ class SetPos(Message):
         return cls(math.radians(position_deg))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetHandbrake(Message):
     """COMM_SET_HANDBRAKE (10): handbrake current in A; wire int32 mA."""
 
@@ -154,7 +154,7 @@ class SetHandbrake(Message):
     current_a: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetDetect(Message):
     """COMM_SET_DETECT (11): uint8 display-position mode (:class:`DetectMode`; 4 = stream position)."""
 
@@ -163,7 +163,7 @@ class SetDetect(Message):
     mode: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class GetValuesSelective(Message):
     """COMM_GET_VALUES_SELECTIVE request (50, CubeMars GET_VALUES_SETUP): uint32 mask of FIELDS bits."""
 
@@ -172,7 +172,7 @@ class GetValuesSelective(Message):
     mask: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetCurrentRel(Message):
     """COMM_SET_CURRENT_REL (84): current as a fraction of the configured maximum; wire int32 x 1e5."""
 
@@ -181,7 +181,7 @@ class SetCurrentRel(Message):
     current_rel: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetPosSpd(Message):
     """CubeMars SET_POS_SPD (91): position rad (wire deg x 1000), speed ERPM, acceleration ERPM/s; int32s."""
 
@@ -201,7 +201,7 @@ class SetPosSpd(Message):
         return cls(math.radians(position_deg), erpm, accel_erpm_per_s)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetPosMulti(Message):
     """CubeMars SET_POS_MULTI (92): select multi-turn (+-100 turns) position mode; 4 reserved bytes (0)."""
 
@@ -210,7 +210,7 @@ class SetPosMulti(Message):
     reserved: int = 0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetPosSingle(Message):
     """CubeMars SET_POS_SINGLE (93): select single-turn (0..360 deg) position mode; 4 reserved bytes (0)."""
 
@@ -219,7 +219,7 @@ class SetPosSingle(Message):
     reserved: int = 0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SetPosOrigin(Message):
     """CubeMars SET_POS_ORIGIN (95): uint8 :class:`OriginMode` (0 temporary, 1 permanent, 2 default)."""
 
@@ -231,7 +231,7 @@ class SetPosOrigin(Message):
 # --- motor -> host (Values and ValuesSelective are in vesc_values) ------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RotorPosition(Message):
     """COMM_ROTOR_POSITION (22) streamed after SET_DETECT 4: position rad; wire int32 degrees x ``scale``.
 
@@ -258,6 +258,8 @@ class RotorPosition(Message):
         divisor = scale * 180.0 / math.pi
         unpack = _INT32.unpack_from
         new = object.__new__
+        set_position = field_setter(cls, "position_rad")
+        set_scale = field_setter(cls, "scale")
 
         def decode(payload: bytes) -> Self:
             try:
@@ -265,7 +267,8 @@ class RotorPosition(Message):
             except struct.error:
                 raise ShortPayloadError(f"RotorPosition needs 5 payload bytes, got {len(payload)}") from None
             obj = new(cls)
-            obj.__dict__.update(position_rad=raw / divisor, scale=scale)
+            set_position(obj, raw / divisor)
+            set_scale(obj, scale)
             return obj
 
         return decode
@@ -276,7 +279,7 @@ class RotorPosition(Message):
         return cls(math.radians(position_deg), scale)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FwVersion(Message):
     """COMM_FW_VERSION reply (0), short 3.x form: major, minor, NUL-terminated hw name, 12-byte UUID.
 

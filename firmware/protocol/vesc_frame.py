@@ -164,12 +164,12 @@ class FrameDecoder(Generic[M]):
     def feed(self, data: bytes | bytearray | memoryview) -> list[M]:
         """Consume ``data`` and return the messages of every complete valid frame, in stream order."""
         # Hot loop: literals instead of the module constants (2 = START_SHORT, 3 = START_LONG = END_BYTE,
-        # 512 = PACKET_MAX_PL_LEN), counters in locals, one slice per frame; reading a header byte past
-        # the end of the buffer (IndexError) means the candidate is incomplete.
+        # 512 = PACKET_MAX_PL_LEN), counters in locals. The loop has no bounds tests:
+        # indexing past the end of the buffer (IndexError) means that the candidate frame starting at
+        # ``pos`` is not complete yet (or that the buffer is used up), which ends the scan.
         stats = self.stats
         stats.bytes_in += len(data)
         buf = self._buf + bytes(data) if self._buf else bytes(data)
-        n = len(buf)
         pos = 0
         out: list[M] = []
         append = out.append
@@ -178,7 +178,7 @@ class FrameDecoder(Generic[M]):
         search = _START_RE.search
         dropped = crc_errors = bad_end = short = 0
         try:
-            while pos < n:
+            while True:
                 b = buf[pos]
                 if b == 2:
                     length = buf[pos + 1]
@@ -196,24 +196,22 @@ class FrameDecoder(Generic[M]):
                     start = pos + 3
                 else:
                     match = search(buf, pos)
-                    nxt = match.start() if match is not None else n
+                    nxt = match.start() if match is not None else len(buf)
                     dropped += nxt - pos
                     pos = nxt
                     continue
                 end = start + length
-                if end + 3 > n:
-                    break  # incomplete candidate: wait for more bytes
                 if buf[end + 2] != 3:
                     bad_end += 1
                     dropped += 1
                     pos += 1
                     continue
-                payload = buf[start:end]
-                if crc(payload, 0) != (buf[end] << 8) | buf[end + 1]:
+                if crc(buf[start : end + 2], 0):  # CRC over payload + its CRC is 0 exactly when they agree
                     crc_errors += 1
                     dropped += 1
                     pos += 1
                     continue
+                payload = buf[start:end]
                 pos = end + 3
                 try:
                     append(table[payload[0]](payload))
@@ -221,7 +219,7 @@ class FrameDecoder(Generic[M]):
                     short += 1
                     _log.debug("skipped frame: %s", exc)
         except IndexError:
-            pass  # header of the candidate at pos not complete yet
+            pass  # the candidate at pos is incomplete, or pos == len(buf)
         self._buf = buf[pos:] if pos else buf
         stats.frames += len(out) + short
         stats.dropped_bytes += dropped

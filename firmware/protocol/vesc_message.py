@@ -14,13 +14,16 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from enum import IntEnum
+from functools import partial
+from operator import truediv
+from types import MemberDescriptorType
 from typing import Any, ClassVar, Self
 
 from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
 
-__all__ = ["CommandId", "Message", "Unknown", "WireField", "lazy_fields", "to_raw"]
+__all__ = ["CommandId", "Message", "Unknown", "WireField", "field_setter", "to_raw"]
 
 _RANGES: dict[str, tuple[int, int, str]] = {
     "b": (-(1 << 7), (1 << 7) - 1, "int8"),
@@ -110,40 +113,52 @@ class WireField:
 
 
 class Message:
-    """Base of every VESC message (each subclass is a frozen dataclass).
+    """Base of every VESC message (each subclass is a ``@dataclass(frozen=True, slots=True)``).
 
     Subclasses set ``COMMAND_ID`` and either ``_WIRE`` (the fields after the command byte, in wire order,
     giving a generic codec) or override :meth:`payload` and :meth:`from_payload`. Bytes after a message's
     layout are ignored on decoding, as the firmware does.
     """
 
-    __slots__ = ()
+    __slots__ = ("_raws",)
     COMMAND_ID: ClassVar[int]
     _WIRE: ClassVar[tuple[WireField, ...]] = ()
     _STRUCT: ClassVar[struct.Struct] = struct.Struct(">B")
     _ARGS: ClassVar[struct.Struct] = struct.Struct(">")
     _decode: ClassVar[Callable[[bytes], Any] | None] = None
     _INDEX: ClassVar[dict[str, int]] = {}
+    _DIVISORS: ClassVar[tuple[float, ...]] = ()
+    _INT_INDEX: ClassVar[tuple[int, ...]] = ()
+    _SETTERS: ClassVar[tuple[Callable[[Any, Any], None], ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Precompile the structs and the payload decoder of a subclass using the generic codec."""
+        """Precompile the structs, conversion tables and payload decoder of a subclass."""
         super().__init_subclass__(**kwargs)
-        cls._STRUCT = struct.Struct(">B" + "".join(f.code for f in cls._WIRE))
-        cls._ARGS = struct.Struct(">" + "".join(f.code for f in cls._WIRE))
-        cls._INDEX = {f.name: i for i, f in enumerate(cls._WIRE)}
+        wire = cls._WIRE
+        cls._STRUCT = struct.Struct(">B" + "".join(f.code for f in wire))
+        cls._ARGS = struct.Struct(">" + "".join(f.code for f in wire))
+        cls._INDEX = {f.name: i for i, f in enumerate(wire)}
+        cls._DIVISORS = tuple(f.divisor for f in wire)
+        cls._INT_INDEX = tuple(i for i, f in enumerate(wire) if f.is_int)
+        cls._SETTERS = tuple(field_setter(cls, f.name) for f in wire)
         cls._decode = None if "from_payload" in cls.__dict__ else staticmethod(_make_decoder(cls))
 
     def __getattr__(self, name: str) -> Any:
-        """Convert a field of a lazily decoded message from its wire integer, on first access only."""
-        if name.startswith("__"):
-            raise AttributeError(name)
+        """Convert all fields of a lazily decoded message from its wire integers (on the first access)."""
         index = self._INDEX.get(name)
-        raws = self.__dict__.get("_raws")
-        if index is None or raws is None:
+        if index is None:
             raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        value = self._WIRE[index].from_raw(raws[index])
-        self.__dict__[name] = value
-        return value
+        try:
+            raws = _get_raws(self)
+        except AttributeError:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}") from None
+        values = list(map(truediv, raws, self._DIVISORS))
+        for i in self._INT_INDEX:
+            values[i] = raws[i]
+        for set_value, value in zip(self._SETTERS, values, strict=True):
+            set_value(self, value)
+        _del_raws(self)
+        return values[index]
 
     def payload(self) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
@@ -169,38 +184,42 @@ class Message:
         return cls._decode if cls._decode is not None else cls.from_payload
 
 
-def lazy_fields(cls: type[Message]) -> type[Message]:
-    """Class decorator put above ``@dataclass``: drop class-level field defaults (``__init__`` keeps them).
+_get_raws = Message._raws.__get__  # type: ignore[attr-defined]
+_del_raws = Message._raws.__delete__  # type: ignore[attr-defined]
 
-    A lazily decoded message holds only its wire integers; a default left on the class would be found by
-    attribute lookup before :meth:`Message.__getattr__` could convert the field.
-    """
-    for f in fields(cls):  # type: ignore[arg-type]
-        if f.name in cls.__dict__:
-            delattr(cls, f.name)
-    return cls
+
+def field_setter(cls: type, name: str) -> Callable[[Any, Any], None]:
+    """Return a fast ``set(obj, value)`` for field ``name`` of a slots class, bypassing frozen checks."""
+    member = cls.__dict__.get(name)
+    if isinstance(member, MemberDescriptorType):
+        return member.__set__
+    return partial(_set_named, name)
+
+
+def _set_named(name: str, obj: Any, value: Any) -> None:
+    """object.__setattr__ with the name first (fallback of :func:`field_setter` before slots exist)."""
+    object.__setattr__(obj, name, value)
 
 
 def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
     """Build the payload decoder of a generic message class (closures: the decoder's hot path).
 
     Instances are created without the dataclass ``__init__`` (values from the wire are valid by
-    construction), so message classes using the generic codec must not use ``slots=True``. A message
-    with several fields keeps the unpacked integers and converts each field on first access: decoding a
-    73-byte GET_VALUES reply then costs one ``struct.unpack_from`` instead of 23 float conversions.
+    construction), writing the slots directly. A message with several fields keeps the unpacked integers
+    in ``_raws`` and converts them all on the first field access (``Message.__getattr__``): decoding a
+    73-byte GET_VALUES reply then costs one ``struct.unpack_from``, not 23 float conversions, until read.
     """
     unpack = cls._ARGS.unpack_from
     size = cls._STRUCT.size
     new = object.__new__
     names = tuple(f.name for f in cls._WIRE)
-    divisors = tuple(f.divisor for f in cls._WIRE)
-    int_index = tuple(i for i, f in enumerate(cls._WIRE) if f.is_int)
+    set_raws = Message._raws.__set__  # type: ignore[attr-defined]
 
     def short(payload: bytes) -> ShortPayloadError:
         return ShortPayloadError(f"{cls.__name__} needs {size} payload bytes, got {len(payload)}")
 
     def decode_none(payload: bytes) -> Any:
-        return new(cls)
+        return singleton  # a frozen message without fields: every instance is equal, share one
 
     def decode_one_int(payload: bytes) -> Any:
         try:
@@ -208,7 +227,7 @@ def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
         except struct.error:
             raise short(payload) from None
         obj = new(cls)
-        obj.__dict__[name] = raw
+        set_value(obj, raw)
         return obj
 
     def decode_one(payload: bytes) -> Any:
@@ -217,7 +236,7 @@ def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
         except struct.error:
             raise short(payload) from None
         obj = new(cls)
-        obj.__dict__[name] = raw / divisor
+        set_value(obj, raw / divisor)
         return obj
 
     def decode_many(payload: bytes) -> Any:
@@ -226,18 +245,21 @@ def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
         except struct.error:
             raise short(payload) from None
         obj = new(cls)
-        obj.__dict__["_raws"] = raws  # fields are converted on first access (Message.__getattr__)
+        set_raws(obj, raws)  # fields are converted on first access (Message.__getattr__)
         return obj
 
     if not names:
+        singleton = new(cls)
         return decode_none
     if len(names) > 1:
         return decode_many
-    (name,), (divisor,) = names, divisors
-    return decode_one_int if int_index else decode_one
+    (wire,) = cls._WIRE
+    set_value = field_setter(cls, wire.name)
+    divisor = wire.divisor
+    return decode_one_int if wire.is_int else decode_one
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Unknown(Message):
     """A CRC-valid frame whose command id the decoder has no message class for (kept verbatim)."""
 

@@ -15,7 +15,7 @@ from functools import lru_cache
 from typing import ClassVar, Self
 
 from firmware.protocol.vesc_frame import ShortPayloadError
-from firmware.protocol.vesc_message import CommandId, Message, WireField, lazy_fields
+from firmware.protocol.vesc_message import CommandId, Message, WireField
 
 __all__ = ["FIELDS", "VALUES_FIELDS", "FaultCode", "Values", "ValuesSelective"]
 
@@ -76,8 +76,7 @@ VALUES_FIELDS: tuple[WireField, ...] = tuple(f for f in FIELDS if f.bit is not N
 """The fields of the CubeMars 73-byte GET_VALUES reply (bits 0..20)."""
 
 
-@lazy_fields
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Values(Message):
     """COMM_GET_VALUES reply (motor -> host), the 73-byte CubeMars layout, in SI units (fault is a code)."""
 
@@ -115,7 +114,7 @@ def _layout(mask: int) -> tuple[struct.Struct, tuple[WireField, ...]]:
     return struct.Struct(">" + "".join(f.code for f in present)), present
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ValuesSelective(Message):
     """COMM_GET_VALUES_SELECTIVE reply (CubeMars GET_VALUES_SETUP, motor -> host): fields whose bit is set.
 
