@@ -217,118 +217,126 @@ class Scheduler:
         next_progress = t_begin + step if progress is not None else _FAR
         next_check = min(wd_due, next_progress)  # the earlier of the two slow-path instants
         stopped = False
-        while True:
-            if now >= next_check:
-                if now >= wd_due and wd_due < t_end:
-                    wd_due = self._fire_watchdogs(now, t_end)
-                if now >= next_progress:
-                    self._now = now
-                    progress(min(1.0, (now - t_begin) / span))  # type: ignore[misc]
-                    next_progress = now + step
-                next_check = min(wd_due, next_progress)
-                if self._stop:
-                    stopped = True
-                    break
-            lim = (now << _SHIFT) | _MASK
-            while heap and heap[0] <= lim:
-                key = heappop(heap)
-                i = key & _MASK
-                mask |= 1 << i
-                if prev > i and (key >> _SHIFT) < now:
-                    blocked[i] = Blocker(tasks[prev].name, (nrel_prev - offsets[prev]) // periods[prev],
-                                         now - (key >> _SHIFT))
-            if now >= t_end:
-                break
-            if not mask:  # idle: jump to the next release, watchdog deadline or the end
-                target = heap[0] >> _SHIFT if heap else _FAR
-                if wd_due < target:
-                    target = wd_due
-                if target > t_end:
-                    target = t_end
-                if irqs:
-                    for j, src in enumerate(irqs):
-                        irq_idle[j] += src.count_in(now, target)
-                now = clock.wait_until(target) if realtime else target
-                prev = -1
-                continue
-            i = (mask & -mask).bit_length() - 1
-            mask ^= 1 << i
-            r = nrel[i]
-            start = now
-            body = bodies[i]
-            result = None
-            if body is not None:
-                job = jobs[i]
-                job.index, job.release, job.ready, job.start = (r - offsets[i]) // periods[i], r, ready[i], start
-                self._now = start
-                result = body(job)
-                if self._watchdogs:
-                    wd_due = self._wd_due()
+        try:  # on any exit, even an exception from a callback, keep the state consistent
+            while True:
+                if now >= next_check:
+                    if now >= wd_due and wd_due < t_end:
+                        wd_due = self._fire_watchdogs(now, t_end)
+                    if now >= next_progress:
+                        self._now = now
+                        progress(min(1.0, (now - t_begin) / span))  # type: ignore[misc]
+                        next_progress = now + step
                     next_check = min(wd_due, next_progress)
-                if self._stop:
-                    stopped = True
-            c = costs[i]
-            if c is None:
-                c = tasks[i].cost(result)  # type: ignore[operator]
-                if type(c) is not int or c < 0:
-                    raise ValueError(
-                        f"task {tasks[i].name!r}: cost model returned {c!r}; need an int >= 0 cycles")
-            if realtime:
-                f = max(start, clock.now_cycles())
-                c = f - start
-            elif irqs:
-                f = solve_finish(start, c, irqs, irq_in_job)
-            else:
-                f = start + c
-            st = stats[i]
-            resp = f - r
-            st.jobs += 1
-            st.response_sum += resp
-            st.busy_cycles += c
-            if resp > st.worst:
-                st.worst = resp
-                st.worst_job = (r - offsets[i]) // periods[i]
-                st.worst_blocker = blocked[i]
-            if resp < st.best:
-                st.best = resp
-            d = start - r
-            if d > st.delay_max:
-                st.delay_max = d
-            if d < st.delay_min:
-                st.delay_min = d
-            blocked[i] = None
-            if resp > deadlines[i]:
-                st.deadline_misses += 1
-                st.miss_streak += 1
-                if st.miss_streak > st.longest_miss_streak:
-                    st.longest_miss_streak = st.miss_streak
+                    if self._stop:
+                        stopped = True
+                        break
+                lim = (now << _SHIFT) | _MASK
+                while heap and heap[0] <= lim:
+                    key = heappop(heap)
+                    i = key & _MASK
+                    mask |= 1 << i
+                    if prev > i and (key >> _SHIFT) < now:
+                        blocked[i] = Blocker(tasks[prev].name, (nrel_prev - offsets[prev]) // periods[prev],
+                                             now - (key >> _SHIFT))
+                if now >= t_end:
+                    break
+                if not mask:  # idle: jump to the next release, watchdog deadline or the end
+                    target = heap[0] >> _SHIFT if heap else _FAR
+                    if wd_due < target:
+                        target = wd_due
+                    if target > t_end:
+                        target = t_end
+                    if irqs:
+                        for j, src in enumerate(irqs):
+                            irq_idle[j] += src.count_in(now, target)
+                    now = clock.wait_until(target) if realtime else target
+                    prev = -1
+                    continue
+                i = (mask & -mask).bit_length() - 1
+                mask ^= 1 << i
+                r = nrel[i]
+                start = now
+                body = bodies[i]
+                result = None
+                if body is not None:
+                    job = jobs[i]
+                    job.index, job.release, job.ready, job.start = (r - offsets[i]) // periods[i], r, ready[i], start
+                    self._now = start
+                    try:
+                        result = body(job)
+                    except BaseException:
+                        mask |= 1 << i  # the job stays pending: the state is as before it started
+                        raise
+                    if self._watchdogs:
+                        wd_due = self._wd_due()
+                        next_check = min(wd_due, next_progress)
+                    if self._stop:
+                        stopped = True
+                c = costs[i]
+                if c is None:
+                    c = tasks[i].cost(result)  # type: ignore[operator]
+                    if type(c) is not int or c < 0:
+                        mask |= 1 << i
+                        raise ValueError(
+                            f"task {tasks[i].name!r}: cost model returned {c!r}; need an int >= 0 cycles")
+                if realtime:
+                    f = max(start, clock.now_cycles())
+                    c = f - start
+                elif irqs:
+                    f = solve_finish(start, c, irqs, irq_in_job)
+                else:
+                    f = start + c
+                st = stats[i]
+                resp = f - r
+                st.jobs += 1
+                st.response_sum += resp
+                st.busy_cycles += c
+                if resp > st.worst:
+                    st.worst = resp
+                    st.worst_job = (r - offsets[i]) // periods[i]
+                    st.worst_blocker = blocked[i]
+                if resp < st.best:
+                    st.best = resp
+                d = start - r
+                if d > st.delay_max:
+                    st.delay_max = d
+                if d < st.delay_min:
+                    st.delay_min = d
+                blocked[i] = None
+                if resp > deadlines[i]:
+                    st.deadline_misses += 1
+                    st.miss_streak += 1
+                    if st.miss_streak > st.longest_miss_streak:
+                        st.longest_miss_streak = st.miss_streak
+                    if trace is not None:
+                        trace.add_event("deadline_miss", r + deadlines[i], tasks[i].name,
+                                        (r - offsets[i]) // periods[i])
+                elif st.miss_streak:
+                    st.miss_streak = 0
                 if trace is not None:
-                    trace.add_event("deadline_miss", r + deadlines[i], tasks[i].name,
-                                    (r - offsets[i]) // periods[i])
-            elif st.miss_streak:
-                st.miss_streak = 0
-            if trace is not None:
-                trace.add_job(tasks[i].name, (r - offsets[i]) // periods[i], r, ready[i], start, f)
-            # the task's next job: releases that came while this one was pending or running overran
-            nxt = nnext[i]
-            if nxt < f and plain[i]:
-                fault = self._overrun(i, r, nxt, f)
-                nxt = nrel[i]
+                    trace.add_job(tasks[i].name, (r - offsets[i]) // periods[i], r, ready[i], start, f)
+                # the task's next job: releases that came while this one was pending or running overran
+                nxt = nnext[i]
+                fault = None
+                if nxt < f and plain[i]:
+                    fault = self._overrun(i, r, nxt, f)
+                    nxt = nrel[i]
+                else:
+                    nnext[i] = nxt + periods[i]
+                    nrel[i] = nxt
+                a = nxt + rng.randint(0, jitters[i]) if jitters[i] else nxt
+                ready[i] = a
+                heappush(heap, (a << _SHIFT) | i)
+                prev, nrel_prev, now = i, r, f
                 if fault is not None:
                     self._now = f
                     self._overrun_fault(fault)
                     stopped = stopped or self._stop
-            else:
-                nnext[i] = nxt + periods[i]
-                nrel[i] = nxt
-            a = nxt + rng.randint(0, jitters[i]) if jitters[i] else nxt
-            ready[i] = a
-            heappush(heap, (a << _SHIFT) | i)
-            prev, nrel_prev, now = i, r, f
-            if stopped:
-                break
-        if not stopped and now < t_end:
-            now = t_end
-        self._now, self._mask, self._prev, self._prev_release = now, mask, prev, nrel_prev
+                if stopped:
+                    break
+            if not stopped and now < t_end:
+                now = t_end
+        finally:
+            self._now, self._mask, self._prev, self._prev_release = now, mask, prev, nrel_prev
         if progress is not None and not stopped:
             progress(1.0)

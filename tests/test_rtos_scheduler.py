@@ -173,3 +173,29 @@ def test_jitter_is_bounded_and_seeded():
     a = run(1)
     assert a == run(1) and a != run(2)
     assert min(a) >= 0 and max(a) <= 30 and len(set(a)) > 10
+
+
+def test_an_exception_from_a_body_leaves_the_job_pending_and_the_scheduler_usable():
+    calls = []
+
+    def flaky(job):
+        calls.append(job.start)
+        if len(calls) == 2:
+            raise KeyError("boom")
+
+    s = Scheduler([Task("x", 1, 10, cost=2, body=flaky), Task("y", 2, 10, cost=3)])
+    with pytest.raises(KeyError):
+        s.run_until(100)
+    assert s.now == 10 and s.stats["x"].jobs == 1
+    s.run_until(100)
+    assert calls[:3] == [0, 10, 10] and s.stats["x"].jobs == 10 and s.stats["y"].jobs == 10
+
+
+def test_after_an_overrun_error_the_run_can_continue():
+    s = Scheduler([Task("x", 1, 10, cost=11, overrun=OverrunPolicy.FAULT), Task("y", 2, 7, cost=1)])
+    with pytest.raises(OverrunError):
+        s.run_until(100)
+    assert s.now == 11
+    s.on_fault = lambda fault: None
+    s.run_until(100)
+    assert s.stats["y"].jobs >= 10 and s.stats["x"].faults >= 4
