@@ -204,8 +204,9 @@ def test_truncation_toward_zero_not_rounding() -> None:
         (Values(temp_fet_c=3276.8), r"temp_fet_c=3276\.8 .*int16"),
         (Values(fault=300), r"fault=300 .*uint8"),
         (SetPos(1e9), r"position_rad=1000000000\.0 .*int32"),
-        (SetDuty(math.nan), r"duty=nan is not finite"),
-        (SetCurrent(math.inf), r"current_a=inf is not finite"),
+        (SetDuty(math.nan), r"duty=nan is not a finite number; allowed \[-21474\.8, 21474\.8\]"),
+        (SetCurrent(math.inf), r"current_a=inf is not a finite number"),
+        (SetCurrent("2.5"), r"current_a='2\.5' is not a finite number"),  # type: ignore[arg-type]
         (RotorPosition(1e9), r"position_rad=1000000000\.0"),
         (FwVersion(256, 0, "x"), r"major=256"),
         (FwVersion(3, 40, "a\0b"), r"hw_name"),
@@ -322,8 +323,10 @@ def test_lazily_decoded_values_behave_like_constructed_ones() -> None:
 def test_decoder_rejects_bad_configuration() -> None:
     with pytest.raises(ValueError, match="direction='sideways'"):
         Decoder("sideways")  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="rotor_position_scale=0"):
+    with pytest.raises(ValueError, match="scale=0 must be finite and > 0"):
         Decoder("from-motor", rotor_position_scale=0)
+    with pytest.raises(ValueError, match="scale=nan"):
+        RotorPosition(1.0, math.nan).encode()
 
 
 def test_short_form_with_zero_length_and_long_form_with_short_length_are_rejected() -> None:

@@ -38,9 +38,9 @@ from firmware.protocol.vesc_message import CommandId, Message, Unknown, WireFiel
 from firmware.protocol.vesc_values import FIELDS, VALUES_FIELDS, FaultCode, Values, ValuesSelective
 
 __all__ = [
-    "FIELDS", "MAX_FRAME_LEN", "MESSAGES_FROM_MOTOR", "MESSAGES_TO_MOTOR", "PACKET_MAX_PL_LEN",
+    "FIELDS", "Direction", "MAX_FRAME_LEN", "MESSAGES_FROM_MOTOR", "MESSAGES_TO_MOTOR", "PACKET_MAX_PL_LEN",
     "VALUES_FIELDS", "Alive", "CommandId", "Decoder", "DecoderStats", "DetectMode", "FaultCode",
-    "FwVersion", "GetFwVersion", "GetValues", "GetValuesSelective", "Message", "OriginMode",
+    "FwVersion", "GetFwVersion", "GetValues", "GetValuesSelective", "GetValuesSetup", "Message", "OriginMode",
     "RotorPosition", "SetCurrent", "SetCurrentBrake", "SetCurrentRel", "SetDetect", "SetDuty",
     "SetHandbrake", "SetPos", "SetPosMulti", "SetPosOrigin", "SetPosSingle", "SetPosSpd", "SetRpm",
     "ShortPayloadError", "Unknown", "Values", "ValuesSelective", "WireField", "crc16", "encode_frame",
@@ -244,6 +244,7 @@ class RotorPosition(Message):
 
     def payload(self) -> bytes:
         """Return the payload: id 22, int32 of degrees x scale (truncated)."""
+        _check_scale(self.scale)
         raw = to_raw(self.position_rad, self.scale * 180.0 / math.pi, "i", "position_rad", False)
         return bytes((self.COMMAND_ID,)) + raw.to_bytes(4, "big", signed=True)
 
@@ -255,6 +256,7 @@ class RotorPosition(Message):
     @classmethod
     def payload_decoder(cls, scale: float = 1e4) -> Callable[[bytes], Self]:
         """Return a fast payload decoder for the wire scale ``scale`` (used by :class:`Decoder`)."""
+        _check_scale(scale)
         divisor = scale * 180.0 / math.pi
         unpack = _INT32.unpack_from
         new = object.__new__
@@ -277,6 +279,12 @@ class RotorPosition(Message):
     def from_degrees(cls, position_deg: float, scale: float = 1e4) -> Self:
         """Build the message from a position in degrees."""
         return cls(math.radians(position_deg), scale)
+
+
+def _check_scale(scale: float) -> None:
+    """Raise ValueError unless ``scale`` is a usable ROTOR_POSITION wire scale (finite, > 0)."""
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"scale={scale!r} must be finite and > 0")
 
 
 @dataclass(frozen=True, slots=True)
@@ -316,6 +324,9 @@ class FwVersion(Message):
         return cls(payload[1], payload[2], name, uuid, bytes(payload[nul + 13 :]))
 
 
+GetValuesSetup = GetValuesSelective
+"""CubeMars name of id 50 (``COMM_GET_VALUES_SETUP``); VESC's own GET_VALUES_SETUP is id 47."""
+
 MESSAGES_TO_MOTOR: dict[int, type[Message]] = {
     cls.COMMAND_ID: cls
     for cls in (GetFwVersion, GetValues, SetDuty, SetCurrent, SetCurrentBrake, SetRpm, SetPos, SetHandbrake,
@@ -350,9 +361,8 @@ class Decoder(FrameDecoder[Message]):
         """Create a decoder for ``direction`` ("to-motor" or "from-motor")."""
         if direction not in ("to-motor", "from-motor"):
             raise ValueError(f"direction={direction!r} must be 'to-motor' or 'from-motor'")
-        if not (math.isfinite(rotor_position_scale) and rotor_position_scale > 0):
-            raise ValueError(f"rotor_position_scale={rotor_position_scale!r} must be finite and > 0")
         self.direction: Direction = direction
+        _check_scale(rotor_position_scale)
         self.rotor_position_scale = float(rotor_position_scale)
         self.selective_mask_echo = selective_mask_echo
         self.selective_mask = selective_mask
@@ -360,7 +370,7 @@ class Decoder(FrameDecoder[Message]):
             table = {cid: cls.payload_decoder() for cid, cls in MESSAGES_TO_MOTOR.items()}
         else:
             table = {cid: cls.payload_decoder() for cid, cls in MESSAGES_FROM_MOTOR.items()}
-            table[CommandId.ROTOR_POSITION] = RotorPosition.payload_decoder(self.rotor_position_scale)
+            table[CommandId.ROTOR_POSITION] = RotorPosition.payload_decoder(rotor_position_scale)
             if not selective_mask_echo:
                 table[CommandId.GET_VALUES_SELECTIVE] = self._selective_without_echo
         super().__init__(table, Unknown)

@@ -2,11 +2,14 @@
 
 Scaling (PROTOCOLS.md A.3): the firmware sends ``int32(value * scale)`` (or int16/uint8), a C cast, i.e.
 **truncation toward zero**, and reads ``raw / scale``. :class:`WireField` does the same in SI units, with one
-deliberate refinement: a product within 4 ulp of an integer is taken as that integer. Without it float noise
-would truncate an intended integer down by one (``(1750531 / 1e4) * 1e4`` may come out as 1750530.9999999998),
-so values decoded from the wire would not re-encode to the same bytes; genuine fractions are truncated
-(2.4999 A -> 2499 mA, -2.4999 A -> -2499 mA). Angles are radians in the API and degrees on the wire: the
-divisor of an angle field is ``scale * 180 / pi`` (one multiplication each way).
+deliberate refinement: a product within 4 ulp of an integer is taken as that integer. Without it float
+noise would truncate an intended integer down by one (``0.57 * 1e5`` is 56999.99999999999 and
+``(1001 / 1000) * 1000`` is 1000.9999999999999), and values decoded from the wire would not re-encode to
+the same bytes; genuine fractions are still truncated (2.4999 A -> 2499 mA, -2.4999 A -> -2499 mA).
+
+Angles are radians in the API and degrees on the wire. The divisor of an angle field is
+``scale * 180 / pi``, one multiplication each way, so ``SetPos(math.pi / 2)`` gives exactly 90 000 000
+(``05 5D 4A 80``) and every int32 read from the wire re-encodes to itself.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import partial
 from operator import truediv
@@ -60,20 +63,22 @@ class CommandId(IntEnum):
 
 def to_raw(value: float, divisor: float, code: str, name: str, is_int: bool) -> int:
     """Return the wire integer for ``value`` (truncated toward zero, see module doc) or raise ValueError."""
-    lo, hi, ctype = _RANGES[code]
-    if is_int and isinstance(value, int):
-        raw = int(value)
+    if is_int and type(value) is int:
+        raw = value
     else:
         try:
-            x = float(value) * divisor
-        except (TypeError, ValueError):
-            raise ValueError(f"{name}={value!r} is not a number") from None
-        if not math.isfinite(x):
-            raise ValueError(f"{name}={value!r} is not finite; allowed [{lo / divisor:g}, {hi / divisor:g}]")
-        raw = int(x)
-        nearest = round(x)
-        if nearest != raw and abs(x - nearest) <= _SNAP_ULPS * math.ulp(x):
-            raw = nearest
+            x = value * divisor
+            raw = int(x)
+        except (TypeError, ValueError, OverflowError):
+            lo, hi, _ = _RANGES[code]
+            raise ValueError(
+                f"{name}={value!r} is not a finite number; allowed [{lo / divisor:g}, {hi / divisor:g}]"
+            ) from None
+        if x != raw:
+            nearest = round(x)
+            if abs(x - nearest) <= _SNAP_ULPS * math.ulp(x):
+                raw = nearest
+    lo, hi, ctype = _RANGES[code]
     if raw < lo or raw > hi:
         scale = f" x {divisor:g}" if divisor != 1.0 else ""
         raise ValueError(
@@ -92,16 +97,17 @@ class WireField:
     scale: float = 1.0
     angle: bool = False
     bit: int | None = None
+    divisor: float = field(init=False, repr=False, compare=False)
+    """Raw units per API unit (``scale``, times 180/pi for an angle field)."""
+    is_int: bool = field(init=False, repr=False, compare=False)
+    """True when the API value is the raw integer itself (scale 1, not an angle)."""
 
-    @property
-    def divisor(self) -> float:
-        """Raw units per API unit (``scale``, times 180/pi for an angle field)."""
-        return self.scale * 180.0 / math.pi if self.angle else float(self.scale)
-
-    @property
-    def is_int(self) -> bool:
-        """True when the API value is the raw integer itself (scale 1, not an angle)."""
-        return self.scale == 1 and not self.angle
+    def __post_init__(self) -> None:
+        """Check the struct code and precompute the divisor."""
+        if self.code not in _RANGES:
+            raise ValueError(f"code={self.code!r} must be one of {sorted(_RANGES)}")
+        object.__setattr__(self, "divisor", self.scale * 180.0 / math.pi if self.angle else float(self.scale))
+        object.__setattr__(self, "is_int", self.scale == 1 and not self.angle)
 
     def to_raw(self, value: float) -> int:
         """Return the wire integer for ``value``; ValueError naming value and range if it does not fit."""
@@ -157,7 +163,10 @@ class Message:
             values[i] = raws[i]
         for set_value, value in zip(self._SETTERS, values, strict=True):
             set_value(self, value)
-        _del_raws(self)
+        try:
+            _del_raws(self)
+        except AttributeError:
+            pass  # another thread converted the same message concurrently (same values)
         return values[index]
 
     def payload(self) -> bytes:
