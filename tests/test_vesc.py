@@ -9,6 +9,7 @@ import inspect
 import math
 import pickle
 import random
+import struct
 import sys
 import types
 
@@ -152,6 +153,26 @@ def test_synthesised_reply_round_trip() -> None:
             assert getattr(back, f.name) == getattr(values, f.name), f.name
     assert back.pid_pos_rad == pytest.approx(values.pid_pos_rad, rel=1e-12)
     assert back.encode() == frame and back == Values.from_payload(frame[2:-3])
+
+
+def test_values_decode_against_hand_written_b3_layout() -> None:
+    # PROTOCOLS.md B.3 written out independently of FIELDS: (name, struct code, raw, expected SI value)
+    b3 = [("temp_fet_c", "h", 365, 36.5), ("temp_motor_c", "h", -412, -41.2), ("avg_motor_current_a", "i", 247, 2.47),
+          ("avg_input_current_a", "i", -31, -0.31), ("avg_id_a", "i", 5, 0.05), ("avg_iq_a", "i", 246, 2.46),
+          ("duty", "h", -125, -0.125), ("erpm", "i", -2100, -2100), ("v_in_v", "h", 243, 24.3),
+          ("amp_hours", "i", 123, 0.0123), ("amp_hours_charged", "i", 4, 0.0004), ("watt_hours", "i", 2987, 0.2987),
+          ("watt_hours_charged", "i", 99, 0.0099), ("tachometer", "i", -4242, -4242),
+          ("tachometer_abs", "i", 98765, 98765), ("fault", "B", 5, 5), ("pid_pos_rad", "i", -123456789, None),
+          ("controller_id", "B", 7, 7), ("temp_mos1_c", "h", 361, 36.1), ("temp_mos2_c", "h", 362, 36.2),
+          ("temp_mos3_c", "h", -55, -5.5), ("avg_vd_v", "i", -123, -0.123), ("avg_vq_v", "i", 11500, 11.5)]
+    payload = struct.pack(">B" + "".join(c for _, c, _, _ in b3), 4, *[raw for _, _, raw, _ in b3])
+    assert len(payload) == 73
+    (v,) = Decoder("from-motor").feed(encode_frame(payload))
+    for name, _, _, expected in b3:
+        if expected is not None:
+            assert getattr(v, name) == expected and type(getattr(v, name)) is type(expected), name
+    assert math.degrees(v.pid_pos_rad) == pytest.approx(-123.456789, abs=1e-12)
+    assert v.payload() == payload
 
 
 def test_rotor_position_manual_vector() -> None:

@@ -152,6 +152,8 @@ def test_generic_messages_round_trip_full_range(cls: type[Message], data: st.Dat
     (message,) = Decoder(direction).feed(encode_frame(payload))
     assert isinstance(message, cls) and message.payload() == payload
     assert message == cls.from_payload(payload) and message.encode() == encode_frame(payload)
+    for f in cls._WIRE:
+        assert type(getattr(message, f.name)) is (int if f.is_int else float), f.name
     rebuilt = cls(**{f.name: getattr(message, f.name) for f in cls._WIRE})  # eager construction path
     assert rebuilt == message and rebuilt.payload() == payload
 
