@@ -1,19 +1,231 @@
-"""`pafp emulate`: serve virtual devices on a pty or serial port (not implemented yet: issue 4)."""
+"""`pafp emulate`: serve the virtual AK60-6 and/or BNO08x on new ptys or real serial ports, in wall-clock time.
+
+``pafp emulate motor|imu|bench (--pty | --port DEVICE [--imu-port DEVICE]) [--baud N] [--fixture NAME]
+[--seed S] [--duration S]``. ``bench`` serves the motor and the IMU on one shared plant. Before serving it
+prints one line per device, ``motor: PATH`` / ``imu: PATH``, and flushes. It then runs until Ctrl-C or
+SIGTERM (or ``--duration``) and exits 0 after one summary line. A port that cannot be opened or a bad
+combination of options: one line on stderr, exit 2.
+
+Timing: bytes read from a port are stamped on arrival, the last one ending at the arrival instant and the
+others back to back before it at the link's byte time, and handed to the device model; the device's
+bytes are written when their stop bit ends (wall clock). The loop sleeps in ``select`` until the next
+device event or byte end, at most 1 ms, so output comes in bursts of at most ~1 ms. A real port adds its
+own transmission time on top (the bytes are written when they would have ended): prefer a pty for
+timing studies.
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
+import select
+import signal
+import sys
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import FrameType
 
-from host_tools.commands.unavailable import not_yet
+from hal.serial.sim_port import WallDevices, arrival_end_times
+from hal.virtual.bench import FIXTURES
 
-HELP = "serve virtual devices on a pty or serial port [not implemented yet]"
+HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
+MAX_SLEEP_S = 0.001
+_ROLES = {"motor": ("motor",), "imu": ("imu",), "bench": ("motor", "imu")}
+
+
+class EmulateError(Exception):
+    """A problem reported as one line on stderr with exit code 2."""
+
+
+@dataclass
+class Endpoint:
+    """One served device: the file descriptor the far end talks through, and its counters."""
+
+    role: str
+    fd: int
+    path: str
+    close: Callable[[], None]
+    bytes_in: int = 0
+    bytes_out: int = 0
+    dropped_out: int = 0
+    last_end_ns: int = -1
+    failed: str = ""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Accept any arguments until the real command lands."""
-    parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    """Register the options of `pafp emulate`."""
+    parser.add_argument("device", choices=sorted(_ROLES), help="what to serve (bench = motor + imu, one plant)")
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--pty", action="store_true", help="create a new pty per device and print its path")
+    where.add_argument("--port", metavar="DEVICE", help="serve on this serial port (bench: the motor's)")
+    parser.add_argument("--imu-port", metavar="DEVICE", help="bench with --port: the IMU's serial port")
+    parser.add_argument("--baud", type=int, default=None,
+                        help="link baud: the motor's (default 921600), or the IMU's for `imu` (default 115200)")
+    parser.add_argument("--fixture", default="suspended", choices=sorted(FIXTURES), help="bench fixture")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
+    parser.add_argument("--duration", type=float, default=None, metavar="S",
+                        help="stop after S seconds (default: run until Ctrl-C or SIGTERM)")
+
+
+def _open_pty(role: str) -> Endpoint:
+    """A new pty pair in raw mode; we keep both ends (the slave stays open so a client may come and go)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+
+    def close() -> None:
+        os.close(master)
+        os.close(slave)
+
+    return Endpoint(role, master, os.ttyname(slave), close)
+
+
+def _open_port(role: str, path: str, baud: int) -> Endpoint:
+    """A real serial port through pyserial (8N1, non-blocking file descriptor)."""
+    import serial
+
+    try:
+        port = serial.Serial(path, baudrate=baud, timeout=0, write_timeout=0)
+        fd = port.fileno()
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise EmulateError(f"cannot open {role} port {path!r}: {exc}") from None
+    os.set_blocking(fd, False)
+    return Endpoint(role, fd, path, port.close)
+
+
+def _bauds(args: argparse.Namespace) -> dict[str, int]:
+    if args.baud is None:
+        return {}
+    if not 1 <= args.baud <= 20_000_000:
+        raise EmulateError(f"--baud {args.baud} out of range: 1..20000000")
+    return {"imu" if args.device == "imu" else "motor": args.baud}
+
+
+def _endpoints(args: argparse.Namespace, devices: WallDevices) -> list[Endpoint]:
+    roles = _ROLES[args.device]
+    if args.pty:
+        return [_open_pty(role) for role in roles]
+    paths = {roles[0]: args.port}
+    if args.device == "bench":
+        paths["imu"] = args.imu_port
+    opened: list[Endpoint] = []
+    try:
+        for role, path in paths.items():
+            opened.append(_open_port(role, path, devices.uarts[role].baud))
+    except EmulateError:
+        for ep in opened:
+            ep.close()
+        raise
+    return opened
+
+
+def _check(args: argparse.Namespace) -> None:
+    if args.imu_port and not (args.device == "bench" and args.port):
+        raise EmulateError("--imu-port is only for `bench` with --port")
+    if args.device == "bench" and args.port and not args.imu_port:
+        raise EmulateError("`bench --port MOTOR_DEVICE` also needs --imu-port IMU_DEVICE")
+    if args.duration is not None and not args.duration > 0:
+        raise EmulateError(f"--duration {args.duration} out of range: > 0 seconds")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Refuse to run, naming the issue that will provide this command."""
-    return not_yet("emulate", "issue 4")
+    """Serve until stopped; print the paths first and a summary line last; 2 on bad options or ports."""
+    try:
+        _check(args)
+        devices = WallDevices(_ROLES[args.device], bauds=_bauds(args), fixture=args.fixture, seed=args.seed)
+        endpoints = _endpoints(args, devices)
+    except (EmulateError, ValueError) as exc:
+        print(f"pafp emulate: {exc}", file=sys.stderr)
+        return 2
+    for ep in endpoints:
+        print(f"{ep.role}: {ep.path}", flush=True)
+    stop: list[str] = []
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.append(signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        _serve(devices, endpoints, stop, args.duration)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for ep in endpoints:
+            ep.close()
+        devices.close()
+    print(_summary(devices, endpoints, stop[0] if stop else "duration"), flush=True)
+    return 0
+
+
+def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], duration_s: float | None) -> None:
+    """The wall-clock loop: take bytes in, let the world catch up, write what has ended, sleep."""
+    end_ns = None if duration_s is None else devices.now() + int(duration_s * 1e9)
+    by_fd = {ep.fd: ep for ep in endpoints}
+    while not stop:
+        now = devices.now()
+        if end_ns is not None and now >= end_ns:
+            return
+        wake = devices.next_event_ns()
+        for uart in devices.uarts.values():
+            if uart.rx_line_busy_until > now:
+                wake = min(wake, uart.rx_line_busy_until)
+        timeout = min(MAX_SLEEP_S, max(0.0, (wake - now) / 1e9))
+        live = [fd for fd, ep in by_fd.items() if not ep.failed]
+        readable, _, _ = select.select(live, [], [], timeout)
+        now = devices.now()
+        for fd in readable:
+            _take(devices, by_fd[fd], now)
+        for ep in endpoints:
+            data = devices.uarts[ep.role].read()
+            if data and not ep.failed:
+                _give(ep, data)
+
+
+def _take(devices: WallDevices, ep: Endpoint, now: int) -> None:
+    """Read what the far end sent and hand it to the device with its arrival times."""
+    try:
+        data = os.read(ep.fd, 4096)
+    except BlockingIOError:
+        return
+    except OSError as exc:
+        ep.failed = f"read failed: {exc}"
+        return
+    if not data:
+        return
+    ep.bytes_in += len(data)
+    after = max(ep.last_end_ns, devices.world.now)
+    ends = arrival_end_times(len(data), now, devices.byte_ns(ep.role), after)
+    ep.last_end_ns = ends[-1]
+    devices.device(ep.role).on_bytes(data, ends)
+
+
+def _give(ep: Endpoint, data: bytes) -> None:
+    """Write the device's bytes without blocking; what the far end cannot take is dropped and counted."""
+    try:
+        written = os.write(ep.fd, data)
+    except BlockingIOError:
+        written = 0
+    except OSError as exc:
+        ep.failed = f"write failed: {exc}"
+        written = 0
+    ep.bytes_out += written
+    ep.dropped_out += len(data) - written
+
+
+def _summary(devices: WallDevices, endpoints: list[Endpoint], reason: str) -> str:
+    """One line: frames in and out per device, errors, and why we stopped."""
+    parts = [f"pafp emulate: stopped ({reason})"]
+    for ep in endpoints:
+        dev = devices.device(ep.role)
+        if ep.role == "motor":
+            st, ds = dev.stats, dev.decoder.stats  # type: ignore[union-attr]
+            errors = ds.crc_errors + ds.bad_end_bytes + ds.short_payloads + ds.unknown_ids
+            counts = (f"frames_in={ds.frames} frames_out={st.replies + st.stream_frames} "
+                      f"errors={errors} junk_bytes={ds.dropped_bytes}")
+        else:
+            counts = f"frames_in=0 frames_out={dev.frames_sent} ignored_bytes={dev.bytes_ignored}"  # type: ignore[union-attr]
+        failed = f" failed='{ep.failed}'" if ep.failed else ""
+        parts.append(f"{ep.role}: {counts} bytes_in={ep.bytes_in} bytes_out={ep.bytes_out} "
+                     f"dropped_out={ep.dropped_out}{failed}")
+    return "; ".join(parts)

@@ -29,6 +29,7 @@ from typing import Any
 
 from firmware.protocol.vesc import (
     VALUES_FIELDS,
+    Alive,
     Decoder,
     DetectMode,
     FwVersion,
@@ -144,6 +145,7 @@ class Ak60:
             SetRpm: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_speed(m.erpm, i, w)),
             SetPos: lambda m, t: self._drive_position(m.position_rad, 0, 0, t),
             SetPosSpd: lambda m, t: self._drive_position(m.position_rad, m.erpm, m.accel_erpm_per_s, t),
+            Alive: lambda m, t: None,  # only resets the timeout (below)
             SetDetect: self._on_set_detect,
             SetPosOrigin: self._on_set_origin,
             SetPosMulti: lambda m, t: setattr(self, "single_turn", False),

@@ -7,7 +7,8 @@ CubeMars does not publish its loops or gains; these are simple, documented stand
 * speed (SET_RPM): PI on the motor-side speed, ``i = Kp e + Ki integral(e)``, integral clamped to the
   peak current (anti-windup), output clamped to +-peak;
 * position (SET_POS, SET_POS_SPD): P on the motor-side angle giving a speed reference, limited to the
-  speed limit and slewed at the acceleration limit (a trapezoidal move), then the speed PI.
+  speed limit and to ``sqrt(2 a |error|)`` (so the move can stop at the acceleration limit ``a``) and
+  slewed at ``a`` (a trapezoidal move), then the speed PI.
 
 Everything is motor side (rotor rad, rad/s); ERPM = rotor rpm x pole pairs. Entering a loop is bumpless:
 the integral starts at the present current and the speed reference at the present speed.
@@ -102,10 +103,12 @@ class InnerLoops:
         if self.mode is LoopMode.DUTY:
             return self._clamp((self.duty * v_in_v - self.ke * w) / self.r_ohm)
         if self.mode is LoopMode.POSITION:
-            vmax = self.max_speed_rad_s
-            want = self.kp_pos * (self.position_target_rad - motor_angle_rad)
-            want = vmax if want > vmax else -vmax if want < -vmax else want
-            step = self.max_accel_rad_s2 * dt_s
+            err = self.position_target_rad - motor_angle_rad
+            accel = self.max_accel_rad_s2
+            # speed limit, P law, and the speed from which the move can still stop in time
+            vmax = min(self.max_speed_rad_s, self.kp_pos * abs(err), math.sqrt(2.0 * accel * abs(err)))
+            want = math.copysign(vmax, err)
+            step = accel * dt_s
             ref = self.speed_ref_rad_s
             ref = min(want, ref + step) if want > ref else max(want, ref - step)
             self.speed_ref_rad_s = ref

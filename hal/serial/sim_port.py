@@ -1,0 +1,156 @@
+"""Virtual devices on the wall clock: the AK60-6 and/or BNO08x on one plant, ticks = nanoseconds since start.
+
+Used by the pyserial ``sim://`` URL handler (:mod:`hal.serial.protocol_sim`) and by ``pafp emulate``.
+The device models and the plant are the very ones of the virtual bench; only the clock differs: a
+:class:`~hal.virtual.uart.VirtualUart` on ``time.perf_counter_ns`` (``f_hz = 10**9``) stands for the
+far end of the link, so byte timing is kept (a read returns only the bytes whose stop bit has ended by
+now) and the world runs lazily whenever the port is used.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from urllib.parse import parse_qs, urlsplit
+
+from hal.virtual.bench import fixture_by_name
+from hal.virtual.devices.ak60 import Ak60
+from hal.virtual.devices.bno08x import Bno08x
+from hal.virtual.devices.world import World
+from hal.virtual.plant import Fixture, Plant
+from hal.virtual.uart import VirtualUart
+
+__all__ = ["DEFAULT_BAUDS", "DEVICE_ROLES", "NS_PER_S", "SimUrl", "WallDevices", "arrival_end_times",
+           "parse_sim_url"]
+
+NS_PER_S = 1_000_000_000
+DEVICE_ROLES: Mapping[str, str] = {"ak60-6": "motor", "ak60": "motor", "motor": "motor",
+                                   "bno08x": "imu", "bno085": "imu", "imu": "imu"}
+"""Device names accepted after ``sim://`` and the role each one plays."""
+DEFAULT_BAUDS: Mapping[str, int] = {"motor": 921_600, "imu": 115_200}
+"""Default baud per role: 921600 for the AK60-6 (PROTOCOLS.md C), 115200 for UART-RVC (D.1)."""
+_OPTIONS = ("baud", "fixture", "seed")
+
+
+@dataclass(frozen=True)
+class SimUrl:
+    """A parsed ``sim://device[?baud=N&fixture=NAME&seed=S]`` URL (baud None: not given)."""
+
+    role: str
+    baud: int | None = None
+    fixture: str = "suspended"
+    seed: int = 0
+    options: dict[str, str] = field(default_factory=dict)
+
+
+def parse_sim_url(url: str) -> SimUrl:
+    """Parse a sim:// URL; ValueError naming the bad part and the allowed values.
+
+    >>> parse_sim_url("sim://ak60-6?baud=921600")
+    SimUrl(role='motor', baud=921600, fixture='suspended', seed=0, options={'baud': '921600'})
+    """
+    parts = urlsplit(url)
+    if parts.scheme.lower() != "sim":
+        raise ValueError(f"URL {url!r} must start with sim://")
+    name = (parts.netloc + parts.path).strip("/").lower()
+    if name not in DEVICE_ROLES:
+        raise ValueError(f"sim:// device {name!r} unknown: one of {sorted(DEVICE_ROLES)}")
+    options: dict[str, str] = {}
+    for key, values in parse_qs(parts.query, keep_blank_values=True).items():
+        if key not in _OPTIONS:
+            raise ValueError(f"sim:// option {key!r} unknown: one of {list(_OPTIONS)}")
+        options[key] = values[-1]
+    baud = _int_option(options, "baud", 1, 20_000_000)
+    seed = _int_option(options, "seed", 0, 2**63 - 1)
+    fixture = options.get("fixture", "suspended")
+    fixture_by_name(fixture)  # validates the name
+    return SimUrl(DEVICE_ROLES[name], baud, fixture, 0 if seed is None else seed, options)
+
+
+def _int_option(options: Mapping[str, str], key: str, lo: int, hi: int) -> int | None:
+    if key not in options:
+        return None
+    try:
+        value = int(options[key])
+    except ValueError:
+        raise ValueError(f"sim:// option {key}={options[key]!r} is not an integer in {lo}..{hi}") from None
+    if not lo <= value <= hi:
+        raise ValueError(f"sim:// option {key}={value} out of range {lo}..{hi}")
+    return value
+
+
+def arrival_end_times(n_bytes: int, arrival_ns: int, byte_ns: float, after_ns: int) -> list[int]:
+    """Stop-bit end times of n bytes that have just arrived together: back to back, the last at arrival.
+
+    Each is kept strictly after ``after_ns`` (the previous byte's end or the device's present time).
+
+    >>> arrival_end_times(3, 1000, 100.0, 0), arrival_end_times(3, 1000, 100.0, 850)
+    ([800, 900, 1000], [851, 900, 1000])
+    """
+    ends = []
+    last = after_ns
+    for k in range(n_bytes):
+        end = max(last + 1, arrival_ns - round((n_bytes - 1 - k) * byte_ns))
+        ends.append(end)
+        last = end
+    return ends
+
+
+class WallDevices:
+    """One plant and the requested device roles, each behind a VirtualUart on the wall clock (ns)."""
+
+    def __init__(
+        self,
+        roles: Iterable[str],
+        *,
+        bauds: Mapping[str, int] | None = None,
+        fixture: Fixture | str | None = None,
+        seed: int = 0,
+        clock_ns: Callable[[], int] | None = None,
+        rx_buffer_size: int = 65_536,
+        tx_queue_size: int = 65_536,
+    ) -> None:
+        """Start the plant and the devices now; clock_ns (default: perf_counter_ns since now) gives ticks."""
+        if clock_ns is None:
+            t0 = time.perf_counter_ns()
+            clock_ns = lambda: time.perf_counter_ns() - t0  # noqa: E731
+        self.now: Callable[[], int] = clock_ns
+        fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
+        self.world = World(Plant(None, fx), NS_PER_S)
+        self.uarts: dict[str, VirtualUart] = {}
+        self.motor: Ak60 | None = None
+        self.imu: Bno08x | None = None
+        bauds = dict(bauds or {})
+        for role in dict.fromkeys(roles):
+            if role not in DEFAULT_BAUDS:
+                raise ValueError(f"role {role!r} unknown: one of {sorted(DEFAULT_BAUDS)}")
+            baud = bauds.get(role, DEFAULT_BAUDS[role])
+            uart = VirtualUart(self.now, NS_PER_S, baud, rx_buffer_size, tx_queue_size, name=role)
+            device: Ak60 | Bno08x
+            if role == "motor":
+                device = self.motor = Ak60(self.world, link=uart)
+            else:
+                device = self.imu = Bno08x(self.world, seed=seed, link=uart)
+            uart.connect(device)
+            self.uarts[role] = uart
+
+    def device(self, role: str) -> Ak60 | Bno08x:
+        """The device model playing role."""
+        dev = self.motor if role == "motor" else self.imu if role == "imu" else None
+        if dev is None:
+            raise ValueError(f"no device plays role {role!r}; served: {sorted(self.uarts)}")
+        return dev
+
+    def byte_ns(self, role: str) -> float:
+        """Duration of one 8N1 byte on role's link, in ns."""
+        return 10 * NS_PER_S / self.uarts[role].baud
+
+    def next_event_ns(self) -> int:
+        """The earliest scheduled device event (a time to wake up for)."""
+        return min(d.next_event for d in (self.motor, self.imu) if d is not None)
+
+    def close(self) -> None:
+        """Close the UARTs."""
+        for uart in self.uarts.values():
+            uart.close()
