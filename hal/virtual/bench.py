@@ -126,15 +126,19 @@ class VirtualBench:
         """Interrupt sources for the scheduler: one RX source per UART (per byte), SysTick, encoder wraps.
 
         isr_cycles is the board profile's ``[isr_cycles]`` table: ``uart_rx_byte`` and ``systick`` are
-        required, ``timer_update`` optional (no encoder-wrap source without it). Call this once.
+        required, ``timer_update`` optional (no encoder-wrap source without it). Call this once and keep
+        the order: the encoder-wrap source comes first.
         """
         missing = [k for k in ("uart_rx_byte", "systick") if k not in isr_cycles]
         if missing:
             raise ValueError(f"isr_cycles lacks {missing}: need uart_rx_byte and systick (cycles per ISR), "
                              "timer_update optional")
         timer = isr_cycles.get("timer_update")
-        return self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]),
-                                          None if timer is None else int(timer))
+        sources = self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]),
+                                             None if timer is None else int(timer))
+        # the encoder-wrap source reads the angle at its window start: it goes first, before a UART
+        # source moves the world (and the plant) on to the window end
+        return sorted(sources, key=lambda s: not s.name.endswith("_update"))
 
     # -------------------------------------------------------------------- time
     def seconds(self, cycles: int) -> float:

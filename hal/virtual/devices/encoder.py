@@ -9,11 +9,14 @@ mounting offset.
 
 from __future__ import annotations
 
+import logging
 import math
 
 from hal.virtual.devices.world import World
 
 __all__ = ["EncoderMount"]
+
+log = logging.getLogger(__name__)
 
 
 class EncoderMount:
@@ -33,9 +36,21 @@ class EncoderMount:
         self.offset_rad = offset_rad
         plant = world.plant
         self.zero_rad = plant.output_angle_rad(plant.latest_time_s)
+        self.late_queries = 0
 
     def angle_rad(self, t_cycles: int) -> float:
-        """The encoder shaft angle at tick t_cycles (the callable a VirtualEncoderTimer takes)."""
+        """The encoder shaft angle at tick t_cycles (the callable a VirtualEncoderTimer takes).
+
+        A time the plant has already passed (only the timer's wrap-interrupt counter asks for one,
+        when a window start lies behind the world) is answered with the angle at the plant's latest
+        time and counted in ``late_queries``.
+        """
         world = self.world
         world.advance_to(t_cycles)
-        return world.plant.output_angle_rad(t_cycles / world.f_hz) - self.zero_rad + self.offset_rad
+        plant = world.plant
+        t_s = t_cycles / world.f_hz
+        if t_s < plant.latest_time_s:
+            self.late_queries += 1
+            log.debug("encoder angle asked for %.9f s, plant already at %.9f s", t_s, plant.latest_time_s)
+            t_s = plant.latest_time_s
+        return plant.output_angle_rad(t_s) - self.zero_rad + self.offset_rad
