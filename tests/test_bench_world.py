@@ -97,7 +97,7 @@ def test_interrupt_sources_drive_the_scheduler() -> None:
         bench.board.motor_uart.read()
         bench.board.motor_uart.write(SetCurrent(0.5).encode() + request)
 
-    sources = bench.interrupt_sources(ISR)
+    sources = bench.interrupt_sources(ISR, encoder_wraps=True)
     assert [s.name for s in sources] == ["encoder_update", "motor_rx", "imu_rx", "telemetry_rx", "systick"]
     sched = Scheduler([Task("motor", 1, period=F // 1000, cost=20_000, body=motor_task)], VirtualClock(F),
                       interrupts=sources)
@@ -107,6 +107,8 @@ def test_interrupt_sources_drive_the_scheduler() -> None:
     assert fired["motor_rx"] == 100 * 23  # every byte of the 100 replies (23 B each), the last by 99.6 ms
     assert fired["imu_rx"] == 81 + 9 * 19  # banner and nine frames by 0.1 s
     assert bench.encoder_mount.late_queries == 0
+    assert [s.name for s in VirtualBench(Clock(), F).interrupt_sources(ISR)] == [
+        "motor_rx", "imu_rx", "telemetry_rx", "systick"]
     with pytest.raises(ValueError, match="uart_rx_byte"):
         bench.interrupt_sources({"systick": 80})
 

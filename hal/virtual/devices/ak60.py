@@ -166,6 +166,9 @@ class Ak60:
         """Keep bytes from the MCU with their stop-bit end times; they are decoded when the world gets there."""
         if len(data) != len(end_times_cycles):
             raise ValueError(f"{len(data)} bytes but {len(end_times_cycles)} end times: need one per byte")
+        if data and end_times_cycles[0] <= self.world.now:
+            raise ValueError(f"byte end time {end_times_cycles[0]} is not after tick {self.world.now}, "
+                             "which the world has already reached")
         base = len(self._rx)
         self._rx += data
         self._ends.extend(end_times_cycles)
