@@ -117,7 +117,6 @@ class Ak60:
         self.single_turn = False
         self.origin_deg = 0.0
         self.detect_mode: int = DetectMode.NONE
-        self._applied: tuple[DriveMode, float] = (DriveMode.CURRENT, 0.0)
         self._brake_a = 0.0
         self._sampled_at = -1
         self._next_target: float | None = None
@@ -279,7 +278,7 @@ class Ak60:
 
     def _receive(self, t: int) -> None:
         end = self._rx_idx + 1
-        messages = self.decoder.feed(memoryview(self._rx)[self._fed : end])
+        messages = self.decoder.feed(self._rx[self._fed : end])
         self._fed = end
         if end == len(self._rx):
             self._rx.clear()
@@ -307,10 +306,7 @@ class Ak60:
 
     # ------------------------------------------------------------------- driving
     def _apply(self, mode: DriveMode, current_a: float, t: int) -> None:
-        """Put a current (or brake) command on the plant unless it is the one already there."""
-        if self._applied == (mode, current_a):
-            return
-        self._applied = (mode, current_a)
+        """Put a current (or brake) command on the plant from tick t."""
         t_s = t / self.world.f_hz
         if mode is DriveMode.BRAKE:
             self.plant.set_brake_current(current_a, t_s)
