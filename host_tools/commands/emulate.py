@@ -75,6 +75,7 @@ def _open_pty(role: str) -> Endpoint:
     os.set_blocking(master, False)
 
     def close() -> None:
+        """Close both ends of the pty."""
         os.close(master)
         os.close(slave)
 
@@ -143,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
     stop: list[str] = []
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
+        """Ask the serving loop to stop."""
         stop.append(signal.Signals(signum).name)
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -2,11 +2,10 @@
 
 The model is a :class:`~hal.virtual.uart.UartPeer` and a :class:`~hal.virtual.devices.world.World`
 device. Bytes from the MCU are kept with their stop-bit end times and fed to the codec's streaming
-decoder only when the world reaches them; a frame can only complete on an ``03`` end byte, so the
-bytes are fed in slices that end at each ``03`` and every decoded message gets the exact end time of
-the byte that completed it (as on the real driver, a frame hidden behind a false long-frame header is
-only seen once the decoder has rejected that header). A request at tick ``t`` samples the plant at
-``t`` and its reply starts at ``t + reply_latency``. Conventions (docs/devices.md):
+decoder only when the world reaches them, in slices ending at each ``03`` byte
+(:class:`~hal.virtual.devices.vesc_rx.TimedBytes`), so every decoded message gets the exact end time of
+the byte that completed it. A request at tick ``t`` samples the plant at ``t`` and its reply starts at
+``t + reply_latency``. Conventions (docs/devices.md):
 
 * currents: the q-axis current is the plant's (it already models the FOC lag and the 22.7 A clamp);
   SET_CURRENT_REL is relative to that peak; HANDBRAKE acts as a brake current;
@@ -27,43 +26,20 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
-from firmware.protocol.vesc import (
-    VALUES_FIELDS,
-    Alive,
-    Decoder,
-    DetectMode,
-    FwVersion,
-    GetFwVersion,
-    GetValues,
-    GetValuesSelective,
-    OriginMode,
-    RotorPosition,
-    SetCurrent,
-    SetCurrentBrake,
-    SetCurrentRel,
-    SetDetect,
-    SetDuty,
-    SetHandbrake,
-    SetPos,
-    SetPosMulti,
-    SetPosOrigin,
-    SetPosSingle,
-    SetPosSpd,
-    SetRpm,
-    Values,
-    encode_frame,
-)
+from firmware.protocol import vesc
+from firmware.protocol.vesc import DetectMode, OriginMode
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode
 from hal.virtual.devices.ak60_meter import Ak60Meter
 from hal.virtual.devices.ak60_values import ValueSource
+from hal.virtual.devices.vesc_rx import TimedBytes
 from hal.virtual.devices.world import NEVER, Link, World
 
 __all__ = ["Ak60", "Ak60Stats", "DriveMode"]
 
 log = logging.getLogger(__name__)
 
-_QUERIES = (GetValues, GetValuesSelective, GetFwVersion)
+_QUERIES = (vesc.GetValues, vesc.GetValuesSelective, vesc.GetFwVersion)
 
 
 class DriveMode(Enum):
@@ -99,7 +75,7 @@ class Ak60:
         self.plant = plant = world.plant
         self.params = p = plant.params
         self.link = link
-        self.decoder = Decoder("to-motor")
+        self.decoder = vesc.Decoder("to-motor")
         self.stats = Ak60Stats()
         self.loops = InnerLoops(cfg, p)
         t0_s = plant.latest_time_s
@@ -120,13 +96,7 @@ class Ak60:
         self._brake_a = 0.0
         self._sampled_at = -1
         self._next_target: float | None = None
-        # received bytes not yet fed to the decoder, with their end times; _rx_at is the end time of
-        # the next 03 byte (a frame can only complete there), _rx_idx its index
-        self._rx = bytearray()
-        self._ends: list[int] = []
-        self._fed = 0
-        self._rx_idx = -1
-        self._rx_at = NEVER
+        self._rx = TimedBytes()
         self._timeout_at = NEVER
         self._loop_at = NEVER
         self._stream_at = NEVER
@@ -136,23 +106,23 @@ class Ak60:
         self.next_event = NEVER
         self.values = ValueSource(self)
         self._handlers: dict[type, Callable[[Any, int], None]] = {
-            SetCurrent: lambda m, t: self._drive_current(m.current_a, t),
-            SetCurrentRel: lambda m, t: self._drive_current(m.current_rel * p.peak_current_a, t),
-            SetCurrentBrake: lambda m, t: self._drive_brake(m.current_a, t),
-            SetHandbrake: lambda m, t: self._drive_brake(m.current_a, t),
-            SetDuty: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_duty(m.duty, i, w)),
-            SetRpm: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_speed(m.erpm, i, w)),
-            SetPos: lambda m, t: self._drive_position(m.position_rad, 0, 0, t),
-            SetPosSpd: lambda m, t: self._drive_position(m.position_rad, m.erpm, m.accel_erpm_per_s, t),
-            Alive: lambda m, t: None,  # only resets the timeout (below)
-            SetDetect: self._on_set_detect,
-            SetPosOrigin: self._on_set_origin,
-            SetPosMulti: lambda m, t: setattr(self, "single_turn", False),
-            SetPosSingle: lambda m, t: setattr(self, "single_turn", True),
-            GetValues: self._on_get_values,
-            GetValuesSelective: self._on_selective,
-            GetFwVersion: lambda m, t: self._reply(
-                FwVersion(cfg.fw_major, cfg.fw_minor, cfg.hw_name, cfg.uuid), t),
+            vesc.SetCurrent: lambda m, t: self._drive_current(m.current_a, t),
+            vesc.SetCurrentRel: lambda m, t: self._drive_current(m.current_rel * p.peak_current_a, t),
+            vesc.SetCurrentBrake: lambda m, t: self._drive_brake(m.current_a, t),
+            vesc.SetHandbrake: lambda m, t: self._drive_brake(m.current_a, t),
+            vesc.SetDuty: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_duty(m.duty, i, w)),
+            vesc.SetRpm: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_speed(m.erpm, i, w)),
+            vesc.SetPos: lambda m, t: self._drive_position(m.position_rad, 0, 0, t),
+            vesc.SetPosSpd: lambda m, t: self._drive_position(m.position_rad, m.erpm, m.accel_erpm_per_s, t),
+            vesc.Alive: lambda m, t: None,  # only resets the timeout (below)
+            vesc.SetDetect: self._on_set_detect,
+            vesc.SetPosOrigin: self._on_set_origin,
+            vesc.SetPosMulti: lambda m, t: setattr(self, "single_turn", False),
+            vesc.SetPosSingle: lambda m, t: setattr(self, "single_turn", True),
+            vesc.GetValues: self._on_get_values,
+            vesc.GetValuesSelective: self._on_selective,
+            vesc.GetFwVersion: lambda m, t: self._reply(
+                vesc.FwVersion(cfg.fw_major, cfg.fw_minor, cfg.hw_name, cfg.uuid), t),
         }
         world.add(self)
 
@@ -163,20 +133,12 @@ class Ak60:
 
     def on_bytes(self, data: bytes, end_times_cycles: Sequence[int]) -> None:
         """Keep bytes from the MCU with their stop-bit end times; they are decoded when the world gets there."""
-        if len(data) != len(end_times_cycles):
-            raise ValueError(f"{len(data)} bytes but {len(end_times_cycles)} end times: need one per byte")
         if data and end_times_cycles[0] <= self.world.now:
             raise ValueError(f"byte end time {end_times_cycles[0]} is not after tick {self.world.now}, "
                              "which the world has already reached")
-        base = len(self._rx)
-        self._rx += data
-        self._ends.extend(end_times_cycles)
-        if self._rx_idx < 0:
-            j = self._rx.find(3, base)
-            if j >= 0:
-                self._rx_idx, self._rx_at = j, self._ends[j]
-                if self._rx_at < self.next_event:
-                    self.next_event = self._rx_at
+        self._rx.push(data, end_times_cycles)
+        if self._rx.next_at < self.next_event:
+            self.next_event = self._rx.next_at
 
     def advance_to(self, t_cycles: int) -> None:
         """Bring the whole world (this driver included) up to t_cycles."""
@@ -212,7 +174,7 @@ class Ak60:
 
     # --------------------------------------------------------------- world device
     def _update_next(self) -> None:
-        nxt = min(self._rx_at, self._timeout_at, self._loop_at, self._stream_at, self._fault_until)
+        nxt = min(self._rx.next_at, self._timeout_at, self._loop_at, self._stream_at, self._fault_until)
         if self._actions and self._actions[0][0] < nxt:
             nxt = self._actions[0][0]
         self.next_event = nxt
@@ -225,7 +187,7 @@ class Ak60:
             heapq.heappop(actions)[2](t)
         if self._fault_until <= t:
             self.fault, self._fault_until = 0, NEVER
-        if self._rx_at <= t:
+        if self._rx.next_at <= t:
             self._receive(t)
         if self._timeout_at <= t:
             self._timeout_at, self.timed_out = NEVER, True
@@ -277,20 +239,7 @@ class Ak60:
             self._next_target = value
 
     def _receive(self, t: int) -> None:
-        end = self._rx_idx + 1
-        messages = self.decoder.feed(self._rx[self._fed : end])
-        self._fed = end
-        if end == len(self._rx):
-            self._rx.clear()
-            self._ends.clear()
-            self._fed, self._rx_idx, self._rx_at = 0, -1, NEVER
-        else:
-            if self._fed > 4096:
-                del self._rx[: self._fed]
-                del self._ends[: self._fed]
-                self._fed = 0
-            j = self._rx.find(3, self._fed)
-            self._rx_idx, self._rx_at = (j, self._ends[j]) if j >= 0 else (-1, NEVER)
+        messages = self.decoder.feed(self._rx.take())
         handlers = self._handlers
         for msg in messages:
             handler = handlers.get(type(msg))
@@ -298,6 +247,7 @@ class Ak60:
                 continue  # Unknown ids are counted by the decoder and ignored
             if isinstance(msg, _QUERIES):
                 self.stats.requests += 1
+                self.stats.replies += 1
             else:
                 self.stats.commands += 1
                 self._timeout_at = t + self._timeout if self._timeout else NEVER
@@ -367,7 +317,6 @@ class Ak60:
         self._apply(DriveMode.CURRENT, 0.0, t)
         self._target(0.0, t)
 
-    # -------------------------------------------------------------------- faults
     def _raise_fault(self, code: int, t: int, hold_ticks: int) -> None:
         self.fault = code
         self._fault_until = t + hold_ticks
@@ -401,14 +350,14 @@ class Ak60:
             return 0.0
         return math.degrees((self.loops.position_target_rad - self._angle) / self.params.gearbox_ratio)
 
-    def _on_set_origin(self, msg: SetPosOrigin, t: int) -> None:
+    def _on_set_origin(self, msg: vesc.SetPosOrigin, t: int) -> None:
         self._sample(t)
         if msg.mode == OriginMode.RESTORE_DEFAULT:
             self.origin_deg = 0.0
         else:
             self.origin_deg = math.degrees(self._angle / self.params.gearbox_ratio)
 
-    def _on_set_detect(self, msg: SetDetect, t: int) -> None:
+    def _on_set_detect(self, msg: vesc.SetDetect, t: int) -> None:
         streams = msg.mode in (DetectMode.ENCODER, DetectMode.PID_POS, DetectMode.PID_POS_ERROR)
         if streams and self._stream_at == NEVER:
             self._stream_at = t + self._stream_period
@@ -428,23 +377,21 @@ class Ak60:
         scale = self.config.rotor_position_scale
         limit = (2**31 - 1) / scale
         deg = max(-limit, min(limit, deg))
-        self._send(RotorPosition(math.radians(deg), scale).encode(), t)
+        self._send(vesc.RotorPosition(math.radians(deg), scale).encode(), t)
         self.stats.stream_frames += 1
         self._stream_at = t + self._stream_period
 
-    def _on_selective(self, msg: GetValuesSelective, t: int) -> None:
+    def _on_selective(self, msg: vesc.GetValuesSelective, t: int) -> None:
         self._sample(t)
         payload = self.values.selective_payload(msg.mask, self.config.selective_mask_echo)
-        self._send(encode_frame(payload), t + self._latency)
-        self.stats.replies += 1
+        self._send(vesc.encode_frame(payload), t + self._latency)
 
-    def _on_get_values(self, msg: GetValues, t: int) -> None:
+    def _on_get_values(self, msg: vesc.GetValues, t: int) -> None:
         self._sample(t)
-        self._reply(Values(**self.values.read(VALUES_FIELDS)), t)
+        self._reply(vesc.Values(**self.values.read(vesc.VALUES_FIELDS)), t)
 
     def _reply(self, message: Any, t: int) -> None:
         self._send(message.encode(), t + self._latency)
-        self.stats.replies += 1
 
     def _send(self, frame: bytes, start: int) -> None:
         self.stats.bytes_out += len(frame)

@@ -46,9 +46,11 @@ class ValueSource:
         controller_id = dev.config.controller_id
 
         def zero() -> float:
+            """A field CubeMars reports as 0."""
             return 0.0
 
         def pid_pos() -> float:
+            """pid_pos in radians, clamped to the wire range."""
             deg = dev.pid_pos_deg()
             return math.radians(max(-_PID_POS_LIMIT_DEG, min(_PID_POS_LIMIT_DEG, deg)))
 

@@ -143,6 +143,7 @@ class PlantView:
         world = self._world
 
         def timed(*args: Any, **kwargs: Any) -> Any:
+            """Advance the world to the call's time, then call the plant."""
             t_s = kwargs["t_s"] if "t_s" in kwargs else args[-1]
             world.advance_to(world.ticks(t_s))
             return attr(*args, **kwargs)
