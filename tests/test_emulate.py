@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import select
 import signal
 import subprocess
 import sys
@@ -71,3 +73,27 @@ def test_duration_serves_then_stops(capsys: pytest.CaptureFixture[str]) -> None:
     assert out[0].startswith("imu: /dev/") and out[-1].startswith("pafp emulate: stopped (duration)")
     frames_out = int(out[-1].split("frames_out=")[1].split()[0])
     assert 15 <= frames_out <= 21
+
+
+def test_serves_on_a_serial_port_given_by_path() -> None:
+    """--port through pyserial: here the port is one end of a pty, the test holds the other."""
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    proc = _start("motor", "--port", path, "--duration", "3")
+    try:
+        assert proc.stdout.readline().strip() == f"motor: {path}"  # type: ignore[union-attr]
+        os.write(master, GetValues().encode())
+        reply = b""
+        deadline = time.monotonic() + 2.0
+        while len(reply) < 78 and time.monotonic() < deadline:
+            if select.select([master], [], [], 0.1)[0]:
+                reply += os.read(master, 256)
+        (values,) = Decoder("from-motor").feed(reply)
+        assert isinstance(values, Values)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+        os.close(master)
+        os.close(slave)
+    assert proc.returncode == 0, err
+    assert "motor: frames_in=1 frames_out=1 errors=0" in out
