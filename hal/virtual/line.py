@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from itertools import accumulate
+from math import gcd
+
 __all__ = ["BITS_PER_BYTE_8N1", "ByteLine", "ceil_div"]
 
 BITS_PER_BYTE_8N1 = 10  # start + 8 data + stop
+_MAX_PATTERN = 4096  # longest period of the per-byte increments kept as a table
 
 
 def ceil_div(a: int, b: int) -> int:
@@ -40,6 +44,13 @@ class ByteLine:
         self._den = baud
         self._origin = 0
         self._count = 0
+        # byte k of a burst lasts ceil(k*num/den) - ceil((k-1)*num/den) cycles: periodic in k with
+        # period den / gcd(num, den), so a table of one period gives every end by a running sum
+        period = baud // gcd(self._num, baud)
+        self._period = period
+        self._pattern = ([ceil_div(k * self._num, baud) - ceil_div((k - 1) * self._num, baud)
+                          for k in range(1, period + 1)] if period <= _MAX_PATTERN else [])
+        self._cycle = list(self._pattern)
 
     @property
     def byte_cycles(self) -> float:
@@ -60,10 +71,19 @@ class ByteLine:
         if start_cycles * self._den > self._origin * self._den + self._count * self._num:
             self._origin = start_cycles  # the line is idle (exactly) before start_cycles: new burst
             self._count = 0
-        first = self._count + 1
-        ends = [self._origin + ceil_div(k * self._num, self._den) for k in range(first, first + n_bytes)]
-        self._count += n_bytes
-        return ends
+        count = self._count
+        self._count = count + n_bytes
+        if not self._pattern:
+            num, den, origin = self._num, self._den, self._origin
+            return [origin - (-(k * num) // den) for k in range(count + 1, count + n_bytes + 1)]
+        phase = count % self._period
+        cycle = self._cycle
+        if len(cycle) < phase + n_bytes:
+            cycle = self._cycle = self._pattern * ((phase + n_bytes) // self._period + 1)
+        incs = cycle[phase : phase + n_bytes]
+        if incs:
+            incs[0] += self._origin - (-(count * self._num) // self._den)
+        return list(accumulate(incs))
 
     def pending(self, t_cycles: int) -> int:
         """Bytes queued whose stop bit has not ended by t_cycles."""
