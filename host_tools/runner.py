@@ -15,18 +15,18 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from hal.virtual.bench import VirtualBench
 
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
+from hal.virtual.bench import VirtualBench
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "run_virtual"]
 
 PROFILES = Path(__file__).resolve().parents[1] / "profiles"
-PROBE_HZ = 500
+PROBE_HZ = 1000
 WATCHDOG_TIMEOUT_S = 0.050
 
 
@@ -53,6 +53,10 @@ class RunConfig:
     trace_capacity: int = 200_000
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
     max_duration_s: float | None = None
+    bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
+    # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
+    # that must happen at their time (bytes on a line, a pressed switch), not at set-up
+    actions: list[tuple[float, Callable[[VirtualBench, Firmware], None]]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -117,7 +121,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     holder: dict[str, Scheduler] = {}
-    bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed)
+    bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed, **cfg.bench_options)
     sched_ref: list[Scheduler] = []
 
     def kernel_health() -> tuple[int, int]:
@@ -130,8 +134,12 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     probe = Probe()
     plant = bench.plant
 
+    actions = sorted(cfg.actions, key=lambda a: a[0])
+
     def probe_body(job) -> None:  # bench instrument, not firmware: zero cycles, lowest priority
         t = job.start / f_cpu
+        while actions and actions[0][0] <= t:
+            actions.pop(0)[1](bench, fw)
         out = fw.out
         probe.t_s.append(t)
         probe.reference_rad.append(out.reference_rad)
@@ -150,6 +158,13 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
     sched.add_watchdog(wd)
     bench.attach_watchdog(wd)
+    # Analyse the declared task set (worst-case costs) before running, so a fault injected through a
+    # cost model during the run cannot change the bound it is compared with.
+    max_bytes = {"motor": 128, "imu": 128, "logger": 64}
+    byte_cycles = {name: (10 * f_cpu) // u.baud for name, u in bench.board.uarts().items() if name != "telemetry"}
+    sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr.get("uart_rx_byte", 0))) for n, c in byte_cycles.items()]
+    sporadic.append(_Sporadic("systick", f_cpu // int(board_cfg.get("systick_hz", 1000)), int(isr.get("systick", 0))))
+    bounds = response_time_bounds(_analysis_tasks(fw, max_bytes), sporadic)
     if cfg.setup:
         cfg.setup(bench, fw)
 
@@ -158,10 +173,5 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     sched.run_until(int(sim_s * f_cpu), progress=progress)
     wall = time.perf_counter() - wall0
 
-    max_bytes = {"motor": 128, "imu": 128, "logger": 64}
-    byte_cycles = {name: (10 * f_cpu) // u.baud for name, u in bench.board.uarts().items()}
-    sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr.get("uart_rx_byte", 0))) for n, c in byte_cycles.items()]
-    sporadic.append(_Sporadic("systick", f_cpu // int(board_cfg.get("systick_hz", 1000)), int(isr.get("systick", 0))))
-    bounds = response_time_bounds(_analysis_tasks(fw, max_bytes), sporadic)
     return RunResult(cfg, fw, bench, sched, bounds, probe, bench.telemetry_bytes(), sched.now / f_cpu, wall,
                      fw.gait_start_s)
