@@ -57,7 +57,8 @@ class EventTimesInterrupt(InterruptSourceBase):
     """Fires once at each recorded event time (e.g. each received byte's stop-bit end).
 
     Event times are pushed in non-decreasing order by the peripheral; ``before_count`` (if given)
-    is called with t1 first so that the peripheral can bring its world up to t1.
+    is called with t1 first so that the peripheral can bring its world up to t1 (only when t1 is
+    later than every t1 before: the world has already been brought up to those).
     """
 
     def __init__(
@@ -68,6 +69,7 @@ class EventTimesInterrupt(InterruptSourceBase):
         self._times: list[int] = []
         self._lo = 0
         self._before_count = before_count
+        self._advanced_to = -1  # the largest t1 handed to before_count so far
 
     def add_times(self, times: Iterable[int]) -> None:
         """Record event times (non-decreasing, and not earlier than those already recorded)."""
@@ -75,12 +77,23 @@ class EventTimesInterrupt(InterruptSourceBase):
 
     def count_in(self, t0: int, t1: int) -> int:
         """Number of recorded events with t0 <= time < t1."""
-        self._check_window(t0, t1)
-        if self._before_count is not None:
-            self._before_count(t1)
-        lo = bisect_left(self._times, t0, self._lo)
+        if t0 < self._last_t0 or t1 < t0 or t0 < 0:
+            self._check_window(t0, t1)  # raises
+        self._last_t0 = t0
+        if t1 > self._advanced_to:  # the peripheral has already caught up to any earlier t1
+            self._advanced_to = t1
+            if self._before_count is not None:
+                self._before_count(t1)
+        times = self._times
+        lo = self._lo
+        if not times or times[-1] < t0:  # every recorded event is past: forget them all
+            if times:
+                times.clear()
+            self._lo = 0
+            return 0
+        lo = bisect_left(times, t0, lo)
         if lo >= _COMPACT_AT:
-            del self._times[:lo]
+            del times[:lo]
             lo = 0
         self._lo = lo
-        return bisect_left(self._times, t1, lo) - lo
+        return bisect_left(times, t1, lo) - lo

@@ -167,7 +167,10 @@ class _PeriodicInterrupt(InterruptSourceBase):
 
     def count_in(self, t0: int, t1: int) -> int:
         """Firings k * period with t0 <= k * period < t1 and k >= 1."""
-        self._check_window(t0, t1)
-        first = max(1, -(-t0 // self._period))
-        last_exclusive = -(-t1 // self._period)
-        return max(0, last_exclusive - first)
+        if t0 < self._last_t0 or t1 < t0 or t0 < 0:
+            self._check_window(t0, t1)  # raises
+        self._last_t0 = t0
+        period = self._period
+        first = -(-t0 // period) or 1
+        n = -(-t1 // period) - first
+        return n if n > 0 else 0
