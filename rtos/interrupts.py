@@ -121,20 +121,19 @@ def solve_finish(start: int, cost: int, sources: Sequence[InterruptSource], coun
     >>> solve_finish(0, 100, [PeriodicInterrupt("t", period=30, cost=10)], [0])
     150
     """
-    finish = start + cost
-    n = len(sources)
-    fired = [0] * n
+    base = start + cost
+    finish = base
     for _ in range(MAX_FIXED_POINT_STEPS):
+        fired = [src.count_in(start, finish) for src in sources]
         extra = 0
-        for j in range(n):
-            src = sources[j]
-            k = src.count_in(start, finish)
-            fired[j] = k
-            extra += k * src.cost_cycles
-        nxt = start + cost + extra
+        for src, k in zip(sources, fired, strict=True):
+            if k:
+                extra += k * src.cost_cycles
+        nxt = base + extra
         if nxt == finish:
-            for j in range(n):
-                counts[j] += fired[j]
+            for j, k in enumerate(fired):
+                if k:
+                    counts[j] += k
             return finish
         finish = nxt
     raise RuntimeError(

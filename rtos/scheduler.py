@@ -134,8 +134,12 @@ class Scheduler:
 
     def _wd_due(self) -> int:
         """Earliest watchdog deadline, or _FAR."""
-        dues = [w.due for w in self._watchdogs if w.due is not None]
-        return min(dues) if dues else _FAR
+        best = None
+        for w in self._watchdogs:
+            due = w.due
+            if due is not None and (best is None or due < best):
+                best = due
+        return _FAR if best is None else best
 
     def _fire_watchdogs(self, now: int, t_end: int) -> int:
         """Fire, in time order, every watchdog reset due at or before ``now`` and before ``t_end``.
