@@ -117,7 +117,8 @@ class PlantView:
 
     A bench probe or a test may read ``plant.output_angle_rad(t_s)`` directly; through this view the
     device events before ``t_s`` run first, so the plant never sees a device input in its past.
-    Everything else (``params``, ``fixture``, ``latest_time_s``, ...) is passed through unchanged.
+    Everything else (``params``, ``fixture``, ``latest_time_s``, ...) is passed through unchanged, looked
+    up again at every access; the wrapper of a timed method is built once per view.
     """
 
     _TIMED = frozenset({
@@ -149,4 +150,5 @@ class PlantView:
             return attr(*args, **kwargs)
 
         timed.__doc__ = attr.__doc__
+        self.__dict__[name] = timed  # built once: later lookups find it without __getattr__
         return timed
