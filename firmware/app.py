@@ -123,6 +123,7 @@ class Firmware:
             motor_fault_code=self.motor.feedback.fault,
             deadline_miss_streak=streak,
             estop_pressed=self.board.estop.read(),
+            link_lost=self.motor.link_lost or self.imu.link_lost,
         ))
 
     def _control_task(self, job: Job) -> None:

@@ -7,6 +7,7 @@ number is still consumed, so the host sees the loss as a sequence gap.
 from __future__ import annotations
 
 from firmware.protocol.telemetry import TelemetryRecord, encode_record
+from hal.errors import HalError
 from hal.interfaces import Uart
 
 __all__ = ["TelemetryLogger"]
@@ -21,14 +22,20 @@ class TelemetryLogger:
         self.seq = 0
         self.sent = 0
         self.dropped = 0
+        self.link_lost = False  # the telemetry port failed: records are dropped, control goes on
 
     def log(self, time_cycles: int, **fields: float | int) -> int:
         """Frame and queue one record; return bytes written (0 if dropped for lack of room)."""
         frame = encode_record(TelemetryRecord(seq=self.seq & 0xFFFFFFFF, time_cycles=time_cycles, **fields))
         self.seq += 1
-        if self.uart.tx_free() < len(frame):
+        try:
+            if self.uart.tx_free() < len(frame):
+                self.dropped += 1
+                return 0
+            self.uart.write(frame)
+        except HalError:
+            self.link_lost = True
             self.dropped += 1
             return 0
-        self.uart.write(frame)
         self.sent += 1
         return len(frame)

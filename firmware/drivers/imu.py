@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from firmware.protocol.rvc import RvcDecoder, RvcFrame
+from hal.errors import HalError
 from hal.interfaces import Uart
 
 __all__ = ["ImuDriver"]
@@ -19,6 +20,14 @@ class ImuDriver:
         self.latest: RvcFrame | None = None
         self.last_frame_s: float | None = None
         self.frames = 0
+        self.link_lost = False
+        self.lost_reason = ""
+        self.lost_at_s: float | None = None
+
+    def relink(self, uart: Uart) -> None:
+        """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
+        self.uart, self.link_lost, self.lost_reason = uart, False, ""
+        self.decoder = RvcDecoder()
 
     @property
     def pitch_rad(self) -> float | None:
@@ -27,7 +36,12 @@ class ImuDriver:
 
     def poll(self, now_s: float) -> int:
         """Decode what has arrived; return the number of new frames (0 if none)."""
-        data = self.uart.read()
+        try:
+            data = self.uart.read()
+        except HalError as exc:  # port gone: latch it with the cause; the supervisor trips LINK_LOST
+            if not self.link_lost:
+                self.link_lost, self.lost_reason, self.lost_at_s = True, str(exc), now_s
+            return 0
         if not data:
             return 0
         frames = self.decoder.feed(data)

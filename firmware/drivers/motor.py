@@ -21,6 +21,7 @@ from firmware.protocol.vesc import (
     Values,
     ValuesSelective,
 )
+from hal.errors import HalError
 from hal.interfaces import Uart
 
 __all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "selective_reply_bytes"]
@@ -82,10 +83,28 @@ class MotorDriver:
         self._pending_since: float | None = None
         self._count = 0
         self._skip_request = False
+        self.link_lost = False
+        self.lost_reason = ""
+        self.lost_at_s: float | None = None
+
+    def _lose(self, exc: HalError, now_s: float) -> None:
+        """The port failed (unplugged, peer gone): latch link_lost with the cause and the time."""
+        if not self.link_lost:
+            self.link_lost, self.lost_reason, self.lost_at_s = True, str(exc), now_s
+
+    def relink(self, uart: Uart) -> None:
+        """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
+        self.uart, self.link_lost, self.lost_reason = uart, False, ""
+        self.decoder = Decoder("from-motor")
+        self._pending_since, self._skip_request = None, False
 
     def poll(self, now_s: float) -> int:
         """Decode every byte that has arrived; return the number of feedback replies taken."""
-        data = self.uart.read()
+        try:
+            data = self.uart.read()
+        except HalError as exc:
+            self._lose(exc, now_s)
+            return 0
         if not data:
             return 0
         taken = 0
@@ -137,7 +156,11 @@ class MotorDriver:
             self._count += 1
             self.stats.requests += 1
             self._pending_since = now_s
-        written = self.uart.write(frame)
+        try:
+            written = self.uart.write(frame)
+        except HalError as exc:
+            self._lose(exc, now_s)
+            return 0
         if written < len(frame):
             self.stats.tx_refused += 1
         return written
