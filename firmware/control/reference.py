@@ -40,6 +40,28 @@ class Trajectory(Protocol):
         ...
 
 
+class _Sampled:
+    """Single-quantity accessors shared by the trajectories (use sample() when more than one is needed)."""
+
+    __slots__ = ()
+
+    def sample(self, t_s: float) -> tuple[float, float, float]:  # pragma: no cover - overridden
+        """Return (angle_rad, velocity_rad_s, accel_rad_s2) at t_s."""
+        raise NotImplementedError
+
+    def angle_rad(self, t_s: float) -> float:
+        """Reference angle at t_s."""
+        return self.sample(t_s)[0]
+
+    def velocity_rad_s(self, t_s: float) -> float:
+        """Reference angular velocity at t_s."""
+        return self.sample(t_s)[1]
+
+    def accel_rad_s2(self, t_s: float) -> float:
+        """Reference angular acceleration at t_s."""
+        return self.sample(t_s)[2]
+
+
 def _read_gait_csv(text: str, source: str, select: Mapping[str, str] | None
                    ) -> tuple[list[float], list[float], list[float] | None]:
     """Parse gait CSV text ('#' lines skipped) into percent, mean and optional SD columns."""
@@ -70,7 +92,7 @@ def _read_gait_csv(text: str, source: str, select: Mapping[str, str] | None
     return percent, mean, (sd if has_sd else None)
 
 
-class GaitReference:
+class GaitReference(_Sampled):
     """Periodic ankle-angle reference from a gait curve (percent of cycle, degrees, dorsiflexion positive).
 
     The published curve's end mismatch d = y(100 %) - y(0 %) is removed by a linear ramp,
@@ -185,18 +207,6 @@ class GaitReference:
             return self._lo_rad, 0.0, 0.0
         return angle, (3.0 * c3 * dt + 2.0 * c2) * dt + c1, 6.0 * c3 * dt + 2.0 * c2
 
-    def angle_rad(self, t_s: float) -> float:
-        """Reference angle at t_s (use sample() when more than one quantity is needed)."""
-        return self.sample(t_s)[0]
-
-    def velocity_rad_s(self, t_s: float) -> float:
-        """Reference angular velocity at t_s."""
-        return self.sample(t_s)[1]
-
-    def accel_rad_s2(self, t_s: float) -> float:
-        """Reference angular acceleration at t_s."""
-        return self.sample(t_s)[2]
-
     def percent_at(self, t_s: float) -> float:
         """Gait-cycle phase in percent [0, 100) at time t_s."""
         return 100.0 * (t_s % self.stride_s) / self.stride_s
@@ -214,7 +224,7 @@ class GaitReference:
         return mean, float(np.interp(ph, self._sd_percent, self._sd))
 
 
-class MinimumJerk:
+class MinimumJerk(_Sampled):
     """Minimum-jerk move (Flash & Hogan 1985): theta = theta0 + D (10 s^3 - 15 s^4 + 6 s^5), s = (t - t0)/T.
 
     Holds theta0 before start_time_s and theta_f after start_time_s + duration_s.
@@ -254,14 +264,3 @@ class MinimumJerk:
         acc = self._a * s * (60.0 + s * (-180.0 + 120.0 * s))
         return angle, vel, acc
 
-    def angle_rad(self, t_s: float) -> float:
-        """Angle at t_s."""
-        return self.sample(t_s)[0]
-
-    def velocity_rad_s(self, t_s: float) -> float:
-        """Angular velocity at t_s."""
-        return self.sample(t_s)[1]
-
-    def accel_rad_s2(self, t_s: float) -> float:
-        """Angular acceleration at t_s."""
-        return self.sample(t_s)[2]
