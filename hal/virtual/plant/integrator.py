@@ -69,13 +69,19 @@ def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) ->
     return a
 
 
+def lag_factors(h: float, tau: float) -> tuple[float, float]:
+    """Decay factors of the current lag over half a step and a whole step h: (exp(-h/2/tau), exp(-h/tau))."""
+    return math.exp(-(0.5 * h) / tau), math.exp(-h / tau)
+
+
 def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int], t_base: float, k_first: int,
-              n: int, h: float, ea: float, eb: float, fn: Callable[[float], float] | None
-              ) -> tuple[float, float, float, int]:
+              n: int, h: float, ea: float, eb: float, fn: Callable[[float], float] | None,
+              exps: tuple[float, float] | None = None) -> tuple[float, float, float, int]:
     """Take n RK4 steps of size h; step j starts at t_base + (k_first + j) * h.
 
     state = (theta, omega, i_q, s) with s the friction mode: +1/-1 sliding that way, 0 stuck.
-    External torque is ea + eb * t, or fn(t) at the stage times when fn is given.
+    External torque is ea + eb * t, or fn(t) at the stage times when fn is given. exps, if given, is
+    (exp(-h/2/tau), exp(-h/tau)) computed once for a fixed h (see :func:`lag_factors`).
     """
     th, w, i, s = state
     (inv_j, kto, ks, c0, kd, mg, psi0, lo, hi, kst, cst, tc, tsx, tau, ker, bscale) = c
@@ -83,8 +89,10 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
     sin = math.sin
     hh = 0.5 * h
     h6 = h / 6.0
-    e1 = math.exp(-h / tau)
-    eh = math.exp(-hh / tau)
+    if exps is None:
+        eh, e1 = lag_factors(h, tau)
+    else:
+        eh, e1 = exps
     timed = fn is not None or eb != 0.0
     x1 = x2 = x4 = ea * inv_j
     for kk in range(k_first, k_first + n):

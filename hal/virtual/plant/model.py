@@ -8,7 +8,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, suspended
-from hal.virtual.plant.integrator import Coefficients, Drive, accel, integrate
+from hal.virtual.plant.integrator import Coefficients, Drive, accel, integrate, lag_factors
 from hal.virtual.plant.params import PlantParams, load_plant_params
 
 logger = logging.getLogger(__name__)
@@ -91,6 +91,7 @@ class Plant:
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
             bscale=p.total_ratio / p.brake_speed_scale_rad_s)
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
+        self._grid_exps = (step_s, lag_factors(step_s, self._c.tau))  # for whole grid steps
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
         self._t0 = start_time_s
         self._k = 0
@@ -307,7 +308,10 @@ class Plant:
             while t0 + (k + n + 1) * dt <= limit:
                 n += 1
             if n > 0:
-                self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb, self._fn)
+                if self._grid_exps[0] != dt:
+                    self._grid_exps = (dt, lag_factors(dt, self._c.tau))
+                self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb, self._fn,
+                                    self._grid_exps[1])
                 self._k = k + n
                 self._t = t0 + self._k * dt
             if tb > t_s:
