@@ -8,4 +8,6 @@ TESTS: dict[str, str] = {
     "backdrive": "backdrive",
     "fast-response": "fast_response",
     "loading": "loading",
+    "tracking": "tracking",
+    "baud-study": "baud_study",
 }

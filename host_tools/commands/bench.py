@@ -10,7 +10,8 @@ from pathlib import Path
 from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
-HELP = "reproduce the report's bench-top tests (uncontrolled, backdrive, fast-response, loading, all)"
+HELP = ("reproduce the report's bench-top tests (uncontrolled, backdrive, fast-response, loading, tracking, "
+        "baud-study, all)")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +35,10 @@ def _run_one(name: str, seed: int, quick: bool) -> BenchResult:
 def run(args: argparse.Namespace) -> int:
     """Run the selected test(s), write outputs if --out is given, print the comparison table."""
     names = list(TESTS) if args.test == "all" else [args.test]
-    results = [_run_one(n, args.seed, args.quick) for n in names]
+    results = []
+    for n in names:
+        print(f"pafp bench: {n} ...", file=sys.stderr)
+        results.append(_run_one(n, args.seed, args.quick))
     if args.out is not None:
         for r in results:
             for path in write_outputs(r, args.out):
