@@ -1,0 +1,113 @@
+"""Full-firmware bench tests (`pafp bench tracking`, `pafp bench baud-study`) against the report's claims."""
+
+import json
+import math
+
+import pytest
+
+from firmware.config import load_firmware_config
+from host_tools.benchtests import baud_study, tracking
+from host_tools.cli import main
+
+
+@pytest.fixture(scope="module")
+def tracking_result():
+    return tracking.run(seed=0, strides=1)
+
+
+def _case(result, name):
+    return result.parameters["cases"][name]
+
+
+def test_tuning_improves_tracking(tracking_result):
+    # The report shows tracking before and after tuning as plots (Figs 4.8-4.11), with no number: its
+    # claim is that tuning visibly improves tracking. Checked: the tuned profile halves the RMS error of
+    # the first-guess gains at least, and neither run misses a deadline or latches a fault.
+    untuned, tuned = _case(tracking_result, "untuned"), _case(tracking_result, "tuned")
+    assert tuned["rms_error_deg"] < 0.5 * untuned["rms_error_deg"]
+    assert tuned["max_error_deg"] < untuned["max_error_deg"]
+    for c in (untuned, tuned):
+        assert c["deadline_misses"] == 0 and c["faults"] == []
+    assert tuned["rms_error_deg"] < 1.0  # tuned gait tracking within a degree RMS
+
+
+def test_butterworth_on_imu_does_not_help_in_this_architecture(tracking_result):
+    # The report adds a Butterworth low-pass on the IMU to smooth its angle. Here the IMU only fixes
+    # the encoder's offset through a 2 s complementary filter, which already averages its noise away;
+    # the Butterworth adds lag the estimator does not model. What the emulator shows instead: at 20 Hz
+    # the run stays fault-free but the estimate error grows (not shrinks) and the tracking RMS does not
+    # improve beyond 10 %; at 10 Hz the filter's lag trips the 6 deg sensor-disagreement check.
+    tuned = _case(tracking_result, "tuned")
+    bw = _case(tracking_result, f"tuned + Butterworth {tracking.BUTTERWORTH_HZ:g} Hz")
+    low = _case(tracking_result, f"tuned + Butterworth {tracking.BUTTERWORTH_LOW_HZ:g} Hz")
+    assert bw["faults"] == [] and bw["deadline_misses"] == 0
+    assert bw["estimate_rms_deg"] > tuned["estimate_rms_deg"]
+    assert bw["rms_error_deg"] > 0.9 * tuned["rms_error_deg"]
+    assert low["faults"] == ["SENSOR_DISAGREEMENT"]
+
+
+def test_tracking_rows_cover_each_case(tracking_result):
+    names = [f.name for f in tracking_result.figures]
+    for case in tracking.tracking_cases(load_firmware_config()):
+        for metric in ("RMS error", "max error", "lag"):
+            assert f"{case}: {metric}" in names
+    lags = [f.emulated_value for f in tracking_result.figures if f.name.endswith(": lag")]
+    assert all(0.0 <= x <= 200.0 for x in lags)
+
+
+@pytest.mark.parametrize(("baud", "mode", "expected"), [(921600, "full", (1961, 980)),
+                                                        (115200, "selective", (245, 235))])
+def test_wire_time_bound(baud, mode, expected):
+    # 10 bit-times per byte: full round trip 10 + 6 + 78 = 94 bytes over two periods; selective mode is
+    # limited by the same full round trip (its 10 + 10 + 23 = 43-byte period allows 268 Hz at 115200)
+    assert tuple(round(x) for x in baud_study.analytic_max_hz(baud, mode, full_values_hz=10)) == expected
+
+
+def test_analytic_bound_rejects_bad_mode():
+    with pytest.raises(ValueError, match="mode"):
+        baud_study.analytic_max_hz(921600, "half")
+
+
+def test_baud_study_achievable_rate_matches_wire_time_bound():
+    # The report names the UART communication delay as a limitation without a figure. The emulator's
+    # achievable control rate (no miss, a reply to every request) must be the fastest candidate within
+    # the wire-time bound: the next faster candidate lies above the bound and fails.
+    candidates = (1000, 500, 200)
+    r = baud_study.run(seed=0, bauds=(115200, 921600), modes=("selective",), candidates=candidates)
+    achievable = r.parameters["achievable"]
+    for baud in (115200, 921600):
+        bound, _ = baud_study.analytic_max_hz(baud, "selective", 10)
+        expected = max(c for c in candidates if c <= bound)
+        assert achievable[f"{baud} selective"] == expected
+    assert r.parameters["recommended"]["baud"] == 921600
+    assert r.parameters["recommended"]["control_hz"] == 1000
+    rows = {f.name: f for f in r.figures}
+    assert rows["921600 selective: feedback rate"].emulated_value > 0.95 * 1000
+    assert rows["921600 selective: worst feedback age"].emulated_value <= 2.0 + 1e-6
+    # slower link, slower loop, worse tracking
+    assert rows["115200 selective: RMS tracking error"].emulated_value > rows[
+        "921600 selective: RMS tracking error"].emulated_value
+    passed = r.columns["passed"]
+    assert passed.sum() == 2 and len(passed) == 4  # 921600: 1 run; 115200: 1000 and 500 fail, 200 passes
+
+
+def test_full_mode_halves_the_feedback_rate():
+    run = baud_study.study_run(load_firmware_config(), 921600, "full", 1000, strides=1, seed=0)
+    assert run.passed
+    assert run.feedback_rate_hz == pytest.approx(500, rel=0.05)
+
+
+def test_link_config_keeps_velocity_filter_below_nyquist():
+    cfg = baud_study.link_config(load_firmware_config(), 100, "full")
+    assert cfg.control_hz == cfg.full_values_hz == 100
+    assert cfg.velocity_cutoff_hz < 50.0
+
+
+def test_pafp_bench_tracking_writes_outputs(tmp_path, capsys):
+    assert main(["bench", "tracking", "--quick", "--out", str(tmp_path)]) == 0
+    for ext in ("png", "csv", "json", "md"):
+        assert (tmp_path / f"tracking.{ext}").stat().st_size > 0
+    doc = json.loads((tmp_path / "tracking.json").read_text())
+    assert doc["parameters"]["strides"] == 2
+    assert all(math.isfinite(f["emulated"]) for f in doc["figures"])
+    assert "| tracking | tuned: RMS error |" in capsys.readouterr().out
