@@ -43,13 +43,13 @@ class FirmwareConfig:
     imu_lowpass_hz: float = 0.0
     imu_lowpass_order: int = 2
     estimator_offset_tau_s: float = 2.0
-    velocity_cutoff_hz: float = 80.0
+    velocity_cutoff_hz: float = 40.0
     stride_s: float = 1.1
     startup_ramp_s: float = 0.5
     com_angle_rad: float = math.pi / 2
-    position_gains: PidGains = PidGains(6.0, 2.0, 0.02, 0.004)
-    velocity_gains: PidGains = PidGains(1.0, 10.0)
-    feedforward_params: FeedforwardParams = FeedforwardParams(0.0322, 1.176, 0.150, 0.078, 27.6, 0.85)
+    position_gains: PidGains = PidGains(8.0, 2.0, 0.02, 0.004)
+    velocity_gains: PidGains = PidGains(0.2, 3.0)
+    feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
     task_cycles: dict[str, CostModel] = field(default_factory=dict)
 

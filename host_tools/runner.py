@@ -26,7 +26,7 @@ from rtos.analysis import TaskBound, response_time_bounds
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "run_virtual"]
 
 PROFILES = Path(__file__).resolve().parents[1] / "profiles"
-PROBE_HZ = 1000
+PROBE_HZ = 500
 WATCHDOG_TIMEOUT_S = 0.050
 
 
