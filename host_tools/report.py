@@ -30,16 +30,18 @@ def summarise(r: RunResult) -> dict:
     m = tracking_metrics(p["t_s"], p["reference_rad"], p["true_angle_rad"], start_s=start,
                          stride_s=fw.config.stride_s, strides=r.config.strides)
     bounds = {b.name: b for b in r.bounds}
+    deadlines = {t.name: t.relative_deadline for t in fw.tasks}  # firmware tasks only (no bench probe)
     tasks = {}
     for name, st in sched.stats.items():
-        if name not in bounds:
+        if name not in deadlines:
             continue
-        b = bounds[name]
+        b = bounds.get(name)  # none in serial mode: host times are measured, not analysed
         tasks[name] = {
-            "jobs": st.jobs, "wcrt_us": _us(st.worst_response, f_cpu), "bound_us": _us(b.bound, f_cpu),
-            "deadline_us": _us(b.deadline, f_cpu), "misses": st.deadline_misses, "skipped": st.skipped,
-            "start_jitter_us": _us(st.start_jitter, f_cpu),
-            "within_bound": st.worst_response is None or (b.bound is not None and st.worst_response <= b.bound),
+            "jobs": st.jobs, "wcrt_us": _us(st.worst_response, f_cpu),
+            "bound_us": _us(b.bound, f_cpu) if b else None, "deadline_us": _us(deadlines[name], f_cpu),
+            "misses": st.deadline_misses, "skipped": st.skipped, "start_jitter_us": _us(st.start_jitter, f_cpu),
+            "within_bound": None if b is None else
+            st.worst_response is None or (b.bound is not None and st.worst_response <= b.bound),
         }
     util = sched.utilisation()
     sup = fw.supervisor
@@ -82,7 +84,7 @@ def _write_telemetry_csv(data: bytes, path: Path) -> dict:
     return {k: v for k, v in vars(dec.stats).items()}
 
 
-def _report_md(s: dict) -> str:
+def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     lines = [
         "# pafp run report", "",
         f"{s['strides']} strides, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
@@ -103,18 +105,21 @@ def _report_md(s: dict) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     for name, t in s["tasks"].items():
+        within = "n/a" if t["within_bound"] is None else "yes" if t["within_bound"] else "NO"
         lines.append(f"| {name} | {t['jobs']} | {t['wcrt_us']} | {t['bound_us']} | {t['deadline_us']} | "
-                     f"{t['misses']} | {'yes' if t['within_bound'] else 'NO'} |")
+                     f"{t['misses']} | {within} |")
+    lines += md_extra or []
     lines += ["", "Files: `telemetry.bin` (raw telemetry UART), `telemetry.csv`, `trace.json` (Perfetto / "
               "chrome://tracing), `tracking.png`, `summary.json`.", ""]
     return "\n".join(lines)
 
 
-def write_outputs(r: RunResult, out: Path) -> dict:
-    """Write every output file into `out` and return the summary."""
+def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: list[str] | None = None) -> dict:
+    """Write every output file into `out`; return the summary (`extra` merged in; `md_extra` ends report.md)."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "telemetry.bin").write_bytes(r.telemetry)
     s = summarise(r)
+    s.update(extra or {})
     s["telemetry"]["decoder"] = _write_telemetry_csv(r.telemetry, out / "telemetry.csv")
     if r.scheduler.trace is not None:
         r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
@@ -131,5 +136,5 @@ def write_outputs(r: RunResult, out: Path) -> dict:
                       p["current_cmd_a"], p["current_meas_a"], err,
                       f"Gait tracking, {s['strides']} strides, RMS {s['rms_error_deg']:.2f}°")
     (out / "summary.json").write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
-    (out / "report.md").write_text(_report_md(s), encoding="utf-8")
+    (out / "report.md").write_text(_report_md(s, md_extra), encoding="utf-8")
     return s

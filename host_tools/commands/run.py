@@ -1,4 +1,8 @@
-"""`pafp run`: the firmware on the virtual bench (the main job), with a progress bar and a report."""
+"""`pafp run`: the firmware on the virtual bench (the main job), or on serial ports in wall-clock time.
+
+With ``--motor PORT --imu PORT`` the same firmware runs in serial mode (host_tools/serial_run.py):
+ports not bound to ``sim://`` are opened with pyserial and the RTOS runs on the wall clock.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-HELP = "run the firmware on the virtual bench (the main job): tracking, deadlines, report"
+HELP = "run the firmware on the virtual bench, or on serial ports (--motor/--imu): tracking, deadlines, report"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,6 +26,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
+    serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
+    serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
+    serial.add_argument("--telemetry", metavar="PORT", help="telemetry out port (always captured to telemetry.bin)")
+    serial.add_argument("--encoder", choices=("motor", "sim"), default="motor",
+                        help="encoder from the motor's position feedback (default) or the in-process plant")
+    serial.add_argument("--duration", type=float, default=10.0, metavar="S", help="run time in s (default 10)")
+    serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
+    serial.add_argument("--reconnect", action="store_true",
+                        help="after a lost port, wait for it and resume in the safe state instead of exiting")
 
 
 class _Progress:
@@ -46,6 +60,8 @@ class _Progress:
 
 def run(args: argparse.Namespace) -> int:
     """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched."""
+    if args.motor or args.imu:
+        return _run_serial(args)
     from firmware.config import load_firmware_config
     from host_tools.report import write_outputs
     from host_tools.runner import RunConfig, run_virtual
@@ -76,4 +92,52 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
     print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv")
+    return 0 if not s["deadline_misses"] and not s["faults"] else 1
+
+
+def _run_serial(args: argparse.Namespace) -> int:
+    """Serial mode: check the ports, run on the wall clock, write the same outputs; 2 if a port fails."""
+    from firmware.config import load_firmware_config
+    from host_tools.report import write_outputs
+    from host_tools.serial_report import serial_extra
+    from host_tools.serial_run import SerialRunConfig, StartupError, run_serial
+
+    if not (args.motor and args.imu):
+        print("pafp run: serial mode needs both --motor PORT and --imu PORT", file=sys.stderr)
+        return 2
+    try:
+        cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
+                              duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
+                              board=args.board, firmware=load_firmware_config(args.profile),
+                              reference_csv=args.reference, reconnect=args.reconnect)
+    except (ValueError, OSError) as e:
+        print(f"pafp run: {e}", file=sys.stderr)
+        return 2
+    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    print(f"pafp run: serial mode, motor {cfg.motor}, imu {cfg.imu}, {cfg.duration_s:g} s -> {out}", flush=True)
+    bar = _Progress(not args.quiet)
+    try:
+        result = run_serial(cfg, out, progress=bar)
+    except (StartupError, ValueError, OSError) as e:
+        bar.done()
+        print(f"pafp run: {e}", file=sys.stderr)
+        return 2
+    bar.done()
+    extra, md = serial_extra(result)
+    s = write_outputs(result, out, extra, md)
+    rt, j = s["realtime"], s["realtime"]["release_jitter_us"]
+    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock; {s['strides']} whole strides")
+    print(f"  tracking ({s['angle_source']}): RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg")
+    print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
+          f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
+    print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}")
+    print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv")
+    link = s["link_lost"]
+    if link is not None:
+        print(f"pafp run: {link['role']} port {link['port']!r} lost ({link['reason']}); safe state LINK_LOST "
+              f"{link['detection_ms']} ms after the loss was seen; files complete up to the fault", file=sys.stderr)
+        if not cfg.reconnect:
+            return 4
+    if result.interrupted:
+        return 130
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
