@@ -1,19 +1,120 @@
-"""`pafp tune`: automatic PID gain search on the emulator (not implemented yet: issue 7)."""
+"""`pafp tune`: automatic PID gain search on the emulator; writes the best gains as a firmware profile."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
 
-from host_tools.commands.unavailable import not_yet
-
-HELP = "automatic PID gain search on the emulator [not implemented yet]"
+HELP = "automatic PID gain search on the emulator (parallel, seeded): writes a tuned firmware profile"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Accept any arguments until the real command lands."""
-    parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    """Options of `pafp tune`."""
+    parser.add_argument("--strides", type=int, default=2, help="gait strides per candidate run (default 2)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the candidate generator and the runs")
+    parser.add_argument("--budget", type=int, default=48, help="candidate runs in all, >= 2 (default 48)")
+    parser.add_argument("--out", type=Path, default=Path("runs") / "tune",
+                        help="output directory (default runs/tune)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="worker processes (default: the number of cores)")
+    parser.add_argument("--profile", type=Path, default=None,
+                        help="starting firmware profile (default profiles/firmware.toml)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+class _Bar:
+    """A one-line progress bar on stderr: candidates evaluated out of the budget."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.t0 = time.perf_counter()
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        frac = done / total
+        bar = "#" * int(frac * 25)
+        sys.stderr.write(f"\r[{bar:<25}] {done}/{total} candidates, {time.perf_counter() - self.t0:.0f} s")
+        sys.stderr.flush()
+        if done == total:
+            sys.stderr.write("\n")
+
+
+def _plot(path: Path, before: object, after: object, title: str) -> None:
+    """Before/after tracking: angle against the reference, and the error."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, (ax_a, ax_e) = plt.subplots(2, 1, sharex=True, figsize=(9, 7), layout="constrained")
+    ax_a.plot(before.t_s, before.reference_deg, "k", lw=1.5, label="reference")  # type: ignore[attr-defined]
+    for case, label in ((before, "before"), (after, "after")):
+        rms = case.summary["rms_error_deg"]  # type: ignore[attr-defined]
+        ax_a.plot(case.t_s, case.angle_deg, lw=0.9, label=f"{label} (RMS {rms:.3f}°)")  # type: ignore[attr-defined]
+        err = case.angle_deg - np.interp(case.t_s, before.t_s, before.reference_deg)  # type: ignore[attr-defined]
+        ax_e.plot(case.t_s, err, lw=0.8, label=label)  # type: ignore[attr-defined]
+    ax_a.set_ylabel("ankle angle [deg]")
+    ax_a.set_title(title)
+    ax_a.legend(fontsize=8)
+    ax_e.set_ylabel("error [deg]")
+    ax_e.set_xlabel("time [s]")
+    ax_e.legend(fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Refuse to run, naming the issue that will provide this command."""
-    return not_yet("tune", "issue 7")
+    """Search, write firmware_tuned.toml, tune.json and tune.png, print the before/after figures."""
+    from firmware.config import DEFAULT_PROFILE, load_firmware_config
+    from host_tools import tuning
+    from host_tools.benchtests.tracking import run_case
+
+    source = args.profile or DEFAULT_PROFILE
+    try:
+        base = load_firmware_config(source)
+        if not 1 <= args.strides <= 100:
+            raise ValueError(f"strides {args.strides!r} out of range: an int in 1..100")
+        print(f"pafp tune: budget {args.budget} runs of {args.strides} strides, {args.jobs} workers, "
+              f"seed {args.seed} -> {args.out}")
+        result = tuning.search(base, budget=args.budget, strides=args.strides, seed=args.seed, jobs=args.jobs,
+                               progress=_Bar(not args.quiet))
+    except ValueError as e:
+        print(f"pafp tune: {e}", file=sys.stderr)
+        return 2
+    out: Path = args.out
+    profile_path = tuning.write_profile(source, result.best.gains, out / "firmware_tuned.toml")
+    check = tuning.gains_of(load_firmware_config(profile_path))
+    if any(abs(check[k] - v) > 1e-12 * max(1.0, abs(v)) for k, v in result.best.gains.items()):
+        print(f"pafp tune: {profile_path} does not read back the tuned gains", file=sys.stderr)
+        return 1
+    before = run_case("before", base, strides=args.strides, seed=args.seed)
+    after = run_case("after", tuning.with_gains(base, result.best.gains), strides=args.strides, seed=args.seed)
+    _plot(out / "tune.png", before, after,
+          f"pafp tune: {args.budget} candidates, {args.strides} strides, seed {args.seed}")
+    doc = {
+        "seed": args.seed, "budget": args.budget, "strides": args.strides, "jobs": args.jobs,
+        "source_profile": str(source), "tuned_profile": str(profile_path),
+        "objective": {"score": "rms_error_deg + effort_weight * (rms_current_a + rms_current_step_a)",
+                      "effort_weight_deg_per_a": tuning.EFFORT_WEIGHT,
+                      "saturation_max_fraction": tuning.SATURATION_MAX_FRACTION,
+                      "stable_max_error_deg": tuning.STABLE_MAX_ERROR_DEG, "bounds": tuning.BOUNDS,
+                      "population": tuning.POPULATION, "sigma0": tuning.SIGMA0, "sigma_decay": tuning.SIGMA_DECAY},
+        "before": result.start.as_dict(), "best": result.best.as_dict(),
+        "evaluations": [e.as_dict() for e in result.evaluations],
+    }
+    (out / "tune.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    b, a = result.start, result.best
+    print(f"  before: RMS {b.rms_error_deg:.4f} deg, max {b.max_error_deg:.4f} deg, score {b.score:.4f}")
+    print(f"  after:  RMS {a.rms_error_deg:.4f} deg, max {a.max_error_deg:.4f} deg, score {a.score:.4f} "
+          f"(candidate {a.index})")
+    print("  gains: " + ", ".join(f"{k} {v:.4g}" for k, v in a.gains.items()))
+    feasible = sum(e.feasible for e in result.evaluations)
+    print(f"  {feasible}/{len(result.evaluations)} candidates feasible; outputs: {profile_path}, "
+          f"{out / 'tune.json'}, {out / 'tune.png'}")
+    return 0
