@@ -1,0 +1,87 @@
+"""`pafp tune` and host_tools.tuning: determinism, constraints, the written profile."""
+
+import json
+import math
+
+import pytest
+
+from firmware.config import DEFAULT_PROFILE, load_firmware_config
+from firmware.control.pid import PidGains
+from host_tools import tuning
+from host_tools.cli import main
+
+
+def test_search_is_deterministic_whatever_the_worker_count():
+    base = load_firmware_config()
+    a = tuning.search(base, budget=3, strides=1, seed=5, jobs=1)
+    b = tuning.search(base, budget=3, strides=1, seed=5, jobs=2)
+    assert [e.as_dict() for e in a.evaluations] == [e.as_dict() for e in b.evaluations]
+    assert [e.index for e in a.evaluations] == [0, 1, 2]
+    assert a.start.gains == tuning.gains_of(base)  # candidate 0 is the starting profile
+    assert a.best.score <= a.start.score
+    assert a.best.score == min(e.score for e in a.evaluations)
+
+
+def test_seed_changes_the_candidates():
+    base = load_firmware_config()
+    rng_a = tuning.search(base, budget=2, strides=1, seed=1).evaluations[1].gains
+    rng_b = tuning.search(base, budget=2, strides=1, seed=2).evaluations[1].gains
+    assert rng_a != rng_b
+    for k, (lo, hi) in tuning.BOUNDS.items():
+        assert lo <= rng_a[k] <= hi
+
+
+def test_saturation_storm_is_infeasible():
+    # hot gains drive the current command into its limit for much of the gait
+    base = load_firmware_config()
+    hot = tuning.gains_of(base.with_changes(position_gains=PidGains(30.0, 10.0, 0.1, 0.004),
+                                            velocity_gains=PidGains(5.0, 100.0)))
+    e = tuning.evaluate(0, base, hot, strides=1, seed=0)
+    assert not e.feasible and math.isinf(e.score)
+    assert e.saturation_fraction > tuning.SATURATION_MAX_FRACTION
+    assert "saturation storm" in e.reason
+
+
+def test_profile_gains_are_feasible_with_a_finite_score():
+    base = load_firmware_config()
+    e = tuning.evaluate(0, base, tuning.gains_of(base), strides=1, seed=0)
+    assert e.feasible, e.reason
+    assert e.score == pytest.approx(e.rms_error_deg + tuning.EFFORT_WEIGHT * (e.rms_current_a + e.rms_current_step_a))
+
+
+def test_write_profile_round_trips(tmp_path):
+    gains = {"position_kp": 7.5, "position_ki": 1.25, "position_kd": 0.03, "velocity_kp": 0.5, "velocity_ki": 4.0}
+    out = tuning.write_profile(DEFAULT_PROFILE, gains, tmp_path / "p.toml")
+    cfg = load_firmware_config(out)
+    assert tuning.gains_of(cfg) == gains
+    base = load_firmware_config()
+    assert cfg.with_changes(position_gains=base.position_gains, velocity_gains=base.velocity_gains) == base
+
+
+def test_write_profile_refuses_a_profile_without_gain_lines(tmp_path):
+    src = tmp_path / "empty.toml"
+    src.write_text("[rates_hz]\ncontrol = 1000\n")
+    with pytest.raises(ValueError, match="position_kp"):
+        tuning.write_profile(src, tuning.gains_of(load_firmware_config()), tmp_path / "out.toml")
+
+
+@pytest.mark.parametrize(("kwargs", "word"), [({"budget": 1}, "budget"), ({"budget": 3, "jobs": 0}, "jobs")])
+def test_search_rejects_bad_arguments(kwargs, word):
+    with pytest.raises(ValueError, match=word):
+        tuning.search(load_firmware_config(), strides=1, **kwargs)
+
+
+def test_pafp_tune_writes_profile_json_and_plot(tmp_path, capsys):
+    out = tmp_path / "tune"
+    assert main(["tune", "--budget", "2", "--strides", "1", "--jobs", "1", "--seed", "3", "--quiet",
+                 "--out", str(out)]) == 0
+    doc = json.loads((out / "tune.json").read_text())
+    assert len(doc["evaluations"]) == 2 and doc["seed"] == 3
+    assert doc["best"]["score"] <= doc["before"]["score"]
+    cfg = load_firmware_config(out / "firmware_tuned.toml")
+    assert tuning.gains_of(cfg) == pytest.approx(doc["best"]["gains"])
+    assert (out / "tune.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    printed = capsys.readouterr().out
+    assert "before: RMS" in printed and "after:  RMS" in printed
+    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet",
+                 "--out", str(tmp_path / "run")]) == 0
