@@ -49,6 +49,7 @@ def serial_extra(r: SerialRunResult) -> tuple[dict, list[str]]:
     link = None
     if r.link is not None:
         e = r.link
+        # safe state latched this long after the driver saw the error (negative: already SAFE before)
         detection_ms = (None if e.lost_at_s is None or e.detected_at_s is None
                         else round((e.detected_at_s - e.lost_at_s) * 1e3, 3))
         link = {"role": e.role, "port": e.port, "reason": e.reason, "lost_at_s": e.lost_at_s,

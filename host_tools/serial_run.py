@@ -22,7 +22,6 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from firmware.drivers.motor import MotorFeedback
-from firmware.safety import FaultReason
 from hal.binding import open_uart
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
@@ -288,13 +287,13 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
                       seed=cfg.seed)
     holder.append(sched)
     sched.add_watchdog(wd)
-    started_unix = time.time()
-    wall0 = time.perf_counter()
     interrupted = False
     gc_was_enabled = gc.isenabled()
     gc.collect()
     gc.freeze()  # what exists now is never scanned again; the probe collects the young generation
     gc.disable()
+    started_unix = time.time()  # the wall clock is anchored at cycle 0 right after this
+    wall0 = time.perf_counter()
     try:
         sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
     except KeyboardInterrupt:
@@ -328,7 +327,7 @@ class _LinkWatch:
     def step(self, t: float) -> bool:
         """Called every probe tick at time t (s); True when the run should stop."""
         sup, fw = self.fw.supervisor, self.fw
-        if self.event is None and sup.reason is FaultReason.LINK_LOST:
+        if self.event is None and (fw.motor.link_lost or fw.imu.link_lost) and sup.tripped_at_s is not None:
             drv, role = (fw.motor, "motor") if fw.motor.link_lost else (fw.imu, "imu")
             self.event = LinkEvent(role, getattr(self.cfg, role), drv.lost_reason, drv.lost_at_s,
                                    sup.tripped_at_s)

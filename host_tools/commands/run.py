@@ -98,8 +98,6 @@ def run(args: argparse.Namespace) -> int:
 def _run_serial(args: argparse.Namespace) -> int:
     """Serial mode: check the ports, run on the wall clock, write the same outputs; 2 if a port fails."""
     from firmware.config import load_firmware_config
-    from host_tools.report import write_outputs
-    from host_tools.serial_report import serial_extra
     from host_tools.serial_run import SerialRunConfig, StartupError, run_serial
 
     if not (args.motor and args.imu):
@@ -123,6 +121,9 @@ def _run_serial(args: argparse.Namespace) -> int:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
     bar.done()
+    from host_tools.report import write_outputs  # matplotlib: imported after the run, not before it
+    from host_tools.serial_report import serial_extra
+
     extra, md = serial_extra(result)
     s = write_outputs(result, out, extra, md)
     rt, j = s["realtime"], s["realtime"]["release_jitter_us"]
