@@ -185,7 +185,7 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, bauds: 
             bound = [analytic_max_hz(b, mode, base.full_values_hz)[0] for b in bauds]
             xs = x + (k - (len(modes) - 1) / 2) * width
             ax_r.bar(xs, ctl, width, label=f"{mode}: achievable control rate")
-            ax_r.plot(xs, fb, "k^", ms=6, label=f"{mode}: feedback rate" if k == 0 else None)
+            ax_r.plot(xs, fb, "k^", ms=6, label="feedback rate" if k == 0 else None)
             ax_r.plot(xs, bound, "rx", ms=8, label="wire-time bound (control)" if k == 0 else None)
             rms = [best[(b, mode)].rms_error_deg if best[(b, mode)] else math.nan for b in bauds]  # type: ignore[union-attr]
             ax_e.bar(xs, rms, width, label=mode)
