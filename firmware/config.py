@@ -95,8 +95,8 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         ctl = dict(ctl)
         pos, vel = ctl.pop("position", {}), ctl.pop("velocity", {})
         limits = SafetyLimits(
-            angle_min_rad=math.radians(saf.get("angle_min_deg", -30.0)),
-            angle_max_rad=math.radians(saf.get("angle_max_deg", 30.0)),
+            angle_min_rad=math.radians(saf.get("angle_min_deg", -33.0)),
+            angle_max_rad=math.radians(saf.get("angle_max_deg", 38.0)),
             disagreement_rad=math.radians(saf.get("disagreement_deg", 6.0)),
             **{k: v for k, v in saf.items() if not k.endswith("_deg")},
         )

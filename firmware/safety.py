@@ -22,8 +22,8 @@ __all__ = ["FaultReason", "SafetyInputs", "SafetyLimits", "SafeCommand", "Superv
 class SafetyLimits:
     """Thresholds of the supervisor (SI units); defaults follow the firmware's requirements."""
 
-    angle_min_rad: float = math.radians(-28.0)
-    angle_max_rad: float = math.radians(25.0)
+    angle_min_rad: float = math.radians(-33.0)
+    angle_max_rad: float = math.radians(38.0)
     current_limit_a: float = 20.0
     motor_timeout_s: float = 0.020
     imu_timeout_s: float = 0.050
