@@ -11,7 +11,7 @@ from bisect import bisect_left
 from collections.abc import Callable, Iterable
 from typing import Protocol, runtime_checkable
 
-__all__ = ["CatchUp", "EventTimesInterrupt", "InterruptSource", "InterruptSourceBase"]
+__all__ = ["EventTimesInterrupt", "InterruptSource", "InterruptSourceBase"]
 
 _COMPACT_AT = 4096
 
@@ -53,51 +53,23 @@ class InterruptSourceBase:
         return f"{type(self).__name__}(name={self.name!r}, cost_cycles={self.cost_cycles})"
 
 
-class CatchUp:
-    """Hooks that bring peripherals up to a cycle t, run once per new (larger) t however many ask.
-
-    Several interrupt sources of one MCU share one: the first source asked about a window ending at
-    t1 runs every hook with t1, the others find ``t >= t1`` and skip.
-
-    >>> seen = []
-    >>> c = CatchUp([seen.append])
-    >>> c.to(5); c.to(5); c.to(3); c.to(9); seen
-    [5, 9]
-    """
-
-    def __init__(self, hooks: Iterable[Callable[[int], None]] = ()) -> None:
-        """Start with the hooks given (more can be added) and nothing run yet."""
-        self.hooks: list[Callable[[int], None]] = list(hooks)
-        self.t = -1  # the largest t the hooks have been run with
-
-    def to(self, t: int) -> None:
-        """Run every hook with t if t is later than any t before."""
-        if t > self.t:
-            self.t = t
-            for hook in self.hooks:
-                hook(t)
-
-
 class EventTimesInterrupt(InterruptSourceBase):
     """Fires once at each recorded event time (e.g. each received byte's stop-bit end).
 
     Event times are pushed in non-decreasing order by the peripheral; ``before_count`` (if given)
     is called with t1 first so that the peripheral can bring its world up to t1 (only when t1 is
-    later than every t1 before: the world has already been brought up to those). Sources given one
-    shared ``catch_up`` instead run its hooks once per new t1 between them.
+    later than every t1 before: the world has already been brought up to those).
     """
 
     def __init__(
-        self, name: str, cost_cycles: int, before_count: Callable[[int], None] | None = None,
-        catch_up: CatchUp | None = None,
+        self, name: str, cost_cycles: int, before_count: Callable[[int], None] | None = None
     ) -> None:
         """Start with no recorded events."""
         super().__init__(name, cost_cycles)
-        if before_count is not None and catch_up is not None:
-            raise ValueError(f"interrupt {name!r}: give before_count or catch_up, not both")
         self._times: list[int] = []
         self._lo = 0
-        self._catch_up = catch_up if catch_up is not None else CatchUp([before_count] if before_count else ())
+        self._before_count = before_count
+        self._advanced_to = -1  # the largest t1 handed to before_count so far
 
     def add_times(self, times: Iterable[int]) -> None:
         """Record event times (non-decreasing, and not earlier than those already recorded)."""
@@ -108,9 +80,10 @@ class EventTimesInterrupt(InterruptSourceBase):
         if t0 < self._last_t0 or t1 < t0 or t0 < 0:
             self._check_window(t0, t1)  # raises
         self._last_t0 = t0
-        catch_up = self._catch_up
-        if t1 > catch_up.t:  # the peripherals have already caught up to any earlier t1
-            catch_up.to(t1)
+        if t1 > self._advanced_to:  # the peripheral has already caught up to any earlier t1
+            self._advanced_to = t1
+            if self._before_count is not None:
+                self._before_count(t1)
         times = self._times
         lo = self._lo
         if not times or times[-1] < t0:  # every recorded event is past: forget them all

@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping
 
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart, Watchdog
 from hal.virtual.gpio import VirtualDigitalIn, VirtualDigitalOut, VirtualWatchdog
-from hal.virtual.irq import CatchUp, InterruptSourceBase
+from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.timer import SysTick, VirtualEncoderTimer
 from hal.virtual.uart import VirtualUart
 
@@ -84,14 +84,8 @@ class VirtualMcu:
     def interrupt_sources(
         self, uart_rx_cycles: int, systick_cycles: int, timer_update_cycles: int | None = None
     ) -> list[InterruptSourceBase]:
-        """One RX interrupt source per UART, the SysTick, and (if a cost is given) each encoder's wraps.
-
-        The RX sources share one catch-up: the UARTs' peers are advanced once per window end, not once
-        per source.
-        """
-        catch_up = CatchUp()
-        sources: list[InterruptSourceBase] = [u.rx_interrupt(uart_rx_cycles, catch_up=catch_up)
-                                              for u in self.uarts.values()]
+        """One RX interrupt source per UART, the SysTick, and (if a cost is given) each encoder's wraps."""
+        sources: list[InterruptSourceBase] = [u.rx_interrupt(uart_rx_cycles) for u in self.uarts.values()]
         sources.append(self.systick.interrupt(systick_cycles))
         if timer_update_cycles is not None:
             sources += [

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol, runtime_checkable
 
 from hal.interfaces import Uart
-from hal.virtual.irq import CatchUp, EventTimesInterrupt
+from hal.virtual.irq import EventTimesInterrupt
 from hal.virtual.line import ByteLine
 
 __all__ = ["UartPeer", "VirtualUart"]
@@ -118,19 +118,9 @@ class VirtualUart(Uart):
         """Cycle at which the last byte the MCU queued ends."""
         return self._tx_line.busy_until
 
-    def rx_interrupt(self, cost_cycles: int, name: str | None = None, catch_up: CatchUp | None = None
-                     ) -> EventTimesInterrupt:
-        """An interrupt source firing once per byte arriving on the RX wire, at its stop-bit end.
-
-        With ``catch_up`` (shared by the RX sources of one MCU) this UART's peer is advanced through it,
-        once per window end for all of them; otherwise the source advances the peer itself.
-        """
-        name = name or f"{self.name}_rx"
-        if catch_up is None:
-            source = EventTimesInterrupt(name, cost_cycles, self._advance_peer)
-        else:
-            catch_up.hooks.append(self._advance_peer)
-            source = EventTimesInterrupt(name, cost_cycles, catch_up=catch_up)
+    def rx_interrupt(self, cost_cycles: int, name: str | None = None) -> EventTimesInterrupt:
+        """An interrupt source firing once per byte arriving on the RX wire, at its stop-bit end."""
+        source = EventTimesInterrupt(name or f"{self.name}_rx", cost_cycles, self._advance_peer)
         self._irq_sources.append(source)
         return source
 

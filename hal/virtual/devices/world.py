@@ -91,12 +91,6 @@ class World:
         """
         if t <= self._now or self._busy:  # nothing new, or a device event asking for its own time
             return
-        for dev in self._devices:
-            if dev.next_event <= t:
-                break
-        else:  # no device has an event by t: only the time moves on
-            self._now = t
-            return
         self._busy = True
         try:
             devices = self._devices
