@@ -15,7 +15,7 @@ def _realtime(r: SerialRunResult) -> dict:
     ctl = sched.stats["control"]
     period = next(t.period for t in sched.tasks if t.name == "control")
     elapsed = min(sched.now, round(r.config.duration_s * f_cpu))
-    releases = ctl.jobs + ctl.skipped
+    releases = sched.releases("control")
     timings = r.timings.as_dict()
     tick_us = [r.timings.execution[n].mean_us() for n in CONTROL_TASKS]
     return {

@@ -115,6 +115,20 @@ class Scheduler:
         """Run for ``cycles`` more cycles (see ``run_until``)."""
         self.run_until(self._now + cycles, progress)
 
+    def releases(self, name: str) -> int:
+        """Nominal releases of task ``name`` before ``now``: jobs run, releases skipped, and those still due.
+
+        With a wall clock the host may end a run behind schedule; releases whose time has come but
+        whose job has not started yet are counted here too, so the count reflects the absolute release
+        times (offset + k * period < now), not how many jobs the host managed to run.
+        """
+        i = next((k for k, t in enumerate(self._tasks) if t.name == name), None)
+        if i is None:
+            raise ValueError(f"no task named {name!r}: tasks are {[t.name for t in self._tasks]}")
+        st, pending_from, period = self._stat_list[i], self._nrel[i], self._tasks[i].period
+        due = -(-(self._now - pending_from) // period) if pending_from < self._now else 0
+        return st.jobs + st.skipped + due
+
     def utilisation(self) -> Utilisation:
         """CPU utilisation from cycle 0 to now: busy cycles per task and per interrupt source."""
         return Utilisation(

@@ -65,6 +65,26 @@ def test_wall_clock_1khz_task_for_2s_is_released_2000_times():
     # How many jobs the host managed to run on time is a speed figure, measured in the wall-clock
     # benchmark, not asserted here (this machine's 2 cores are shared).
     assert abs(st.jobs + st.skipped - 2000) <= 1
+    assert abs(s.releases("tick") - 2000) <= 1
     assert st.jobs > 0
     # no drift: the last job starts within a few ms of its absolute release time
     assert 0 <= starts[-1] - 1000 * (len(starts) - 1 + st.skipped) < 5_000
+
+
+def test_releases_count_absolute_release_times_even_when_jobs_run_late():
+    # cost 2.5 periods: most releases are skipped, and the run ends with releases still due
+    task = Task("slow", 1, period=100, cost=250, overrun=OverrunPolicy.SKIP)
+    s = Scheduler([task])
+    s.run_until(10_050)
+    assert s.now == 10_150  # the job started at 9900 ran to completion
+    assert s.releases("slow") == len(range(0, s.now, 100)) == 102  # every release time before now
+    assert s.stats["slow"].jobs + s.stats["slow"].skipped == 102  # overruns counted as skipped
+
+
+def test_releases_include_those_still_due_when_the_run_ends():
+    hog = Task("hog", 1, period=10_000, cost=1000)
+    fast = Task("fast", 2, period=100, cost=1)
+    s = Scheduler([hog, fast])
+    s.run_until(500)  # the hog started at 0 and ran to 1000; fast has not run yet
+    assert s.stats["fast"].jobs + s.stats["fast"].skipped == 0
+    assert s.releases("fast") == 10  # releases at 0, 100, ..., 900
