@@ -23,7 +23,7 @@ from hal.virtual.bench import VirtualBench
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 
-__all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "run_virtual"]
+__all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
 
 PROFILES = Path(__file__).resolve().parents[1] / "profiles"
 PROBE_HZ = 500
@@ -77,6 +77,16 @@ class Probe:
     current_cmd_a: list[float] = field(default_factory=list)
     current_meas_a: list[float] = field(default_factory=list)
 
+    def sample(self, t_s: float, fw: Firmware, true_angle_rad: float) -> None:
+        """Record one sample of the firmware's outputs and the true (or best known) angle at t_s."""
+        out = fw.out
+        self.t_s.append(t_s)
+        self.reference_rad.append(out.reference_rad)
+        self.true_angle_rad.append(true_angle_rad)
+        self.fused_angle_rad.append(out.fused_angle_rad)
+        self.current_cmd_a.append(out.current_cmd_a)
+        self.current_meas_a.append(fw.motor.feedback.current_a)
+
     def arrays(self) -> dict[str, np.ndarray]:
         """The samples as numpy arrays."""
         return {k: np.asarray(v) for k, v in self.__dict__.items()}
@@ -104,6 +114,21 @@ def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
             for t in fw.tasks]
 
 
+def kernel_health(holder: dict[str, Scheduler]) -> Callable[[], tuple[int, int]]:
+    """What the firmware asks the RTOS: (total deadline misses, longest current miss streak) of its tasks.
+
+    ``holder["s"]`` is the scheduler once built (the firmware is built first); bench probes are left out.
+    """
+    def health() -> tuple[int, int]:
+        sched = holder.get("s")
+        if sched is None:
+            return 0, 0
+        stats = [s for n, s in sched.stats.items() if not n.endswith("_probe")]
+        return sum(s.deadline_misses for s in stats), max(s.miss_streak for s in stats)
+
+    return health
+
+
 @dataclass(frozen=True)
 class _Sporadic:
     name: str
@@ -122,15 +147,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     clock = VirtualClock(f_cpu)
     holder: dict[str, Scheduler] = {}
     bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed, **cfg.bench_options)
-    sched_ref: list[Scheduler] = []
-
-    def kernel_health() -> tuple[int, int]:
-        if not sched_ref:
-            return 0, 0
-        stats = sched_ref[0].stats.values()
-        return sum(s.deadline_misses for s in stats), max(s.miss_streak for s in stats)
-
-    fw = Firmware(bench.board, fw_cfg, reference=reference, kernel_health=kernel_health)
+    fw = Firmware(bench.board, fw_cfg, reference=reference, kernel_health=kernel_health(holder))
     probe = Probe()
     plant = bench.plant
 
@@ -140,13 +157,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
         t = job.start / f_cpu
         while actions and actions[0][0] <= t:
             actions.pop(0)[1](bench, fw)
-        out = fw.out
-        probe.t_s.append(t)
-        probe.reference_rad.append(out.reference_rad)
-        probe.true_angle_rad.append(plant.output_angle_rad(t))
-        probe.fused_angle_rad.append(out.fused_angle_rad)
-        probe.current_cmd_a.append(out.current_cmd_a)
-        probe.current_meas_a.append(fw.motor.feedback.current_a)
+        probe.sample(t, fw, plant.output_angle_rad(t))
 
     probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
     interrupts = bench.interrupt_sources(isr)
@@ -154,7 +165,6 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     sched = Scheduler([*fw.tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
     holder["s"] = sched
-    sched_ref.append(sched)
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
     sched.add_watchdog(wd)
     bench.attach_watchdog(wd)

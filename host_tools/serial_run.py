@@ -31,7 +31,7 @@ from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.null import NullDigitalIn, NullDigitalOut
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.jitter import TaskTimings, instrument
-from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile
+from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health
 from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
 from host_tools.serial_io import CaptureUart
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
@@ -239,7 +239,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
          reference: GaitReference, seen: dict[str, int], progress: Callable[[float], None] | None) -> SerialRunResult:
     """Build the board, the firmware and the wall-clock RTOS on opened ports, run, collect."""
     clock = WallClock(f_cpu)
-    holder: list[Scheduler] = []
+    holder: dict[str, Scheduler] = {}
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu))
     feedback_angle = FeedbackAngle()
     if cfg.encoder == "sim":
@@ -250,15 +250,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
         encoder = VirtualEncoderTimer(lambda: 0, feedback_angle.angle_rad)
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=capture, encoder=encoder,
                   estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
-                  now_cycles=lambda: holder[0].now, f_cpu_hz=f_cpu)
-
-    def kernel_health() -> tuple[int, int]:
-        if not holder:
-            return 0, 0
-        stats = [s for n, s in holder[0].stats.items() if n != "serial_probe"]
-        return sum(s.deadline_misses for s in stats), max(s.miss_streak for s in stats)
-
-    fw = Firmware(board, fw_cfg, reference=reference, kernel_health=kernel_health)
+                  now_cycles=lambda: holder["s"].now, f_cpu_hz=f_cpu)
+    fw = Firmware(board, fw_cfg, reference=reference, kernel_health=kernel_health(holder))
     wd.on_reset = fw.on_watchdog_reset
     feedback_angle.feedback = fw.motor.feedback
     plant = ports.devices.world.plant if ports.devices is not None and ports.devices.motor is not None else None
@@ -267,16 +260,10 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
 
     def probe_body(job) -> None:  # bench instrument, not firmware
         t = job.start / f_cpu
-        out = fw.out
-        probe.t_s.append(t)
-        probe.reference_rad.append(out.reference_rad)
-        probe.true_angle_rad.append(plant.output_angle_rad(plant.latest_time_s) if plant is not None
-                                    else out.fused_angle_rad)
-        probe.fused_angle_rad.append(out.fused_angle_rad)
-        probe.current_cmd_a.append(out.current_cmd_a)
-        probe.current_meas_a.append(fw.motor.feedback.current_a)
+        probe.sample(t, fw, plant.output_angle_rad(plant.latest_time_s) if plant is not None
+                     else fw.out.fused_angle_rad)
         if link.step(t):
-            holder[0].request_stop()
+            holder["s"].request_stop()
         if job.index % GC_EVERY_TICKS == 0:
             gc.collect(0)  # young objects only: tens of µs, never a full scan in the loop
 
@@ -285,7 +272,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
-    holder.append(sched)
+    holder["s"] = sched
     sched.add_watchdog(wd)
     interrupted = False
     gc_was_enabled = gc.isenabled()
