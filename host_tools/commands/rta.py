@@ -37,7 +37,7 @@ def _fmt(value: object) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Analyse (and optionally emulate) the task set; print a table or JSON; 2 on bad input."""
+    """Analyse (and optionally emulate) the task set; print a table or JSON; exit 1 if unschedulable, 2 on bad input."""
     try:
         ts = load_taskset(args.taskset)
         if args.max_jobs <= 0:
@@ -63,9 +63,10 @@ def run(args: argparse.Namespace) -> int:
             seen = observation.worst[b.name]
             row["observed"] = None if seen is None else ts.to_unit(seen)
         rows.append(row)
+    verdict = 0 if all(b.schedulable for b in bounds) else 1  # scriptable: 1 when a deadline can be missed
     if args.json:
         print(json.dumps({"tasks": rows}))
-        return 0
+        return verdict
     headers = ["task", "priority", "period", "deadline", "cost", "bound", "schedulable"]
     if observation is not None:
         headers.append("observed")
@@ -84,4 +85,4 @@ def run(args: argparse.Namespace) -> int:
             note += (f" (CAPPED at --max-jobs={args.max_jobs}; the hyperperiod is "
                      f"{ts.to_unit(observation.hyperperiod_cycles)} {ts.unit})")
         print(note)
-    return 0
+    return verdict
