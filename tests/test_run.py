@@ -175,3 +175,11 @@ def test_task_overrunning_its_budget_tenfold_is_seen_by_the_kernel():
     assert ctl["wcrt_us"] > ctl["bound_us"] and not ctl["within_bound"]  # the analysis trusted the budget
     assert ctl["wcrt_us"] >= 10 * declared(None) / 168.0
     assert isinstance(declared, CostModel) and not math.isnan(s["rms_error_deg"])
+
+
+def test_cli_warns_before_running_a_link_too_slow_for_the_control_rate(tmp_path, capsys):
+    code = main(["run", "--baud", "115200", "--strides", "1", "--quiet", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert "warning: at 115200 baud" in out and "245 times per second" in out
+    assert code == 1  # the run completed and reported the motor timeout it led to
+    assert json.loads((tmp_path / "summary.json").read_text())["faults"] == ["MOTOR_TIMEOUT"]

@@ -58,6 +58,17 @@ class _Progress:
             sys.stderr.write("\n")
 
 
+def _warn_link_budget(baud: int, control_hz: int, full_values_hz: int) -> None:
+    """Say before running when the motor link cannot carry command + request + reply every period."""
+    from host_tools.benchtests.baud_study import analytic_max_hz
+
+    max_hz, _ = analytic_max_hz(baud, "selective", full_values_hz)
+    if control_hz > max_hz:
+        print(f"  warning: at {baud} baud the motor link carries command + request + reply at most "
+              f"{max_hz:.0f} times per second, below the {control_hz} Hz control rate: expect missing "
+              f"replies and a MOTOR_TIMEOUT; `pafp bench baud-study` finds the rate this link allows")
+
+
 def run(args: argparse.Namespace) -> int:
     """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched."""
     if args.motor or args.imu:
@@ -79,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed} -> {out}")
+    _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
     bar = _Progress(not args.quiet)
     result = run_virtual(cfg, progress=bar)
     bar.done()
