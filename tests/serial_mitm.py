@@ -1,0 +1,163 @@
+"""A faulty cable for serial-mode tests: relays bytes between new ptys and device ptys, spoiling some.
+
+Run as a separate process (``python tests/serial_mitm.py --link motor=/dev/pts/N ...``) so that its
+timing does not share the GIL with the firmware under test. For each ``--link ROLE=DEVICE`` it creates a
+raw pty, prints ``ROLE: PATH`` (the path the firmware opens) and relays both directions. On the way from
+the device to the firmware it injects seeded bursts of random bytes, drops single bytes, and now and then
+holds everything back for ``--delay-s`` (a device replying late), from ``--start-s`` to ``--until-s``
+after its start. On SIGTERM it prints one JSON line with
+what it did per role and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import select
+import signal
+import sys
+import termios
+import time
+import tty
+from dataclasses import asdict, dataclass, field
+
+
+@dataclass
+class LinkCounts:
+    """What the relay did on one link."""
+
+    to_device: int = 0
+    to_host: int = 0
+    garbage_bytes: int = 0
+    garbage_bursts: int = 0
+    dropped_bytes: int = 0
+    delays: int = 0
+    write_errors: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Link:
+    """One relayed link: our pty master (the firmware's side) and the device's pty, opened as a client."""
+
+    role: str
+    host_fd: int
+    host_slave: int
+    device_fd: int
+    counts: LinkCounts
+    next_garbage_s: float
+    next_delay_s: float
+
+
+def _open_link(role: str, device: str, now_s: float, args: argparse.Namespace) -> Link:
+    """A new raw pty for the firmware and the device's pty opened raw and non-blocking."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    dev = os.open(device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    tty.setraw(dev)
+    termios.tcflush(dev, termios.TCIFLUSH)  # what the device sent while nobody listened is gone
+    print(f"{role}: {os.ttyname(slave)}", flush=True)
+    return Link(role, master, slave, dev, LinkCounts(), now_s + args.start_s, now_s + args.start_s)
+
+
+def _write_all(fd: int, data: bytes, counts: LinkCounts) -> None:
+    """Write everything (a pty takes a few kB; spin briefly if it is full)."""
+    view = memoryview(data)
+    deadline = time.monotonic() + 0.05
+    while view:
+        try:
+            n = os.write(fd, view)
+        except BlockingIOError:
+            n = 0
+        except OSError as exc:
+            counts.write_errors.append(str(exc))
+            return
+        view = view[n:]
+        if view and time.monotonic() > deadline:
+            counts.write_errors.append(f"{len(view)} bytes not taken")
+            return
+
+
+def _spoil(link: Link, data: bytes, now_s: float, rng: random.Random, args: argparse.Namespace) -> bytes:
+    """Device -> host bytes after the faults: a late hold, a garbage burst in front, single bytes dropped."""
+    c = link.counts
+    if now_s >= args.t0_s + args.until_s:
+        return data
+    if args.delay_every_s > 0 and now_s >= link.next_delay_s:
+        link.next_delay_s = now_s + args.delay_every_s
+        c.delays += 1
+        time.sleep(args.delay_s)
+    out = bytearray()
+    if args.garbage_every_s > 0 and now_s >= link.next_garbage_s:
+        link.next_garbage_s = now_s + args.garbage_every_s
+        burst = rng.randbytes(rng.randint(1, args.garbage_max))
+        out += burst
+        c.garbage_bytes += len(burst)
+        c.garbage_bursts += 1
+    for b in data:
+        if rng.random() < args.drop_p:
+            c.dropped_bytes += 1
+        else:
+            out.append(b)
+    return bytes(out)
+
+
+def serve(links: list[Link], rng: random.Random, args: argparse.Namespace, stop: list[int]) -> None:
+    """Relay until stop is non-empty."""
+    by_fd: dict[int, tuple[Link, bool]] = {}
+    for link in links:
+        by_fd[link.host_fd] = (link, True)
+        by_fd[link.device_fd] = (link, False)
+    while not stop:
+        try:
+            readable, _, _ = select.select(list(by_fd), [], [], 0.01)
+        except InterruptedError:
+            continue
+        for fd in readable:
+            link, from_host = by_fd[fd]
+            try:
+                data = os.read(fd, 4096)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError:  # the firmware closed its end (EIO on the master): wait for it to come back
+                time.sleep(0.001)
+                continue
+            if from_host:
+                link.counts.to_device += len(data)
+                _write_all(link.device_fd, data, link.counts)
+            else:
+                data = _spoil(link, data, time.monotonic(), rng, args)
+                link.counts.to_host += len(data)
+                _write_all(link.host_fd, data, link.counts)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse the options, open the links, relay until SIGTERM, print the counts as JSON."""
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--link", action="append", required=True, metavar="ROLE=DEVICE")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--start-s", type=float, default=0.5, help="clean relay this long first (start-up check)")
+    p.add_argument("--until-s", type=float, default=1e9, help="clean relay again from this time on")
+    p.add_argument("--garbage-every-s", type=float, default=0.05, help="0: no garbage")
+    p.add_argument("--garbage-max", type=int, default=48)
+    p.add_argument("--drop-p", type=float, default=0.002)
+    p.add_argument("--delay-every-s", type=float, default=0.1, help="0: never late")
+    p.add_argument("--delay-s", type=float, default=0.005)
+    args = p.parse_args(argv)
+    rng = random.Random(args.seed)
+    now_s = args.t0_s = time.monotonic()
+    t0_unix_s = time.time()
+    links = [_open_link(*spec.split("=", 1), now_s, args) for spec in args.link]
+    stop: list[int] = []
+    signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(signum))
+    serve(links, rng, args, stop)
+    report: dict[str, object] = {link.role: asdict(link.counts) for link in links}
+    report["faults_unix_s"] = [t0_unix_s + args.start_s, t0_unix_s + min(args.until_s, 1e6)]
+    print(json.dumps(report), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
