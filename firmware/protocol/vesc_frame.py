@@ -56,6 +56,9 @@ _crc_hqx = binascii.crc_hqx
 _SHORT_HEAD = struct.Struct(">BB")
 _LONG_HEAD = struct.Struct(">BH")
 _TAIL = struct.Struct(">HB")
+_pack_tail = _TAIL.pack
+_SHORT_HEADS = tuple(_SHORT_HEAD.pack(START_SHORT, n) for n in range(256))
+"""Header of a short frame, indexed by payload length (index 0 unused)."""
 _START_RE = re.compile(b"[\x02\x03]")
 
 
@@ -75,16 +78,15 @@ def encode_frame(payload: bytes) -> bytes:
     '02 01 04 40 84 03'
     """
     n = len(payload)
-    if n <= 255:
-        if n == 0:
-            raise ValueError(f"payload length 0 is outside the allowed range [1, {PACKET_MAX_PL_LEN}]")
-        head = _SHORT_HEAD.pack(START_SHORT, n)
-    elif n <= PACKET_MAX_PL_LEN:
+    if 0 < n <= 255:
+        head = _SHORT_HEADS[n]
+    elif 255 < n <= PACKET_MAX_PL_LEN:
         head = _LONG_HEAD.pack(START_LONG, n)
     else:
         raise ValueError(f"payload length {n} is outside the allowed range [1, {PACKET_MAX_PL_LEN}]")
-    payload = bytes(payload)
-    return head + payload + _TAIL.pack(_crc_hqx(payload, 0), END_BYTE)
+    if type(payload) is not bytes:
+        payload = bytes(payload)
+    return head + payload + _pack_tail(_crc_hqx(payload, 0), END_BYTE)
 
 
 class ShortPayloadError(ValueError):
@@ -164,12 +166,13 @@ class FrameDecoder(Generic[M]):
     def feed(self, data: bytes | bytearray | memoryview) -> list[M]:
         """Consume ``data`` and return the messages of every complete valid frame, in stream order."""
         # Hot loop: literals instead of the module constants (2 = START_SHORT, 3 = START_LONG = END_BYTE,
-        # 512 = PACKET_MAX_PL_LEN), counters in locals. The loop has no bounds tests:
-        # indexing past the end of the buffer (IndexError) means that the candidate frame starting at
-        # ``pos`` is not complete yet (or that the buffer is used up), which ends the scan.
+        # 512 = PACKET_MAX_PL_LEN), counters in locals. The loop tests only ``pos < n`` (a used-up buffer,
+        # the usual end, without raising); inside a candidate frame, indexing past the end of the buffer
+        # (IndexError) means that the frame starting at ``pos`` is not complete yet, which ends the scan.
         stats = self.stats
         stats.bytes_in += len(data)
         buf = self._buf + bytes(data) if self._buf else bytes(data)
+        n = len(buf)
         pos = 0
         out: list[M] = []
         append = out.append
@@ -178,7 +181,7 @@ class FrameDecoder(Generic[M]):
         search = _START_RE.search
         dropped = crc_errors = bad_end = short = 0
         try:
-            while True:
+            while pos < n:
                 b = buf[pos]
                 if b == 2:
                     length = buf[pos + 1]
@@ -219,11 +222,15 @@ class FrameDecoder(Generic[M]):
                     short += 1
                     _log.debug("skipped frame: %s", exc)
         except IndexError:
-            pass  # the candidate at pos is incomplete, or pos == len(buf)
+            pass  # the candidate at pos is incomplete
         self._buf = buf[pos:] if pos else buf
-        stats.frames += len(out) + short
-        stats.dropped_bytes += dropped
-        stats.crc_errors += crc_errors
-        stats.bad_end_bytes += bad_end
-        stats.short_payloads += short
+        if out:
+            stats.frames += len(out)
+        if dropped:  # every CRC error and bad end byte also drops a byte
+            stats.dropped_bytes += dropped
+            stats.crc_errors += crc_errors
+            stats.bad_end_bytes += bad_end
+        if short:
+            stats.frames += short
+            stats.short_payloads += short
         return out

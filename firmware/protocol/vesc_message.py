@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import partial
-from operator import truediv
+from operator import attrgetter, truediv
 from types import MemberDescriptorType
 from typing import Any, ClassVar, Self
 
@@ -75,9 +75,13 @@ def to_raw(value: float, divisor: float, code: str, name: str, is_int: bool) -> 
                 f"{name}={value!r} is not a finite number; allowed [{lo / divisor:g}, {hi / divisor:g}]"
             ) from None
         if x != raw:
-            nearest = round(x)
-            if abs(x - nearest) <= _SNAP_ULPS * math.ulp(x):
-                raw = nearest
+            frac = abs(x - raw)
+            # Only a product within 0.001 of an integer can be within 4 ulp of one while |x| < 2**40
+            # (4 ulp <= 2**-11 there); beyond that every code's range is exceeded with or without a snap.
+            if frac < 0.001 or frac > 0.999:
+                nearest = round(x)
+                if abs(x - nearest) <= _SNAP_ULPS * math.ulp(x):
+                    raw = nearest
     lo, hi, ctype = _RANGES[code]
     if raw < lo or raw > hi:
         scale = f" x {divisor:g}" if divisor != 1.0 else ""
@@ -148,6 +152,8 @@ class Message:
         cls._INT_INDEX = tuple(i for i, f in enumerate(wire) if f.is_int)
         cls._SETTERS = tuple(field_setter(cls, f.name) for f in wire)
         cls._decode = None if "from_payload" in cls.__dict__ else staticmethod(_make_decoder(cls))
+        if cls.payload is Message.payload or getattr(cls.payload, "compiled_from_wire", False):
+            cls.payload = _make_payload(cls)  # type: ignore[method-assign]
 
     def __getattr__(self, name: str) -> Any:
         """Convert all fields of a lazily decoded message from its wire integers (on the first access)."""
@@ -170,8 +176,8 @@ class Message:
         return values[index]
 
     def payload(self) -> bytes:
-        """Return the payload: command id byte followed by the arguments."""
-        return self._STRUCT.pack(self.COMMAND_ID, *[f.to_raw(getattr(self, f.name)) for f in self._WIRE])
+        """Return the payload: command id byte followed by the arguments (compiled per class)."""
+        return _make_payload(type(self))(self)
 
     def encode(self) -> bytes:
         """Return the complete frame (start byte, length, payload, CRC, end byte)."""
@@ -208,6 +214,39 @@ def field_setter(cls: type, name: str) -> Callable[[Any, Any], None]:
 def _set_named(name: str, obj: Any, value: Any) -> None:
     """object.__setattr__ with the name first (fallback of :func:`field_setter` before slots exist)."""
     object.__setattr__(obj, name, value)
+
+
+def _make_payload(cls: type[Message]) -> Callable[[Any], bytes]:
+    """Build the ``payload`` method of a generic message class from its ``_WIRE`` layout (encode hot path).
+
+    Each field goes through :func:`to_raw` with its precomputed divisor, then one ``struct`` packs the
+    command id and all raw integers.
+    """
+    pack = cls._STRUCT.pack
+    convs = tuple((f.divisor, f.code, f.name, f.is_int) for f in cls._WIRE)
+
+    def payload_none(self: Any) -> bytes:
+        """Return the payload: command id byte followed by the arguments."""
+        return pack(self.COMMAND_ID)
+
+    def payload_one(self: Any) -> bytes:
+        """Return the payload: command id byte followed by the arguments."""
+        return pack(self.COMMAND_ID, to_raw(get(self), divisor, code, name, is_int))
+
+    def payload_many(self: Any) -> bytes:
+        """Return the payload: command id byte followed by the arguments."""
+        return pack(self.COMMAND_ID, *[to_raw(v, *c) for v, c in zip(get(self), convs, strict=True)])
+
+    if not convs:
+        method = payload_none
+    elif len(convs) > 1:
+        method = payload_many
+    else:
+        ((divisor, code, name, is_int),) = convs
+        method = payload_one
+    get = attrgetter(*(f.name for f in cls._WIRE)) if convs else None
+    method.compiled_from_wire = True  # type: ignore[attr-defined]  # a subclass recompiles for its own _WIRE
+    return method
 
 
 def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:

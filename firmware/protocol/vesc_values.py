@@ -9,13 +9,14 @@ VESC >= 5.03 only) exists only in the selective reply.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import lru_cache
 from typing import ClassVar, Self
 
 from firmware.protocol.vesc_frame import ShortPayloadError
-from firmware.protocol.vesc_message import CommandId, Message, WireField
+from firmware.protocol.vesc_message import CommandId, Message, WireField, field_setter
 
 __all__ = ["FIELDS", "VALUES_FIELDS", "FaultCode", "Values", "ValuesSelective"]
 
@@ -114,6 +115,13 @@ def _layout(mask: int) -> tuple[struct.Struct, tuple[WireField, ...]]:
     return struct.Struct(">" + "".join(f.code for f in present)), present
 
 
+@lru_cache(maxsize=256)
+def _reader(mask: int) -> tuple[Callable[[bytes, int], tuple[int, ...]], int, tuple[tuple[str, float | None], ...]]:
+    """Decode table of a selective reply for ``mask``: unpack_from, size, (name, divisor or None if int)."""
+    unpacker, present = _layout(mask)
+    return unpacker.unpack_from, unpacker.size, tuple((f.name, None if f.is_int else f.divisor) for f in present)
+
+
 @dataclass(frozen=True, slots=True)
 class ValuesSelective(Message):
     """COMM_GET_VALUES_SELECTIVE reply (CubeMars GET_VALUES_SETUP, motor -> host): fields whose bit is set.
@@ -152,16 +160,22 @@ class ValuesSelective(Message):
         if mask is None:
             if len(payload) < 5:
                 raise ShortPayloadError(f"ValuesSelective needs 5 bytes for the mask, got {len(payload)}")
-            mask = int.from_bytes(payload[1:5], "big")
+            (mask,) = _MASK.unpack_from(payload, 1)
             offset = 5
-        unpacker, present = _layout(mask & 0x3FFFFF)
-        if len(payload) < offset + unpacker.size:
+        unpack, size, columns = _reader(mask & 0x3FFFFF)
+        try:
+            raws = unpack(payload, offset)
+        except struct.error:
             raise ShortPayloadError(
-                f"ValuesSelective mask 0x{mask:08X} needs {offset + unpacker.size} bytes, got {len(payload)}"
-            )
-        raws = unpacker.unpack_from(payload, offset)
-        values = {f.name: f.from_raw(r) for f, r in zip(present, raws, strict=True)}
-        return cls(mask, values, echo)
+                f"ValuesSelective mask 0x{mask:08X} needs {offset + size} bytes, got {len(payload)}"
+            ) from None
+        values = {name: raw if divisor is None else raw / divisor
+                  for (name, divisor), raw in zip(columns, raws, strict=True)}
+        obj = _new(cls)
+        _set_mask(obj, mask)
+        _set_values(obj, values)
+        _set_echo(obj, echo)
+        return obj
 
     @classmethod
     def from_values(cls, values: Values, mask: int, mask_echo: bool = True, status: int = 0) -> Self:
@@ -172,3 +186,10 @@ class ValuesSelective(Message):
         selected = {f.name: status if f.name == "status" else getattr(values, f.name) for f in present}
         return cls(mask, selected, mask_echo)
 
+
+
+_MASK = struct.Struct(">I")
+_new = object.__new__
+_set_mask = field_setter(ValuesSelective, "mask")
+_set_values = field_setter(ValuesSelective, "values")
+_set_echo = field_setter(ValuesSelective, "mask_echo")
