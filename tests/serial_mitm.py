@@ -48,6 +48,7 @@ class Link:
     counts: LinkCounts
     next_garbage_s: float
     next_delay_s: float
+    garbage_rng: random.Random
 
 
 def _open_link(role: str, device: str, now_s: float, args: argparse.Namespace) -> Link:
@@ -59,7 +60,8 @@ def _open_link(role: str, device: str, now_s: float, args: argparse.Namespace) -
     tty.setraw(dev)
     termios.tcflush(dev, termios.TCIFLUSH)  # what the device sent while nobody listened is gone
     print(f"{role}: {os.ttyname(slave)}", flush=True)
-    return Link(role, master, slave, dev, LinkCounts(), now_s + args.start_s, now_s + args.start_s)
+    return Link(role, master, slave, dev, LinkCounts(), now_s + args.start_s, now_s + args.start_s,
+                random.Random(f"{args.seed}:{role}"))
 
 
 def _write_all(fd: int, data: bytes, counts: LinkCounts) -> None:
@@ -81,23 +83,26 @@ def _write_all(fd: int, data: bytes, counts: LinkCounts) -> None:
 
 
 def _spoil(link: Link, data: bytes, now_s: float, rng: random.Random, args: argparse.Namespace) -> bytes:
+    # the bursts come from link.garbage_rng alone, so a seed gives the same bursts whatever the chunking
     """Device -> host bytes after the faults: a late hold, a garbage burst in front, single bytes dropped."""
     c = link.counts
     if now_s >= args.t0_s + args.until_s:
         return data
-    if args.delay_every_s > 0 and now_s >= link.next_delay_s:
+    lossy = args.lossy is None or link.role in args.lossy.split(",")
+    if lossy and args.delay_every_s > 0 and now_s >= link.next_delay_s:
         link.next_delay_s = now_s + args.delay_every_s
         c.delays += 1
         time.sleep(args.delay_s)
     out = bytearray()
     if args.garbage_every_s > 0 and now_s >= link.next_garbage_s:
         link.next_garbage_s = now_s + args.garbage_every_s
-        burst = rng.randbytes(rng.randint(1, args.garbage_max))
+        g = link.garbage_rng
+        burst = g.randbytes(g.randint(1, args.garbage_max))
         out += burst
         c.garbage_bytes += len(burst)
         c.garbage_bursts += 1
     for b in data:
-        if rng.random() < args.drop_p:
+        if lossy and rng.random() < args.drop_p:
             c.dropped_bytes += 1
         else:
             out.append(b)
@@ -145,8 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--drop-p", type=float, default=0.002)
     p.add_argument("--delay-every-s", type=float, default=0.1, help="0: never late")
     p.add_argument("--delay-s", type=float, default=0.005)
+    p.add_argument("--lossy", default=None, metavar="ROLE,...", help="drops and delays on these links only")
     args = p.parse_args(argv)
-    rng = random.Random(args.seed)
+    rng = random.Random(args.seed)  # which bytes are dropped
     now_s = args.t0_s = time.monotonic()
     t0_unix_s = time.time()
     links = [_open_link(*spec.split("=", 1), now_s, args) for spec in args.link]
