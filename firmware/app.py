@@ -166,20 +166,20 @@ class Firmware:
         return written + self.motor.decoder.stats.bytes_in - before
 
     def _logger_task(self, job: Job) -> int:
-        out, sup = self.out, self.supervisor
-        return self.logger.log(
+        out, sup, encoder = self.out, self.supervisor, self.encoder
+        return self.logger.log_values(  # the fields in RECORD_FIELDS order (telemetry.TelemetryRecord)
             job.start,
-            reference_rad=out.reference_rad,
-            encoder_angle_rad=self.encoder.angle_rad,
-            imu_pitch_rad=self.imu_pitch_rad,
-            fused_angle_rad=out.fused_angle_rad,
-            velocity_rad_s=self.encoder.velocity_rad_s,
-            current_cmd_a=out.current_cmd_a,
-            current_meas_a=self.motor.feedback.current_a,
-            torque_est_nm=out.torque_est_nm,
-            supervisor_state=int(sup.state),
-            fault_reason=int(sup.reason),
-            deadline_misses=self.kernel_health()[0],
+            out.reference_rad,  # reference_rad
+            encoder.angle_rad,  # encoder_angle_rad
+            self.imu_pitch_rad,  # imu_pitch_rad
+            out.fused_angle_rad,  # fused_angle_rad
+            encoder.velocity_rad_s,  # velocity_rad_s
+            out.current_cmd_a,  # current_cmd_a
+            self.motor.feedback.current_a,  # current_meas_a
+            out.torque_est_nm,  # torque_est_nm
+            sup.state,  # supervisor_state
+            sup.reason,  # fault_reason
+            self.kernel_health()[0],  # deadline_misses
         )
 
     def _watchdog_task(self, job: Job) -> None:

@@ -6,7 +6,7 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
-from firmware.protocol.telemetry import TelemetryRecord, encode_record
+from firmware.protocol.telemetry import TelemetryRecord, encode_record, encode_record_values
 from hal.errors import HalError
 from hal.interfaces import Uart
 
@@ -26,7 +26,15 @@ class TelemetryLogger:
 
     def log(self, time_cycles: int, **fields: float | int) -> int:
         """Frame and queue one record; return bytes written (0 if dropped for lack of room)."""
-        frame = encode_record(TelemetryRecord(seq=self.seq & 0xFFFFFFFF, time_cycles=time_cycles, **fields))
+        return self._queue(encode_record(TelemetryRecord(seq=self.seq & 0xFFFFFFFF, time_cycles=time_cycles,
+                                                         **fields)))
+
+    def log_values(self, time_cycles: int, *values: float | int) -> int:
+        """Like `log` with every field after time_cycles given positionally in RECORD_FIELDS order."""
+        return self._queue(encode_record_values(self.seq & 0xFFFFFFFF, time_cycles, *values))
+
+    def _queue(self, frame: bytes) -> int:
+        """Queue one encoded record (its sequence number is consumed even if dropped); return bytes written."""
         self.seq += 1
         try:
             if self.uart.tx_free() < len(frame):

@@ -9,6 +9,7 @@ per started 254 bytes of input.
 from __future__ import annotations
 
 _MAX_RUN = 254
+_CODES = tuple(bytes((n + 1,)) for n in range(_MAX_RUN))  # code byte of a group of n data bytes
 
 
 def cobs_encode(data: bytes) -> bytes:
@@ -17,8 +18,10 @@ def cobs_encode(data: bytes) -> bytes:
     >>> cobs_encode(b"\\x11\\x00\\x22\\x33").hex(" ")
     '02 11 03 22 33'
     """
-    out = bytearray()
     segments = bytes(data).split(b"\x00")
+    if len(data) < _MAX_RUN:  # no group can fill up: each zero-free segment is its code + its bytes
+        return b"".join([_CODES[len(segment)] + segment for segment in segments])
+    out = bytearray()
     last = len(segments) - 1
     for k, segment in enumerate(segments):
         full_runs = False

@@ -17,6 +17,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from enum import IntEnum
+from operator import attrgetter
 from typing import Any, NamedTuple
 
 from firmware.protocol.cobs import cobs_decode, cobs_encode
@@ -99,6 +100,9 @@ RECORD_SPECS: tuple[FieldSpec, ...] = tuple(
 RECORD_FIELDS: tuple[str, ...] = tuple(s.name for s in RECORD_SPECS)
 BASE_FIELD_COUNT: int = len(RECORD_SPECS)  # every version-1 record carries at least these
 _RECORD_BODY = struct.Struct("<" + "".join(s.fmt for s in RECORD_SPECS))
+_RECORD_DATA = struct.Struct(_HEADER.format + "".join(s.fmt for s in RECORD_SPECS))  # header + body
+_record_values = attrgetter(*RECORD_FIELDS)
+_pack_crc = _CRC.pack
 RECORD_PAYLOAD_LEN: int = _HEADER.size + _RECORD_BODY.size + _CRC.size  # 54 bytes
 RECORD_FRAME_LEN: int = RECORD_PAYLOAD_LEN + 2  # + COBS code byte + 0x00 delimiter = 56 bytes
 
@@ -182,13 +186,28 @@ def frame_payload(payload: bytes) -> bytes:
 
 def encode_record(rec: TelemetryRecord) -> bytes:
     """Encode a record as its full wire frame (RECORD_FRAME_LEN bytes, 0x00-terminated)."""
-    values = [getattr(rec, name) for name in RECORD_FIELDS]
+    return encode_record_values(*_record_values(rec))
+
+
+def encode_record_values(seq: int, time_cycles: int, *values: int | float) -> bytes:
+    """Encode one record given as its field values in RECORD_FIELDS order as its full wire frame.
+
+    The same bytes as ``encode_record(TelemetryRecord(seq, time_cycles, *values))`` without building the
+    record (the logger's path); ValueError for a wrong number of values or a value its type cannot hold.
+
+    >>> encode_record_values(7, 99, 0.5, 0.25, 0, 0, 0, 0, 0, 0, 1, 0, 0) == encode_record(
+    ...     TelemetryRecord(seq=7, time_cycles=99, reference_rad=0.5, encoder_angle_rad=0.25, supervisor_state=1))
+    True
+    """
     try:
-        body = _RECORD_BODY.pack(*values)
+        data = _RECORD_DATA.pack(TELEMETRY_VERSION, BASE_FIELD_COUNT, seq, time_cycles, *values)
     except (struct.error, OverflowError, TypeError):
-        raise _explain_pack_error(values, RECORD_SPECS) from None
-    data = _HEADER.pack(TELEMETRY_VERSION, BASE_FIELD_COUNT) + body
-    return frame_payload(data + _CRC.pack(crc16(data)))
+        every = (seq, time_cycles, *values)
+        if len(every) != BASE_FIELD_COUNT:
+            raise ValueError(f"{len(every)} values for the {BASE_FIELD_COUNT} record fields: need one per field "
+                             f"({', '.join(RECORD_FIELDS)})") from None
+        raise _explain_pack_error(every, RECORD_SPECS) from None
+    return frame_payload(data + _pack_crc(crc16(data)))
 
 
 def decode_payload(payload: bytes, specs: Sequence[FieldSpec] = RECORD_SPECS) -> dict[str, int | float]:
