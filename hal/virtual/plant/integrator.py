@@ -191,3 +191,36 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
             else:
                 s = 1 if a > 0.0 else -1
     return th, w, i, s
+
+
+def lag_target(c: Coefficients, d: Drive, w: float) -> float:
+    """The current target held over a step that starts at velocity w: brake or command, back-EMF clamped.
+
+    The same expression as inside :func:`integrate` (kept inline there for speed).
+    """
+    tg = -d.brake_a * math.tanh(w * c.bscale) if d.brake_a else d.target_a
+    lim = d.v_over_r - c.ker * w
+    if tg > lim:
+        return lim
+    lim -= d.v_over_r + d.v_over_r
+    return lim if tg < lim else tg
+
+
+def hermite(x0: tuple[float, float, float, int], x1: tuple[float, float, float, int], a0: float, a1: float,
+            dt: float, h: float, target_a: float, tau: float) -> tuple[float, float, float, int]:
+    """State h into a step of size dt from x0 to x1 (same friction mode), without integrating.
+
+    Angle: cubic Hermite from (theta, omega) at both ends; velocity: cubic Hermite from (omega, alpha);
+    current: the exact first-order lag towards target_a, the target held over the step.
+    """
+    th0, w0, i0, s = x0
+    th1, w1 = x1[0], x1[1]
+    u = h / dt
+    v = 1.0 - u
+    h01 = u * u * (3.0 - 2.0 * u)
+    h00 = 1.0 - h01
+    h10 = u * v * v * dt
+    h11 = -u * u * v * dt
+    return (h00 * th0 + h10 * w0 + h01 * th1 + h11 * w1,
+            h00 * w0 + h10 * a0 + h01 * w1 + h11 * a1,
+            target_a + (i0 - target_a) * math.exp(-h / tau), s)

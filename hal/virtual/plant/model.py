@@ -8,7 +8,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, suspended
-from hal.virtual.plant.integrator import Coefficients, Drive, accel, integrate, lag_factors
+from hal.virtual.plant.integrator import Coefficients, Drive, accel, hermite, integrate, lag_factors, lag_target
 from hal.virtual.plant.params import PlantParams, load_plant_params
 
 logger = logging.getLogger(__name__)
@@ -104,6 +104,9 @@ class Plant:
         self._brake_a = 0.0
         self._drive = self._make_drive()
         self._cache: tuple[float, tuple[float, float, float, int]] | None = None
+        # the next grid step, integrated ahead (not committed) for queries inside it: (t0, k, state at the
+        # next grid point, accelerations at both ends, the step's current target); None when stale
+        self._ahead: tuple[float, int, tuple[float, float, float, int], float, float, float] | None = None
         lever = p.toe_lever_m if fx.toe_lever_m is None else fx.toe_lever_m
         self._set_load(fx.torque_nm if fx.toe_force_n is None else _scaled_load(fx.toe_force_n, lever))
 
@@ -221,6 +224,7 @@ class Plant:
     def _set_load(self, load: Load) -> None:
         """Install an external torque load (profile segments, a function, or a constant)."""
         self._cache = None
+        self._ahead = None
         self._fn: Callable[[float], float] | None = None
         self._profile: TorqueProfile | None = None
         self._ea, self._eb, self._t_break = 0.0, 0.0, math.inf
@@ -266,7 +270,12 @@ class Plant:
         self._latest = t_s
 
     def _state_tuple(self, t_s: float) -> tuple[float, float, float, int]:
-        """State at t_s: commit whole steps, then a partial step from a copy (not committed)."""
+        """State at t_s: commit whole steps, then interpolate inside the next one (nothing committed).
+
+        Inside a grid step the state comes from the step integrated ahead (cubic Hermite, exact current
+        lag); where the friction mode is stuck or changes within the step, or a profile breakpoint comes
+        before its end, it is one partial RK4 step from a copy instead.
+        """
         cache = self._cache
         if cache is not None and cache[0] == t_s:
             return cache[1]
@@ -275,9 +284,35 @@ class Plant:
         h = t_s - self._t
         x = self._x
         if h > 0.0:
-            x = integrate(self._c, self._drive, x, self._t, 0, 1, h, self._ea, self._eb, self._fn)
+            dt = self.step_s
+            ahead = self._ahead
+            if ahead is None or ahead[0] != self._t0 or ahead[1] != self._k:
+                ahead = self._step_ahead(dt)
+            if ahead is not None and x[3] and ahead[2][3] == x[3]:
+                x = hermite(x, ahead[2], ahead[3], ahead[4], dt, h, ahead[5], self._c.tau)
+            else:
+                x = integrate(self._c, self._drive, x, self._t, 0, 1, h, self._ea, self._eb, self._fn)
         self._cache = (t_s, x)
         return x
+
+    def _step_ahead(self, dt: float) -> tuple[float, int, tuple[float, float, float, int], float, float, float] | None:
+        """Integrate the next grid step from the committed state (kept for queries and the next commit).
+
+        None when a load-profile breakpoint falls inside the step (the committed path stops there).
+        """
+        t = self._t
+        if self._t_break < t + dt:
+            return None
+        if self._grid_exps[0] != dt:
+            self._grid_exps = (dt, lag_factors(dt, self._c.tau))
+        c, x0 = self._c, self._x
+        x1 = integrate(c, self._drive, x0, self._t0, self._k, 1, dt, self._ea, self._eb, self._fn,
+                       self._grid_exps[1])
+        t1 = self._t0 + (self._k + 1) * dt
+        a0 = accel(c, x0[0], x0[1], x0[2], self._ext_value(t), x0[3])
+        a1 = accel(c, x1[0], x1[1], x1[2], self._ext_value(t1), x1[3])
+        self._ahead = ahead = (self._t0, self._k, x1, a0, a1, lag_target(c, self._drive, x0[1]))
+        return ahead
 
     def _commit_event(self, t_s: float) -> None:
         """Commit the state exactly to t_s (snapped to a grid point within EVENT_SNAP_S) before an input."""
@@ -286,6 +321,7 @@ class Plant:
         if t_s - self._t > EVENT_SNAP_S:
             self._commit_partial(t_s)
         self._cache = None
+        self._ahead = None  # the input changes the step ahead
 
     def _commit_partial(self, t_end: float) -> None:
         """Commit one short step to t_end (< one step away) and restart the step grid there."""
@@ -308,15 +344,22 @@ class Plant:
             while t0 + (k + n + 1) * dt <= limit:
                 n += 1
             if n > 0:
-                if self._grid_exps[0] != dt:
-                    self._grid_exps = (dt, lag_factors(dt, self._c.tau))
-                self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb, self._fn,
-                                    self._grid_exps[1])
+                ahead = self._ahead
+                if ahead is not None and ahead[0] == t0 and ahead[1] == k:  # first step done already
+                    self._x = ahead[2]
+                    k += 1
+                    n -= 1
+                if n > 0:
+                    if self._grid_exps[0] != dt:
+                        self._grid_exps = (dt, lag_factors(dt, self._c.tau))
+                    self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb,
+                                        self._fn, self._grid_exps[1])
                 self._k = k + n
                 self._t = t0 + self._k * dt
             if tb > t_s:
                 return
             # a breakpoint of the load profile: commit exactly to it, restart the grid, next segment
+            self._ahead = None
             if tb > self._t:
                 self._commit_partial(tb)
             else:
