@@ -29,6 +29,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["Firmware", "KernelHealth"]
 
+_INIT, _SAFE = SupervisorState.INIT, SupervisorState.SAFE  # enum members bound once (per-period checks)
+
 KernelHealth = Callable[[], tuple[int, int]]
 """Returns (total deadline misses, longest current miss streak) as the RTOS sees them."""
 
@@ -67,6 +69,7 @@ class Firmware:
                                          c.current_limit_a, c.velocity_limit_rad_s)
         self.kernel_health: KernelHealth = kernel_health or (lambda: (0, 0))
         self.out = ControlOutput()
+        self._safety_inputs = SafetyInputs(now_s=0.0, angle_rad=0.0)
         self.imu_pitch_rad = 0.0
         self.gait_start_s: float | None = None
         self._trajectory: Trajectory | None = None
@@ -111,23 +114,22 @@ class Firmware:
         return self.imu.decoder.stats.bytes_in - before
 
     def _supervisor_task(self, job: Job) -> None:
-        now_s = self.seconds(job.start)
-        misses, streak = self.kernel_health()
-        self.supervisor.check(SafetyInputs(
-            now_s=now_s,
-            angle_rad=self.out.fused_angle_rad,
-            current_meas_a=self.motor.feedback.current_a,
-            last_motor_reply_s=self.motor.feedback.received_s,
-            last_imu_frame_s=self.imu.last_frame_s,
-            disagreement_rad=self.estimator.disagreement_rad if self.estimator.seeded else 0.0,
-            motor_fault_code=self.motor.feedback.fault,
-            deadline_miss_streak=streak,
-            estop_pressed=self.board.estop.read(),
-            link_lost=self.motor.link_lost or self.imu.link_lost,
-        ))
+        x = self._safety_inputs  # one object refilled each period (the supervisor keeps no reference)
+        x.now_s = job.start / self.f_cpu_hz
+        x.deadline_miss_streak = self.kernel_health()[1]
+        feedback, estimator = self.motor.feedback, self.estimator
+        x.angle_rad = self.out.fused_angle_rad
+        x.current_meas_a = feedback.current_a
+        x.last_motor_reply_s = feedback.received_s
+        x.last_imu_frame_s = self.imu.last_frame_s
+        x.disagreement_rad = estimator.disagreement_rad if estimator.seeded else 0.0
+        x.motor_fault_code = feedback.fault
+        x.estop_pressed = self.board.estop.read()
+        x.link_lost = self.motor.link_lost or self.imu.link_lost
+        self.supervisor.check(x)
 
     def _control_task(self, job: Job) -> None:
-        now_s = self.seconds(job.start)
+        now_s = job.start / self.f_cpu_hz
         self._heartbeat += 1
         imu = self.imu_pitch_rad if self._new_imu else None
         self._new_imu = False
@@ -135,12 +137,12 @@ class Firmware:
         out = self.out
         out.fused_angle_rad = fused
         state = self.supervisor.state
-        if state is SupervisorState.SAFE:
+        if state is _SAFE:
             cmd = self.supervisor.safe_command(now_s)
             out.current_cmd_a, out.brake = cmd.current_a, cmd.brake
             self.cascade.reset()
             return
-        if state is SupervisorState.INIT or not self.estimator.seeded:
+        if state is _INIT or not self.estimator.seeded:
             out.current_cmd_a, out.brake, out.reference_rad = 0.0, False, fused
             return
         if self._trajectory is None:  # first RUN period: glide to the gait's first angle, then walk
@@ -156,7 +158,7 @@ class Firmware:
         out.brake = False
 
     def _motor_task(self, job: Job) -> int:
-        now_s = self.seconds(job.start)
+        now_s = job.start / self.f_cpu_hz
         before = self.motor.decoder.stats.bytes_in
         self.motor.poll(now_s)
         written = self.motor.send(self.out.current_cmd_a, now_s, brake=self.out.brake)
@@ -187,7 +189,7 @@ class Firmware:
             self._kicked_heartbeat = self._heartbeat
             self.board.watchdog.kick()
         led = self.board.led
-        if self.supervisor.state is SupervisorState.SAFE:
+        if self.supervisor.state is _SAFE:
             led.write(True)
         elif job.index % 50 == 0:
             led.toggle()

@@ -102,14 +102,14 @@ class Supervisor:
 
     def check(self, x: SafetyInputs) -> SupervisorState:
         """Evaluate every rule once; return the (possibly new) state."""
-        if self.state is SupervisorState.SAFE:
-            return self.state
+        state = self.state
+        if state is _SAFE:
+            return state
         reason = self._first_fault(x)
-        if reason is not FaultReason.NONE:
+        if reason is not _NONE:
             self.trip(reason, x.now_s)
-        elif self.state is SupervisorState.INIT and x.last_motor_reply_s is not None \
-                and x.last_imu_frame_s is not None:
-            self.state = SupervisorState.RUN
+        elif state is _INIT and x.last_motor_reply_s is not None and x.last_imu_frame_s is not None:
+            self.state = _RUN
         return self.state
 
     def safe_command(self, now_s: float) -> SafeCommand:
@@ -120,7 +120,11 @@ class Supervisor:
         return SafeCommand(brake=False, current_a=0.0)
 
     def _first_fault(self, x: SafetyInputs) -> FaultReason:
-        """The highest-ranked fault present in `x`, or NONE."""
+        """The highest-ranked fault present in `x`, or NONE.
+
+        A source is stale when silent longer than its timeout; one never heard from counts as stale
+        once the start-up grace has passed.
+        """
         lim = self.limits
         if x.estop_pressed:
             return FaultReason.ESTOP
@@ -130,21 +134,24 @@ class Supervisor:
             return FaultReason.MOTOR_FAULT
         if x.deadline_miss_streak >= lim.deadline_miss_streak:
             return FaultReason.DEADLINE_MISSES
-        if self._stale(x.last_motor_reply_s, x.now_s, lim.motor_timeout_s):
+        now_s = x.now_s
+        last_s = x.last_motor_reply_s
+        if (now_s > lim.startup_grace_s) if last_s is None else (now_s - last_s > lim.motor_timeout_s):
             return FaultReason.MOTOR_TIMEOUT
-        if self._stale(x.last_imu_frame_s, x.now_s, lim.imu_timeout_s):
+        last_s = x.last_imu_frame_s
+        if (now_s > lim.startup_grace_s) if last_s is None else (now_s - last_s > lim.imu_timeout_s):
             return FaultReason.IMU_TIMEOUT
-        if self.state is SupervisorState.RUN:
+        if self.state is _RUN:
             if not lim.angle_min_rad <= x.angle_rad <= lim.angle_max_rad:
                 return FaultReason.ANGLE_LIMIT
             if abs(x.current_meas_a) > lim.current_limit_a:
                 return FaultReason.CURRENT_LIMIT
             if x.disagreement_rad > lim.disagreement_rad:
                 return FaultReason.SENSOR_DISAGREEMENT
-        return FaultReason.NONE
+        return _NONE
 
-    def _stale(self, last_s: float | None, now_s: float, timeout_s: float) -> bool:
-        """True if a source has been silent too long (never heard counts after the start-up grace)."""
-        if last_s is None:
-            return now_s > self.limits.startup_grace_s
-        return now_s - last_s > timeout_s
+
+# Enum members as module constants: the per-period checks compare against them without the enum's
+# class attribute lookup.
+_INIT, _RUN, _SAFE = SupervisorState.INIT, SupervisorState.RUN, SupervisorState.SAFE
+_NONE = FaultReason.NONE
