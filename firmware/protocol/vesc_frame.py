@@ -182,40 +182,38 @@ class FrameDecoder(Generic[M]):
         dropped = crc_errors = bad_end = short = 0
         try:
             while pos < n:
-                b = buf[pos]
-                if b == 2:
-                    length = buf[pos + 1]
-                    if not length:
+                if buf[pos] == 2:
+                    start = pos + 2
+                    end = start + buf[pos + 1]
+                    if end == start:  # LEN 0
                         pos += 1
                         dropped += 1
                         continue
-                    start = pos + 2
-                elif b == 3:
+                elif buf[pos] == 3:
                     length = (buf[pos + 1] << 8) | buf[pos + 2]
                     if length < 255 or length > 512:
                         pos += 1
                         dropped += 1
                         continue
                     start = pos + 3
+                    end = start + length
                 else:
                     match = search(buf, pos)
                     nxt = match.start() if match is not None else len(buf)
                     dropped += nxt - pos
                     pos = nxt
                     continue
-                end = start + length
-                if buf[end + 2] != 3:
-                    bad_end += 1
+                # CRC over payload + its CRC is 0 exactly when they agree
+                if buf[end + 2] != 3 or crc(buf[start : end + 2], 0):
+                    if buf[end + 2] != 3:
+                        bad_end += 1
+                    else:
+                        crc_errors += 1
                     dropped += 1
                     pos += 1
                     continue
-                if crc(buf[start : end + 2], 0):  # CRC over payload + its CRC is 0 exactly when they agree
-                    crc_errors += 1
-                    dropped += 1
-                    pos += 1
-                    continue
-                payload = buf[start:end]
                 pos = end + 3
+                payload = buf[start:end]
                 try:
                     append(table[payload[0]](payload))
                 except ShortPayloadError as exc:

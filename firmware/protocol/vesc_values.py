@@ -169,8 +169,9 @@ class ValuesSelective(Message):
             raise ShortPayloadError(
                 f"ValuesSelective mask 0x{mask:08X} needs {offset + size} bytes, got {len(payload)}"
             ) from None
-        values = {name: raw if divisor is None else raw / divisor
-                  for (name, divisor), raw in zip(columns, raws, strict=True)}
+        values = {}
+        for (name, divisor), raw in zip(columns, raws, strict=True):  # a loop: no comprehension frame
+            values[name] = raw if divisor is None else raw / divisor
         obj = _new(cls)
         _set_mask(obj, mask)
         _set_values(obj, values)
