@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import bisect
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Protocol, runtime_checkable
 
 MAX_FIXED_POINT_STEPS = 1_000_000
@@ -113,6 +113,15 @@ class TimestampedInterrupt:
         return bisect.bisect_left(buf, t1, lo) - lo
 
 
+BoundSources = list[tuple[int, Callable[[int, int], int], int]]
+"""Interrupt sources as (index, bound ``count_in``, cost in cycles), see :func:`bind_sources`."""
+
+
+def bind_sources(sources: Sequence[InterruptSource]) -> BoundSources:
+    """The sources as (index, bound count_in, cost) triples, for :func:`solve_bound` in a hot loop."""
+    return [(j, src.count_in, src.cost_cycles) for j, src in enumerate(sources)]
+
+
 def solve_finish(start: int, cost: int, sources: Sequence[InterruptSource], counts: list[int]) -> int:
     """Return the least f with f = start + cost + sum_i cost_i * count_i(start, f), adding counts in place.
 
@@ -121,22 +130,32 @@ def solve_finish(start: int, cost: int, sources: Sequence[InterruptSource], coun
     >>> solve_finish(0, 100, [PeriodicInterrupt("t", period=30, cost=10)], [0])
     150
     """
+    return solve_bound(start, cost, bind_sources(sources), counts)
+
+
+def solve_bound(start: int, cost: int, bound: BoundSources, counts: list[int]) -> int:
+    """:func:`solve_finish` on sources already bound with :func:`bind_sources`."""
     base = start + cost
     finish = base
     for _ in range(MAX_FIXED_POINT_STEPS):
-        fired = [src.count_in(start, finish) for src in sources]
         extra = 0
-        for src, k in zip(sources, fired, strict=True):
+        hits = None
+        for j, count_in, c in bound:
+            k = count_in(start, finish)
             if k:
-                extra += k * src.cost_cycles
+                extra += k * c
+                if hits is None:
+                    hits = [(j, k)]
+                else:
+                    hits.append((j, k))
         nxt = base + extra
         if nxt == finish:
-            for j, k in enumerate(fired):
-                if k:
+            if hits is not None:
+                for j, k in hits:
                     counts[j] += k
             return finish
         finish = nxt
     raise RuntimeError(
         f"interrupt load never lets the job started at cycle {start} finish: the sources "
-        f"{[s.name for s in sources]} saturate the CPU"
+        f"{[getattr(getattr(fn, '__self__', None), 'name', j) for j, fn, _ in bound]} saturate the CPU"
     )

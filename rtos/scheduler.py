@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable
 from heapq import heappop, heappush
 
 from rtos.clock import Clock, VirtualClock
-from rtos.interrupts import InterruptSource, solve_finish
+from rtos.interrupts import InterruptSource, bind_sources, solve_bound
 from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
 from rtos.task import Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
 from rtos.trace import Trace
@@ -225,7 +225,7 @@ class Scheduler:
         plain = [t.overrun is not _QUEUE for t in tasks]  # policies that drop releases
         nrel, nnext, ready, blocked = self._nrel, self._nnext, self._ready, self._blocked
         heap, trace, rng = self._heap, self.trace, self._rng
-        irqs = [] if realtime else self._interrupts
+        irqs = [] if realtime else bind_sources(self._interrupts)
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
@@ -264,9 +264,10 @@ class Scheduler:
                         target = wd_due
                     if target > t_end:
                         target = t_end
-                    if irqs:
-                        for j, src in enumerate(irqs):
-                            irq_idle[j] += src.count_in(now, target)
+                    for j, count_in, _ in irqs:
+                        k = count_in(now, target)
+                        if k:
+                            irq_idle[j] += k
                     now = clock.wait_until(target) if realtime else target
                     prev = -1
                     continue
@@ -300,8 +301,8 @@ class Scheduler:
                 if realtime:
                     f = max(start, clock.now_cycles())
                     c = f - start
-                elif irqs:
-                    f = solve_finish(start, c, irqs, irq_in_job)
+                elif irqs and c:  # a zero-cost job spans an empty window: nothing can fire in it
+                    f = solve_bound(start, c, irqs, irq_in_job)
                 else:
                     f = start + c
                 st = stats[i]
