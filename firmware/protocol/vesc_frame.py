@@ -171,14 +171,16 @@ class FrameDecoder(Generic[M]):
         # (IndexError) means that the frame starting at ``pos`` is not complete yet, which ends the scan.
         stats = self.stats
         stats.bytes_in += len(data)
-        buf = self._buf + bytes(data) if self._buf else bytes(data)
+        if self._buf:
+            buf = self._buf + bytes(data)
+        else:
+            buf = data if type(data) is bytes else bytes(data)
         n = len(buf)
         pos = 0
         out: list[M] = []
         append = out.append
         table = self._table
         crc = _crc_hqx
-        search = _START_RE.search
         dropped = crc_errors = bad_end = short = 0
         try:
             while pos < n:
@@ -198,7 +200,7 @@ class FrameDecoder(Generic[M]):
                     start = pos + 3
                     end = start + length
                 else:
-                    match = search(buf, pos)
+                    match = _START_RE.search(buf, pos)
                     nxt = match.start() if match is not None else len(buf)
                     dropped += nxt - pos
                     pos = nxt
