@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from bisect import bisect_left
 from collections.abc import Callable, Iterable
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 __all__ = ["EventTimesInterrupt", "InterruptSource", "InterruptSourceBase"]
 
@@ -58,7 +58,9 @@ class EventTimesInterrupt(InterruptSourceBase):
 
     Event times are pushed in non-decreasing order by the peripheral; ``before_count`` (if given)
     is called with t1 first so that the peripheral can bring its world up to t1 (only when t1 is
-    later than every t1 before: the world has already been brought up to those).
+    later than every t1 before: the world has already been brought up to those). ``horizon``, if
+    set, is an object whose ``next_event`` (int) promises that no event time not yet recorded is
+    earlier than it: windows ending at or before it need no ``before_count``.
     """
 
     def __init__(
@@ -70,6 +72,7 @@ class EventTimesInterrupt(InterruptSourceBase):
         self._lo = 0
         self._before_count = before_count
         self._advanced_to = -1  # the largest t1 handed to before_count so far
+        self.horizon: Any = None  # see the class docstring
 
     def add_times(self, times: Iterable[int]) -> None:
         """Record event times (non-decreasing, and not earlier than those already recorded)."""
@@ -81,9 +84,11 @@ class EventTimesInterrupt(InterruptSourceBase):
             self._check_window(t0, t1)  # raises
         self._last_t0 = t0
         if t1 > self._advanced_to:  # the peripheral has already caught up to any earlier t1
-            self._advanced_to = t1
-            if self._before_count is not None:
-                self._before_count(t1)
+            horizon = self.horizon
+            if horizon is None or t1 > horizon.next_event:  # else every event before t1 is recorded
+                self._advanced_to = t1
+                if self._before_count is not None:
+                    self._before_count(t1)
         times = self._times
         lo = self._lo
         if not times or times[-1] < t0:  # every recorded event is past: forget them all

@@ -102,6 +102,18 @@ class VirtualUart(Uart):
         if peer is not None and not isinstance(peer, UartPeer):
             raise TypeError(f"peer {peer!r} lacks on_bytes(data, end_times) and advance_to(t)")
         self._peer = peer
+        for source in self._irq_sources:
+            source.horizon = self._horizon()
+
+    def _horizon(self) -> UartPeer | None:
+        """The peer if it announces ``next_event``: it sends nothing ending at or before that tick.
+
+        A peer with ``next_event`` promises that every byte it has not yet transmitted ends after its
+        ``next_event`` (bytes are sent from events at that tick or later), so an RX interrupt window
+        ending by then needs no catch-up of the peer.
+        """
+        peer = self._peer
+        return peer if isinstance(getattr(peer, "next_event", None), int) else None
 
     @property
     def byte_cycles(self) -> float:
@@ -121,6 +133,7 @@ class VirtualUart(Uart):
     def rx_interrupt(self, cost_cycles: int, name: str | None = None) -> EventTimesInterrupt:
         """An interrupt source firing once per byte arriving on the RX wire, at its stop-bit end."""
         source = EventTimesInterrupt(name or f"{self.name}_rx", cost_cycles, self._advance_peer)
+        source.horizon = self._horizon()
         self._irq_sources.append(source)
         return source
 

@@ -15,6 +15,9 @@ class ByteSink:
     (b'ab', 20)
     """
 
+    next_event: int = 1 << 62
+    """It never transmits: an RX interrupt window on its UART needs no catch-up (see ``VirtualUart``)."""
+
     def __init__(self, max_bytes: int | None = None) -> None:
         """Keep at most max_bytes (None: everything); older bytes beyond it are counted in ``discarded``."""
         if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, int)
