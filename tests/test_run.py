@@ -183,3 +183,25 @@ def test_cli_warns_before_running_a_link_too_slow_for_the_control_rate(tmp_path,
     assert "warning: at 115200 baud" in out and "245 times per second" in out
     assert code == 1  # the run completed and reported the motor timeout it led to
     assert json.loads((tmp_path / "summary.json").read_text())["faults"] == ["MOTOR_TIMEOUT"]
+
+
+@pytest.mark.parametrize("hold_timeout_s, expect_fault", [(None, False), (1.0, True)])
+def test_false_long_header_in_line_noise_is_given_up_after_the_rx_timeout(hold_timeout_s, expect_fault):
+    """`03 01 FF` announces 511 bytes: without the driver's rx timeout the replies behind it are held
+    about 22 ms (replies bring ~23 bytes per ms), longer than the 20 ms motor timeout."""
+
+    def noise(bench, fw):
+        bench.motor_uart.inject_garbage(bytes.fromhex("03 01 ff"), bench.board.now_cycles())
+
+    def setup(bench, fw):
+        if hold_timeout_s is not None:
+            fw.motor.hold_timeout_s = hold_timeout_s  # the check disabled: what the codec alone does
+
+    r, _ = _run_with(setup, actions=[(T_FAULT, noise)])
+    fw = r.firmware
+    if expect_fault:
+        assert fw.supervisor.reason is FaultReason.MOTOR_TIMEOUT and fw.motor.stats.rx_timeouts == 0
+    else:
+        assert fw.supervisor.state is SupervisorState.RUN and fw.supervisor.reason is FaultReason.NONE
+        assert fw.motor.stats.rx_timeouts == 1 and fw.motor.decoder.stats.pending_skipped == 1
+        assert fw.motor.stats.max_age_s < 0.004

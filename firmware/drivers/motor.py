@@ -5,6 +5,11 @@ current or brake command followed by a feedback request). Feedback normally come
 GET_VALUES_SELECTIVE with a small mask, so command + request + reply fit one period at 921600 baud;
 every `full_every`-th request is a full GET_VALUES (temperatures, voltage); its 78-byte reply takes
 most of a period at 921600 baud, so the next period sends its command without a request.
+
+Receive timeout: the codec, like VESC's own decoder, waits for as many bytes as a frame header
+announces, so a false header in line noise (``03 01 FF``: 511 bytes) would hold every good reply
+behind it for many periods. A candidate frame still pending after the longest reply's wire time plus
+one period (1.8 ms at 921600 baud) is given up (`Decoder.skip_pending`, counted in `rx_timeouts`).
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ from hal.interfaces import Uart
 
 __all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "selective_reply_bytes"]
 
+# The longest reply the driver asks for: the 73-byte GET_VALUES payload, 78 bytes on the wire.
+LONGEST_REPLY_BYTES = 78
 # avg_iq (bit 5), erpm (7), fault (15), pid_pos (16): 18-byte payload, 23 bytes on the wire.
 FEEDBACK_MASK = (1 << 5) | (1 << 7) | (1 << 15) | (1 << 16)
 _FIELD_BYTES = {0: 2, 1: 2, 6: 2, 8: 2, 15: 1, 17: 1, 18: 6, 21: 1}
@@ -64,6 +71,7 @@ class MotorLinkStats:
     stale_replies: int = 0
     tx_refused: int = 0
     max_age_s: float = 0.0
+    rx_timeouts: int = 0
 
 
 class MotorDriver:
@@ -81,6 +89,9 @@ class MotorDriver:
         self._selective_request = GetValuesSelective(feedback_mask).encode()
         self._full_request = GetValues().encode()
         self._pending_since: float | None = None
+        self._held_since: float | None = None
+        # a candidate frame pending longer than the longest reply's wire time plus a period is line noise
+        self.hold_timeout_s = LONGEST_REPLY_BYTES * 10 / uart.baud + 0.001
         self._count = 0
         self._skip_request = False
         self.link_lost = False
@@ -105,11 +116,20 @@ class MotorDriver:
         except HalError as exc:
             self._lose(exc, now_s)
             return 0
-        if not data:
+        messages = self.decoder.feed(data) if data else []
+        if messages or not self.decoder.buffered:
+            self._held_since = None
+        elif self._held_since is None:
+            self._held_since = now_s
+        elif now_s - self._held_since > self.hold_timeout_s:  # a false header holds the replies back
+            self.stats.rx_timeouts += 1
+            self._held_since = None
+            messages = self.decoder.skip_pending()
+        if not messages:
             return 0
         taken = 0
         fb = self.feedback
-        for msg in self.decoder.feed(data):
+        for msg in messages:
             if isinstance(msg, ValuesSelective):
                 v = msg.values
                 fb.current_a = v.get("avg_iq_a", fb.current_a)

@@ -111,6 +111,8 @@ class DecoderStats:
     """CRC-valid frames with a command id this decoder has no message for (returned as Unknown)."""
     short_payloads: int = 0
     """CRC-valid frames whose payload was too short or malformed for their id (skipped)."""
+    pending_skipped: int = 0
+    """Pending candidate frames given up by :meth:`FrameDecoder.skip_pending` (an rx timeout)."""
 
     def as_dict(self) -> dict[str, int]:
         """Return the counters as a plain dict."""
@@ -162,6 +164,31 @@ class FrameDecoder(Generic[M]):
         """Forget any partially received frame (the dropped bytes are counted); keep the statistics."""
         self.stats.dropped_bytes += len(self._buf)
         self._buf = b""
+
+    def skip_pending(self) -> list[M]:
+        """Give up on the pending candidate frame: drop its start byte and rescan what follows.
+
+        The receiver's timeout for a frame that never completes (VESC 3.x reset a half-received packet
+        after ``PACKET_RX_TIMEOUT``; HEAD has none): a false header in line noise, e.g. ``03 01 FF``,
+        would otherwise hold every good frame behind it until 511 more bytes have arrived. Dropping only
+        the start byte, as for a bad CRC, keeps the frames that follow. Returns the messages they hold.
+
+        >>> from firmware.protocol.vesc import Decoder, SetCurrent
+        >>> d = Decoder("to-motor")
+        >>> d.feed(bytes.fromhex("03 01 ff") + SetCurrent(2.5).encode())
+        []
+        >>> d.skip_pending(), d.stats.pending_skipped, d.buffered
+        ([SetCurrent(current_a=2.5)], 1, 0)
+        """
+        if not self._buf:
+            return []
+        rest = self._buf[1:]
+        self._buf = b""
+        stats = self.stats
+        stats.pending_skipped += 1
+        stats.dropped_bytes += 1
+        stats.bytes_in -= len(rest)  # fed again below: count each byte once
+        return self.feed(rest)
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[M]:
         """Consume ``data`` and return the messages of every complete valid frame, in stream order."""
