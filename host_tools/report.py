@@ -65,7 +65,8 @@ def summarise(r: RunResult) -> dict:
         "motor_link": {
             "requests": link.requests, "replies": link.replies, "full_replies": link.full_replies,
             "missing_replies": link.missing_replies, "stale_replies": link.stale_replies,
-            "crc_errors": fw.motor.crc_errors, "rx_timeouts": link.rx_timeouts, "max_feedback_age_ms": round(link.max_age_s * 1e3, 3),
+            "crc_errors": fw.motor.crc_errors, "rx_timeouts": link.rx_timeouts,
+            "max_feedback_age_ms": round(link.max_age_s * 1e3, 3),
             "feedback_rate_hz": round(link.replies / r.sim_time_s, 1) if r.sim_time_s else 0.0,
         },
         "telemetry": {"records_sent": fw.logger.sent, "records_dropped": fw.logger.dropped,
