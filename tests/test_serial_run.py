@@ -104,8 +104,10 @@ def test_unplug_is_detected_within_20_ms_and_files_are_complete(tmp_path: Path,
     s = json.loads((tmp_path / "summary.json").read_text())
     link = s["link_lost"]
     assert link["port"] in (motor, imu) and s["supervisor_state"] == "SAFE"
-    seen_unix = s["started_unix_s"] + link["lost_at_s"]  # the driver saw the port fail
-    assert 0 <= seen_unix - killed[0] <= 0.020, seen_unix - killed[0]
+    # the driver saw the port fail in a job that started at lost_at_s: that start may precede the kill by
+    # less than one job (seen once: 60 us), and started_unix_s is read just before the clock's anchor
+    seen_unix = s["started_unix_s"] + link["lost_at_s"]
+    assert -0.001 <= seen_unix - killed[0] <= 0.020, seen_unix - killed[0]
     assert link["detection_ms"] <= 1.5  # safe state latched within the next supervisor period (or before)
     # on this shared host a deadline-miss streak may have latched SAFE first; the first reason is kept
     assert s["faults"] in (["LINK_LOST"], ["DEADLINE_MISSES"])
