@@ -228,6 +228,9 @@ class Scheduler:
         irqs = [] if realtime else bind_sources(self._interrupts)
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
+        wds = self._watchdogs
+        names = [t.name for t in tasks]
+        trace_job = trace.job_appender() if trace is not None else None
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         t_begin = now
         span = max(1, t_end - t_begin)
@@ -286,7 +289,12 @@ class Scheduler:
                     except BaseException:
                         mask |= 1 << i  # the job stays pending: the state is as before it started
                         raise
-                    if self._watchdogs:
+                    if len(wds) == 1:  # one watchdog (the usual case): its deadline, inline
+                        wd_due = wds[0].due
+                        if wd_due is None:
+                            wd_due = _FAR
+                        next_check = wd_due if wd_due < next_progress else next_progress
+                    elif wds:
                         wd_due = self._wd_due()
                         next_check = min(wd_due, next_progress)
                     if self._stop:
@@ -332,8 +340,8 @@ class Scheduler:
                                         (r - offsets[i]) // periods[i])
                 elif st.miss_streak:
                     st.miss_streak = 0
-                if trace is not None:
-                    trace.add_job(tasks[i].name, (r - offsets[i]) // periods[i], r, ready[i], start, f)
+                if trace_job is not None:
+                    trace_job((names[i], (r - offsets[i]) // periods[i], r, ready[i], start, f))
                 # the task's next job: releases that came while this one was pending or running overran
                 nxt = nnext[i]
                 fault = None

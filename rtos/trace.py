@@ -6,6 +6,7 @@ import csv
 import io
 import json
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
@@ -52,6 +53,10 @@ class Trace:
     def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int) -> None:
         """Record one job."""
         self._jobs.append((task, job, release, ready, start, finish))
+
+    def job_appender(self) -> Callable[[tuple[str, int, int, int, int, int]], None]:
+        """``add_job`` for a hot loop: a callable taking the tuple (task, job, release, ready, start, finish)."""
+        return self._jobs.append
 
     def add_event(self, kind: str, time: int, source: str, job: int = -1) -> None:
         """Record one instant event."""
