@@ -51,7 +51,7 @@ def test_fixture_validation_names_the_value() -> None:
     with pytest.raises(ValueError, match="either torque_nm or toe_force_n"):
         Fixture(FixtureKind.BACKDRIVE, torque_nm=1.0, toe_force_n=2.0)
     with pytest.raises(ValueError, match="step_s"):
-        Plant(P, suspended(), step_s=5e-4)
+        Plant(P, suspended(), step_s=2e-4)
     with pytest.raises(ValueError, match="initial_angle_rad"):
         Plant(P, suspended(), initial_angle_rad=1.0)
     with pytest.raises(ValueError, match="load"):

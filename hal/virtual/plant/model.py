@@ -13,8 +13,8 @@ from hal.virtual.plant.params import PlantParams, load_plant_params
 
 logger = logging.getLogger(__name__)
 
-#: Largest integration step allowed (4 kHz), and the default step.
-MAX_STEP_S = 2.5e-4
+#: Largest integration step allowed (10 kHz).
+MAX_STEP_S = 1e-4
 #: Input events closer than this to the committed time or a grid point are taken as happening there.
 EVENT_SNAP_S = 1e-10
 _UNPOWERED_V_OVER_R = 1e300  # no back-EMF clamp with the bridge open (current is forced to zero)
@@ -62,7 +62,7 @@ class Plant:
         self.fixture = fixture if fixture is not None else suspended()
         p = self.params
         if not (math.isfinite(step_s) and 0.0 < step_s <= MAX_STEP_S):
-            raise ValueError(f"step_s = {step_s!r} outside the allowed range (0, {MAX_STEP_S}] (>= 4 kHz)")
+            raise ValueError(f"step_s = {step_s!r} outside the allowed range (0, {MAX_STEP_S}] (>= 10 kHz)")
         if not (math.isfinite(initial_angle_rad) and p.stop_min_rad <= initial_angle_rad <= p.stop_max_rad):
             raise ValueError(f"initial_angle_rad = {initial_angle_rad!r} outside the range of motion "
                              f"[{p.stop_min_rad}, {p.stop_max_rad}]")
