@@ -205,3 +205,18 @@ def test_false_long_header_in_line_noise_is_given_up_after_the_rx_timeout(hold_t
         assert fw.supervisor.state is SupervisorState.RUN and fw.supervisor.reason is FaultReason.NONE
         assert fw.motor.stats.rx_timeouts == 1 and fw.motor.decoder.stats.pending_skipped == 1
         assert fw.motor.stats.max_age_s < 0.004
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--strides", "0"], "strides 0 out of range"),
+    (["--baud", "10"], "baud 10 out of range"),
+    (["--profile", "/nonexistent/fw.toml"], "/nonexistent/fw.toml"),
+    (["--reference", "/nonexistent/gait.csv"], "cannot read /nonexistent/gait.csv"),
+    (["--board", "stm32f9"], "board profile 'stm32f9' not found"),
+])
+def test_cli_bad_input_is_one_line_and_exit_2_with_nothing_written(tmp_path, capsys, args, needle):
+    out = tmp_path / "never"
+    code = main(["run", *args, "--quiet", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and needle in err and len(err.splitlines()) == 1
+    assert not out.exists()

@@ -75,17 +75,21 @@ def run(args: argparse.Namespace) -> int:
         return _run_serial(args)
     from firmware.config import load_firmware_config
     from host_tools.report import write_outputs
-    from host_tools.runner import RunConfig, run_virtual
+    from host_tools.runner import RunConfig, board_profile, run_virtual
 
     try:
         fw_cfg = load_firmware_config(args.profile)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
                         firmware=fw_cfg, reference_csv=args.reference)
+        board_profile(args.board)  # fail early with a clear message, before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
 
-            GaitReference.from_csv(args.reference)  # fail early with a clear message
-    except (ValueError, OSError) as e:
+            GaitReference.from_csv(args.reference)
+    except OSError as e:
+        print(f"pafp run: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
+        return 2
+    except ValueError as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
