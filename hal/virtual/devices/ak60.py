@@ -213,10 +213,8 @@ class Ak60:
             return
         self._sampled_at = t
         t_s = t / self.world.f_hz
-        plant = self.plant
-        i = plant.current_q_a(t_s)
-        self._velocity = w = plant.motor_velocity_rad_s(t_s)
-        self._angle = plant.motor_angle_rad(t_s)
+        i, w, self._angle = self.plant.motor_sample(t_s)
+        self._velocity = w
         meter = self.meter
         meter.sample(t_s, i, w, self._angle)
         if self._next_target is not None:

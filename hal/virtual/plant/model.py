@@ -192,6 +192,12 @@ class Plant:
         """Rotor mechanical speed at t_s [rad/s]."""
         return self.params.total_ratio * self._state_tuple(t_s)[1]
 
+    def motor_sample(self, t_s: float) -> tuple[float, float, float]:
+        """(q current [A], rotor speed [rad/s], rotor angle [rad]) at t_s from one state evaluation."""
+        th, w, i, _ = self._state_tuple(t_s)
+        n = self.params.total_ratio
+        return i, n * w, n * th + self.motor_angle_offset_rad
+
     def current_q_a(self, t_s: float) -> float:
         """q-axis current at t_s [A]."""
         return self._state_tuple(t_s)[2]
