@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from firmware.drivers.link import LinkState
 from firmware.protocol.rvc import RvcDecoder, RvcFrame
 from hal.errors import HalError
 from hal.interfaces import Uart
@@ -9,7 +10,7 @@ from hal.interfaces import Uart
 __all__ = ["ImuDriver"]
 
 
-class ImuDriver:
+class ImuDriver(LinkState):
     """Reads the IMU UART; `pitch_rad` is the newest frame's pitch, `last_frame_s` when it came."""
 
     def __init__(self, uart: Uart, mounting_offset_rad: float = 0.0) -> None:
@@ -20,13 +21,11 @@ class ImuDriver:
         self.latest: RvcFrame | None = None
         self.last_frame_s: float | None = None
         self.frames = 0
-        self.link_lost = False
-        self.lost_reason = ""
-        self.lost_at_s: float | None = None
 
     def relink(self, uart: Uart) -> None:
         """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
-        self.uart, self.link_lost, self.lost_reason = uart, False, ""
+        self.uart = uart
+        self._relinked()
         self.decoder = RvcDecoder()
 
     @property
@@ -39,8 +38,7 @@ class ImuDriver:
         try:
             data = self.uart.read()
         except HalError as exc:  # port gone: latch it with the cause; the supervisor trips LINK_LOST
-            if not self.link_lost:
-                self.link_lost, self.lost_reason, self.lost_at_s = True, str(exc), now_s
+            self._lose(exc, now_s)
             return 0
         if not data:
             return 0

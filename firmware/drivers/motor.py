@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from firmware.drivers.link import LinkState
 from firmware.protocol.vesc import (
     Decoder,
     GetValues,
@@ -74,7 +75,7 @@ class MotorLinkStats:
     rx_timeouts: int = 0
 
 
-class MotorDriver:
+class MotorDriver(LinkState):
     """Talks to the AK60-6 over `uart`; owns no timing: callers pass the time in seconds."""
 
     def __init__(self, uart: Uart, *, full_every: int = 100, feedback_mask: int = FEEDBACK_MASK) -> None:
@@ -94,18 +95,11 @@ class MotorDriver:
         self.hold_timeout_s = LONGEST_REPLY_BYTES * 10 / uart.baud + 0.001
         self._count = 0
         self._skip_request = False
-        self.link_lost = False
-        self.lost_reason = ""
-        self.lost_at_s: float | None = None
-
-    def _lose(self, exc: HalError, now_s: float) -> None:
-        """The port failed (unplugged, peer gone): latch link_lost with the cause and the time."""
-        if not self.link_lost:
-            self.link_lost, self.lost_reason, self.lost_at_s = True, str(exc), now_s
 
     def relink(self, uart: Uart) -> None:
         """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
-        self.uart, self.link_lost, self.lost_reason = uart, False, ""
+        self.uart = uart
+        self._relinked()
         self.decoder = Decoder("from-motor")
         self._pending_since, self._skip_request = None, False
 
