@@ -6,9 +6,15 @@ ARGS ?=
 
 .PHONY: install test bench lint run clean
 
-$(STAMP): pyproject.toml
+# The hot path is compiled with mypyc (setup.py): any edit under firmware/, hal/ or rtos/ rebuilds it.
+# PAFP_PURE_PYTHON=1 make install gives the pure-Python package instead.
+SOURCES := $(shell find firmware hal rtos -name '*.py' 2>/dev/null)
+EXTENSIONS = find firmware hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
+
+$(STAMP): pyproject.toml setup.py $(SOURCES)
 	@test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
+	@$(EXTENSIONS)
 	$(PY) -m pip install -q -e '.[dev]'
 	@touch $(STAMP)
 
@@ -28,4 +34,5 @@ run: $(STAMP)
 	$(VENV)/bin/pafp run $(ARGS)
 
 clean:
-	rm -rf $(VENV) build *.egg-info runs
+	@$(EXTENSIONS)
+	rm -rf $(VENV) *.egg-info runs

@@ -109,6 +109,7 @@ class Firmware:
         before = self.imu.decoder.stats.bytes_in
         if self.imu.poll(self.seconds(job.start)):
             pitch = self.imu.pitch_rad
+            assert pitch is not None  # poll() returned frames
             self.imu_pitch_rad = self.imu_filter.step(pitch) if self.imu_filter else pitch
             self._new_imu = True
         return self.imu.decoder.stats.bytes_in - before
@@ -145,11 +146,12 @@ class Firmware:
         if state is _INIT or not self.estimator.seeded:
             out.current_cmd_a, out.brake, out.reference_rad = 0.0, False, fused
             return
-        if self._trajectory is None:  # first RUN period: glide to the gait's first angle, then walk
+        gait_start_s = self.gait_start_s
+        if self._trajectory is None or gait_start_s is None:  # first RUN period: glide to the gait's start
             ramp = self.config.startup_ramp_s
             self._trajectory = MinimumJerk(fused, self.reference.angle_rad(0.0), ramp, now_s)
-            self.gait_start_s = now_s + ramp
-        gait_t = now_s - self.gait_start_s
+            self.gait_start_s = gait_start_s = now_s + ramp
+        gait_t = now_s - gait_start_s
         ref = self._trajectory.sample(now_s) if gait_t < 0 else self.reference.sample(gait_t)
         ff = feedforward_current_a(ref[0] + self.config.com_angle_rad, ref[2], self.config.feedforward_params) \
             if self.config.feedforward else 0.0

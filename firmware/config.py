@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
+from firmware.control.validation import check_int_range
 from firmware.safety import SafetyLimits
 
 __all__ = ["DEFAULT_PROFILE", "CostModel", "FirmwareConfig", "load_firmware_config"]
@@ -51,7 +54,7 @@ class FirmwareConfig:
     velocity_gains: PidGains = PidGains(0.2, 3.0)
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
-    task_cycles: dict[str, CostModel] = field(default_factory=dict)
+    task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
 
     def __post_init__(self) -> None:
         """Check the rates divide sensibly into the control rate."""
@@ -59,11 +62,12 @@ class FirmwareConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or not 1 <= value <= 10_000:
                 raise ValueError(f"{name} {value!r} out of range: an int in 1..10000 Hz")
+        check_int_range("imu_lowpass_order", self.imu_lowpass_order, *ORDER_RANGE)
         if self.full_values_hz > self.control_hz:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
 
-    def cost(self, task: str) -> CostModel:
+    def cost(self, task: str) -> Callable[[object], int]:
         """The cost model of `task` (a small default if the profile does not name it)."""
         return self.task_cycles.get(task, CostModel(500))
 

@@ -6,6 +6,8 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
+from typing import Any
+
 from firmware.protocol.telemetry import TelemetryRecord, encode_record, encode_record_values
 from hal.errors import HalError
 from hal.interfaces import Uart
@@ -24,7 +26,7 @@ class TelemetryLogger:
         self.dropped = 0
         self.link_lost = False  # the telemetry port failed: records are dropped, control goes on
 
-    def log(self, time_cycles: int, **fields: float | int) -> int:
+    def log(self, time_cycles: int, **fields: Any) -> int:
         """Frame and queue one record; return bytes written (0 if dropped for lack of room)."""
         return self._queue(encode_record(TelemetryRecord(seq=self.seq & 0xFFFFFFFF, time_cycles=time_cycles,
                                                          **fields)))

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
+from typing import Any
 
 from firmware.protocol.telemetry import FaultReason, SupervisorState
 
@@ -32,6 +33,10 @@ class SafetyLimits:
     startup_grace_s: float = 0.5
     brake_delay_s: float = 0.010
     brake_current_a: float = 2.0
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickle through the constructor (compiled frozen instances cannot be restored field by field)."""
+        return type(self), astuple(self)
 
     def __post_init__(self) -> None:
         """Reject limits that cannot describe a working supervisor."""

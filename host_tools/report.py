@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +83,7 @@ def _write_telemetry_csv(data: bytes, path: Path) -> dict:
         w.writeheader()
         for rec in dec.feed(data):
             w.writerow(record_to_row(rec))
-    return {k: v for k, v in vars(dec.stats).items()}
+    return asdict(dec.stats)
 
 
 def _report_md(s: dict, md_extra: list[str] | None = None) -> str:

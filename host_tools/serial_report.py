@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
+
 from host_tools.serial_run import SerialRunResult
 
 __all__ = ["CONTROL_TASKS", "serial_extra"]
@@ -37,7 +39,7 @@ def _errors(r: SerialRunResult) -> dict:
     return {
         "motor": {"crc_errors": m.crc_errors, "junk_bytes": m.dropped_bytes, "bad_end_bytes": m.bad_end_bytes,
                   "missing_replies": fw.motor.stats.missing_replies, "stale_replies": fw.motor.stats.stale_replies,
-                  "uart": vars(fw.motor.uart.errors) if not fw.motor.link_lost else None},
+                  "uart": asdict(fw.motor.uart.errors) if not fw.motor.link_lost else None},
         "imu": {"frames": fw.imu.frames, "checksum_errors": i.checksum_errors, "junk_bytes": i.dropped_bytes,
                 "lost_frames": i.lost_frames},
     }

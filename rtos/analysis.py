@@ -146,10 +146,11 @@ def response_time_bounds(
         worst_q: int | None = None
         w = b
         for q in range(instances):
-            w = _least_fixed_point(b + q * c_i, hp + irq, w + (c_i if q else 0), limit)
-            if w is None:
+            w_q = _least_fixed_point(b + q * c_i, hp + irq, w + (c_i if q else 0), limit)
+            if w_q is None:
                 bound = worst_q = None
                 break
+            w = w_q
             irq_before = sum(-(-(w + beta) // p) * c for p, c in irq_terms)
             finish = _least_fixed_point(w + c_i - irq_before, irq, w + c_i, limit)
             if finish is None:

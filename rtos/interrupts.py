@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from typing import Protocol, runtime_checkable
+from typing import Protocol
 
 MAX_FIXED_POINT_STEPS = 1_000_000
 
 
-@runtime_checkable
 class InterruptSource(Protocol):
     """Anything that fires interrupts: a name, the cycles of one service routine, and a firing count.
 
@@ -23,6 +22,16 @@ class InterruptSource(Protocol):
     def count_in(self, t0: int, t1: int) -> int:
         """Number of firings in [t0, t1)."""
         ...
+
+
+def is_interrupt_source(obj: object) -> bool:
+    """Whether ``obj`` has the :class:`InterruptSource` shape (a str name, an int cost, a callable count_in).
+
+    >>> is_interrupt_source(PeriodicInterrupt("systick", period=1000, cost=80)), is_interrupt_source(3)
+    (True, False)
+    """
+    return (isinstance(getattr(obj, "name", None), str) and isinstance(getattr(obj, "cost_cycles", None), int)
+            and callable(getattr(obj, "count_in", None)))
 
 
 def _check_cost(name: str, cost: object) -> int:

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable
 from heapq import heappop, heappush
 
 from rtos.clock import Clock, VirtualClock
-from rtos.interrupts import InterruptSource, bind_sources, solve_bound
+from rtos.interrupts import InterruptSource, bind_sources, is_interrupt_source, solve_bound
 from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
 from rtos.task import Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
 from rtos.trace import Trace
@@ -18,7 +18,7 @@ log = logging.getLogger(__name__)
 
 _SHIFT = 8  # heap keys are (ready_cycle << _SHIFT) | priority rank
 _MASK = (1 << _SHIFT) - 1
-_FAR = 1 << 200  # later than any event
+_FAR = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
 _LATE = OverrunPolicy.LATE
 _FAULT = OverrunPolicy.FAULT
 _QUEUE = OverrunPolicy.QUEUE
@@ -55,7 +55,7 @@ class Scheduler:
             raise ValueError(f"at most {_MASK + 1} tasks are supported, got {len(self._tasks)}")
         self._interrupts: list[InterruptSource] = list(interrupts)
         for src in self._interrupts:
-            if not isinstance(src, InterruptSource):
+            if not is_interrupt_source(src):
                 raise ValueError(f"{src!r} is not an InterruptSource (name, cost_cycles, count_in)")
         self.trace = trace
         if trace is not None:
@@ -209,6 +209,8 @@ class Scheduler:
             raise ValueError(f"t_end must be an int number of cycles, got {t_end!r}")
         if t_end < self._now:
             raise ValueError(f"t_end {t_end} is in the past (now = {self._now} cycles)")
+        if t_end >= _FAR:
+            raise ValueError(f"t_end {t_end} out of range: below 2**61 cycles")
         clock = self.clock
         realtime = clock.realtime
         if not self._started:
@@ -290,9 +292,8 @@ class Scheduler:
                         mask |= 1 << i  # the job stays pending: the state is as before it started
                         raise
                     if len(wds) == 1:  # one watchdog (the usual case): its deadline, inline
-                        wd_due = wds[0].due
-                        if wd_due is None:
-                            wd_due = _FAR
+                        due = wds[0].due
+                        wd_due = _FAR if due is None else due
                         next_check = wd_due if wd_due < next_progress else next_progress
                     elif wds:
                         wd_due = self._wd_due()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import pytest
 
@@ -79,15 +78,8 @@ def test_frame_starts_are_exactly_periodic_or_jittered_by_seed() -> None:
     assert jittery[0] == jittery[1] != jittery[2]
 
 
-@dataclass
-class StepPlant:
-    """A stand-in plant whose ankle steps from 0 to 0.2 rad at t = 0.1 s and never moves otherwise."""
-
-    latest_time_s: float = 0.0
-    params: object = None
-
-    def __post_init__(self) -> None:
-        self.params = type("P", (), {"gravity_m_s2": 9.8})()
+class StepPlant(Plant):
+    """A plant whose ankle steps from 0 to 0.2 rad at t = 0.1 s and never moves otherwise."""
 
     def output_angle_rad(self, t_s: float) -> float:
         return 0.2 if t_s >= 0.1 else 0.0

@@ -54,8 +54,8 @@ def test_fixture_validation_names_the_value() -> None:
         Plant(P, suspended(), step_s=2e-4)
     with pytest.raises(ValueError, match="initial_angle_rad"):
         Plant(P, suspended(), initial_angle_rad=1.0)
-    with pytest.raises(ValueError, match="load"):
-        Plant(P, Fixture(FixtureKind.SUSPENDED, torque_nm="3"))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="torque_nm = '3' is not a load"):
+        Fixture(FixtureKind.SUSPENDED, torque_nm="3")  # type: ignore[arg-type]
 
 
 def test_backdrive_static_friction_holds_until_the_push_exceeds_breakaway() -> None:

@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -30,11 +31,26 @@ CLEAN = ["--garbage-every-s", "0", "--drop-p", "0", "--delay-every-s", "0"]
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 
 
+_RELAYS: list[subprocess.Popen] = []  # every relay started by the running test
+
+
+@pytest.fixture(autouse=True)
+def _kill_leftover_relays() -> Iterator[None]:
+    """A test that fails before stopping its relay must not leave it spinning on a pty (it would load the CPU)."""
+    yield
+    while _RELAYS:
+        proc = _RELAYS.pop()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 def _relay(links: dict[str, str], *options: str) -> tuple[subprocess.Popen, dict[str, str]]:
     """Start the faulty cable between each device path and a new pty; return it and the new paths."""
     args = [a for role, dev in links.items() for a in ("--link", f"{role}={dev}")]
     proc = subprocess.Popen([sys.executable, str(MITM), *args, *options], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
+    _RELAYS.append(proc)
     paths = {}
     for _ in links:
         line = proc.stdout.readline().strip()  # type: ignore[union-attr]

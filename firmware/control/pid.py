@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
+from typing import Any
 
 from firmware.control.validation import check_range
 
@@ -32,6 +33,10 @@ class PidGains:
     ki: float = 0.0
     kd: float = 0.0
     derivative_tau_s: float = 0.0
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickle through the constructor (compiled frozen instances cannot be restored field by field)."""
+        return type(self), astuple(self)
 
     def __post_init__(self) -> None:
         """Validate that every gain and the filter time constant are finite and non-negative."""
@@ -151,6 +156,10 @@ class FeedforwardParams:
     gear_ratio: float
     efficiency: float
     gravity_m_s2: float = 9.8
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickle through the constructor (compiled frozen instances cannot be restored field by field)."""
+        return type(self), astuple(self)
 
     def __post_init__(self) -> None:
         """Validate the parameters (positive, efficiency in (0, 1])."""

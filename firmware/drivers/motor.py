@@ -127,9 +127,9 @@ class MotorDriver(LinkState):
             if isinstance(msg, ValuesSelective):
                 v = msg.values
                 fb.current_a = v.get("avg_iq_a", fb.current_a)
-                fb.erpm = v.get("erpm", fb.erpm)
+                fb.erpm = int(v.get("erpm", fb.erpm))  # int fields decode as int
                 fb.position_rad = v.get("pid_pos_rad", fb.position_rad)
-                fb.fault = v.get("fault", fb.fault)
+                fb.fault = int(v.get("fault", fb.fault))
             elif isinstance(msg, Values):
                 fb.current_a, fb.erpm, fb.position_rad = msg.avg_iq_a, msg.erpm, msg.pid_pos_rad
                 fb.fault, fb.temp_motor_c, fb.temp_fet_c = msg.fault, msg.temp_motor_c, msg.temp_fet_c

@@ -39,7 +39,7 @@ _LINE_END = frozenset({0x0A, 0x0D})
 class RvcRaw(NamedTuple):
     """One RVC frame in wire units: angles in 0.01 degree, accelerations in milli-g."""
 
-    index: int
+    index: int  # type: ignore[assignment]  # the frame index byte (shadows tuple.index on purpose)
     yaw_cdeg: int
     pitch_cdeg: int
     roll_cdeg: int
@@ -50,7 +50,7 @@ class RvcRaw(NamedTuple):
     motion_request: int = 0
 
 
-def rvc_checksum(body: bytes) -> int:
+def rvc_checksum(body: bytes | bytearray) -> int:
     """Checksum of an RVC frame: the sum of bytes 2..17 (the 16 bytes after the header) mod 256."""
     return sum(body) & 0xFF
 

@@ -23,7 +23,7 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import ClassVar, Literal, Self
+from typing import Any, ClassVar, Literal, Self
 
 from firmware.protocol.vesc_frame import (
     MAX_FRAME_LEN,
@@ -263,7 +263,7 @@ class RotorPosition(Message):
         set_position = field_setter(cls, "position_rad")
         set_scale = field_setter(cls, "scale")
 
-        def decode(payload: bytes) -> Self:
+        def decode(payload: bytes) -> Any:
             try:
                 (raw,) = unpack(payload, 1)
             except struct.error:
@@ -310,8 +310,8 @@ class FwVersion(Message):
             raise ValueError(f"hw_name={self.hw_name!r} must be Latin-1 without NUL (code points 1-255)")
         if len(self.uuid) != 12:
             raise ValueError(f"uuid length {len(self.uuid)} must be exactly 12 bytes")
-        name = self.hw_name.encode("latin-1")
-        return bytes((self.COMMAND_ID, self.major, self.minor)) + name + b"\0" + bytes(self.uuid) + self.extra
+        raw_name = self.hw_name.encode("latin-1")
+        return bytes((self.COMMAND_ID, self.major, self.minor)) + raw_name + b"\0" + bytes(self.uuid) + self.extra
 
     @classmethod
     def from_payload(cls, payload: bytes) -> Self:

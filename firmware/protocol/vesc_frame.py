@@ -21,6 +21,7 @@ from dataclasses import dataclass, fields
 from typing import Generic, TypeVar
 
 import crcmod
+from mypy_extensions import mypyc_attr
 
 __all__ = [
     "END_BYTE",
@@ -89,11 +90,12 @@ def encode_frame(payload: bytes) -> bytes:
     return head + payload + _pack_tail(_crc_hqx(payload, 0), END_BYTE)
 
 
+@mypyc_attr(native_class=False)  # a plain Python exception class in the compiled build (setup.py)
 class ShortPayloadError(ValueError):
     """A payload is too short (or malformed) for its command id; the decoder counts and skips it."""
 
 
-@dataclass(slots=True)
+@dataclass
 class DecoderStats:
     """Counters of a :class:`FrameDecoder`; bytes_in == frame bytes + dropped_bytes + buffered."""
 
@@ -122,6 +124,7 @@ class DecoderStats:
 M = TypeVar("M")
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # vesc.Decoder adds the message table
 class FrameDecoder(Generic[M]):
     """Streaming VESC frame decoder: feed bytes in any chunking, get decoded messages out; never raises.
 

@@ -153,7 +153,7 @@ class Message:
         cls._SETTERS = tuple(field_setter(cls, f.name) for f in wire)
         cls._decode = None if "from_payload" in cls.__dict__ else staticmethod(_make_decoder(cls))
         if cls.payload is Message.payload or getattr(cls.payload, "compiled_from_wire", False):
-            cls.payload = _make_payload(cls)  # type: ignore[method-assign]
+            cls.payload = _make_payload(cls)  # type: ignore[method-assign,assignment]
 
     def __getattr__(self, name: str) -> Any:
         """Convert all fields of a lazily decoded message from its wire integers (on the first access)."""
@@ -231,11 +231,11 @@ def _make_payload(cls: type[Message]) -> Callable[[Any], bytes]:
 
     def payload_one(self: Any) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
-        return pack(self.COMMAND_ID, to_raw(get(self), divisor, code, name, is_int))
+        return pack(self.COMMAND_ID, to_raw(get(self), divisor, code, name, is_int))  # type: ignore[misc,arg-type]
 
     def payload_many(self: Any) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
-        return pack(self.COMMAND_ID, *[to_raw(v, *c) for v, c in zip(get(self), convs, strict=True)])
+        return pack(self.COMMAND_ID, *[to_raw(v, *c) for v, c in zip(get(self), convs, strict=True)])  # type: ignore[misc]
 
     if not convs:
         method = payload_none

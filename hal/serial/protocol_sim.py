@@ -54,7 +54,7 @@ class Serial(SerialBase):
 
     def open(self) -> None:
         """Start the virtual device named by the URL; SerialException for a bad URL."""
-        if self.is_open:
+        if self.is_open:  # type: ignore[has-type]  # set by pyserial's SerialBase
             raise SerialException("Port is already open.")
         if self._port is None:
             raise SerialException("Port must be configured before it can be used.")

@@ -21,8 +21,9 @@ from hal.virtual.devices.ak60 import Ak60
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.bno08x import Bno08x, Bno08xConfig
 from hal.virtual.devices.encoder import EncoderMount
+from hal.virtual.devices.plant_view import PlantView
 from hal.virtual.devices.sink import ByteSink
-from hal.virtual.devices.world import PlantView, World
+from hal.virtual.devices.world import World
 from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.mcu import VirtualMcu
 from hal.virtual.plant import Fixture, Plant, PlantParams, backdrive, spring_bench, suspended

@@ -1,31 +1,20 @@
 """Interrupt sources of the virtual MCU, in the shape the RTOS scheduler counts as interference.
 
 The RTOS (which imports nothing of ours) asks each source ``count_in(t0, t1)``: how many times it
-fires in the half-open cycle window [t0, t1), with non-decreasing t0. This module gives that shape
-a name for type checking and a small base class that validates the windows.
+fires in the half-open cycle window [t0, t1), with non-decreasing t0 (the shape
+``rtos.interrupts.InterruptSource``). This module holds a small base class that validates the windows
+and the source of the virtual UARTs.
 """
 
 from __future__ import annotations
 
 from bisect import bisect_left
 from collections.abc import Callable, Iterable
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
-__all__ = ["EventTimesInterrupt", "InterruptSource", "InterruptSourceBase"]
+__all__ = ["EventTimesInterrupt", "InterruptSourceBase"]
 
 _COMPACT_AT = 4096
-
-
-@runtime_checkable
-class InterruptSource(Protocol):
-    """An interrupt: its name, the cycles one service costs, and its firings in a window."""
-
-    name: str
-    cost_cycles: int
-
-    def count_in(self, t0: int, t1: int) -> int:
-        """Number of firings in the cycle window [t0, t1)."""
-        ...
 
 
 class InterruptSourceBase:

@@ -15,7 +15,7 @@ from bisect import bisect_right
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol, runtime_checkable
+from typing import Literal, Protocol
 
 from hal.interfaces import Uart
 from hal.virtual.irq import EventTimesInterrupt
@@ -28,7 +28,6 @@ log = logging.getLogger(__name__)
 _DATA, _NOISE, _FRAMING = 0, 1, 2
 
 
-@runtime_checkable
 class UartPeer(Protocol):
     """The far end of a virtual UART (a device model)."""
 
@@ -99,7 +98,8 @@ class VirtualUart(Uart):
 
     def connect(self, peer: UartPeer | None) -> None:
         """Connect a device model to this UART (None disconnects)."""
-        if peer is not None and not isinstance(peer, UartPeer):
+        if peer is not None and not (callable(getattr(peer, "on_bytes", None))
+                                     and callable(getattr(peer, "advance_to", None))):
             raise TypeError(f"peer {peer!r} lacks on_bytes(data, end_times) and advance_to(t)")
         self._peer = peer
         for source in self._irq_sources:

@@ -386,7 +386,7 @@ class Ak60:
 
     def _on_get_values(self, msg: vesc.GetValues, t: int) -> None:
         self._sample(t)
-        self._reply(vesc.Values(**self.values.read(vesc.VALUES_FIELDS)), t)
+        self._reply(vesc.Values(**self.values.read(vesc.VALUES_FIELDS)), t)  # type: ignore[arg-type]  # int fields read as int
 
     def _reply(self, message: Any, t: int) -> None:
         self._send(message.encode(), t + self._latency)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from hal.virtual.devices.world import NEVER
+
 __all__ = ["ByteSink"]
 
 
@@ -15,7 +17,7 @@ class ByteSink:
     (b'ab', 20)
     """
 
-    next_event: int = 1 << 62
+    next_event: int = NEVER
     """It never transmits: an RX interrupt window on its UART needs no catch-up (see ``VirtualUart``)."""
 
     def __init__(self, max_bytes: int | None = None) -> None:

@@ -23,8 +23,8 @@ class TimedBytes:
 
     >>> rx = TimedBytes()
     >>> rx.push(b"\\x02\\x01\\x04\\x40\\x84\\x03\\x00", [1, 2, 3, 4, 5, 6, 7])
-    >>> rx.next_at, rx.take(), rx.next_at, len(rx)
-    (6, b'\\x02\\x01\\x04@\\x84\\x03', 4611686018427387904, 1)
+    >>> rx.next_at, rx.take(), rx.next_at == NEVER, len(rx)
+    (6, b'\\x02\\x01\\x04@\\x84\\x03', True, 1)
     """
 
     def __init__(self) -> None:

@@ -101,6 +101,13 @@ class Fixture:
             raise ValueError(f"fixture toe_lever_m = {self.toe_lever_m!r} outside the allowed range (0, 1]")
         if self.torque_nm is not None and self.toe_force_n is not None:
             raise ValueError("fixture takes either torque_nm or toe_force_n, not both")
+        for name in ("torque_nm", "toe_force_n"):
+            load = getattr(self, name)
+            number = isinstance(load, (int, float)) and not isinstance(load, bool)
+            if not (load is None or isinstance(load, TorqueProfile) or callable(load)
+                    or (number and math.isfinite(load))):
+                raise ValueError(f"fixture {name} = {load!r} is not a load: must be None, a finite number, "
+                                 "a TorqueProfile or a callable f(t_s)")
         if self.spring_offset_rad is not None and not abs(self.spring_offset_rad) <= math.pi:
             raise ValueError(
                 f"fixture spring_offset_rad = {self.spring_offset_rad!r} outside the allowed range [-pi, pi]"

@@ -7,6 +7,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from mypy_extensions import mypyc_attr
+
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, suspended
 from hal.virtual.plant.integrator import Coefficients, Drive, accel, hermite, integrate, lag_factors, lag_target
 from hal.virtual.plant.params import PlantParams, load_plant_params
@@ -41,6 +43,7 @@ class PlantState:
     in_contact: bool
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # test doubles override the queries
 class Plant:
     """Motor + transmission + foot on a fixture, integrated lazily at fixed steps up to each query time.
 

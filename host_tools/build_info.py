@@ -1,0 +1,48 @@
+"""Which modules run compiled (mypyc, see setup.py) and whether those builds are newer than their source.
+
+A compiled module is an extension file (``app.cpython-311-x86_64-linux-gnu.so``) beside its ``.py``;
+Python imports the extension first, so an extension older than its source runs stale code.
+"""
+
+from __future__ import annotations
+
+from importlib.machinery import EXTENSION_SUFFIXES
+from pathlib import Path
+
+__all__ = ["ROOT", "compiled_sources", "describe", "stale_sources"]
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("firmware", "hal", "rtos", "host_tools")
+
+
+def _extension_of(source: Path) -> Path | None:
+    for suffix in EXTENSION_SUFFIXES:
+        ext = source.with_name(source.stem + suffix)
+        if ext.exists():
+            return ext
+    return None
+
+
+def compiled_sources(root: Path = ROOT) -> list[Path]:
+    """The ``.py`` files of our packages that have a compiled extension beside them (sorted)."""
+    return sorted(p for pkg in PACKAGES for p in (root / pkg).rglob("*.py") if _extension_of(p) is not None)
+
+
+def stale_sources(root: Path = ROOT) -> list[Path]:
+    """Compiled sources edited after their extension was built: rebuild with ``make install``."""
+    out = []
+    for src in compiled_sources(root):
+        ext = _extension_of(src)
+        if ext is not None and src.stat().st_mtime > ext.stat().st_mtime:
+            out.append(src)
+    return out
+
+
+def describe(root: Path = ROOT) -> str:
+    """One line for reports: how many modules run compiled, or that the package is pure Python."""
+    n = len(compiled_sources(root))
+    if not n:
+        return "pure Python (no compiled modules; see setup.py)"
+    stale = stale_sources(root)
+    note = f", {len(stale)} STALE (older than their source: run make install)" if stale else ""
+    return f"{n} hot-path modules compiled with mypyc{note}"

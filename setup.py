@@ -1,0 +1,68 @@
+"""Build hook: compile the simulation's hot path to C extensions with mypyc (everything else is in pyproject.toml).
+
+The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop, the interrupt
+interference solve, the virtual peripherals and device models, the plant, and the firmware's tasks.
+mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
+when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
+compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
+
+What stays interpreted on purpose: the VESC codec (its message classes are built by
+``__init_subclass__`` metaprogramming mypyc does not support, and it is already tuned for CPython),
+the gait reference (tests replace its constructors), the analysis and the host tools.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from setuptools import setup
+
+COMPILED = [
+    "rtos/scheduler.py",
+    "rtos/interrupts.py",
+    "rtos/stats.py",
+    "hal/virtual/gpio.py",
+    "hal/virtual/irq.py",
+    "hal/virtual/uart.py",
+    "hal/virtual/line.py",
+    "hal/virtual/timer.py",
+    "hal/virtual/plant/integrator.py",
+    "hal/virtual/plant/model.py",
+    "hal/virtual/devices/world.py",
+    "hal/virtual/devices/ak60.py",
+    "hal/virtual/devices/ak60_config.py",
+    "hal/virtual/devices/ak60_loops.py",
+    "hal/virtual/devices/ak60_meter.py",
+    "hal/virtual/devices/ak60_values.py",
+    "hal/virtual/devices/vesc_rx.py",
+    "hal/virtual/devices/bno08x.py",
+    "hal/virtual/devices/encoder.py",
+    "firmware/app.py",
+    "firmware/safety.py",
+    "firmware/logger.py",
+    "firmware/drivers/motor.py",
+    "firmware/drivers/imu.py",
+    "firmware/drivers/encoder.py",
+    "firmware/drivers/link.py",
+    "firmware/control/pid.py",
+    "firmware/control/estimation.py",
+    "firmware/control/filters.py",
+    "firmware/protocol/vesc_frame.py",
+    "firmware/protocol/rvc.py",
+    "firmware/protocol/cobs.py",
+]
+
+
+def _extensions() -> list:
+    if os.environ.get("PAFP_PURE_PYTHON"):
+        return []
+    try:
+        from mypyc.build import mypycify
+    except ImportError:  # a build without the [build-system] requirements (e.g. --no-build-isolation)
+        print("pafp: mypyc not available, installing the pure-Python package", file=sys.stderr)
+        return []
+    return mypycify(["--ignore-missing-imports", *COMPILED], opt_level="3")
+
+
+setup(ext_modules=_extensions())
