@@ -8,6 +8,8 @@ import logging
 import os
 import sys
 
+from host_tools.build_info import ROOT, stale_sources
+
 # name -> module under host_tools.commands; each module defines HELP, add_arguments(parser), run(args) -> int
 COMMANDS: dict[str, str] = {
     "run": "run",
@@ -47,6 +49,10 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    stale = stale_sources()
+    if stale:  # Python imports the extension, not the edited source
+        print(f"pafp: warning: {len(stale)} compiled modules are older than their source (e.g. "
+              f"{stale[0].relative_to(ROOT)}): run `make install` to rebuild", file=sys.stderr)
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:

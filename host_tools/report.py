@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware.protocol.telemetry import RECORD_COLUMNS, TelemetryDecoder, record_to_row
+from host_tools.build_info import describe
 from host_tools.metrics import cut_strides, tracking_metrics
 from host_tools.plots import plot_tracking
 from host_tools.runner import RunResult
@@ -53,6 +54,7 @@ def summarise(r: RunResult) -> dict:
         "sim_time_s": round(r.sim_time_s, 6),
         "wall_time_s": round(r.wall_time_s, 3),
         "realtime_factor": round(r.sim_time_s / r.wall_time_s, 2) if r.wall_time_s > 0 else None,
+        "build": describe(),
         "rms_error_deg": round(m.rms_error_deg, 4),
         "max_error_deg": round(m.max_error_deg, 4),
         "lag_ms": round(m.lag_ms, 2),
@@ -90,7 +92,8 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     lines = [
         "# pafp run report", "",
         f"{s['strides']} strides, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
-        f"(realtime factor {s['realtime_factor']}), motor link {s['baud']} baud, seed {s['seed']}.", "",
+        f"(realtime factor {s['realtime_factor']}; {s['build']}), motor link {s['baud']} baud, seed {s['seed']}.",
+        "",
         "| metric | value |", "|---|---|",
         f"| RMS tracking error | {s['rms_error_deg']:.3f}° |",
         f"| max tracking error | {s['max_error_deg']:.3f}° |",
