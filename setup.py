@@ -22,6 +22,7 @@ COMPILED = [
     "rtos/scheduler.py",
     "rtos/interrupts.py",
     "rtos/stats.py",
+    "hal/interfaces.py",
     "hal/virtual/gpio.py",
     "hal/virtual/irq.py",
     "hal/virtual/uart.py",

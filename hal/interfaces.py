@@ -13,6 +13,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from mypy_extensions import mypyc_attr
+
 from hal.errors import HalError
 
 __all__ = [
@@ -49,6 +51,7 @@ class UartErrors:
         return self.overrun + self.framing + self.noise + self.tx_dropped + self.rx_lost
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
 class Uart(ABC):
     """A UART as the firmware sees it: non-blocking, bounded transmit queue, receive buffer.
 
@@ -57,11 +60,14 @@ class Uart(ABC):
     only the bytes that have arrived by now.
     """
 
-    def __init__(self, baud: int, name: str = "uart") -> None:
-        """Validate the baud rate and set up the shared error counters."""
+    def __init__(self, baud: object, name: str = "uart") -> None:
+        """Validate the baud rate (an int; typed ``object`` so that the compiled build sees a bool as one).
+
+        Also sets up the shared error counters.
+        """
         if isinstance(baud, bool) or not isinstance(baud, int) or not 0 < baud <= _MAX_BAUD:
             raise ValueError(f"baud {baud!r} out of range: an int in 1..{_MAX_BAUD}")
-        self._baud = baud
+        self._baud: int = baud
         self.name = name
         self._errors = UartErrors()
         self._closed = False
@@ -158,6 +164,7 @@ class Uart(ABC):
         """Release backend resources."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
 class EncoderTimer(ABC):
     """A general-purpose timer in quadrature encoder mode (STM32 TIMx with SMS = 011, x4).
 
@@ -206,6 +213,7 @@ class EncoderTimer(ABC):
         """Backend hook for `set_cnt` with a validated value."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
 class Watchdog(ABC):
     """The independent watchdog as the firmware sees it: kick it or the MCU resets."""
 
@@ -214,6 +222,7 @@ class Watchdog(ABC):
         """Reload the watchdog counter (IWDG_KR = 0xAAAA)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
 class DigitalIn(ABC):
     """A digital input pin (the e-stop switch)."""
 
@@ -222,6 +231,7 @@ class DigitalIn(ABC):
         """The pin level now (True = high)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
 class DigitalOut(ABC):
     """A digital output pin (the status LED): shared level bookkeeping, a tiny drive hook."""
 

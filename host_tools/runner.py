@@ -22,6 +22,7 @@ from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
+from rtos.stats import DeadlineHealth
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
 
@@ -114,27 +115,9 @@ def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
             for t in fw.tasks]
 
 
-def kernel_health(holder: dict[str, Scheduler]) -> Callable[[], tuple[int, int]]:
-    """What the firmware asks the RTOS: (total deadline misses, longest current miss streak) of its tasks.
-
-    ``holder["s"]`` is the scheduler once built (the firmware is built first); bench probes are left out.
-    """
-    seen: list = [None, []]  # the scheduler last looked at and its firmware tasks' stats (fixed per scheduler)
-
-    def health() -> tuple[int, int]:
-        sched = holder.get("s")
-        if sched is None:
-            return 0, 0
-        if sched is not seen[0]:
-            seen[0], seen[1] = sched, [s for n, s in sched.stats.items() if not n.endswith("_probe")]
-        misses = streak = 0
-        for s in seen[1]:
-            misses += s.deadline_misses
-            if s.miss_streak > streak:
-                streak = s.miss_streak
-        return misses, streak
-
-    return health
+def kernel_health(sched: Scheduler) -> DeadlineHealth:
+    """What the firmware asks the RTOS (misses, current streak) over its own tasks: bench probes left out."""
+    return DeadlineHealth([s for n, s in sched.stats.items() if not n.endswith("_probe")])
 
 
 @dataclass(frozen=True)
@@ -155,7 +138,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     clock = VirtualClock(f_cpu)
     holder: dict[str, Scheduler] = {}
     bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed, **cfg.bench_options)
-    fw = Firmware(bench.board, fw_cfg, reference=reference, kernel_health=kernel_health(holder))
+    fw = Firmware(bench.board, fw_cfg, reference=reference)
     probe = Probe()
     plant = bench.plant
 
@@ -173,6 +156,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     sched = Scheduler([*fw.tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
     holder["s"] = sched
+    fw.kernel_health = kernel_health(sched)
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
     sched.add_watchdog(wd)
     bench.attach_watchdog(wd)

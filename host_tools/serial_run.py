@@ -251,7 +251,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=capture, encoder=encoder,
                   estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
                   now_cycles=lambda: holder["s"].now, f_cpu_hz=f_cpu)
-    fw = Firmware(board, fw_cfg, reference=reference, kernel_health=kernel_health(holder))
+    fw = Firmware(board, fw_cfg, reference=reference)
     wd.on_reset = fw.on_watchdog_reset
     feedback_angle.feedback = fw.motor.feedback
     plant = ports.devices.world.plant if ports.devices is not None and ports.devices.motor is not None else None
@@ -273,6 +273,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     holder["s"] = sched
+    fw.kernel_health = kernel_health(sched)
     sched.add_watchdog(wd)
     interrupted = False
     gc_was_enabled = gc.isenabled()

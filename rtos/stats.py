@@ -99,6 +99,29 @@ class TaskStats:
                 f"misses={self.deadline_misses}, skipped={self.skipped})")
 
 
+class DeadlineHealth:
+    """What a firmware asks its kernel: (total deadline misses, longest current miss streak) of some tasks.
+
+    >>> a, b = TaskStats("a"), TaskStats("b")
+    >>> a.deadline_misses, b.deadline_misses, b.miss_streak = 1, 3, 2
+    >>> DeadlineHealth([a, b])()
+    (4, 2)
+    """
+
+    def __init__(self, stats: list[TaskStats]) -> None:
+        """Watch these tasks' statistics (live objects: each call reads them anew)."""
+        self._stats = list(stats)
+
+    def __call__(self) -> tuple[int, int]:
+        """(sum of deadline misses, longest current streak of consecutive misses)."""
+        misses = streak = 0
+        for s in self._stats:
+            misses += s.deadline_misses
+            if s.miss_streak > streak:
+                streak = s.miss_streak
+        return misses, streak
+
+
 class InterruptStats:
     """Firings of one interrupt source, split by whether a job or the idle CPU absorbed them."""
 
