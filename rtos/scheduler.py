@@ -115,18 +115,21 @@ class Scheduler:
         """Run for ``cycles`` more cycles (see ``run_until``)."""
         self.run_until(self._now + cycles, progress)
 
-    def releases(self, name: str) -> int:
-        """Nominal releases of task ``name`` before ``now``: jobs run, releases skipped, and those still due.
+    def releases(self, name: str, before: int | None = None) -> int:
+        """Nominal releases of task ``name`` before ``before`` (default ``now``): jobs run, skipped and still due.
 
         With a wall clock the host may end a run behind schedule; releases whose time has come but
         whose job has not started yet are counted here too, so the count reflects the absolute release
-        times (offset + k * period < now), not how many jobs the host managed to run.
+        times (offset + k * period < before), not how many jobs the host managed to run. A run ends at
+        the last job's finish, which may lie past the end asked of ``run_until``: pass that end as
+        ``before`` to count the releases of the run's span only.
         """
         i = next((k for k, t in enumerate(self._tasks) if t.name == name), None)
         if i is None:
             raise ValueError(f"no task named {name!r}: tasks are {[t.name for t in self._tasks]}")
+        end = self._now if before is None else min(before, self._now)
         st, pending_from, period = self._stat_list[i], self._nrel[i], self._tasks[i].period
-        due = -(-(self._now - pending_from) // period) if pending_from < self._now else 0
+        due = -(-(end - pending_from) // period) if pending_from < end else 0
         return st.jobs + st.skipped + due
 
     def utilisation(self) -> Utilisation:

@@ -88,3 +88,12 @@ def test_releases_include_those_still_due_when_the_run_ends():
     s.run_until(500)  # the hog started at 0 and ran to 1000; fast has not run yet
     assert s.stats["fast"].jobs + s.stats["fast"].skipped == 0
     assert s.releases("fast") == 10  # releases at 0, 100, ..., 900
+
+
+def test_releases_before_the_asked_end_leave_out_the_last_jobs_overshoot():
+    hog = Task("hog", 1, period=10_000, cost=1000)
+    fast = Task("fast", 2, period=100, cost=1)
+    s = Scheduler([hog, fast])
+    s.run_until(500)  # ends at the hog's finish, 1000
+    assert s.releases("fast", before=500) == 5  # releases at 0, 100, ..., 400: the run's span
+    assert s.releases("fast", before=10**9) == s.releases("fast") == 10  # never past now
