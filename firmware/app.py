@@ -12,7 +12,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from firmware.config import FirmwareConfig
+from firmware.config import CostModel, FirmwareConfig
 from firmware.control.estimation import AngleEstimator
 from firmware.control.filters import ButterworthLowPass
 from firmware.control.pid import CascadeController, feedforward_current_a
@@ -84,8 +84,10 @@ class Firmware:
         c, f = self.config, self.f_cpu_hz
 
         def task(name: str, prio: int, hz: int, body: Callable[[Job], object]) -> Task:
-            return Task(name, prio, period=f // hz, cost=c.cost(name), body=body,
-                        overrun=OverrunPolicy.SKIP)
+            cost: int | Callable[[object], int] = c.cost(name)
+            if isinstance(cost, CostModel) and not cost.per_byte:
+                cost = cost.base  # a fixed cost: the kernel need not call the model for every job
+            return Task(name, prio, period=f // hz, cost=cost, body=body, overrun=OverrunPolicy.SKIP)
 
         return [
             task("encoder", 1, c.control_hz, self._encoder_task),

@@ -140,7 +140,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed, **cfg.bench_options)
     fw = Firmware(bench.board, fw_cfg, reference=reference)
     probe = Probe()
-    plant = bench.plant
+    plant = bench.plant.raw  # the probe brings the world up to its job's start itself
 
     actions = sorted(cfg.actions, key=lambda a: a[0])
 
@@ -148,6 +148,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
         t = job.start / f_cpu
         while actions and actions[0][0] <= t:
             actions.pop(0)[1](bench, fw)
+        bench.advance_to(job.start)
         probe.sample(t, fw, plant.output_angle_rad(t))
 
     probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
