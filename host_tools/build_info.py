@@ -6,10 +6,11 @@ Python imports the extension first, so an extension older than its source runs s
 
 from __future__ import annotations
 
+import shutil
 from importlib.machinery import EXTENSION_SUFFIXES
 from pathlib import Path
 
-__all__ = ["ROOT", "compiled_sources", "describe", "stale_sources"]
+__all__ = ["ROOT", "compiled_sources", "copy_pure_source", "describe", "stale_sources"]
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("firmware", "hal", "rtos", "host_tools")
@@ -46,3 +47,13 @@ def describe(root: Path = ROOT) -> str:
     stale = stale_sources(root)
     note = f", {len(stale)} STALE (older than their source: run make install)" if stale else ""
     return f"{n} hot-path modules compiled with mypyc{note}"
+
+
+def copy_pure_source(dest: Path, root: Path = ROOT) -> Path:
+    """Copy the packages and profiles into dest without their extensions; return dest.
+
+    The copy is the pure-Python build, importable with ``PYTHONPATH=dest``: the two builds side by side.
+    """
+    for name in (*PACKAGES, "profiles"):
+        shutil.copytree(root / name, dest / name, ignore=shutil.ignore_patterns("*.so", "__pycache__"))
+    return dest

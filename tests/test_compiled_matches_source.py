@@ -7,14 +7,13 @@ install is pure Python already (nothing to compare).
 from __future__ import annotations
 
 import hashlib
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from host_tools.build_info import PACKAGES, ROOT, compiled_sources
+from host_tools.build_info import compiled_sources, copy_pure_source
 from host_tools.runner import RunConfig, run_virtual
 
 SCRIPT = """
@@ -29,8 +28,7 @@ print(hashlib.sha256(r.telemetry).hexdigest(), r.scheduler.stats["control"].jobs
 
 @pytest.mark.skipif(not compiled_sources(), reason="pure-Python install: nothing compiled to compare")
 def test_compiled_run_matches_the_pure_python_source(tmp_path: Path) -> None:
-    for name in (*PACKAGES, "profiles"):
-        shutil.copytree(ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("*.so", "__pycache__"))
+    copy_pure_source(tmp_path)
     pure = subprocess.run([sys.executable, "-c", SCRIPT], cwd=tmp_path, capture_output=True, text=True,
                           timeout=300, env={"PYTHONPATH": str(tmp_path), "PATH": "/usr/bin:/bin"})
     assert pure.returncode == 0, pure.stderr

@@ -9,13 +9,12 @@ the ratio, measured side by side. ``default_run_realtime_factor`` is one default
 
 from __future__ import annotations
 
-import shutil
 import statistics
 import subprocess
 import sys
 from pathlib import Path
 
-from host_tools.build_info import PACKAGES, ROOT, compiled_sources, describe
+from host_tools.build_info import compiled_sources, copy_pure_source, describe
 from host_tools.runner import RunConfig, run_virtual
 
 ROUNDS = 3
@@ -31,8 +30,7 @@ print(statistics.median(f))
 
 
 def _pure_python_factor(tmp: Path) -> float:
-    for name in (*PACKAGES, "profiles"):
-        shutil.copytree(ROOT / name, tmp / name, ignore=shutil.ignore_patterns("*.so", "__pycache__"))
+    copy_pure_source(tmp)
     out = subprocess.run([sys.executable, "-c", PURE_SCRIPT.format(rounds=ROUNDS)], cwd=tmp, capture_output=True,
                          text=True, timeout=600, env={"PYTHONPATH": str(tmp), "PATH": "/usr/bin:/bin"}, check=True)
     return float(out.stdout.strip())
