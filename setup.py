@@ -6,15 +6,19 @@ mypyc compiles the same typed Python source; the ``.py`` files stay the referenc
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
 
-What stays interpreted on purpose: the VESC codec (its message classes are built by
-``__init_subclass__`` metaprogramming mypyc does not support, and it is already tuned for CPython),
-the gait reference (tests replace its constructors), the analysis and the host tools.
+What stays interpreted on purpose: the VESC message classes (built by ``__init_subclass__``
+metaprogramming mypyc does not support; their frame decoder is compiled), the telemetry records (enum
+fields that compiled code would store as plain ints), the configuration value classes and the plant
+parameters (their checks must see the values as given: compiled code turns a bool into an int at the
+boundary), the gait reference (tests replace its constructors), the analysis and the host tools.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import sys
+import sysconfig
 
 from setuptools import setup
 
@@ -57,6 +61,10 @@ COMPILED = [
 
 def _extensions() -> list:
     if os.environ.get("PAFP_PURE_PYTHON"):
+        return []
+    compiler = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
+    if shutil.which(compiler) is None:
+        print(f"pafp: no C compiler ({compiler}), installing the pure-Python package", file=sys.stderr)
         return []
     try:
         from mypyc.build import mypycify
