@@ -80,6 +80,14 @@ class TorqueProfile:
 Load = TorqueProfile | TimeFunction | float | None
 
 
+def check_load(name: str, load: object) -> None:
+    """ValueError naming ``name`` unless load is a :data:`Load`: None, a finite number, a profile or f(t_s)."""
+    number = isinstance(load, (int, float)) and not isinstance(load, bool) and math.isfinite(load)
+    if not (load is None or isinstance(load, TorqueProfile) or callable(load) or number):
+        raise ValueError(f"{name} = {load!r} is not a load: must be None, a finite number, a TorqueProfile "
+                         "or a callable f(t_s)")
+
+
 @dataclass(frozen=True)
 class Fixture:
     """A bench set-up: kind, powered state, spring/load choice and external loads."""
@@ -101,13 +109,8 @@ class Fixture:
             raise ValueError(f"fixture toe_lever_m = {self.toe_lever_m!r} outside the allowed range (0, 1]")
         if self.torque_nm is not None and self.toe_force_n is not None:
             raise ValueError("fixture takes either torque_nm or toe_force_n, not both")
-        for name in ("torque_nm", "toe_force_n"):
-            load = getattr(self, name)
-            number = isinstance(load, (int, float)) and not isinstance(load, bool)
-            if not (load is None or isinstance(load, TorqueProfile) or callable(load)
-                    or (number and math.isfinite(load))):
-                raise ValueError(f"fixture {name} = {load!r} is not a load: must be None, a finite number, "
-                                 "a TorqueProfile or a callable f(t_s)")
+        check_load("fixture torque_nm", self.torque_nm)
+        check_load("fixture toe_force_n", self.toe_force_n)
         if self.spring_offset_rad is not None and not abs(self.spring_offset_rad) <= math.pi:
             raise ValueError(
                 f"fixture spring_offset_rad = {self.spring_offset_rad!r} outside the allowed range [-pi, pi]"

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from mypy_extensions import mypyc_attr
 
-from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, suspended
+from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, check_load, suspended
 from hal.virtual.plant.integrator import Coefficients, Drive, accel, hermite, integrate, lag_factors, lag_target
 from hal.virtual.plant.params import PlantParams, load_plant_params
 
@@ -232,6 +232,7 @@ class Plant:
 
     def _set_load(self, load: Load) -> None:
         """Install an external torque load (profile segments, a function, or a constant)."""
+        check_load("external torque load", load)
         self._cache = None
         self._ahead = None
         self._fn: Callable[[float], float] | None = None
@@ -244,11 +245,8 @@ class Plant:
             self._ea, self._eb, self._t_break = load.segment(self._t)
         elif callable(load):
             self._fn = load
-        elif isinstance(load, (int, float)) and math.isfinite(load):
-            self._ea = float(load)
         else:
-            raise ValueError(f"external torque load {load!r} must be None, a finite number, a TorqueProfile "
-                             "or a callable f(t_s)")
+            self._ea = float(load)
 
     def _ext_value(self, t_s: float) -> float:
         """External torque at t_s [N m]."""
