@@ -17,7 +17,7 @@ from pathlib import Path
 from host_tools.build_info import compiled_sources, copy_pure_source, describe
 from host_tools.runner import RunConfig, run_virtual
 
-ROUNDS = 3
+ROUNDS = 5
 PURE_SCRIPT = """
 import statistics
 from host_tools.runner import RunConfig, run_virtual
