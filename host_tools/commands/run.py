@@ -99,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_virtual(cfg, progress=bar)
     bar.done()
     s = write_outputs(result, out)
-    print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']})")
+    print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']}; "
+          f"{s['build']})")
     print(f"  tracking: RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg, lag {s['lag_ms']:.1f} ms")
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
