@@ -6,6 +6,7 @@ import dataclasses
 import math
 import struct
 
+from doubles import SpyLink
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -228,17 +229,6 @@ def test_alive_postpones_the_timeout() -> None:
     assert rig.motor.mode is DriveMode.CURRENT
     rig.world.advance_to(end_alive + F)
     assert rig.motor.mode is DriveMode.RELEASED
-
-
-class SpyLink:
-    """Records what the driver transmits, and when."""
-
-    def __init__(self) -> None:
-        self.sent: list[tuple[bytes, int]] = []
-
-    def transmit_to_mcu(self, data: bytes, start_cycles: int) -> list[int]:
-        self.sent.append((data, start_cycles))
-        return [start_cycles]
 
 
 def test_set_detect_4_streams_the_position_every_10_ms_at_scale_1e4() -> None:

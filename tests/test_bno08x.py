@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from doubles import SpyLink
 
 from firmware.protocol.rvc import RvcDecoder, RvcFrame
 from hal.virtual.devices.bno08x import BANNER_LINES, Bno08x, Bno08xConfig
@@ -32,17 +33,6 @@ class Rig:
     def read_until(self, t_s: float) -> bytes:
         self.t = round(t_s * F)
         return self.uart.read()
-
-
-class SpyLink:
-    """Records the frames and their start ticks."""
-
-    def __init__(self) -> None:
-        self.sent: list[tuple[bytes, int]] = []
-
-    def transmit_to_mcu(self, data: bytes, start_cycles: int) -> list[int]:
-        self.sent.append((data, start_cycles))
-        return [start_cycles]
 
 
 def test_banner_then_frames_at_100_hz() -> None:
