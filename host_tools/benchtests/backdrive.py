@@ -36,12 +36,6 @@ MAX_TRIAL_S = 2.0
 REPORT_NMM = {"dorsiflexion": 2.06, "plantarflexion": 2.14}
 
 
-def reflected_inertia_kg_m2(p: PlantParams) -> float:
-    """J_total = J_m N^2 + sum J_i N_i^2: rotor through N, actuator output through the belt, ankle pulley."""
-    return (p.rotor_inertia_kg_m2 * p.total_ratio**2 + p.actuator_output_inertia_kg_m2 * p.belt_ratio**2
-            + p.ankle_pulley_inertia_kg_m2)
-
-
 def alpha_from_counts(counts: np.ndarray, dt_s: float, counts_per_rev: int, cutoff_hz: float) -> np.ndarray:
     """Angular acceleration [rad/s^2] from unwrapped counts: double difference, zero-phase low-pass."""
     rad = 2.0 * math.pi / counts_per_rev
@@ -91,7 +85,7 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
     if n_trials < 1:
         raise ValueError(f"trials = {n_trials!r} outside the allowed range [1, 1000]")
     rng = np.random.default_rng(seed)
-    j_total = reflected_inertia_kg_m2(p)
+    j_total = p.reflected_inertia_kg_m2  # J_m N^2 + sum J_i N_i^2
     eta = p.efficiency
     cols: dict[str, list[float]] = {k: [] for k in ("trial", "direction", "t_s", "angle_deg", "counts",
                                                     "alpha_true_rad_s2", "alpha_enc_rad_s2", "tau_b_nm")}
