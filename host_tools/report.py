@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from dataclasses import asdict
@@ -10,9 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware.protocol.telemetry import RECORD_COLUMNS, TelemetryDecoder, record_to_row
+from firmware.protocol.telemetry import TelemetryDecoder
 from host_tools.build_info import describe
 from host_tools.metrics import cut_strides, tracking_metrics
+from host_tools.monitor import CsvSink
 from host_tools.plots import plot_tracking
 from host_tools.runner import RunResult
 
@@ -80,11 +80,11 @@ def summarise(r: RunResult) -> dict:
 
 def _write_telemetry_csv(data: bytes, path: Path) -> dict:
     dec = TelemetryDecoder()
-    with path.open("w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, fieldnames=list(RECORD_COLUMNS), extrasaction="ignore")
-        w.writeheader()
-        for rec in dec.feed(data):
-            w.writerow(record_to_row(rec))
+    sink = CsvSink(path)
+    try:
+        sink.write(dec.feed(data))
+    finally:
+        sink.close()
     return asdict(dec.stats)
 
 

@@ -53,7 +53,6 @@ class RunConfig:
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
     trace_capacity: int = 200_000
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
-    max_duration_s: float | None = None
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
     # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
@@ -115,9 +114,9 @@ def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
             for t in fw.tasks]
 
 
-def kernel_health(sched: Scheduler) -> DeadlineHealth:
-    """What the firmware asks the RTOS (misses, current streak) over its own tasks: bench probes left out."""
-    return DeadlineHealth([s for n, s in sched.stats.items() if not n.endswith("_probe")])
+def kernel_health(sched: Scheduler, fw: Firmware) -> DeadlineHealth:
+    """What the firmware asks the RTOS (misses, current streak) over the firmware's own tasks."""
+    return DeadlineHealth([sched.stats[t.name] for t in fw.tasks])
 
 
 @dataclass(frozen=True)
@@ -137,7 +136,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     holder: dict[str, Scheduler] = {}
-    bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed, **cfg.bench_options)
+    bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
     fw = Firmware(bench.board, fw_cfg, reference=reference)
     probe = Probe()
     plant = bench.plant.raw  # the probe brings the world up to its job's start itself
@@ -157,21 +157,22 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     sched = Scheduler([*fw.tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
     holder["s"] = sched
-    fw.kernel_health = kernel_health(sched)
+    fw.kernel_health = kernel_health(sched, fw)
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
     sched.add_watchdog(wd)
     bench.attach_watchdog(wd)
     # Analyse the declared task set (worst-case costs) before running, so a fault injected through a
     # cost model during the run cannot change the bound it is compared with.
     max_bytes = {"motor": 128, "imu": 128, "logger": 64}
+    # the same interrupt model the scheduler counts (bench.interrupt_sources checked both ISR costs)
     byte_cycles = {name: (10 * f_cpu) // u.baud for name, u in bench.board.uarts().items() if name != "telemetry"}
-    sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr.get("uart_rx_byte", 0))) for n, c in byte_cycles.items()]
-    sporadic.append(_Sporadic("systick", f_cpu // int(board_cfg.get("systick_hz", 1000)), int(isr.get("systick", 0))))
+    sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr["uart_rx_byte"])) for n, c in byte_cycles.items()]
+    sporadic.append(_Sporadic("systick", bench.mcu.systick.period_cycles, int(isr["systick"])))
     bounds = response_time_bounds(_analysis_tasks(fw, max_bytes), sporadic)
     if cfg.setup:
         cfg.setup(bench, fw)
 
-    sim_s = cfg.max_duration_s or (cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05)
+    sim_s = cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05
     wall0 = time.perf_counter()
     sched.run_until(int(sim_s * f_cpu), progress=progress)
     wall = time.perf_counter() - wall0

@@ -196,9 +196,7 @@ def _open_ports(cfg: SerialRunConfig) -> _Ports:
                 continue
             try:
                 opened[role] = open_uart(url, baud, role=role)
-            except HalError as exc:
-                raise StartupError(f"{role} port {url!r}: {exc}") from exc
-            except ValueError as exc:
+            except (HalError, ValueError) as exc:
                 raise StartupError(f"{role} port {url!r}: {exc}") from exc
     except BaseException:
         for u in opened.values():
@@ -273,7 +271,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     holder["s"] = sched
-    fw.kernel_health = kernel_health(sched)
+    fw.kernel_health = kernel_health(sched, fw)
     sched.add_watchdog(wd)
     interrupted = False
     gc_was_enabled = gc.isenabled()

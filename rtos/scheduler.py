@@ -96,11 +96,6 @@ class Scheduler:
         """The tasks, highest priority first."""
         return list(self._tasks)
 
-    @property
-    def watchdogs(self) -> list[Watchdog]:
-        """The attached watchdogs."""
-        return list(self._watchdogs)
-
     def add_watchdog(self, watchdog: Watchdog) -> Watchdog:
         """Attach ``watchdog``: it is armed now and its kicks use this scheduler's ``now``."""
         watchdog.bind(self)
@@ -192,9 +187,9 @@ class Scheduler:
         self._nrel[i] = nxt
         return fault
 
-    def _overrun_fault(self, fault: Fault) -> None:
-        """Record a FAULT-policy overrun and hand it to ``on_fault`` (or raise OverrunError)."""
-        self._stat_list[next(i for i, t in enumerate(self._tasks) if t.name == fault.task)].faults += 1
+    def _overrun_fault(self, i: int, fault: Fault) -> None:
+        """Record task ``i``'s FAULT-policy overrun and hand it to ``on_fault`` (or raise OverrunError)."""
+        self._stat_list[i].faults += 1
         if self.trace is not None:
             self.trace.add_event("fault", fault.time, fault.task, fault.job)
         log.warning("overrun fault: %s", fault)
@@ -361,7 +356,7 @@ class Scheduler:
                 prev, nrel_prev, now = i, r, f
                 if fault is not None:
                     self._now = f
-                    self._overrun_fault(fault)
+                    self._overrun_fault(i, fault)
                     stopped = stopped or self._stop
                 if stopped:
                     break

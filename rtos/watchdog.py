@@ -36,8 +36,6 @@ class Watchdog:
         self.due: int | None = None
         self.resets = 0
         self.kicks = 0
-        self.reset_times: list[int] = []
-        self._max_kept = 1000
         self._time: _TimeSource | None = None
 
     def bind(self, time_source: _TimeSource) -> None:
@@ -68,8 +66,6 @@ class Watchdog:
             raise RuntimeError("watchdog is not armed")
         t = self.due
         self.resets += 1
-        if len(self.reset_times) < self._max_kept:
-            self.reset_times.append(t)
         self.due = t + self.timeout_cycles
         if self.on_reset is not None:
             self.on_reset(t)

@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import logging
 import math
-import tomllib
-from pathlib import Path
 
 import numpy as np
 
-from firmware.control.pid import CascadeController, PidGains
+from firmware.config import FirmwareConfig, load_firmware_config
+from firmware.control.pid import CascadeController
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, spring_bench
 from host_tools.benchtests.output import BenchResult, Figure
 
@@ -34,7 +33,6 @@ REPORT_TARGET_POWER_W = 1.5
 REPORT_CURRENT_A = (-0.2, 0.7)
 REPORT_PEAK_TORQUE_NM = 10.0
 REPORT_ELECTRICAL_PEAK_W = 0.39
-_PROFILE = Path(__file__).resolve().parents[2] / "profiles" / "firmware.toml"
 
 
 def omega_for_power(p: PlantParams, power_w: float = REPORT_TARGET_POWER_W) -> float:
@@ -43,18 +41,12 @@ def omega_for_power(p: PlantParams, power_w: float = REPORT_TARGET_POWER_W) -> f
     return power_w / (p.spring_stiffness_nm_per_rad * p.spring_offset_rad**2 * shape)
 
 
-def controller_from_profile(path: Path = _PROFILE) -> CascadeController:
-    """The firmware's cascade (gains, limits) from profiles/firmware.toml at 1 kHz."""
-    cfg = tomllib.loads(path.read_text())["control"]
-    pos, vel = cfg["position"], cfg["velocity"]
-    return CascadeController(PidGains(**pos), PidGains(**vel), SAMPLE_S,
-                             current_limit_a=cfg["current_limit_a"], velocity_limit_rad_s=cfg["velocity_limit_rad_s"])
-
-
-def run_load(p: PlantParams, load_kg: float, omega_rad_s: float, periods: float) -> dict[str, np.ndarray]:
-    """Track theta0 sin(wt) on the spring bench with one load; sampled signals at 1 kHz."""
+def run_load(p: PlantParams, load_kg: float, omega_rad_s: float, periods: float,
+             fw: FirmwareConfig | None = None) -> dict[str, np.ndarray]:
+    """Track theta0 sin(wt) on the spring bench with one load and the firmware's cascade; signals at 1 kHz."""
+    fw = fw or load_firmware_config()
     plant = Plant(p, spring_bench(load_kg), initial_angle_rad=0.0)
-    ctl = controller_from_profile()
+    ctl = CascadeController(fw.position_gains, fw.velocity_gains, SAMPLE_S, fw.current_limit_a, fw.velocity_limit_rad_s)
     theta0 = p.spring_offset_rad
     n = int(round(periods * 2 * math.pi / omega_rad_s / SAMPLE_S))
     out = {k: np.empty(n) for k in ("t_s", "ref_rad", "angle_rad", "velocity_rad_s", "current_a",
@@ -93,7 +85,8 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
     omega = omega_for_power(p)
     n_periods = periods if periods is not None else (1.0 if quick else 2.0)
     period_s = 2 * math.pi / omega
-    runs = {m: run_load(p, m, omega, n_periods) for m in p.load_masses_kg}
+    fw = load_firmware_config()
+    runs = {m: run_load(p, m, omega, n_periods, fw) for m in p.load_masses_kg}
     full = runs[max(runs)]
     keep = full["t_s"] >= SETTLE_S
     heavy = {k: v[keep] for k, v in full.items()}

@@ -14,7 +14,6 @@ import csv
 import dataclasses
 import json
 import math
-import os
 import sys
 from collections.abc import Callable, Iterator
 from enum import IntEnum
@@ -185,14 +184,4 @@ def run(args: argparse.Namespace) -> int:
     except DecodeError as exc:
         print(f"pafp decode: {exc}", file=sys.stderr)
         return 2
-    except BrokenPipeError:
-        _silence_stdout()
-        return 1  # the reader of our output went away (e.g. `| head`): stop quietly
     return 0
-
-
-def _silence_stdout() -> None:
-    """Point stdout at /dev/null so the interpreter's final flush does not fail again."""
-    with contextlib.suppress(OSError, ValueError, AttributeError):
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
