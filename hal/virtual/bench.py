@@ -140,8 +140,7 @@ class VirtualBench:
             raise ValueError(f"isr_cycles lacks {missing}: need uart_rx_byte and systick (cycles per ISR), "
                              "and timer_update with encoder_wraps")
         timer = int(isr_cycles["timer_update"]) if encoder_wraps else None
-        sources = self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
-        return sorted(sources, key=lambda s: not s.name.endswith("_update"))
+        return self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
 
     # -------------------------------------------------------------------- time
     def seconds(self, cycles: int) -> float:
