@@ -143,14 +143,6 @@ class VirtualBench:
         return self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
 
     # -------------------------------------------------------------------- time
-    def seconds(self, cycles: int) -> float:
-        """Convert cycles to seconds."""
-        return cycles / self.f_cpu_hz
-
-    def cycles(self, t_s: float) -> int:
-        """Convert seconds to the nearest cycle."""
-        return self.world.ticks(t_s)
-
     def advance_to(self, t_cycles: int) -> None:
         """Run every device event up to t_cycles (reads of the peripherals do this by themselves)."""
         self.world.advance_to(t_cycles)

@@ -88,7 +88,6 @@ class VirtualUart(Uart):
         self.dropped_rx = 0
         self.dropped_tx = 0
         self.tx_bytes = 0
-        self.rx_bytes = 0
 
     # Wiring ---------------------------------------------------------------------------------
     @property
@@ -221,7 +220,6 @@ class VirtualUart(Uart):
         lost = len(data) - len(kept)
         if kept:
             self._buffer += kept
-            self.rx_bytes += len(kept)
             self._in_overrun = False
         if lost:
             if not self._in_overrun:

@@ -286,7 +286,7 @@ class Ak60:
             self._sample(t)
             start(self.meter.current_a, self._velocity)
             self.mode = DriveMode.LOOP
-            self._loop_tick(t, first=True)
+            self._loop_tick(t)
 
     def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
         self._sample(t)
@@ -299,7 +299,7 @@ class Ak60:
             rotor_target = math.radians(target_deg + self.origin_deg) * gear
         self._drive_loop(t, lambda i, w: self.loops.start_position(rotor_target, i, w, erpm, accel))
 
-    def _loop_tick(self, t: int, first: bool = False) -> None:
+    def _loop_tick(self, t: int) -> None:
         if self.mode is not DriveMode.LOOP:
             self._loop_at = NEVER
             return

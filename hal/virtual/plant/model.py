@@ -205,10 +205,6 @@ class Plant:
         """q-axis current at t_s [A]."""
         return self._state_tuple(t_s)[2]
 
-    def motor_torque_nm(self, t_s: float) -> float:
-        """Electromagnetic torque on the rotor at t_s, Kt * i_q [N m]."""
-        return self.params.kt_nm_per_a * self._state_tuple(t_s)[2]
-
     def energy_j(self, t_s: float) -> float:
         """Mechanical energy at t_s: kinetic + gravity + spring + stop-contact potential [J]."""
         th, w, _, _ = self._state_tuple(t_s)
