@@ -143,7 +143,7 @@ class VirtualUart(Uart):
 
     def inject_garbage(self, data: bytes, start_cycles: int) -> list[int]:
         """Put arbitrary bytes on the RX wire (received as ordinary data); return their end cycles."""
-        return self._schedule_rx(bytes(data), start_cycles, _DATA)
+        return self.transmit_to_mcu(data, start_cycles)
 
     def inject_noise(self, data: bytes, start_cycles: int) -> list[int]:
         """Put bytes on the RX wire that arrive with the noise flag set (kept, counted as noise)."""
