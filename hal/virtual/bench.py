@@ -154,7 +154,7 @@ class VirtualBench:
     # ------------------------------------------------- SimContext of hal.binding
     def virtual_uart(self, role: str, model: str, baud: int) -> Uart:
         """The bench UART of role (motor/imu/telemetry) if model and baud match how it was built."""
-        uarts = {"motor": self.motor_uart, "imu": self.imu_uart, "telemetry": self.telemetry_uart}
+        uarts = self.mcu.uarts
         if role not in uarts:
             raise ValueError(f"role {role!r} has no UART on the bench: one of {sorted(uarts)}")
         if model not in ("", _MODELS[role]):
