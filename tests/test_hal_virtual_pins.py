@@ -110,6 +110,6 @@ def test_virtual_mcu_builds_a_board_and_lists_interrupt_sources() -> None:
     clock.t = 168_000 * 7 + 5
     assert board.ticks_ms() == 7 == mcu.systick.ticks(clock.t)
     names = [s.name for s in mcu.interrupt_sources(120, 80, timer_update_cycles=60)]
-    assert names == ["motor_rx", "imu_rx", "telemetry_rx", "systick", "encoder_update"]
+    assert names == ["encoder_update", "motor_rx", "imu_rx", "telemetry_rx", "systick"]
     with pytest.raises(ValueError, match="'motor' already used"):
         mcu.uart("motor", 115_200)

@@ -27,23 +27,21 @@ from firmware.protocol.vesc import (
     Values,
     ValuesSelective,
 )
+from firmware.protocol.vesc_values import selective_layout
 from hal.errors import HalError
 from hal.interfaces import Uart
 
 __all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "selective_reply_bytes"]
 
 # The longest reply the driver asks for: the 73-byte GET_VALUES payload, 78 bytes on the wire.
-LONGEST_REPLY_BYTES = 78
+LONGEST_REPLY_BYTES = len(Values().encode())
 # avg_iq (bit 5), erpm (7), fault (15), pid_pos (16): 18-byte payload, 23 bytes on the wire.
 FEEDBACK_MASK = (1 << 5) | (1 << 7) | (1 << 15) | (1 << 16)
-_FIELD_BYTES = {0: 2, 1: 2, 6: 2, 8: 2, 15: 1, 17: 1, 18: 6, 21: 1}
 
 
 def selective_reply_bytes(mask: int, mask_echo: bool = True) -> int:
     """Bytes on the wire of a GET_VALUES_SELECTIVE reply for `mask` (frame overhead included)."""
-    payload = 1 + (4 if mask_echo else 0)
-    payload += sum(_FIELD_BYTES.get(bit, 4) for bit in range(22) if mask >> bit & 1)
-    return payload + 5
+    return 1 + (4 if mask_echo else 0) + selective_layout(mask & 0x3FFFFF)[0].size + 5
 
 
 @dataclass
@@ -58,7 +56,6 @@ class MotorFeedback:
     temp_fet_c: float = math.nan
     v_in_v: float = math.nan
     received_s: float | None = None
-    age_s: float = math.nan
 
 
 @dataclass
@@ -149,7 +146,6 @@ class MotorDriver(LinkState):
             return
         st.replies += 1
         age = now_s - self._pending_since
-        self.feedback.age_s = age
         self.feedback.received_s = now_s
         if age > st.max_age_s:
             st.max_age_s = age

@@ -18,7 +18,7 @@ from typing import ClassVar, Self
 from firmware.protocol.vesc_frame import ShortPayloadError
 from firmware.protocol.vesc_message import CommandId, Message, WireField, field_setter
 
-__all__ = ["FIELDS", "VALUES_FIELDS", "FaultCode", "Values", "ValuesSelective"]
+__all__ = ["FIELDS", "VALUES_FIELDS", "FaultCode", "Values", "ValuesSelective", "selective_layout"]
 
 
 class FaultCode(IntEnum):
@@ -109,7 +109,7 @@ class Values(Message):
 
 
 @lru_cache(maxsize=256)
-def _layout(mask: int) -> tuple[struct.Struct, tuple[WireField, ...]]:
+def selective_layout(mask: int) -> tuple[struct.Struct, tuple[WireField, ...]]:
     """Return the struct and the fields present in a selective reply for ``mask`` (bits > 21 ignored)."""
     present = tuple(f for f in FIELDS if f.bit is not None and mask >> f.bit & 1)
     return struct.Struct(">" + "".join(f.code for f in present)), present
@@ -118,7 +118,7 @@ def _layout(mask: int) -> tuple[struct.Struct, tuple[WireField, ...]]:
 @lru_cache(maxsize=256)
 def _reader(mask: int) -> tuple[Callable[[bytes, int], tuple[int, ...]], int, tuple[tuple[str, float | None], ...]]:
     """Decode table of a selective reply for ``mask``: unpack_from, size, (name, divisor or None if int)."""
-    unpacker, present = _layout(mask)
+    unpacker, present = selective_layout(mask)
     return unpacker.unpack_from, unpacker.size, tuple((f.name, None if f.is_int else f.divisor) for f in present)
 
 
@@ -140,7 +140,7 @@ class ValuesSelective(Message):
         """Return the payload: id, mask (if echoed), then the selected fields in FIELDS order."""
         if not 0 <= self.mask <= 0xFFFFFFFF:
             raise ValueError(f"mask={self.mask!r} is outside the uint32 range [0, 4294967295]")
-        packer, present = _layout(self.mask & 0x3FFFFF)
+        packer, present = selective_layout(self.mask & 0x3FFFFF)
         names = {f.name for f in present}
         missing = [n for n in (f.name for f in present) if n not in self.values]
         extra = sorted(set(self.values) - names)
@@ -183,7 +183,7 @@ class ValuesSelective(Message):
         """Select the fields of ``mask`` from a full :class:`Values` (``status`` supplies bit 21)."""
         if not 0 <= mask <= 0xFFFFFFFF:
             raise ValueError(f"mask={mask!r} is outside the uint32 range [0, 4294967295]")
-        _, present = _layout(mask & 0x3FFFFF)
+        _, present = selective_layout(mask & 0x3FFFFF)
         selected = {f.name: status if f.name == "status" else getattr(values, f.name) for f in present}
         return cls(mask, selected, mask_echo)
 

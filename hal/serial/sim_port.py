@@ -143,8 +143,8 @@ class WallDevices:
         return dev
 
     def byte_ns(self, role: str) -> float:
-        """Duration of one 8N1 byte on role's link, in ns."""
-        return 10 * NS_PER_S / self.uarts[role].baud
+        """Duration of one 8N1 byte on role's link, in ns (its UART's clock is NS_PER_S)."""
+        return self.uarts[role].byte_cycles
 
     def next_event_ns(self) -> int:
         """The earliest scheduled device event (a time to wake up for)."""

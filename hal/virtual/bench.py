@@ -140,18 +140,9 @@ class VirtualBench:
             raise ValueError(f"isr_cycles lacks {missing}: need uart_rx_byte and systick (cycles per ISR), "
                              "and timer_update with encoder_wraps")
         timer = int(isr_cycles["timer_update"]) if encoder_wraps else None
-        sources = self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
-        return sorted(sources, key=lambda s: not s.name.endswith("_update"))
+        return self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
 
     # -------------------------------------------------------------------- time
-    def seconds(self, cycles: int) -> float:
-        """Convert cycles to seconds."""
-        return cycles / self.f_cpu_hz
-
-    def cycles(self, t_s: float) -> int:
-        """Convert seconds to the nearest cycle."""
-        return self.world.ticks(t_s)
-
     def advance_to(self, t_cycles: int) -> None:
         """Run every device event up to t_cycles (reads of the peripherals do this by themselves)."""
         self.world.advance_to(t_cycles)
@@ -163,7 +154,7 @@ class VirtualBench:
     # ------------------------------------------------- SimContext of hal.binding
     def virtual_uart(self, role: str, model: str, baud: int) -> Uart:
         """The bench UART of role (motor/imu/telemetry) if model and baud match how it was built."""
-        uarts = {"motor": self.motor_uart, "imu": self.imu_uart, "telemetry": self.telemetry_uart}
+        uarts = self.mcu.uarts
         if role not in uarts:
             raise ValueError(f"role {role!r} has no UART on the bench: one of {sorted(uarts)}")
         if model not in ("", _MODELS[role]):

@@ -84,13 +84,18 @@ class VirtualMcu:
     def interrupt_sources(
         self, uart_rx_cycles: int, systick_cycles: int, timer_update_cycles: int | None = None
     ) -> list[InterruptSourceBase]:
-        """One RX interrupt source per UART, the SysTick, and (if a cost is given) each encoder's wraps."""
-        sources: list[InterruptSourceBase] = [u.rx_interrupt(uart_rx_cycles) for u in self.uarts.values()]
-        sources.append(self.systick.interrupt(systick_cycles))
+        """Each encoder's wraps (if a cost is given), one RX interrupt source per UART, the SysTick.
+
+        The encoder sources come first: they read the angle at their window start, before a UART source
+        moves the world on.
+        """
+        sources: list[InterruptSourceBase] = []
         if timer_update_cycles is not None:
             sources += [
                 e.update_interrupt(timer_update_cycles, name=f"{n}_update") for n, e in self.encoders.items()
             ]
+        sources += [u.rx_interrupt(uart_rx_cycles) for u in self.uarts.values()]
+        sources.append(self.systick.interrupt(systick_cycles))
         return sources
 
     def board(

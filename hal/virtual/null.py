@@ -18,10 +18,8 @@ class NullUart(Uart):
     def __init__(self, baud: int, name: str = "null") -> None:
         """A UART at baud that never receives."""
         super().__init__(baud, name)
-        self.tx_bytes = 0
 
     def _send(self, data: bytes) -> int:
-        self.tx_bytes += len(data)
         return len(data)
 
     def _receive(self, max_bytes: int) -> bytes:

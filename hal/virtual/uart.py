@@ -88,7 +88,6 @@ class VirtualUart(Uart):
         self.dropped_rx = 0
         self.dropped_tx = 0
         self.tx_bytes = 0
-        self.rx_bytes = 0
 
     # Wiring ---------------------------------------------------------------------------------
     @property
@@ -144,7 +143,7 @@ class VirtualUart(Uart):
 
     def inject_garbage(self, data: bytes, start_cycles: int) -> list[int]:
         """Put arbitrary bytes on the RX wire (received as ordinary data); return their end cycles."""
-        return self._schedule_rx(bytes(data), start_cycles, _DATA)
+        return self.transmit_to_mcu(data, start_cycles)
 
     def inject_noise(self, data: bytes, start_cycles: int) -> list[int]:
         """Put bytes on the RX wire that arrive with the noise flag set (kept, counted as noise)."""
@@ -221,7 +220,6 @@ class VirtualUart(Uart):
         lost = len(data) - len(kept)
         if kept:
             self._buffer += kept
-            self.rx_bytes += len(kept)
             self._in_overrun = False
         if lost:
             if not self._in_overrun:

@@ -223,7 +223,7 @@ def _summary(devices: WallDevices, endpoints: list[Endpoint], reason: str) -> st
         if ep.role == "motor":
             st, ds = dev.stats, dev.decoder.stats  # type: ignore[union-attr]
             errors = ds.crc_errors + ds.bad_end_bytes + ds.short_payloads + ds.unknown_ids
-            counts = (f"frames_in={ds.frames} frames_out={st.replies + st.stream_frames} "
+            counts = (f"frames_in={ds.frames} frames_out={st.requests + st.stream_frames} "
                       f"errors={errors} junk_bytes={ds.dropped_bytes}")
         else:
             counts = f"frames_in=0 frames_out={dev.frames_sent} ignored_bytes={dev.bytes_ignored}"  # type: ignore[union-attr]

@@ -57,7 +57,6 @@ class Ak60Stats:
 
     commands: int = 0
     requests: int = 0
-    replies: int = 0
     stream_frames: int = 0
     timeouts: int = 0
     faults: int = 0
@@ -79,9 +78,8 @@ class Ak60:
         self.stats = Ak60Stats()
         self.loops = InnerLoops(cfg, p)
         t0_s = plant.latest_time_s
-        self._angle = plant.motor_angle_rad(t0_s)
-        self._velocity = plant.motor_velocity_rad_s(t0_s)
-        self.meter = Ak60Meter(cfg, p, t0_s, self._angle, plant.current_q_a(t0_s), self._velocity)
+        current_a, self._velocity, self._angle = plant.motor_sample(t0_s)
+        self.meter = Ak60Meter(cfg, p, t0_s, self._angle, current_a, self._velocity)
         self._latency = world.ticks(cfg.reply_latency_s)
         self._stream_period = max(1, world.ticks(cfg.stream_period_s))
         self._loop_period = max(1, world.ticks(cfg.inner_loop_period_s))
@@ -245,7 +243,6 @@ class Ak60:
                 continue  # Unknown ids are counted by the decoder and ignored
             if isinstance(msg, _QUERIES):
                 self.stats.requests += 1
-                self.stats.replies += 1
             else:
                 self.stats.commands += 1
                 self._timeout_at = t + self._timeout if self._timeout else NEVER
@@ -286,7 +283,7 @@ class Ak60:
             self._sample(t)
             start(self.meter.current_a, self._velocity)
             self.mode = DriveMode.LOOP
-            self._loop_tick(t, first=True)
+            self._loop_tick(t)
 
     def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
         self._sample(t)
@@ -299,7 +296,7 @@ class Ak60:
             rotor_target = math.radians(target_deg + self.origin_deg) * gear
         self._drive_loop(t, lambda i, w: self.loops.start_position(rotor_target, i, w, erpm, accel))
 
-    def _loop_tick(self, t: int, first: bool = False) -> None:
+    def _loop_tick(self, t: int) -> None:
         if self.mode is not DriveMode.LOOP:
             self._loop_at = NEVER
             return
@@ -325,13 +322,13 @@ class Ak60:
     def _check_limits(self, t: int) -> None:
         cfg, m = self.config, self.meter
         if abs(m.current_a) > cfg.abs_max_current_a:
-            code = 4  # ABS_OVER_CURRENT
+            code = vesc.FaultCode.ABS_OVER_CURRENT
         elif m.temp_fet_c > cfg.temp_fet_max_c:
-            code = 5  # OVER_TEMP_FET
+            code = vesc.FaultCode.OVER_TEMP_FET
         elif m.temp_motor_c > cfg.temp_motor_max_c:
-            code = 6  # OVER_TEMP_MOTOR
+            code = vesc.FaultCode.OVER_TEMP_MOTOR
         elif m.v_in_v < cfg.min_input_voltage_v:
-            code = 2  # UNDER_VOLTAGE
+            code = vesc.FaultCode.UNDER_VOLTAGE
         else:
             return
         self._raise_fault(code, t, self._fault_stop)

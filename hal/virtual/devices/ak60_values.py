@@ -15,7 +15,8 @@ import struct
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
-from firmware.protocol.vesc import FIELDS, CommandId, WireField
+from firmware.protocol.vesc import CommandId, WireField
+from firmware.protocol.vesc_values import selective_layout
 
 if TYPE_CHECKING:
     from hal.virtual.devices.ak60 import Ak60
@@ -89,15 +90,15 @@ class ValueSource:
     def selective_payload(self, mask: int, mask_echo: bool = True) -> bytes:
         """The GET_VALUES_SELECTIVE reply payload for mask (same bytes as ``ValuesSelective.payload``).
 
-        The layout for each mask is compiled once: the codec's field table (bits > 21 ignored), its
-        ``WireField.to_raw`` scaling, one ``struct`` for the fields present.
+        The layout for each mask is compiled once: the codec's ``selective_layout`` (one ``struct`` for
+        the fields present, bits > 21 ignored) and its ``WireField.to_raw`` scaling.
         """
         entry = self._layouts.get((mask, mask_echo))
         if entry is None:
-            present = tuple(f for f in FIELDS if f.bit is not None and (mask & 0x3FFFFF) >> f.bit & 1)
+            packer, present = selective_layout(mask & 0x3FFFFF)
             cid = int(CommandId.GET_VALUES_SELECTIVE)
             head = struct.pack(">BI", cid, mask) if mask_echo else bytes((cid,))
-            entry = (present, head, struct.Struct(">" + "".join(f.code for f in present)).pack)
+            entry = (present, head, packer.pack)
             self._layouts[(mask, mask_echo)] = entry
         present, head, pack = entry
         getters = self._getters

@@ -25,7 +25,7 @@ class PlantView:
 
     _TIMED = frozenset({
         "advance_to", "state_at", "output_angle_rad", "output_velocity_rad_s", "output_accel_rad_s2",
-        "motor_angle_rad", "motor_velocity_rad_s", "current_q_a", "motor_sample", "motor_torque_nm", "energy_j",
+        "motor_angle_rad", "motor_velocity_rad_s", "current_q_a", "motor_sample", "energy_j",
         "set_current_command", "set_brake_current", "set_powered", "set_external_torque",
     })
 

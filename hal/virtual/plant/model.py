@@ -94,7 +94,7 @@ class Plant:
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
             bscale=p.total_ratio / p.brake_speed_scale_rad_s)
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
-        self._grid_exps = (step_s, lag_factors(step_s, self._c.tau))  # for whole grid steps
+        self._grid_lag = lag_factors(step_s, self._c.tau)  # current-lag factors of one grid step
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
         self._t0 = start_time_s
         self._k = 0
@@ -205,10 +205,6 @@ class Plant:
         """q-axis current at t_s [A]."""
         return self._state_tuple(t_s)[2]
 
-    def motor_torque_nm(self, t_s: float) -> float:
-        """Electromagnetic torque on the rotor at t_s, Kt * i_q [N m]."""
-        return self.params.kt_nm_per_a * self._state_tuple(t_s)[2]
-
     def energy_j(self, t_s: float) -> float:
         """Mechanical energy at t_s: kinetic + gravity + spring + stop-contact potential [J]."""
         th, w, _, _ = self._state_tuple(t_s)
@@ -310,11 +306,9 @@ class Plant:
         t = self._t
         if self._t_break < t + dt:
             return None
-        if self._grid_exps[0] != dt:
-            self._grid_exps = (dt, lag_factors(dt, self._c.tau))
         c, x0 = self._c, self._x
         x1 = integrate(c, self._drive, x0, self._t0, self._k, 1, dt, self._ea, self._eb, self._fn,
-                       self._grid_exps[1])
+                       self._grid_lag)
         t1 = self._t0 + (self._k + 1) * dt
         a0 = accel(c, x0[0], x0[1], x0[2], self._ext_value(t), x0[3])
         a1 = accel(c, x1[0], x1[1], x1[2], self._ext_value(t1), x1[3])
@@ -357,10 +351,8 @@ class Plant:
                     k += 1
                     n -= 1
                 if n > 0:
-                    if self._grid_exps[0] != dt:
-                        self._grid_exps = (dt, lag_factors(dt, self._c.tau))
                     self._x = integrate(self._c, self._drive, self._x, t0, k, n, dt, self._ea, self._eb,
-                                        self._fn, self._grid_exps[1])
+                                        self._fn, self._grid_lag)
                 self._k = k + n
                 self._t = t0 + self._k * dt
             if tb > t_s:
