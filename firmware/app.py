@@ -21,6 +21,7 @@ from firmware.drivers.encoder import EncoderDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor import MotorDriver
 from firmware.logger import TelemetryLogger
+from firmware.protocol.rvc import RVC_RATE_HZ
 from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
 from hal.interfaces import Board
 from rtos import Job, OverrunPolicy, Task
@@ -63,10 +64,12 @@ class Firmware:
         self.logger = TelemetryLogger(board.telemetry_uart)
         self.supervisor = Supervisor(c.safety)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
-        self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, 100.0)
+        self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
                            if c.imu_lowpass_hz > 0 else None)
         self.cascade = CascadeController(c.position_gains, c.velocity_gains, self.ts_s,
                                          c.current_limit_a, c.velocity_limit_rad_s)
+        ff = c.feedforward_params
+        self._nm_per_a = ff.torque_constant_nm_per_a * ff.gear_ratio * ff.efficiency  # output torque per motor amp
         self.kernel_health: KernelHealth = kernel_health or (lambda: (0, 0))
         self.out = ControlOutput()
         self._safety_inputs = SafetyInputs(now_s=0.0, angle_rad=0.0)
@@ -125,7 +128,7 @@ class Firmware:
         x.current_meas_a = feedback.current_a
         x.last_motor_reply_s = feedback.received_s
         x.last_imu_frame_s = self.imu.last_frame_s
-        x.disagreement_rad = estimator.disagreement_rad if estimator.seeded else 0.0
+        x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_fault_code = feedback.fault
         x.estop_pressed = self.board.estop.read()
         x.link_lost = self.motor.link_lost or self.imu.link_lost
@@ -166,9 +169,7 @@ class Firmware:
         before = self.motor.decoder.stats.bytes_in
         self.motor.poll(now_s)
         written = self.motor.send(self.out.current_cmd_a, now_s, brake=self.out.brake)
-        p = self.config.feedforward_params
-        self.out.torque_est_nm = (self.motor.feedback.current_a * p.torque_constant_nm_per_a
-                                  * p.gear_ratio * p.efficiency)
+        self.out.torque_est_nm = self.motor.feedback.current_a * self._nm_per_a
         return written + self.motor.decoder.stats.bytes_in - before
 
     def _logger_task(self, job: Job) -> int:

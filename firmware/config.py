@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ from firmware.safety import SafetyLimits
 __all__ = ["DEFAULT_PROFILE", "CostModel", "FirmwareConfig", "load_firmware_config"]
 
 DEFAULT_PROFILE = Path(__file__).resolve().parents[1] / "profiles" / "firmware.toml"
+RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
 
 
 @dataclass(frozen=True)
@@ -58,10 +59,8 @@ class FirmwareConfig:
 
     def __post_init__(self) -> None:
         """Check the rates divide sensibly into the control rate."""
-        for name in ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or not 1 <= value <= 10_000:
-                raise ValueError(f"{name} {value!r} out of range: an int in 1..10000 Hz")
+        for name in RATE_FIELDS:
+            check_int_range(name, getattr(self, name), 1, 10_000)
         check_int_range("imu_lowpass_order", self.imu_lowpass_order, *ORDER_RANGE)
         if self.full_values_hz > self.control_hz:
             raise ValueError(
@@ -85,6 +84,28 @@ def _gains(table: dict[str, Any], where: str) -> PidGains:
         raise ValueError(f"[{where}] in the firmware profile: {e}") from None
 
 
+def _rates(table: dict[str, Any]) -> dict[str, Any]:
+    """[rates_hz] keys as FirmwareConfig fields (`control` -> `control_hz`); TypeError names an unknown key."""
+    out = {}
+    for key, value in table.items():
+        if f"{key}_hz" not in RATE_FIELDS:
+            raise TypeError(f"[rates_hz] has no key {key!r}")
+        out[f"{key}_hz"] = value
+    return out
+
+
+def _safety(table: dict[str, Any]) -> dict[str, Any]:
+    """[safety] keys as SafetyLimits fields (`*_deg` in degrees -> `*_rad`); TypeError names an unknown key."""
+    known = {f.name for f in fields(SafetyLimits)}
+    out = {}
+    for key, value in table.items():
+        name, converted = (key[:-len("_deg")] + "_rad", math.radians(value)) if key.endswith("_deg") else (key, value)
+        if name not in known:
+            raise TypeError(f"[safety] has no key {key!r}")
+        out[name] = converted
+    return out
+
+
 def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
@@ -98,22 +119,12 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         rates, ctl, saf = doc.get("rates_hz", {}), doc.get("control", {}), doc.get("safety", {})
         ctl = dict(ctl)
         pos, vel = ctl.pop("position", {}), ctl.pop("velocity", {})
-        limits = SafetyLimits(
-            angle_min_rad=math.radians(saf.get("angle_min_deg", -33.0)),
-            angle_max_rad=math.radians(saf.get("angle_max_deg", 38.0)),
-            disagreement_rad=math.radians(saf.get("disagreement_deg", 6.0)),
-            **{k: v for k, v in saf.items() if not k.endswith("_deg")},
-        )
         return FirmwareConfig(
-            control_hz=rates.get("control", 1000),
-            imu_poll_hz=rates.get("imu_poll", 500),
-            logger_hz=rates.get("logger", 500),
-            watchdog_kick_hz=rates.get("watchdog_kick", 100),
-            full_values_hz=rates.get("full_values", 10),
+            **_rates(rates),
             position_gains=_gains(pos, "control.position"),
             velocity_gains=_gains(vel, "control.velocity"),
             feedforward_params=FeedforwardParams(**doc.get("feedforward", {})),
-            safety=limits,
+            safety=SafetyLimits(**_safety(saf)),
             task_cycles={k: CostModel(**v) for k, v in doc.get("task_cycles", {}).items()},
             **ctl,
         )

@@ -6,9 +6,7 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
-from typing import Any
-
-from firmware.protocol.telemetry import TelemetryRecord, encode_record, encode_record_values
+from firmware.protocol.telemetry import encode_record_values
 from hal.errors import HalError
 from hal.interfaces import Uart
 
@@ -24,15 +22,12 @@ class TelemetryLogger:
         self.seq = 0
         self.sent = 0
         self.dropped = 0
-        self.link_lost = False  # the telemetry port failed: records are dropped, control goes on
-
-    def log(self, time_cycles: int, **fields: Any) -> int:
-        """Frame and queue one record; return bytes written (0 if dropped for lack of room)."""
-        return self._queue(encode_record(TelemetryRecord(seq=self.seq & 0xFFFFFFFF, time_cycles=time_cycles,
-                                                         **fields)))
 
     def log_values(self, time_cycles: int, *values: float | int) -> int:
-        """Like `log` with every field after time_cycles given positionally in RECORD_FIELDS order."""
+        """Frame and queue one record, every field after time_cycles given positionally in RECORD_FIELDS order.
+
+        Return bytes written (0 if dropped for lack of room).
+        """
         return self._queue(encode_record_values(self.seq & 0xFFFFFFFF, time_cycles, *values))
 
     def _queue(self, frame: bytes) -> int:
@@ -43,8 +38,7 @@ class TelemetryLogger:
                 self.dropped += 1
                 return 0
             self.uart.write(frame)
-        except HalError:
-            self.link_lost = True
+        except HalError:  # the telemetry port failed: the record is dropped, control goes on
             self.dropped += 1
             return 0
         self.sent += 1

@@ -88,7 +88,6 @@ class Supervisor:
         self.state = SupervisorState.INIT
         self.reason = FaultReason.NONE
         self.tripped_at_s: float | None = None
-        self.trips = 0
 
     @property
     def healthy(self) -> bool:
@@ -102,7 +101,6 @@ class Supervisor:
         self.state = SupervisorState.SAFE
         self.reason = reason
         self.tripped_at_s = now_s
-        self.trips += 1
         log.warning("safe state at %.4f s: %s", now_s, reason.name)
 
     def check(self, x: SafetyInputs) -> SupervisorState:

@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from firmware.protocol import rvc
-from firmware.protocol.rvc import RvcFrame, RvcRaw, from_bytes, pack_raw, unpack_raw
+from firmware.protocol.rvc import RvcDecoder, RvcFrame, RvcRaw, pack_raw, unpack_raw
 
 DATASHEET = bytes.fromhex("AA AA DE 01 00 92 FF 25 08 8D FE EC FF D1 03 00 00 00 E7")
 CONSTRUCTED = bytes.fromhex("AA AA 2A D2 04 C9 FD E2 45 0C 00 DE FF EA 03 00 00 00 C3")
@@ -19,7 +19,7 @@ raws = st.builds(RvcRaw, uint8, int16, int16, int16, int16, int16, int16, uint8,
 
 
 def test_datasheet_vector_decodes_to_the_datasheet_values():
-    f = from_bytes(DATASHEET)
+    f = RvcFrame.from_bytes(DATASHEET)
     assert f.index == 222
     assert math.degrees(f.yaw_rad) == pytest.approx(0.01, rel=1e-12)
     assert math.degrees(f.pitch_rad) == pytest.approx(-1.10, rel=1e-12)
@@ -32,7 +32,7 @@ def test_datasheet_vector_decodes_to_the_datasheet_values():
 
 
 def test_constructed_vector_decodes_like_the_adafruit_parser():
-    f = from_bytes(CONSTRUCTED)
+    f = RvcFrame.from_bytes(CONSTRUCTED)
     assert f.index == 0x2A
     degs = [round(math.degrees(a), 2) for a in (f.yaw_rad, f.pitch_rad, f.roll_rad)]
     assert degs == [12.34, -5.67, 178.9]
@@ -42,8 +42,8 @@ def test_constructed_vector_decodes_like_the_adafruit_parser():
 
 @pytest.mark.parametrize("frame", [DATASHEET, CONSTRUCTED])
 def test_vectors_reencode_byte_exact(frame):
-    assert from_bytes(frame).encode() == frame
-    assert RvcFrame.from_bytes(frame) == from_bytes(frame)
+    assert RvcFrame.from_bytes(frame).encode() == frame
+    assert RvcDecoder().feed(frame) == [RvcFrame.from_bytes(frame)]  # the stream decoder's path agrees
 
 
 def test_constructed_vector_encodes_from_values_given_in_degrees_and_mg():
@@ -71,7 +71,7 @@ def test_raw_round_trip_over_full_field_ranges(raw):
     assert len(wire) == 19 and wire[:2] == b"\xaa\xaa" and wire[17] == 0
     assert wire[18] == sum(wire[2:18]) % 256
     assert unpack_raw(wire) == raw
-    frame = from_bytes(wire)
+    frame = RvcFrame.from_bytes(wire)
     assert frame.to_raw() == raw
     assert frame.encode() == wire
 
@@ -86,7 +86,7 @@ def test_encode_truncates_toward_zero(lsb_value, field_and_lsb):
     values = dict(index=0, yaw_rad=0.0, pitch_rad=0.0, roll_rad=0.0,
                   accel_x_mps2=0.0, accel_y_mps2=0.0, accel_z_mps2=0.0)
     values[name] = si
-    decoded = getattr(from_bytes(RvcFrame(**values).encode()), name)
+    decoded = getattr(RvcFrame.from_bytes(RvcFrame(**values).encode()), name)
     assert abs(decoded) <= abs(si) * (1 + 1e-12)  # never rounded away from zero
     assert abs(si - decoded) < lsb * (1 + 1e-9)  # by less than one LSB
 
@@ -138,17 +138,17 @@ def test_largest_values_that_fit_encode():
 )
 def test_from_bytes_rejects_bad_frames(frame, needle):
     with pytest.raises(ValueError, match=needle):
-        from_bytes(frame)
+        RvcFrame.from_bytes(frame)
 
 
 def test_reserved_byte_is_covered_by_checksum_but_ignored():
     body = bytearray(CONSTRUCTED)
     body[17] = 0x55
     body[18] = sum(body[2:18]) % 256
-    assert from_bytes(bytes(body)) == from_bytes(CONSTRUCTED)
+    assert RvcFrame.from_bytes(bytes(body)) == RvcFrame.from_bytes(CONSTRUCTED)
 
 
 def test_motion_intent_and_request_sit_in_bytes_15_and_16():
     wire = RvcFrame(1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, motion_intent=3, motion_request=4).encode()
     assert (wire[15], wire[16], wire[17]) == (3, 4, 0)
-    assert from_bytes(wire).motion_intent == 3 and from_bytes(wire).motion_request == 4
+    assert RvcFrame.from_bytes(wire).motion_intent == 3 and RvcFrame.from_bytes(wire).motion_request == 4

@@ -85,3 +85,17 @@ def test_pafp_tune_writes_profile_json_and_plot(tmp_path, capsys):
     assert "before: RMS" in printed and "after:  RMS" in printed
     assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet",
                  "--out", str(tmp_path / "run")]) == 0
+
+
+@pytest.mark.parametrize(("old", "new", "needle"), [
+    ("control = 1000", "contrl = 1000", "[rates_hz] has no key 'contrl'"),
+    ("angle_min_deg = -33.0", "angle_mni_deg = -33.0", "[safety] has no key 'angle_mni_deg'"),
+])
+def test_profile_with_a_misspelled_key_is_refused_naming_the_key(tmp_path, old, new, needle):
+    text = DEFAULT_PROFILE.read_text(encoding="utf-8")
+    assert text.count(old) == 1
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(old, new), encoding="utf-8")
+    with pytest.raises(ValueError, match="unknown or missing key") as info:
+        load_firmware_config(bad)
+    assert needle in str(info.value) and str(bad) in str(info.value)

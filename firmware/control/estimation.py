@@ -86,8 +86,7 @@ class VelocityEstimator:
         self._prev = count
         if prev is None:
             return self._angle, self._velocity
-        half = self.counter_modulus >> 1
-        delta = ((count - prev + half) % self.counter_modulus) - half
+        delta = wrap_delta_counts(count, prev, self.counter_modulus)
         self._total += delta
         self._angle = self._total * self._rad_per_count
         self._raw_velocity = delta * self._vel_gain
@@ -98,16 +97,6 @@ class VelocityEstimator:
     def total_counts(self) -> int:
         """Accumulated signed counts since the first sample (before the direction sign)."""
         return self._total
-
-    @property
-    def angle_rad(self) -> float:
-        """Continuous output angle since the first sample, radians."""
-        return self._angle
-
-    @property
-    def velocity_rad_s(self) -> float:
-        """Low-pass filtered velocity, rad/s."""
-        return self._velocity
 
     @property
     def raw_velocity_rad_s(self) -> float:
@@ -132,7 +121,7 @@ class AngleEstimator:
     """
 
     __slots__ = ("ts_s", "offset_tau_s", "imu_lag_s", "_lag_beta", "_enc_lagged", "_offset", "_seeded",
-                 "_since_imu", "_disagreement", "_angle", "imu_samples")
+                 "_since_imu", "_disagreement", "imu_samples")
 
     def __init__(self, ts_s: float, offset_tau_s: float = 2.0, imu_lag_s: float = IMU_LAG_S) -> None:
         """Build for control period ts_s, offset time constant offset_tau_s, IMU lag constant imu_lag_s."""
@@ -152,7 +141,6 @@ class AngleEstimator:
         self._seeded = False
         self._since_imu = 0
         self._disagreement = 0.0
-        self._angle = 0.0
         self.imu_samples = 0
 
     def update(self, encoder_angle_rad: float, imu_pitch_rad: float | None) -> float:
@@ -176,14 +164,7 @@ class AngleEstimator:
                 gain = 1.0 - math.exp(-self._since_imu * self.ts_s / self.offset_tau_s)
                 self._offset += gain * innovation
             self._since_imu = 0
-        angle = encoder_angle_rad + self._offset
-        self._angle = angle
-        return angle
-
-    @property
-    def angle_rad(self) -> float:
-        """Last fused absolute angle, radians."""
-        return self._angle
+        return encoder_angle_rad + self._offset
 
     @property
     def offset_rad(self) -> float:
@@ -199,8 +180,3 @@ class AngleEstimator:
     def disagreement_rad(self) -> float:
         """|imu - (lagged encoder + offset)| at the last IMU sample, radians (for the safety supervisor)."""
         return self._disagreement
-
-    @property
-    def samples_since_imu(self) -> int:
-        """Control samples since the last IMU sample."""
-        return self._since_imu

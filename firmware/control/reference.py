@@ -150,7 +150,6 @@ class GaitReference(_Sampled):
             self.closure_offset_deg = 0.0
             yc = y + [y[0]]
             pc = p + [100.0]
-        self.corrected_angle_deg = tuple(yc[: len(p)])
         self._sd_percent = pc
         self._sd = None if sd_deg is None else (sd + [sd[0]] if len(pc) > len(p) else sd)
         x = np.asarray(pc) / 100.0 * self.stride_s

@@ -75,11 +75,15 @@ def unpack_raw(frame: bytes) -> RvcRaw:
         raise ValueError(f"RVC frame length {len(frame)} is invalid: must be exactly {RVC_FRAME_LEN} bytes")
     if frame[:2] != RVC_HEADER:
         raise ValueError(f"RVC header {frame[:2].hex(' ')} is invalid: must be aa aa")
-    body = frame[2:18]
-    expected = rvc_checksum(body)
+    expected = rvc_checksum(frame[2:18])
     if frame[18] != expected:
         raise ValueError(f"RVC checksum 0x{frame[18]:02x} is wrong: bytes 2..17 sum to 0x{expected:02x}")
-    *values, _reserved = _BODY.unpack(body)
+    return _raw_at(frame, 0)
+
+
+def _raw_at(buf: bytes | bytearray, start: int) -> RvcRaw:
+    """Wire-unit values of the frame at buf[start:], its length, header and checksum already verified."""
+    *values, _reserved = _BODY.unpack_from(buf, start + 2)
     return RvcRaw(*values)
 
 
@@ -154,11 +158,6 @@ class RvcFrame:
         return cls.from_raw(unpack_raw(frame))
 
 
-def from_bytes(frame: bytes) -> RvcFrame:
-    """Decode exactly one 19-byte frame (same as RvcFrame.from_bytes)."""
-    return RvcFrame.from_bytes(frame)
-
-
 @dataclass
 class RvcStats:
     """Counters of an RvcDecoder: each input byte is in a frame, banner_bytes, dropped_bytes or pending."""
@@ -196,7 +195,7 @@ class RvcDecoder:
                         break  # maybe the start of a frame: wait for the rest
                 elif buf[i + 1] == 0xAA:
                     if rvc_checksum(buf[i + 2 : i + 18]) == buf[i + 18]:
-                        frames.append(self._accept(bytes(buf[i : i + RVC_FRAME_LEN])))
+                        frames.append(self._accept(_raw_at(buf, i)))  # header and checksum just checked
                         i += RVC_FRAME_LEN
                         continue
                     self.stats.checksum_errors += 1
@@ -232,10 +231,10 @@ class RvcDecoder:
         self._last_index = None
         self._after_banner = False
 
-    def _accept(self, frame: bytes) -> RvcFrame:
+    def _accept(self, raw: RvcRaw) -> RvcFrame:
         """Count a good frame, its index gap, and convert it."""
         self._after_banner = False
-        msg = RvcFrame.from_raw(unpack_raw(frame))
+        msg = RvcFrame.from_raw(raw)
         if self._last_index is not None:
             gap = (msg.index - self._last_index - 1) % 256
             if gap:

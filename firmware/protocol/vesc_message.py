@@ -117,10 +117,6 @@ class WireField:
         """Return the wire integer for ``value``; ValueError naming value and range if it does not fit."""
         return to_raw(value, self.divisor, self.code, self.name, self.is_int)
 
-    def from_raw(self, raw: int) -> float | int:
-        """Return the API value of the wire integer ``raw``."""
-        return raw if self.is_int else raw / self.divisor
-
 
 class Message:
     """Base of every VESC message (each subclass is a ``@dataclass(frozen=True, slots=True)``).
