@@ -54,6 +54,7 @@ COMPILED = [
     "firmware/control/estimation.py",
     "firmware/control/filters.py",
     "firmware/protocol/vesc_frame.py",
+    "firmware/protocol/vesc_codec.py",
     "firmware/protocol/rvc.py",
     "firmware/protocol/cobs.py",
 ]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 from firmware.drivers.link import LinkState
 from firmware.protocol.vesc import (
@@ -27,6 +28,7 @@ from firmware.protocol.vesc import (
     Values,
     ValuesSelective,
 )
+from firmware.protocol.vesc_codec import MessageCodec
 from firmware.protocol.vesc_values import selective_layout
 from hal.errors import HalError
 from hal.interfaces import Uart
@@ -34,9 +36,9 @@ from hal.interfaces import Uart
 __all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "selective_reply_bytes"]
 
 # The longest reply the driver asks for: the 73-byte GET_VALUES payload, 78 bytes on the wire.
-LONGEST_REPLY_BYTES = len(Values().encode())
+LONGEST_REPLY_BYTES: Final = len(Values().encode())
 # avg_iq (bit 5), erpm (7), fault (15), pid_pos (16): 18-byte payload, 23 bytes on the wire.
-FEEDBACK_MASK = (1 << 5) | (1 << 7) | (1 << 15) | (1 << 16)
+FEEDBACK_MASK: Final = (1 << 5) | (1 << 7) | (1 << 15) | (1 << 16)
 
 
 def selective_reply_bytes(mask: int, mask_echo: bool = True) -> int:
@@ -84,6 +86,8 @@ class MotorDriver(LinkState):
         self.decoder = Decoder("from-motor")
         self.feedback = MotorFeedback()
         self.stats = MotorLinkStats()
+        self._current_codec: MessageCodec = SetCurrent.codec()  # frames straight from the float
+        self._brake_codec: MessageCodec = SetCurrentBrake.codec()
         self._selective_request = GetValuesSelective(feedback_mask).encode()
         self._full_request = GetValues().encode()
         self._pending_since: float | None = None
@@ -153,8 +157,7 @@ class MotorDriver(LinkState):
 
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Write the current (or brake) command, then a feedback request; return bytes written."""
-        command = SetCurrentBrake(current_a) if brake else SetCurrent(current_a)
-        frame = command.encode()
+        frame = (self._brake_codec if brake else self._current_codec).frame((current_a,))
         if request and self._skip_request:  # a full reply is still on the wire: let it finish
             request, self._skip_request = False, False
         if request:

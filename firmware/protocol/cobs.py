@@ -8,8 +8,11 @@ per started 254 bytes of input.
 
 from __future__ import annotations
 
-_MAX_RUN = 254
-_CODES = tuple(bytes((n + 1,)) for n in range(_MAX_RUN))  # code byte of a group of n data bytes
+from typing import Final
+
+from mypy_extensions import i64
+
+_MAX_RUN: Final = 254
 
 
 def cobs_encode(data: bytes) -> bytes:
@@ -18,19 +21,29 @@ def cobs_encode(data: bytes) -> bytes:
     >>> cobs_encode(b"\\x11\\x00\\x22\\x33").hex(" ")
     '02 11 03 22 33'
     """
+    n: i64 = len(data)
+    if n < _MAX_RUN:  # no group can fill up: each zero becomes the code of the group after it
+        out = bytearray(b"\x01" + data)  # out[k + 1] is data[k]; out[0] is the first group's code
+        code_at: i64 = 0
+        k: i64 = 0
+        while k < n:
+            if data[k] == 0:
+                out[code_at] = k + 1 - code_at
+                code_at = k + 1
+            k += 1
+        out[code_at] = n + 1 - code_at
+        return bytes(out)
     segments = bytes(data).split(b"\x00")
-    if len(data) < _MAX_RUN:  # no group can fill up: each zero-free segment is its code + its bytes
-        return b"".join([_CODES[len(segment)] + segment for segment in segments])
     out = bytearray()
     last = len(segments) - 1
-    for k, segment in enumerate(segments):
+    for j, segment in enumerate(segments):
         full_runs = False
         while len(segment) >= _MAX_RUN:
             out.append(0xFF)
             out += segment[:_MAX_RUN]
             segment = segment[_MAX_RUN:]
             full_runs = True
-        if k < last or segment or not full_runs:  # a final 0xFF group needs no empty group after it
+        if j < last or segment or not full_runs:  # a final 0xFF group needs no empty group after it
             out.append(len(segment) + 1)
             out += segment
     return bytes(out)

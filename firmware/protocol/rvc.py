@@ -16,24 +16,25 @@ import logging
 import math
 import struct
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Final, NamedTuple
 
-logger = logging.getLogger(__name__)
+logger: Final = logging.getLogger(__name__)
 
-RVC_HEADER: bytes = b"\xaa\xaa"
-RVC_FRAME_LEN: int = 19
-RVC_BAUD: int = 115200
-RVC_RATE_HZ: int = 100
-MG_TO_MPS2: float = 0.00980665  # 1 milli-g in m/s^2 (standard gravity 9.80665 m/s^2 / 1000)
-CENTIDEG_TO_RAD: float = math.pi / 18000.0  # one LSB of yaw/pitch/roll (0.01 degree) in radians
-BANNER_START: int = 0x25  # '%': every boot banner line of the BNO08x starts with it (datasheet §5.1)
-MAX_BANNER_LINE: int = 128  # longest banner line accepted before the '%' is treated as junk
+RVC_HEADER: Final[bytes] = b"\xaa\xaa"
+RVC_FRAME_LEN: Final[int] = 19
+RVC_BAUD: Final[int] = 115200
+RVC_RATE_HZ: Final[int] = 100
+MG_TO_MPS2: Final[float] = 0.00980665  # 1 milli-g in m/s^2 (standard gravity 9.80665 m/s^2 / 1000)
+CENTIDEG_TO_RAD: Final[float] = math.pi / 18000.0  # one LSB of yaw/pitch/roll (0.01 degree) in radians
+BANNER_START: Final[int] = 0x25  # '%': every boot banner line of the BNO08x starts with it (datasheet §5.1)
+MAX_BANNER_LINE: Final[int] = 128  # longest banner line accepted before the '%' is treated as junk
 
-_INT16_MIN, _INT16_MAX = -32768, 32767
-_SNAP_LSB = 1e-6  # a scaled value this close to an integer is that integer (float round-off, not data)
-_BODY = struct.Struct("<B6hBBB")  # bytes 2..17: index, yaw, pitch, roll, ax, ay, az, MI, MR, reserved
-_PRINTABLE = frozenset(range(0x20, 0x7F)) | {0x09}
-_LINE_END = frozenset({0x0A, 0x0D})
+_INT16_MIN: Final = -32768
+_INT16_MAX: Final = 32767
+_SNAP_LSB: Final = 1e-6  # a scaled value this close to an integer is that integer (float round-off, not data)
+_BODY: Final = struct.Struct("<B6hBBB")  # bytes 2..17: index, yaw, pitch, roll, ax, ay, az, MI, MR, reserved
+_PRINTABLE: Final = frozenset(range(0x20, 0x7F)) | {0x09}
+_LINE_END: Final = frozenset({0x0A, 0x0D})
 
 
 class RvcRaw(NamedTuple):

@@ -18,7 +18,7 @@ import re
 import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
-from typing import Generic, TypeVar
+from typing import Final, Generic, TypeVar
 
 import crcmod
 from mypy_extensions import mypyc_attr
@@ -37,30 +37,30 @@ __all__ = [
     "encode_frame",
 ]
 
-_log = logging.getLogger(__name__)
+_log: Final = logging.getLogger(__name__)
 
-START_SHORT = 0x02
+START_SHORT: Final = 0x02
 """Start byte of a frame with a one-byte length (payload 1..255 bytes)."""
-START_LONG = 0x03
+START_LONG: Final = 0x03
 """Start byte of a frame with a two-byte length (payload 256..512 bytes)."""
-END_BYTE = 0x03
+END_BYTE: Final = 0x03
 """Last byte of every frame."""
-PACKET_MAX_PL_LEN = 512
+PACKET_MAX_PL_LEN: Final = 512
 """Largest payload VESC >= 3.67 accepts (``comm/packet.h``)."""
-MAX_FRAME_LEN = PACKET_MAX_PL_LEN + 6
+MAX_FRAME_LEN: Final = PACKET_MAX_PL_LEN + 6
 """Largest frame on the wire: long header (3) + payload + CRC (2) + end byte (1)."""
 
 crc16_reference: Callable[[bytes], int] = crcmod.mkCrcFun(0x11021, initCrc=0, rev=False, xorOut=0)
 """CRC-16/XMODEM as defined by crcmod: the definition the fast :func:`crc16` is tested against."""
 
-_crc_hqx = binascii.crc_hqx
-_SHORT_HEAD = struct.Struct(">BB")
-_LONG_HEAD = struct.Struct(">BH")
-_TAIL = struct.Struct(">HB")
-_pack_tail = _TAIL.pack
-_SHORT_HEADS = tuple(_SHORT_HEAD.pack(START_SHORT, n) for n in range(256))
+_crc_hqx: Final = binascii.crc_hqx
+_SHORT_HEAD: Final = struct.Struct(">BB")
+_LONG_HEAD: Final = struct.Struct(">BH")
+_TAIL: Final = struct.Struct(">HB")
+_pack_tail: Final = _TAIL.pack
+_SHORT_HEADS: Final = tuple(_SHORT_HEAD.pack(START_SHORT, n) for n in range(256))
 """Header of a short frame, indexed by payload length (index 0 unused)."""
-_START_RE = re.compile(b"[\x02\x03]")
+_START_RE: Final = re.compile(b"[\x02\x03]")
 
 
 def crc16(data: bytes) -> int:

@@ -24,20 +24,11 @@ from operator import attrgetter, truediv
 from types import MemberDescriptorType
 from typing import Any, ClassVar, Self
 
+from firmware.protocol.vesc_codec import RANGES as _RANGES
+from firmware.protocol.vesc_codec import MessageCodec, to_raw
 from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
 
 __all__ = ["CommandId", "Message", "Unknown", "WireField", "field_setter", "to_raw"]
-
-_RANGES: dict[str, tuple[int, int, str]] = {
-    "b": (-(1 << 7), (1 << 7) - 1, "int8"),
-    "B": (0, (1 << 8) - 1, "uint8"),
-    "h": (-(1 << 15), (1 << 15) - 1, "int16"),
-    "H": (0, (1 << 16) - 1, "uint16"),
-    "i": (-(1 << 31), (1 << 31) - 1, "int32"),
-    "I": (0, (1 << 32) - 1, "uint32"),
-}
-_SNAP_ULPS = 4.0
-
 
 class CommandId(IntEnum):
     """Command ids (payload byte 0) used by the CubeMars servo-mode UART protocol (PROTOCOLS.md B.1)."""
@@ -59,37 +50,6 @@ class CommandId(IntEnum):
     SET_POS_MULTI = 92
     SET_POS_SINGLE = 93
     SET_POS_ORIGIN = 95
-
-
-def to_raw(value: float, divisor: float, code: str, name: str, is_int: bool) -> int:
-    """Return the wire integer for ``value`` (truncated toward zero, see module doc) or raise ValueError."""
-    if is_int and type(value) is int:
-        raw = value
-    else:
-        try:
-            x = value * divisor
-            raw = int(x)
-        except (TypeError, ValueError, OverflowError):
-            lo, hi, _ = _RANGES[code]
-            raise ValueError(
-                f"{name}={value!r} is not a finite number; allowed [{lo / divisor:g}, {hi / divisor:g}]"
-            ) from None
-        if x != raw:
-            frac = abs(x - raw)
-            # Only a product within 0.001 of an integer can be within 4 ulp of one while |x| < 2**40
-            # (4 ulp <= 2**-11 there); beyond that every code's range is exceeded with or without a snap.
-            if frac < 0.001 or frac > 0.999:
-                nearest = round(x)
-                if abs(x - nearest) <= _SNAP_ULPS * math.ulp(x):
-                    raw = nearest
-    lo, hi, ctype = _RANGES[code]
-    if raw < lo or raw > hi:
-        scale = f" x {divisor:g}" if divisor != 1.0 else ""
-        raise ValueError(
-            f"{name}={value!r} is outside the wire range [{lo / divisor:g}, {hi / divisor:g}] "
-            f"({ctype} of the value{scale})"
-        )
-    return raw
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,9 +96,10 @@ class Message:
     _DIVISORS: ClassVar[tuple[float, ...]] = ()
     _INT_INDEX: ClassVar[tuple[int, ...]] = ()
     _SETTERS: ClassVar[tuple[Callable[[Any, Any], None], ...]] = ()
+    _CODEC: ClassVar[MessageCodec | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Precompile the structs, conversion tables and payload decoder of a subclass."""
+        """Precompile the structs, conversion tables, codec and payload decoder of a subclass."""
         super().__init_subclass__(**kwargs)
         wire = cls._WIRE
         cls._STRUCT = struct.Struct(">B" + "".join(f.code for f in wire))
@@ -147,7 +108,12 @@ class Message:
         cls._DIVISORS = tuple(f.divisor for f in wire)
         cls._INT_INDEX = tuple(i for i, f in enumerate(wire) if f.is_int)
         cls._SETTERS = tuple(field_setter(cls, f.name) for f in wire)
-        cls._decode = None if "from_payload" in cls.__dict__ else staticmethod(_make_decoder(cls))
+        command_id = getattr(cls, "COMMAND_ID", None)
+        cls._CODEC = None if command_id is None else MessageCodec(
+            cls, command_id, tuple((f.name, f.code, f.divisor, f.is_int) for f in wire), cls._SETTERS, _set_raws
+        )
+        own_decoder = "from_payload" in cls.__dict__ or cls._CODEC is None
+        cls._decode = None if own_decoder else staticmethod(cls._CODEC.decode)  # type: ignore[union-attr]
         if cls.payload is Message.payload or getattr(cls.payload, "compiled_from_wire", False):
             cls.payload = _make_payload(cls)  # type: ignore[method-assign,assignment]
 
@@ -194,8 +160,19 @@ class Message:
         """Return the fastest function turning a payload of this class's id into a message (for Decoder)."""
         return cls._decode if cls._decode is not None else cls.from_payload
 
+    @classmethod
+    def codec(cls) -> MessageCodec:
+        """Return the compiled codec of a generic (``_WIRE``) class: its frames straight from field values.
+
+        ``SetCurrent.codec().frame((2.5,))`` is ``SetCurrent(2.5).encode()`` without building the message.
+        """
+        if cls._CODEC is None or not getattr(cls.payload, "compiled_from_wire", False):
+            raise TypeError(f"{cls.__name__} has its own payload layout, not a generic codec")
+        return cls._CODEC
+
 
 _get_raws = Message._raws.__get__  # type: ignore[attr-defined]
+_set_raws = Message._raws.__set__  # type: ignore[attr-defined]
 _del_raws = Message._raws.__delete__  # type: ignore[attr-defined]
 
 
@@ -215,92 +192,30 @@ def _set_named(name: str, obj: Any, value: Any) -> None:
 def _make_payload(cls: type[Message]) -> Callable[[Any], bytes]:
     """Build the ``payload`` method of a generic message class from its ``_WIRE`` layout (encode hot path).
 
-    Each field goes through :func:`to_raw` with its precomputed divisor, then one ``struct`` packs the
-    command id and all raw integers.
+    The method hands the field values to the class's compiled :class:`MessageCodec`: each field goes
+    through :func:`to_raw` with its precomputed divisor, then one ``struct`` packs the command id and all
+    raw integers.
     """
-    pack = cls._STRUCT.pack
-    convs = tuple((f.divisor, f.code, f.name, f.is_int) for f in cls._WIRE)
+    codec = cls._CODEC
+    assert codec is not None
+    names = tuple(f.name for f in cls._WIRE)
+    get = attrgetter(*names) if names else None
 
     def payload_none(self: Any) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
-        return pack(self.COMMAND_ID)
+        return codec.payload(())
 
     def payload_one(self: Any) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
-        return pack(self.COMMAND_ID, to_raw(get(self), divisor, code, name, is_int))  # type: ignore[misc,arg-type]
+        return codec.payload((get(self),))  # type: ignore[misc]
 
     def payload_many(self: Any) -> bytes:
         """Return the payload: command id byte followed by the arguments."""
-        return pack(self.COMMAND_ID, *[to_raw(v, *c) for v, c in zip(get(self), convs, strict=True)])  # type: ignore[misc]
+        return codec.payload(get(self))  # type: ignore[misc]
 
-    if not convs:
-        method = payload_none
-    elif len(convs) > 1:
-        method = payload_many
-    else:
-        ((divisor, code, name, is_int),) = convs
-        method = payload_one
-    get = attrgetter(*(f.name for f in cls._WIRE)) if convs else None
+    method = payload_none if not names else payload_one if len(names) == 1 else payload_many
     method.compiled_from_wire = True  # type: ignore[attr-defined]  # a subclass recompiles for its own _WIRE
     return method
-
-
-def _make_decoder(cls: type[Message]) -> Callable[[bytes], Any]:
-    """Build the payload decoder of a generic message class (closures: the decoder's hot path).
-
-    Instances are created without the dataclass ``__init__`` (values from the wire are valid by
-    construction), writing the slots directly. A message with several fields keeps the unpacked integers
-    in ``_raws`` and converts them all on the first field access (``Message.__getattr__``): decoding a
-    73-byte GET_VALUES reply then costs one ``struct.unpack_from``, not 23 float conversions, until read.
-    """
-    unpack = cls._ARGS.unpack_from
-    size = cls._STRUCT.size
-    new = object.__new__
-    names = tuple(f.name for f in cls._WIRE)
-    set_raws = Message._raws.__set__  # type: ignore[attr-defined]
-
-    def short(payload: bytes) -> ShortPayloadError:
-        return ShortPayloadError(f"{cls.__name__} needs {size} payload bytes, got {len(payload)}")
-
-    def decode_none(payload: bytes) -> Any:
-        return singleton  # a frozen message without fields: every instance is equal, share one
-
-    def decode_one_int(payload: bytes) -> Any:
-        try:
-            (raw,) = unpack(payload, 1)
-        except struct.error:
-            raise short(payload) from None
-        obj = new(cls)
-        set_value(obj, raw)
-        return obj
-
-    def decode_one(payload: bytes) -> Any:
-        try:
-            (raw,) = unpack(payload, 1)
-        except struct.error:
-            raise short(payload) from None
-        obj = new(cls)
-        set_value(obj, raw / divisor)
-        return obj
-
-    def decode_many(payload: bytes) -> Any:
-        try:
-            raws = unpack(payload, 1)
-        except struct.error:
-            raise short(payload) from None
-        obj = new(cls)
-        set_raws(obj, raws)  # fields are converted on first access (Message.__getattr__)
-        return obj
-
-    if not names:
-        singleton = new(cls)
-        return decode_none
-    if len(names) > 1:
-        return decode_many
-    (wire,) = cls._WIRE
-    set_value = field_setter(cls, wire.name)
-    divisor = wire.divisor
-    return decode_one_int if wire.is_int else decode_one
 
 
 @dataclass(frozen=True, slots=True)

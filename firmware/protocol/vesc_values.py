@@ -15,7 +15,7 @@ from enum import IntEnum
 from functools import lru_cache
 from typing import ClassVar, Self
 
-from firmware.protocol.vesc_frame import ShortPayloadError
+from firmware.protocol.vesc_codec import SelectiveCodec
 from firmware.protocol.vesc_message import CommandId, Message, WireField, field_setter
 
 __all__ = ["FIELDS", "VALUES_FIELDS", "FaultCode", "Values", "ValuesSelective", "selective_layout"]
@@ -115,13 +115,6 @@ def selective_layout(mask: int) -> tuple[struct.Struct, tuple[WireField, ...]]:
     return struct.Struct(">" + "".join(f.code for f in present)), present
 
 
-@lru_cache(maxsize=256)
-def _reader(mask: int) -> tuple[Callable[[bytes, int], tuple[int, ...]], int, tuple[tuple[str, float | None], ...]]:
-    """Decode table of a selective reply for ``mask``: unpack_from, size, (name, divisor or None if int)."""
-    unpacker, present = selective_layout(mask)
-    return unpacker.unpack_from, unpacker.size, tuple((f.name, None if f.is_int else f.divisor) for f in present)
-
-
 @dataclass(frozen=True, slots=True)
 class ValuesSelective(Message):
     """COMM_GET_VALUES_SELECTIVE reply (CubeMars GET_VALUES_SETUP, motor -> host): fields whose bit is set.
@@ -155,28 +148,12 @@ class ValuesSelective(Message):
     @classmethod
     def from_payload(cls, payload: bytes, mask: int | None = None) -> Self:
         """Decode a reply; ``mask=None``: the mask is echoed in the payload, else it is the mask asked for."""
-        offset = 1
-        echo = mask is None
-        if mask is None:
-            if len(payload) < 5:
-                raise ShortPayloadError(f"ValuesSelective needs 5 bytes for the mask, got {len(payload)}")
-            (mask,) = _MASK.unpack_from(payload, 1)
-            offset = 5
-        unpack, size, columns = _reader(mask & 0x3FFFFF)
-        try:
-            raws = unpack(payload, offset)
-        except struct.error:
-            raise ShortPayloadError(
-                f"ValuesSelective mask 0x{mask:08X} needs {offset + size} bytes, got {len(payload)}"
-            ) from None
-        values = {}
-        for (name, divisor), raw in zip(columns, raws, strict=True):  # a loop: no comprehension frame
-            values[name] = raw if divisor is None else raw / divisor
-        obj = _new(cls)
-        _set_mask(obj, mask)
-        _set_values(obj, values)
-        _set_echo(obj, echo)
-        return obj
+        return _SELECTIVE.decode(payload, mask)  # type: ignore[no-any-return]
+
+    @classmethod
+    def payload_decoder(cls) -> Callable[[bytes], Self]:
+        """Return the compiled decoder of replies with the mask echoed (for Decoder)."""
+        return _SELECTIVE.decode
 
     @classmethod
     def from_values(cls, values: Values, mask: int, mask_echo: bool = True, status: int = 0) -> Self:
@@ -188,9 +165,10 @@ class ValuesSelective(Message):
         return cls(mask, selected, mask_echo)
 
 
-
-_MASK = struct.Struct(">I")
-_new = object.__new__
-_set_mask = field_setter(ValuesSelective, "mask")
-_set_values = field_setter(ValuesSelective, "values")
-_set_echo = field_setter(ValuesSelective, "mask_echo")
+_SELECTIVE = SelectiveCodec(
+    ValuesSelective,
+    selective_layout,
+    field_setter(ValuesSelective, "mask"),
+    field_setter(ValuesSelective, "values"),
+    field_setter(ValuesSelective, "mask_echo"),
+)
