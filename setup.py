@@ -7,8 +7,9 @@ when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
 
 What stays interpreted on purpose: the VESC message classes (built by ``__init_subclass__``
-metaprogramming mypyc does not support; their frame decoder is compiled), the telemetry records (enum
-fields that compiled code would store as plain ints), the configuration value classes and the plant
+metaprogramming mypyc does not support; their frame decoder and their per-message scaling, packing and
+unpacking, ``vesc_codec``, are compiled), the telemetry records (enum fields that compiled code would
+store as plain ints; their framing, ``telemetry_frame``, is compiled), the configuration value classes and the plant
 parameters (their checks must see the values as given: compiled code turns a bool into an int at the
 boundary), the gait reference (tests replace its constructors), the analysis and the host tools.
 """
@@ -57,6 +58,7 @@ COMPILED = [
     "firmware/protocol/vesc_codec.py",
     "firmware/protocol/rvc.py",
     "firmware/protocol/cobs.py",
+    "firmware/protocol/telemetry_frame.py",
 ]
 
 

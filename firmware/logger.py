@@ -6,7 +6,8 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
-from firmware.protocol.telemetry import encode_record_values
+from firmware.protocol.telemetry import RECORD_FRAMER
+from firmware.protocol.telemetry_frame import RecordFramer
 from hal.errors import HalError
 from hal.interfaces import Uart
 
@@ -19,6 +20,7 @@ class TelemetryLogger:
     def __init__(self, uart: Uart) -> None:
         """Bind the telemetry UART; the first record gets sequence number 0."""
         self.uart = uart
+        self._framer: RecordFramer = RECORD_FRAMER
         self.seq = 0
         self.sent = 0
         self.dropped = 0
@@ -28,7 +30,7 @@ class TelemetryLogger:
 
         Return bytes written (0 if dropped for lack of room).
         """
-        return self._queue(encode_record_values(self.seq & 0xFFFFFFFF, time_cycles, *values))
+        return self._queue(self._framer.frame(self.seq & 0xFFFFFFFF, time_cycles, values))  # encode_record_values
 
     def _queue(self, frame: bytes) -> int:
         """Queue one encoded record (its sequence number is consumed even if dropped); return bytes written."""

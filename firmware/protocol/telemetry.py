@@ -10,7 +10,6 @@ at least the BASE_FIELD_COUNT base fields.
 
 from __future__ import annotations
 
-import binascii
 import logging
 import math
 import struct
@@ -20,7 +19,9 @@ from enum import IntEnum
 from operator import attrgetter
 from typing import Any, NamedTuple
 
-from firmware.protocol.cobs import cobs_decode, cobs_encode
+from firmware.protocol.cobs import cobs_decode
+from firmware.protocol.telemetry_frame import RecordFramer, crc16
+from firmware.protocol.telemetry_frame import frame_payload as frame_payload  # re-exported
 
 logger = logging.getLogger(__name__)
 
@@ -102,7 +103,6 @@ BASE_FIELD_COUNT: int = len(RECORD_SPECS)  # every version-1 record carries at l
 _RECORD_BODY = struct.Struct("<" + "".join(s.fmt for s in RECORD_SPECS))
 _RECORD_DATA = struct.Struct(_HEADER.format + "".join(s.fmt for s in RECORD_SPECS))  # header + body
 _record_values = attrgetter(*RECORD_FIELDS)
-_pack_crc = _CRC.pack
 RECORD_PAYLOAD_LEN: int = _HEADER.size + _RECORD_BODY.size + _CRC.size  # 54 bytes
 RECORD_FRAME_LEN: int = RECORD_PAYLOAD_LEN + 2  # + COBS code byte + 0x00 delimiter = 56 bytes
 
@@ -134,15 +134,6 @@ class CrcError(FrameError):
 
 class UnknownVersionError(FrameError):
     """A telemetry frame with a valid CRC but a version this reader does not know."""
-
-
-def crc16(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
-
-    >>> hex(crc16(b"123456789"))
-    '0x29b1'
-    """
-    return binascii.crc_hqx(data, 0xFFFF)
 
 
 def _explain_pack_error(values: Sequence[int | float], specs: Sequence[FieldSpec]) -> ValueError:
@@ -179,11 +170,6 @@ def encode_payload(
     return data + _CRC.pack(crc16(data))
 
 
-def frame_payload(payload: bytes) -> bytes:
-    """Frame a payload for the wire: COBS-encode it and append the 0x00 delimiter."""
-    return cobs_encode(payload) + b"\x00"
-
-
 def encode_record(rec: TelemetryRecord) -> bytes:
     """Encode a record as its full wire frame (RECORD_FRAME_LEN bytes, 0x00-terminated)."""
     return encode_record_values(*_record_values(rec))
@@ -199,15 +185,19 @@ def encode_record_values(seq: int, time_cycles: int, *values: int | float) -> by
     ...     TelemetryRecord(seq=7, time_cycles=99, reference_rad=0.5, encoder_angle_rad=0.25, supervisor_state=1))
     True
     """
-    try:
-        data = _RECORD_DATA.pack(TELEMETRY_VERSION, BASE_FIELD_COUNT, seq, time_cycles, *values)
-    except (struct.error, OverflowError, TypeError):
-        every = (seq, time_cycles, *values)
-        if len(every) != BASE_FIELD_COUNT:
-            raise ValueError(f"{len(every)} values for the {BASE_FIELD_COUNT} record fields: need one per field "
-                             f"({', '.join(RECORD_FIELDS)})") from None
-        raise _explain_pack_error(every, RECORD_SPECS) from None
-    return frame_payload(data + _pack_crc(crc16(data)))
+    return RECORD_FRAMER.frame(seq, time_cycles, values)
+
+
+def _explain_record_error(every: tuple[object, ...]) -> ValueError:
+    """Build the ValueError for record values that cannot be packed (wrong count or a value out of range)."""
+    if len(every) != BASE_FIELD_COUNT:
+        return ValueError(f"{len(every)} values for the {BASE_FIELD_COUNT} record fields: need one per field "
+                          f"({', '.join(RECORD_FIELDS)})")
+    return _explain_pack_error(every, RECORD_SPECS)  # type: ignore[arg-type]
+
+
+RECORD_FRAMER: RecordFramer = RecordFramer(_RECORD_DATA, TELEMETRY_VERSION, BASE_FIELD_COUNT, _explain_record_error)
+"""Frames records from their field values (:func:`encode_record_values`; the logger calls it directly)."""
 
 
 def decode_payload(payload: bytes, specs: Sequence[FieldSpec] = RECORD_SPECS) -> dict[str, int | float]:
