@@ -33,6 +33,7 @@ _INT16_MIN: Final = -32768
 _INT16_MAX: Final = 32767
 _SNAP_LSB: Final = 1e-6  # a scaled value this close to an integer is that integer (float round-off, not data)
 _BODY: Final = struct.Struct("<B6hBBB")  # bytes 2..17: index, yaw, pitch, roll, ax, ay, az, MI, MR, reserved
+_CHECKSUM_BYTES: Final = tuple(bytes((n,)) for n in range(256))
 _PRINTABLE: Final = frozenset(range(0x20, 0x7F)) | {0x09}
 _LINE_END: Final = frozenset({0x0A, 0x0D})
 
@@ -58,16 +59,26 @@ def rvc_checksum(body: bytes | bytearray) -> int:
 
 def pack_raw(raw: RvcRaw) -> bytes:
     """Build the 19 wire bytes from wire-unit values; ValueError names any value out of its range."""
-    for name in ("index", "motion_intent", "motion_request"):
-        value = getattr(raw, name)
-        if not 0 <= value <= 0xFF:
-            raise ValueError(f"{name}={value} is out of range: uint8 allows 0..255")
-    for name in RvcRaw._fields[1:7]:
-        value = getattr(raw, name)
-        if not _INT16_MIN <= value <= _INT16_MAX:
-            raise ValueError(f"{name}={value} is out of range: int16 allows {_INT16_MIN}..{_INT16_MAX}")
-    body = _BODY.pack(*raw, 0)
-    return RVC_HEADER + body + bytes((rvc_checksum(body),))
+    return _pack_wire(raw)
+
+
+_WireValues = tuple[int, int, int, int, int, int, int, int, int]
+"""The nine wire-unit values of :class:`RvcRaw`, as a plain tuple (unboxed in the compiled build)."""
+
+
+def _pack_wire(values: _WireValues) -> bytes:
+    """:func:`pack_raw` of the values in RvcRaw order (the shared path of pack_raw and RvcFrame.encode)."""
+    index, yaw, pitch, roll, ax, ay, az, intent, request = values
+    for k in (0, 7, 8):
+        if not 0 <= values[k] <= 0xFF:
+            raise ValueError(f"{RvcRaw._fields[k]}={values[k]} is out of range: uint8 allows 0..255")
+    for k in range(1, 7):
+        if not _INT16_MIN <= values[k] <= _INT16_MAX:
+            raise ValueError(
+                f"{RvcRaw._fields[k]}={values[k]} is out of range: int16 allows {_INT16_MIN}..{_INT16_MAX}"
+            )
+    body = _BODY.pack(index, yaw, pitch, roll, ax, ay, az, intent, request, 0)
+    return RVC_HEADER + body + _CHECKSUM_BYTES[rvc_checksum(body)]
 
 
 def unpack_raw(frame: bytes) -> RvcRaw:
@@ -119,30 +130,35 @@ class RvcFrame:
     @classmethod
     def from_raw(cls, raw: RvcRaw) -> RvcFrame:
         """Convert wire units to SI (exactly invertible by to_raw)."""
+        index, yaw, pitch, roll, ax, ay, az, intent, request = raw
         return cls(
-            index=raw.index,
-            yaw_rad=raw.yaw_cdeg * CENTIDEG_TO_RAD,
-            pitch_rad=raw.pitch_cdeg * CENTIDEG_TO_RAD,
-            roll_rad=raw.roll_cdeg * CENTIDEG_TO_RAD,
-            accel_x_mps2=raw.accel_x_mg * MG_TO_MPS2,
-            accel_y_mps2=raw.accel_y_mg * MG_TO_MPS2,
-            accel_z_mps2=raw.accel_z_mg * MG_TO_MPS2,
-            motion_intent=raw.motion_intent,
-            motion_request=raw.motion_request,
+            index,
+            yaw * CENTIDEG_TO_RAD,
+            pitch * CENTIDEG_TO_RAD,
+            roll * CENTIDEG_TO_RAD,
+            ax * MG_TO_MPS2,
+            ay * MG_TO_MPS2,
+            az * MG_TO_MPS2,
+            intent,
+            request,
         )
 
     def to_raw(self) -> RvcRaw:
         """Convert to wire units, truncating toward zero; ValueError names a value that does not fit."""
-        return RvcRaw(
-            index=self.index,
-            yaw_cdeg=_to_lsb("yaw_rad", self.yaw_rad, CENTIDEG_TO_RAD, "rad"),
-            pitch_cdeg=_to_lsb("pitch_rad", self.pitch_rad, CENTIDEG_TO_RAD, "rad"),
-            roll_cdeg=_to_lsb("roll_rad", self.roll_rad, CENTIDEG_TO_RAD, "rad"),
-            accel_x_mg=_to_lsb("accel_x_mps2", self.accel_x_mps2, MG_TO_MPS2, "m/s^2"),
-            accel_y_mg=_to_lsb("accel_y_mps2", self.accel_y_mps2, MG_TO_MPS2, "m/s^2"),
-            accel_z_mg=_to_lsb("accel_z_mps2", self.accel_z_mps2, MG_TO_MPS2, "m/s^2"),
-            motion_intent=self.motion_intent,
-            motion_request=self.motion_request,
+        return RvcRaw(*self._wire_values())
+
+    def _wire_values(self) -> _WireValues:
+        """The wire-unit values in RvcRaw order (:meth:`to_raw` as a plain tuple)."""
+        return (
+            self.index,
+            _to_lsb("yaw_rad", self.yaw_rad, CENTIDEG_TO_RAD, "rad"),
+            _to_lsb("pitch_rad", self.pitch_rad, CENTIDEG_TO_RAD, "rad"),
+            _to_lsb("roll_rad", self.roll_rad, CENTIDEG_TO_RAD, "rad"),
+            _to_lsb("accel_x_mps2", self.accel_x_mps2, MG_TO_MPS2, "m/s^2"),
+            _to_lsb("accel_y_mps2", self.accel_y_mps2, MG_TO_MPS2, "m/s^2"),
+            _to_lsb("accel_z_mps2", self.accel_z_mps2, MG_TO_MPS2, "m/s^2"),
+            self.motion_intent,
+            self.motion_request,
         )
 
     def encode(self) -> bytes:
@@ -151,7 +167,7 @@ class RvcFrame:
         >>> RvcFrame(42, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0).encode().hex(" ")
         'aa aa 2a 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 2a'
         """
-        return pack_raw(self.to_raw())
+        return _pack_wire(self._wire_values())
 
     @classmethod
     def from_bytes(cls, frame: bytes) -> RvcFrame:

@@ -116,6 +116,9 @@ class MessageCodec:
         fields = self.fields
         if len(values) != len(fields):
             raise ValueError(f"{len(values)} values for the {len(fields)} fields of {self.cls.__name__}")
+        if len(fields) == 1:  # a command's single argument: no list of raw values to unpack
+            name, code, divisor, is_int = fields[0]
+            return self._pack(self.command_id, to_raw(values[0], divisor, code, name, is_int))
         raws: list[int] = []
         for i, (name, code, divisor, is_int) in enumerate(fields):
             raws.append(to_raw(values[i], divisor, code, name, is_int))
@@ -164,16 +167,19 @@ class SelectiveCodec:
         self._set_values = set_values
         self._set_echo = set_echo
         self._tables: dict[int, _SelectiveTable] = {}
+        self._last: _SelectiveTable | None = None
 
     def decode(self, payload: Payload, mask: int | None = None) -> Any:
         """Decode a reply; ``mask=None``: the mask is echoed in the payload, else it is the mask asked for."""
-        offset = 1
-        echo = mask is None
-        if mask is None:
-            if len(payload) < 5:
-                raise ShortPayloadError(f"ValuesSelective needs 5 bytes for the mask, got {len(payload)}")
-            (mask,) = _MASK.unpack_from(payload, 1)
-            offset = 5
+        if mask is not None:
+            return self._decode(payload, mask, 1, False)
+        if len(payload) < 5:
+            raise ShortPayloadError(f"ValuesSelective needs 5 bytes for the mask, got {len(payload)}")
+        (echoed,) = _MASK.unpack_from(payload, 1)
+        return self._decode(payload, echoed, 5, True)
+
+    def _decode(self, payload: Payload, mask: int, offset: int, echo: bool) -> Any:
+        """Decode the fields of ``mask`` starting at ``offset`` into a new message."""
         table = self._table(mask & 0x3FFFFF)
         try:
             raws = table.unpack(payload, offset)
@@ -194,18 +200,23 @@ class SelectiveCodec:
 
     def _table(self, mask: int) -> _SelectiveTable:
         """The decode table of ``mask`` (bits > 21 already cleared), built on first use."""
+        table = self._last
+        if table is not None and table.mask == mask:  # the driver asks for the same mask every time
+            return table
         table = self._tables.get(mask)
         if table is None:
             unpacker, present = self._layout(mask)
-            table = _SelectiveTable(unpacker, present)
+            table = _SelectiveTable(mask, unpacker, present)
             self._tables[mask] = table
+        self._last = table
         return table
 
 
 class _SelectiveTable:
     """Decode table of one selective mask: unpack_from, size, and each field's name, divisor, int-ness."""
 
-    def __init__(self, unpacker: struct.Struct, present: tuple[Any, ...]) -> None:
+    def __init__(self, mask: int, unpacker: struct.Struct, present: tuple[Any, ...]) -> None:
+        self.mask = mask
         self.unpack = unpacker.unpack_from
         self.size = unpacker.size
         self.names: list[str] = [f.name for f in present]

@@ -56,8 +56,6 @@ crc16_reference: Callable[[bytes], int] = crcmod.mkCrcFun(0x11021, initCrc=0, re
 _crc_hqx: Final = binascii.crc_hqx
 _SHORT_HEAD: Final = struct.Struct(">BB")
 _LONG_HEAD: Final = struct.Struct(">BH")
-_TAIL: Final = struct.Struct(">HB")
-_pack_tail: Final = _TAIL.pack
 _SHORT_HEADS: Final = tuple(_SHORT_HEAD.pack(START_SHORT, n) for n in range(256))
 """Header of a short frame, indexed by payload length (index 0 unused)."""
 _START_RE: Final = re.compile(b"[\x02\x03]")
@@ -87,7 +85,8 @@ def encode_frame(payload: bytes) -> bytes:
         raise ValueError(f"payload length {n} is outside the allowed range [1, {PACKET_MAX_PL_LEN}]")
     if type(payload) is not bytes:
         payload = bytes(payload)
-    return head + payload + _pack_tail(_crc_hqx(payload, 0), END_BYTE)
+    crc: int = _crc_hqx(payload, 0)
+    return head + payload + (crc << 8 | END_BYTE).to_bytes(3, "big")  # CRC_HI CRC_LO 03
 
 
 @mypyc_attr(native_class=False)  # a plain Python exception class in the compiled build (setup.py)
