@@ -17,7 +17,6 @@ from firmware.protocol.cobs import cobs_encode
 __all__ = ["RecordFramer", "crc16", "frame_payload"]
 
 _crc_hqx: Final = binascii.crc_hqx
-_pack_crc: Final = struct.Struct("<H").pack
 
 
 def crc16(data: bytes) -> int:
@@ -57,4 +56,5 @@ class RecordFramer:
             data = self._pack(self._version, self._field_count, seq, time_cycles, *values)
         except (struct.error, OverflowError, TypeError):
             raise self._explain((seq, time_cycles, *values)) from None
-        return frame_payload(data + _pack_crc(_crc_hqx(data, 0xFFFF)))
+        crc: int = _crc_hqx(data, 0xFFFF)
+        return frame_payload(data + crc.to_bytes(2, "little"))  # the CRC little-endian

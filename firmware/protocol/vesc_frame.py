@@ -195,9 +195,8 @@ class FrameDecoder(Generic[M]):
     def feed(self, data: bytes | bytearray | memoryview) -> list[M]:
         """Consume ``data`` and return the messages of every complete valid frame, in stream order."""
         # Hot loop: literals instead of the module constants (2 = START_SHORT, 3 = START_LONG = END_BYTE,
-        # 512 = PACKET_MAX_PL_LEN), counters in locals. The loop tests only ``pos < n`` (a used-up buffer,
-        # the usual end, without raising); inside a candidate frame, indexing past the end of the buffer
-        # (IndexError) means that the frame starting at ``pos`` is not complete yet, which ends the scan.
+        # 512 = PACKET_MAX_PL_LEN), counters in locals. A candidate frame whose header or end byte lies
+        # beyond the buffer is not complete yet, which ends the scan.
         stats = self.stats
         stats.bytes_in += len(data)
         if self._buf:
@@ -207,51 +206,54 @@ class FrameDecoder(Generic[M]):
         n = len(buf)
         pos = 0
         out: list[M] = []
-        append = out.append
         table = self._table
         crc = _crc_hqx
         dropped = crc_errors = bad_end = short = 0
-        try:
-            while pos < n:
-                if buf[pos] == 2:
-                    start = pos + 2
-                    end = start + buf[pos + 1]
-                    if end == start:  # LEN 0
-                        pos += 1
-                        dropped += 1
-                        continue
-                elif buf[pos] == 3:
-                    length = (buf[pos + 1] << 8) | buf[pos + 2]
-                    if length < 255 or length > 512:
-                        pos += 1
-                        dropped += 1
-                        continue
-                    start = pos + 3
-                    end = start + length
-                else:
-                    match = _START_RE.search(buf, pos)
-                    nxt = match.start() if match is not None else len(buf)
-                    dropped += nxt - pos
-                    pos = nxt
-                    continue
-                # CRC over payload + its CRC is 0 exactly when they agree
-                if buf[end + 2] != 3 or crc(buf[start : end + 2], 0):
-                    if buf[end + 2] != 3:
-                        bad_end += 1
-                    else:
-                        crc_errors += 1
-                    dropped += 1
+        while pos < n:
+            first = buf[pos]
+            if first == 2:
+                if pos + 1 >= n:
+                    break
+                start = pos + 2
+                end = start + buf[pos + 1]
+                if end == start:  # LEN 0
                     pos += 1
+                    dropped += 1
                     continue
-                pos = end + 3
-                payload = buf[start:end]
-                try:
-                    append(table[payload[0]](payload))
-                except ShortPayloadError as exc:
-                    short += 1
-                    _log.debug("skipped frame: %s", exc)
-        except IndexError:
-            pass  # the candidate at pos is incomplete
+            elif first == 3:
+                if pos + 2 >= n:
+                    break
+                length = (buf[pos + 1] << 8) | buf[pos + 2]
+                if length < 255 or length > 512:
+                    pos += 1
+                    dropped += 1
+                    continue
+                start = pos + 3
+                end = start + length
+            else:
+                match = _START_RE.search(buf, pos)
+                nxt = match.start() if match is not None else len(buf)
+                dropped += nxt - pos
+                pos = nxt
+                continue
+            if end + 2 >= n:
+                break
+            # CRC over payload + its CRC is 0 exactly when they agree
+            if buf[end + 2] != 3 or crc(buf[start : end + 2], 0):
+                if buf[end + 2] != 3:
+                    bad_end += 1
+                else:
+                    crc_errors += 1
+                dropped += 1
+                pos += 1
+                continue
+            pos = end + 3
+            payload = buf[start:end]
+            try:
+                out.append(table[payload[0]](payload))
+            except ShortPayloadError as exc:
+                short += 1
+                _log.debug("skipped frame: %s", exc)
         self._buf = buf[pos:] if pos else buf
         if out:
             stats.frames += len(out)
