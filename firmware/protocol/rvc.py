@@ -34,6 +34,7 @@ _INT16_MAX: Final = 32767
 _SNAP_LSB: Final = 1e-6  # a scaled value this close to an integer is that integer (float round-off, not data)
 _BODY: Final = struct.Struct("<B6hBBB")  # bytes 2..17: index, yaw, pitch, roll, ax, ay, az, MI, MR, reserved
 _CHECKSUM_BYTES: Final = tuple(bytes((n,)) for n in range(256))
+_new_tuple: Final = tuple.__new__
 _PRINTABLE: Final = frozenset(range(0x20, 0x7F)) | {0x09}
 _LINE_END: Final = frozenset({0x0A, 0x0D})
 
@@ -95,8 +96,8 @@ def unpack_raw(frame: bytes) -> RvcRaw:
 
 def _raw_at(buf: bytes | bytearray, start: int) -> RvcRaw:
     """Wire-unit values of the frame at buf[start:], its length, header and checksum already verified."""
-    *values, _reserved = _BODY.unpack_from(buf, start + 2)
-    return RvcRaw(*values)
+    # the namedtuple's own __new__ is interpreted Python; tuple.__new__ builds the same tuple directly
+    return _new_tuple(RvcRaw, _BODY.unpack_from(buf, start + 2)[:9])  # without the reserved byte
 
 
 def _to_lsb(name: str, value_si: float, lsb_si: float, unit: str) -> int:
@@ -126,6 +127,22 @@ class RvcFrame:
     accel_z_mps2: float
     motion_intent: int = 0
     motion_request: int = 0
+
+    def __init__(
+        self, index: int, yaw_rad: float, pitch_rad: float, roll_rad: float, accel_x_mps2: float,
+        accel_y_mps2: float, accel_z_mps2: float, motion_intent: int = 0, motion_request: int = 0,
+    ) -> None:
+        """Set the fields (written out: the compiled build sets them natively; a generated frozen
+        ``__init__`` would stay interpreted)."""
+        object.__setattr__(self, "index", index)
+        object.__setattr__(self, "yaw_rad", yaw_rad)
+        object.__setattr__(self, "pitch_rad", pitch_rad)
+        object.__setattr__(self, "roll_rad", roll_rad)
+        object.__setattr__(self, "accel_x_mps2", accel_x_mps2)
+        object.__setattr__(self, "accel_y_mps2", accel_y_mps2)
+        object.__setattr__(self, "accel_z_mps2", accel_z_mps2)
+        object.__setattr__(self, "motion_intent", motion_intent)
+        object.__setattr__(self, "motion_request", motion_request)
 
     @classmethod
     def from_raw(cls, raw: RvcRaw) -> RvcFrame:
