@@ -13,11 +13,12 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, Final
 
 from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
 
-__all__ = ["MessageCodec", "SelectiveCodec", "to_raw"]
+__all__ = ["MessageCodec", "SelectiveCodec", "WireField", "to_raw"]
 
 RANGES: Final[dict[str, tuple[int, int, str]]] = {
     "b": (-(1 << 7), (1 << 7) - 1, "int8"),
@@ -79,6 +80,39 @@ def _truncate(x: float) -> int:
             if abs(x - nearest) <= _SNAP_ULPS * math.ulp(x):
                 raw = nearest
     return raw
+
+
+@dataclass(frozen=True)
+class WireField:
+    """One field on the wire: name, struct code, value = raw / scale (angles: deg on wire, rad in API)."""
+
+    name: str
+    code: str
+    scale: int | float = 1.0  # kept as given (an int scale stays an int)
+    angle: bool = False
+    bit: int | None = None
+    divisor: float = field(init=False, repr=False, compare=False)
+    """Raw units per API unit (``scale``, times 180/pi for an angle field)."""
+    is_int: bool = field(init=False, repr=False, compare=False)
+    """True when the API value is the raw integer itself (scale 1, not an angle)."""
+
+    def __init__(
+        self, name: str, code: str, scale: int | float = 1.0, angle: bool = False, bit: int | None = None
+    ) -> None:
+        """Check the struct code and precompute the divisor (written out: compiled, unlike a generated one)."""
+        if code not in RANGES:
+            raise ValueError(f"code={code!r} must be one of {sorted(RANGES)}")
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "code", code)
+        object.__setattr__(self, "scale", scale)
+        object.__setattr__(self, "angle", angle)
+        object.__setattr__(self, "bit", bit)
+        object.__setattr__(self, "divisor", scale * 180.0 / math.pi if angle else float(scale))
+        object.__setattr__(self, "is_int", scale == 1 and not angle)
+
+    def to_raw(self, value: object) -> int:
+        """Return the wire integer for ``value``; ValueError naming value and range if it does not fit."""
+        return to_raw(value, self.divisor, self.code, self.name, self.is_int)
 
 
 class MessageCodec:

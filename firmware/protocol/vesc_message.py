@@ -14,18 +14,16 @@ Angles are radians in the API and degrees on the wire. The divisor of an angle f
 
 from __future__ import annotations
 
-import math
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import IntEnum
 from functools import partial
 from operator import attrgetter, truediv
 from types import MemberDescriptorType
 from typing import Any, ClassVar, Self
 
-from firmware.protocol.vesc_codec import RANGES as _RANGES
-from firmware.protocol.vesc_codec import MessageCodec, to_raw
+from firmware.protocol.vesc_codec import MessageCodec, WireField, to_raw
 from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
 
 __all__ = ["CommandId", "Message", "Unknown", "WireField", "field_setter", "to_raw"]
@@ -50,32 +48,6 @@ class CommandId(IntEnum):
     SET_POS_MULTI = 92
     SET_POS_SINGLE = 93
     SET_POS_ORIGIN = 95
-
-
-@dataclass(frozen=True, slots=True)
-class WireField:
-    """One field on the wire: name, struct code, value = raw / scale (angles: deg on wire, rad in API)."""
-
-    name: str
-    code: str
-    scale: float = 1.0
-    angle: bool = False
-    bit: int | None = None
-    divisor: float = field(init=False, repr=False, compare=False)
-    """Raw units per API unit (``scale``, times 180/pi for an angle field)."""
-    is_int: bool = field(init=False, repr=False, compare=False)
-    """True when the API value is the raw integer itself (scale 1, not an angle)."""
-
-    def __post_init__(self) -> None:
-        """Check the struct code and precompute the divisor."""
-        if self.code not in _RANGES:
-            raise ValueError(f"code={self.code!r} must be one of {sorted(_RANGES)}")
-        object.__setattr__(self, "divisor", self.scale * 180.0 / math.pi if self.angle else float(self.scale))
-        object.__setattr__(self, "is_int", self.scale == 1 and not self.angle)
-
-    def to_raw(self, value: float) -> int:
-        """Return the wire integer for ``value``; ValueError naming value and range if it does not fit."""
-        return to_raw(value, self.divisor, self.code, self.name, self.is_int)
 
 
 class Message:
