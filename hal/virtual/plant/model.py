@@ -6,6 +6,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 
@@ -16,10 +17,10 @@ from hal.virtual.plant.params import PlantParams, load_plant_params
 logger = logging.getLogger(__name__)
 
 #: Largest integration step allowed (10 kHz).
-MAX_STEP_S = 1e-4
+MAX_STEP_S: Final = 1e-4
 #: Input events closer than this to the committed time or a grid point are taken as happening there.
-EVENT_SNAP_S = 1e-10
-_UNPOWERED_V_OVER_R = 1e300  # no back-EMF clamp with the bridge open (current is forced to zero)
+EVENT_SNAP_S: Final = 1e-10
+_UNPOWERED_V_OVER_R: Final = 1e300  # no back-EMF clamp with the bridge open (current is forced to zero)
 
 #: (angle [rad], velocity [rad/s], q current [A], friction mode: +1/-1 sliding that way, 0 stuck)
 State = tuple[float, float, float, int]
@@ -92,8 +93,7 @@ class Plant:
         finite_args = {"initial_velocity_rad_s": initial_velocity_rad_s, "start_time_s": start_time_s,
                        "motor_angle_offset_rad": motor_angle_offset_rad}
         for name, value in finite_args.items():
-            if not math.isfinite(value):
-                raise ValueError(f"{name} = {value!r} must be finite")
+            _check_finite(name, value)
         self.step_s = step_s
         self.motor_angle_offset_rad = motor_angle_offset_rad
         self._ratio = p.total_ratio  # read per query: kept here, not looked up on the interpreted params
@@ -138,8 +138,7 @@ class Plant:
     # ----------------------------------------------------------------- inputs
     def set_current_command(self, current_a: float, t_s: float) -> None:
         """From t_s on, command this q-axis current (clamped to the peak current); ignored when unpowered."""
-        if not math.isfinite(current_a):
-            raise ValueError(f"current_a = {current_a!r} must be finite")
+        _check_finite("current_a", current_a)
         self._commit_event(t_s)
         peak = self._peak_a
         self._command_a = min(peak, max(-peak, current_a))
@@ -151,8 +150,7 @@ class Plant:
 
     def set_brake_current(self, current_a: float, t_s: float) -> None:
         """From t_s on, brake: a current of this magnitude opposes rotation (regenerative brake)."""
-        if not math.isfinite(current_a):
-            raise ValueError(f"current_a = {current_a!r} must be finite")
+        _check_finite("current_a", current_a)
         self._commit_event(t_s)
         self._brake_a = min(self._peak_a, abs(current_a)) if self._powered else 0.0
         self._command_a = 0.0
@@ -392,6 +390,12 @@ class Plant:
                 self._t0, self._k = self._t, 0
             assert self._profile is not None
             self._ea, self._eb, self._t_break = self._profile.segment(self._t)
+
+
+def _check_finite(name: str, value: float) -> None:
+    """ValueError naming the value unless it is finite."""
+    if not -math.inf < value < math.inf:  # false for NaN too (compiled: no call into the math module)
+        raise ValueError(f"{name} = {value!r} must be finite")
 
 
 def _scaled_load(load: Load, factor: float) -> Load:
