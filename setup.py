@@ -53,6 +53,7 @@ COMPILED = [
     "firmware/control/pid.py",
     "firmware/control/estimation.py",
     "firmware/control/filters.py",
+    "firmware/control/curve.py",
     "firmware/protocol/vesc_frame.py",
     "firmware/protocol/rvc.py",
     "firmware/protocol/cobs.py",
