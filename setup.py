@@ -57,6 +57,7 @@ COMPILED = [
     "firmware/protocol/vesc_frame.py",
     "firmware/protocol/rvc.py",
     "firmware/protocol/cobs.py",
+    "host_tools/probe.py",
 ]
 
 
