@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+from mypy_extensions import mypyc_attr
+
 
 class Coefficients:
     """Constants of one plant configuration; torques are divided by the output inertia (1/s^2 units).
@@ -38,6 +40,7 @@ class Coefficients:
         self.bscale = bscale  # N / brake speed scale: tanh argument per output rad/s
 
 
+@mypyc_attr(free_list_len=1, acyclic=True)  # one made per input event: allocation from a free list, no GC
 class Drive:
     """Motor-driver inputs, constant between input events."""
 

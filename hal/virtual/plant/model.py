@@ -47,6 +47,7 @@ class PlantState:
     in_contact: bool
 
 
+@mypyc_attr(free_list_len=1, acyclic=True)  # one made per step ahead: allocation from a free list, no GC
 class StepAhead:
     """The next grid step integrated ahead (not committed), for queries inside it and the next commit."""
 
