@@ -54,11 +54,13 @@ COMPILED = [
     "firmware/control/pid.py",
     "firmware/control/estimation.py",
     "firmware/control/filters.py",
+    "firmware/control/curve.py",
     "firmware/protocol/vesc_frame.py",
     "firmware/protocol/vesc_codec.py",
     "firmware/protocol/rvc.py",
     "firmware/protocol/cobs.py",
     "firmware/protocol/telemetry_frame.py",
+    "host_tools/probe.py",
 ]
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Final
 
 from firmware.config import CostModel, FirmwareConfig
 from firmware.control.estimation import AngleEstimator
@@ -30,7 +31,9 @@ log = logging.getLogger(__name__)
 
 __all__ = ["Firmware", "KernelHealth"]
 
-_INIT, _SAFE = SupervisorState.INIT, SupervisorState.SAFE  # enum members bound once (per-period checks)
+# enum members bound once for the per-period checks (Final: compiled, C statics, no module-dict lookup)
+_INIT: Final = SupervisorState.INIT
+_SAFE: Final = SupervisorState.SAFE
 
 KernelHealth = Callable[[], tuple[int, int]]
 """Returns (total deadline misses, longest current miss streak) as the RTOS sees them."""
@@ -58,6 +61,7 @@ class Firmware:
         self.f_cpu_hz = board.f_cpu_hz
         self.ts_s = 1.0 / c.control_hz
         self.reference = reference or GaitReference.normative(stride_s=c.stride_s)
+        self._gait_curve = self.reference.curve  # sampled directly: compiled, not through the interpreted class
         self.encoder = EncoderDriver(board.encoder, self.ts_s, velocity_cutoff_hz=c.velocity_cutoff_hz)
         self.imu = ImuDriver(board.imu_uart)
         self.motor = MotorDriver(board.motor_uart, full_every=max(1, c.control_hz // c.full_values_hz))
@@ -70,6 +74,9 @@ class Firmware:
                                          c.current_limit_a, c.velocity_limit_rad_s)
         ff = c.feedforward_params
         self._nm_per_a = ff.torque_constant_nm_per_a * ff.gear_ratio * ff.efficiency  # output torque per motor amp
+        # what the control task reads of the (frozen, interpreted) configuration every period
+        self._feedforward = ff if c.feedforward else None
+        self._com_angle_rad = c.com_angle_rad
         self.kernel_health: KernelHealth = kernel_health or (lambda: (0, 0))
         self.out = ControlOutput()
         self._safety_inputs = SafetyInputs(now_s=0.0, angle_rad=0.0)
@@ -157,9 +164,9 @@ class Firmware:
             self._trajectory = MinimumJerk(fused, self.reference.angle_rad(0.0), ramp, now_s)
             self.gait_start_s = gait_start_s = now_s + ramp
         gait_t = now_s - gait_start_s
-        ref = self._trajectory.sample(now_s) if gait_t < 0 else self.reference.sample(gait_t)
-        ff = feedforward_current_a(ref[0] + self.config.com_angle_rad, ref[2], self.config.feedforward_params) \
-            if self.config.feedforward else 0.0
+        ref = self._trajectory.sample(now_s) if gait_t < 0 else self._gait_curve.sample(gait_t)
+        ff_params = self._feedforward
+        ff = feedforward_current_a(ref[0] + self._com_angle_rad, ref[2], ff_params) if ff_params is not None else 0.0
         out.reference_rad = ref[0]
         out.current_cmd_a = self.cascade.update(ref[0], ref[1], fused, self.encoder.velocity_rad_s, ff)
         out.brake = False

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import astuple, dataclass
-from typing import Any
+from typing import Any, Final
 
 from firmware.protocol.telemetry import FaultReason, SupervisorState
 
@@ -155,6 +155,8 @@ class Supervisor:
 
 
 # Enum members as module constants: the per-period checks compare against them without the enum's
-# class attribute lookup.
-_INIT, _RUN, _SAFE = SupervisorState.INIT, SupervisorState.RUN, SupervisorState.SAFE
-_NONE = FaultReason.NONE
+# class attribute lookup (Final: compiled, they are C statics, not looked up in the module's dict).
+_INIT: Final = SupervisorState.INIT
+_RUN: Final = SupervisorState.RUN
+_SAFE: Final = SupervisorState.SAFE
+_NONE: Final = FaultReason.NONE

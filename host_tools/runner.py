@@ -14,12 +14,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
-
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
+from host_tools.probe import Action, Probe, ProbeBody
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 from rtos.stats import DeadlineHealth
@@ -56,7 +55,7 @@ class RunConfig:
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
     # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
-    actions: list[tuple[float, Callable[[VirtualBench, Firmware], None]]] = field(default_factory=list)
+    actions: list[tuple[float, Action]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -64,32 +63,6 @@ class RunConfig:
             raise ValueError(f"strides {self.strides!r} out of range: an int in 1..10000")
         if not isinstance(self.baud, int) or not 9600 <= self.baud <= 3_000_000:
             raise ValueError(f"baud {self.baud!r} out of range: an int in 9600..3000000")
-
-
-@dataclass
-class Probe:
-    """Samples of the run at PROBE_HZ: time, reference, true and estimated angles, currents."""
-
-    t_s: list[float] = field(default_factory=list)
-    reference_rad: list[float] = field(default_factory=list)
-    true_angle_rad: list[float] = field(default_factory=list)
-    fused_angle_rad: list[float] = field(default_factory=list)
-    current_cmd_a: list[float] = field(default_factory=list)
-    current_meas_a: list[float] = field(default_factory=list)
-
-    def sample(self, t_s: float, fw: Firmware, true_angle_rad: float) -> None:
-        """Record one sample of the firmware's outputs and the true (or best known) angle at t_s."""
-        out = fw.out
-        self.t_s.append(t_s)
-        self.reference_rad.append(out.reference_rad)
-        self.true_angle_rad.append(true_angle_rad)
-        self.fused_angle_rad.append(out.fused_angle_rad)
-        self.current_cmd_a.append(out.current_cmd_a)
-        self.current_meas_a.append(fw.motor.feedback.current_a)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The samples as numpy arrays."""
-        return {k: np.asarray(v) for k, v in self.__dict__.items()}
 
 
 @dataclass
@@ -140,17 +113,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
     fw = Firmware(bench.board, fw_cfg, reference=reference)
     probe = Probe()
-    plant = bench.plant.raw  # the probe brings the world up to its job's start itself
-
-    actions = sorted(cfg.actions, key=lambda a: a[0])
-
-    def probe_body(job) -> None:  # bench instrument, not firmware: zero cycles, lowest priority
-        t = job.start / f_cpu
-        while actions and actions[0][0] <= t:
-            actions.pop(0)[1](bench, fw)
-        bench.advance_to(job.start)
-        probe.sample(t, fw, plant.output_angle_rad(t))
-
+    # bench instrument, not firmware: zero cycles, lowest priority
+    probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))
     probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
     interrupts = bench.interrupt_sources(isr)
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None

@@ -1,8 +1,9 @@
 """Position references: the periodic normative gait curve and the minimum-jerk point-to-point move.
 
 The gait curve is a periodic C2 cubic spline built with scipy at construction; the per-sample path
-evaluates the spline's piecewise-polynomial coefficients in pure Python (bisect + Horner), exact at any
-t. See docs/control.md for the closure of the (non-periodic) published curve.
+evaluates the spline's piecewise-polynomial coefficients (bisect + Horner, exact at any t) in a compiled
+:class:`~firmware.control.curve.PeriodicCubic`. See docs/control.md for the closure of the
+(non-periodic) published curve.
 """
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ import csv
 import io
 import logging
 import math
-from bisect import bisect_right
 from collections.abc import Mapping, Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Protocol
 
+from firmware.control.curve import PeriodicCubic
 from firmware.control.validation import check_range, is_number
 
 logger = logging.getLogger(__name__)
@@ -154,16 +155,15 @@ class GaitReference(_Sampled):
         self._sd = None if sd_deg is None else (sd + [sd[0]] if len(pc) > len(p) else sd)
         x = np.asarray(pc) / 100.0 * self.stride_s
         self._spline = CubicSpline(x, np.radians(yc), bc_type="periodic")
-        self._breaks: list[float] = [float(v) for v in x[:-1]]
         c = self._spline.c
-        self._coef: list[tuple[float, float, float, float]] = [
-            (float(c[0, i]), float(c[1, i]), float(c[2, i]), float(c[3, i])) for i in range(c.shape[1])
-        ]
-        self._lo_rad = math.radians(self.rom_deg[0])
-        self._hi_rad = math.radians(self.rom_deg[1])
-        self.clamp_count = 0
+        lo_rad, hi_rad = math.radians(self.rom_deg[0]), math.radians(self.rom_deg[1])
+        #: the spline's pieces, sampled by sample() and directly by the firmware's control task
+        self.curve = PeriodicCubic(
+            [float(v) for v in x[:-1]],
+            [(float(c[0, i]), float(c[1, i]), float(c[2, i]), float(c[3, i])) for i in range(c.shape[1])],
+            self.stride_s, lo_rad, hi_rad)
         dense = self._spline(np.linspace(0.0, self.stride_s, 2001))
-        self.clamped_fraction = float(np.mean((dense < self._lo_rad) | (dense > self._hi_rad)))
+        self.clamped_fraction = float(np.mean((dense < lo_rad) | (dense > hi_rad)))
         if self.clamped_fraction > 0.0:
             logger.warning("%s: %.1f %% of the gait curve lies outside the range of motion %s deg "
                            "and is clamped", source, 100.0 * self.clamped_fraction, self.rom_deg)
@@ -191,20 +191,12 @@ class GaitReference(_Sampled):
 
     def sample(self, t_s: float) -> tuple[float, float, float]:
         """Return (angle_rad, velocity_rad_s, accel_rad_s2) at t_s >= 0, clamped to the range of motion."""
-        if not 0.0 <= t_s < math.inf:
-            raise ValueError(f"t_s = {t_s!r} is not allowed: must be a finite time >= 0 s")
-        tau = t_s % self.stride_s
-        i = bisect_right(self._breaks, tau) - 1
-        dt = tau - self._breaks[i]
-        c3, c2, c1, c0 = self._coef[i]
-        angle = ((c3 * dt + c2) * dt + c1) * dt + c0
-        if angle > self._hi_rad:
-            self.clamp_count += 1
-            return self._hi_rad, 0.0, 0.0
-        if angle < self._lo_rad:
-            self.clamp_count += 1
-            return self._lo_rad, 0.0, 0.0
-        return angle, (3.0 * c3 * dt + 2.0 * c2) * dt + c1, 6.0 * c3 * dt + 2.0 * c2
+        return self.curve.sample(t_s)
+
+    @property
+    def clamp_count(self) -> int:
+        """Samples clamped to the range of motion so far."""
+        return self.curve.clamp_count
 
     def percent_at(self, t_s: float) -> float:
         """Gait-cycle phase in percent [0, 100) at time t_s."""

@@ -8,36 +8,47 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+
+from mypy_extensions import mypyc_attr
 
 
-class Coefficients(NamedTuple):
-    """Constants of one plant configuration; torques are divided by the output inertia (1/s^2 units)."""
+class Coefficients:
+    """Constants of one plant configuration; torques are divided by the output inertia (1/s^2 units).
 
-    inv_j: float  # 1 / J_total [1/(kg m^2)]
-    kto: float  # ankle torque per ampere / J
-    ks: float  # spring stiffness term (-k_l / J), 0 without spring
-    c0: float  # constant torque / J (spring preload -k_l*theta0)
-    kd: float  # viscous damping / J
-    mg: float  # gravity moment / J
-    psi0: float  # angle of the COM line from the downward vertical at theta = 0
-    lo: float  # plantarflexion stop [rad]
-    hi: float  # dorsiflexion stop [rad]
-    kst: float  # stop stiffness / J
-    cst: float  # stop damping / J
-    tc: float  # kinetic Coulomb friction / J
-    tsx: float  # static friction / J
-    tau: float  # current-loop time constant [s]
-    ker: float  # back-EMF per output rad/s over R: Ke*N/R [A s/rad]
-    bscale: float  # N / brake speed scale: tanh argument per output rad/s
+    A plain class with float attributes (not a tuple): compiled, every field read is a C double.
+    """
+
+    def __init__(self, *, inv_j: float, kto: float, ks: float, c0: float, kd: float, mg: float, psi0: float,
+                 lo: float, hi: float, kst: float, cst: float, tc: float, tsx: float, tau: float, ker: float,
+                 bscale: float) -> None:
+        """Store the constants (keyword arguments, in SI units divided by J where noted)."""
+        self.inv_j = inv_j  # 1 / J_total [1/(kg m^2)]
+        self.kto = kto  # ankle torque per ampere / J
+        self.ks = ks  # spring stiffness term (-k_l / J), 0 without spring
+        self.c0 = c0  # constant torque / J (spring preload -k_l*theta0)
+        self.kd = kd  # viscous damping / J
+        self.mg = mg  # gravity moment / J
+        self.psi0 = psi0  # angle of the COM line from the downward vertical at theta = 0
+        self.lo = lo  # plantarflexion stop [rad]
+        self.hi = hi  # dorsiflexion stop [rad]
+        self.kst = kst  # stop stiffness / J
+        self.cst = cst  # stop damping / J
+        self.tc = tc  # kinetic Coulomb friction / J
+        self.tsx = tsx  # static friction / J
+        self.tau = tau  # current-loop time constant [s]
+        self.ker = ker  # back-EMF per output rad/s over R: Ke*N/R [A s/rad]
+        self.bscale = bscale  # N / brake speed scale: tanh argument per output rad/s
 
 
-class Drive(NamedTuple):
+@mypyc_attr(free_list_len=1, acyclic=True)  # one made per input event: allocation from a free list, no GC
+class Drive:
     """Motor-driver inputs, constant between input events."""
 
-    target_a: float  # commanded q-axis current (already clamped to the peak current)
-    brake_a: float  # regenerative brake current magnitude; 0 = current mode
-    v_over_r: float  # bus voltage / R: the back-EMF current limit (inf when unpowered)
+    def __init__(self, target_a: float, brake_a: float, v_over_r: float) -> None:
+        """Store the driver inputs."""
+        self.target_a = target_a  # commanded q-axis current (already clamped to the peak current)
+        self.brake_a = brake_a  # regenerative brake current magnitude; 0 = current mode
+        self.v_over_r = v_over_r  # bus voltage / R: the back-EMF current limit (inf when unpowered)
 
 
 def static_accel(c: Coefficients, th: float, i: float, ext: float) -> float:
@@ -76,23 +87,20 @@ def lag_factors(h: float, tau: float) -> tuple[float, float]:
 
 def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int], t_base: float, k_first: int,
               n: int, h: float, ea: float, eb: float, fn: Callable[[float], float] | None,
-              exps: tuple[float, float] | None = None) -> tuple[float, float, float, int]:
+              exps: tuple[float, float]) -> tuple[float, float, float, int]:
     """Take n RK4 steps of size h; step j starts at t_base + (k_first + j) * h.
 
     state = (theta, omega, i_q, s) with s the friction mode: +1/-1 sliding that way, 0 stuck.
-    External torque is ea + eb * t, or fn(t) at the stage times when fn is given. exps, if given, is
-    (exp(-h/2/tau), exp(-h/tau)) computed once for a fixed h (see :func:`lag_factors`).
+    External torque is ea + eb * t, or fn(t) at the stage times when fn is given. exps is
+    (exp(-h/2/tau), exp(-h/tau)) for this h, from :func:`lag_factors` (computed once for the grid step).
     """
     th, w, i, s = state
-    (inv_j, kto, ks, c0, kd, mg, psi0, lo, hi, kst, cst, tc, tsx, tau, ker, bscale) = c
-    tgt, brake, vr = d
-    sin = math.sin
+    inv_j, kto, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.ks, c.c0, c.kd, c.mg, c.psi0
+    lo, hi, kst, cst, tc, tsx, ker, bscale = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale
+    tgt, brake, vr = d.target_a, d.brake_a, d.v_over_r
     hh = 0.5 * h
     h6 = h / 6.0
-    if exps is None:
-        eh, e1 = lag_factors(h, tau)
-    else:
-        eh, e1 = exps
+    eh, e1 = exps
     timed = fn is not None or eb != 0.0
     x1 = x2 = x4 = ea * inv_j
     for kk in range(k_first, k_first + n):
@@ -119,7 +127,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         i_m = tg + dev * eh
         i_e = tg + dev * e1
         if s == 0:  # stuck: stays until the static torque exceeds breakaway
-            a = kto * i + x1 + c0 + ks * th - mg * sin(th + psi0)
+            a = kto * i + x1 + c0 + ks * th - mg * math.sin(th + psi0)
             if th > hi:
                 a -= kst * (th - hi)
             elif th < lo:
@@ -132,7 +140,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         u1 = kto * i + f + x1
         u2 = kto * i_m + f + x2
         u4 = kto * i_e + f + x4
-        a1 = u1 + ks * th - mg * sin(th + psi0) - kd * w
+        a1 = u1 + ks * th - mg * math.sin(th + psi0) - kd * w
         if th > hi:
             x = kst * (th - hi) + cst * w
             if x > 0.0:
@@ -143,7 +151,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
                 a1 -= x
         th2 = th + hh * w
         w2 = w + hh * a1
-        a2 = u2 + ks * th2 - mg * sin(th2 + psi0) - kd * w2
+        a2 = u2 + ks * th2 - mg * math.sin(th2 + psi0) - kd * w2
         if th2 > hi:
             x = kst * (th2 - hi) + cst * w2
             if x > 0.0:
@@ -154,7 +162,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
                 a2 -= x
         th3 = th + hh * w2
         w3 = w + hh * a2
-        a3 = u2 + ks * th3 - mg * sin(th3 + psi0) - kd * w3
+        a3 = u2 + ks * th3 - mg * math.sin(th3 + psi0) - kd * w3
         if th3 > hi:
             x = kst * (th3 - hi) + cst * w3
             if x > 0.0:
@@ -165,7 +173,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
                 a3 -= x
         th4 = th + h * w3
         w4 = w + h * a3
-        a4 = u4 + ks * th4 - mg * sin(th4 + psi0) - kd * w4
+        a4 = u4 + ks * th4 - mg * math.sin(th4 + psi0) - kd * w4
         if th4 > hi:
             x = kst * (th4 - hi) + cst * w4
             if x > 0.0:
@@ -178,7 +186,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         w += h6 * (a1 + 2.0 * (a2 + a3) + a4)
         i = i_e
         if w * s <= 0.0:  # velocity reached or crossed zero inside the step: stick or reverse
-            a = kto * i + x4 + c0 + ks * th - mg * sin(th + psi0)
+            a = kto * i + x4 + c0 + ks * th - mg * math.sin(th + psi0)
             if th > hi:
                 a -= kst * (th - hi)
             elif th < lo:

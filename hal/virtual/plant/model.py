@@ -6,6 +6,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 
@@ -16,10 +17,13 @@ from hal.virtual.plant.params import PlantParams, load_plant_params
 logger = logging.getLogger(__name__)
 
 #: Largest integration step allowed (10 kHz).
-MAX_STEP_S = 1e-4
+MAX_STEP_S: Final = 1e-4
 #: Input events closer than this to the committed time or a grid point are taken as happening there.
-EVENT_SNAP_S = 1e-10
-_UNPOWERED_V_OVER_R = 1e300  # no back-EMF clamp with the bridge open (current is forced to zero)
+EVENT_SNAP_S: Final = 1e-10
+_UNPOWERED_V_OVER_R: Final = 1e300  # no back-EMF clamp with the bridge open (current is forced to zero)
+
+#: (angle [rad], velocity [rad/s], q current [A], friction mode: +1/-1 sliding that way, 0 stuck)
+State = tuple[float, float, float, int]
 
 
 @dataclass(frozen=True)
@@ -41,6 +45,24 @@ class PlantState:
     powered: bool
     stuck: bool
     in_contact: bool
+
+
+@mypyc_attr(free_list_len=1, acyclic=True)  # one made per step ahead: allocation from a free list, no GC
+class StepAhead:
+    """The next grid step integrated ahead (not committed), for queries inside it and the next commit."""
+
+    def __init__(self, t0: float, k: int, x1: State, a0: float, a1: float, target_a: float) -> None:
+        """The step k of the grid that starts at t0: state at its end, accelerations at both ends, target."""
+        self.t0 = t0
+        self.k = k
+        self.x1 = x1  # state at the next grid point
+        self.a0 = a0  # acceleration at the step's start
+        self.a1 = a1  # acceleration at the step's end
+        self.target_a = target_a  # the current target held over the step
+
+    def starts(self, t0: float, k: int) -> bool:
+        """Whether this is step k of the grid that starts at t0."""
+        return self.k == k and self.t0 == t0
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)  # test doubles override the queries
@@ -72,10 +94,11 @@ class Plant:
         finite_args = {"initial_velocity_rad_s": initial_velocity_rad_s, "start_time_s": start_time_s,
                        "motor_angle_offset_rad": motor_angle_offset_rad}
         for name, value in finite_args.items():
-            if not math.isfinite(value):
-                raise ValueError(f"{name} = {value!r} must be finite")
+            _check_finite(name, value)
         self.step_s = step_s
         self.motor_angle_offset_rad = motor_angle_offset_rad
+        self._ratio = p.total_ratio  # read per query: kept here, not looked up on the interpreted params
+        self._peak_a = p.peak_current_a
         fx = self.fixture
         load_lever = p.load_lever_m
         self.output_inertia_kg_m2 = p.output_inertia_kg_m2 + fx.load_mass_kg * load_lever**2
@@ -101,25 +124,24 @@ class Plant:
         self._t = start_time_s
         self._latest = start_time_s
         w0 = initial_velocity_rad_s
-        self._x: tuple[float, float, float, int] = (initial_angle_rad, w0, 0.0, (w0 > 0) - (w0 < 0))
+        self._x: State = (initial_angle_rad, w0, 0.0, (w0 > 0) - (w0 < 0))
         self._powered = fx.powered
         self._command_a = 0.0
         self._brake_a = 0.0
         self._drive = self._make_drive()
-        self._cache: tuple[float, tuple[float, float, float, int]] | None = None
-        # the next grid step, integrated ahead (not committed) for queries inside it: (t0, k, state at the
-        # next grid point, accelerations at both ends, the step's current target); None when stale
-        self._ahead: tuple[float, int, tuple[float, float, float, int], float, float, float] | None = None
+        # the state of the latest query and its time (NaN: none; NaN equals no time)
+        self._cache_t = math.nan
+        self._cache_x: State = self._x
+        self._ahead: StepAhead | None = None  # None when stale
         lever = p.toe_lever_m if fx.toe_lever_m is None else fx.toe_lever_m
         self._set_load(fx.torque_nm if fx.toe_force_n is None else _scaled_load(fx.toe_force_n, lever))
 
     # ----------------------------------------------------------------- inputs
     def set_current_command(self, current_a: float, t_s: float) -> None:
         """From t_s on, command this q-axis current (clamped to the peak current); ignored when unpowered."""
-        if not math.isfinite(current_a):
-            raise ValueError(f"current_a = {current_a!r} must be finite")
+        _check_finite("current_a", current_a)
         self._commit_event(t_s)
-        peak = self.params.peak_current_a
+        peak = self._peak_a
         self._command_a = min(peak, max(-peak, current_a))
         self._brake_a = 0.0
         if not self._powered:
@@ -129,10 +151,9 @@ class Plant:
 
     def set_brake_current(self, current_a: float, t_s: float) -> None:
         """From t_s on, brake: a current of this magnitude opposes rotation (regenerative brake)."""
-        if not math.isfinite(current_a):
-            raise ValueError(f"current_a = {current_a!r} must be finite")
+        _check_finite("current_a", current_a)
         self._commit_event(t_s)
-        self._brake_a = min(self.params.peak_current_a, abs(current_a)) if self._powered else 0.0
+        self._brake_a = min(self._peak_a, abs(current_a)) if self._powered else 0.0
         self._command_a = 0.0
         self._drive = self._make_drive()
 
@@ -164,7 +185,7 @@ class Plant:
         p = self.params
         ext = self._ext_value(t_s)
         a = accel(self._c, th, w, i, ext, s)
-        n = p.total_ratio
+        n = self._ratio
         lo, hi = p.stop_min_rad, p.stop_max_rad
         return PlantState(
             t_s=t_s, output_angle_rad=th, output_velocity_rad_s=w, output_accel_rad_s2=a,
@@ -189,16 +210,16 @@ class Plant:
 
     def motor_angle_rad(self, t_s: float) -> float:
         """Rotor mechanical angle at t_s: N * ankle angle + offset [rad]."""
-        return self.params.total_ratio * self._state_tuple(t_s)[0] + self.motor_angle_offset_rad
+        return self._ratio * self._state_tuple(t_s)[0] + self.motor_angle_offset_rad
 
     def motor_velocity_rad_s(self, t_s: float) -> float:
         """Rotor mechanical speed at t_s [rad/s]."""
-        return self.params.total_ratio * self._state_tuple(t_s)[1]
+        return self._ratio * self._state_tuple(t_s)[1]
 
     def motor_sample(self, t_s: float) -> tuple[float, float, float]:
         """(q current [A], rotor speed [rad/s], rotor angle [rad]) at t_s from one state evaluation."""
         th, w, i, _ = self._state_tuple(t_s)
-        n = self.params.total_ratio
+        n = self._ratio
         return i, n * w, n * th + self.motor_angle_offset_rad
 
     def current_q_a(self, t_s: float) -> float:
@@ -229,7 +250,7 @@ class Plant:
     def _set_load(self, load: Load) -> None:
         """Install an external torque load (profile segments, a function, or a constant)."""
         check_load("external torque load", load)
-        self._cache = None
+        self._cache_t = math.nan
         self._ahead = None
         self._fn: Callable[[float], float] | None = None
         self._profile: TorqueProfile | None = None
@@ -265,23 +286,23 @@ class Plant:
 
     def _check_time(self, t_s: float) -> None:
         """Refuse non-finite times and times before the latest one seen."""
+        if self._latest <= t_s < math.inf:  # false for NaN too
+            self._latest = t_s
+            return
         if not math.isfinite(t_s):
             raise ValueError(f"time t_s = {t_s!r} must be finite")
-        if t_s < self._latest:
-            raise ValueError(f"time t_s = {t_s!r} is in the past: the plant has already been queried or "
+        raise ValueError(f"time t_s = {t_s!r} is in the past: the plant has already been queried or "
                              f"driven at {self._latest!r} s; times must be >= {self._latest!r}")
-        self._latest = t_s
 
-    def _state_tuple(self, t_s: float) -> tuple[float, float, float, int]:
+    def _state_tuple(self, t_s: float) -> State:
         """State at t_s: commit whole steps, then interpolate inside the next one (nothing committed).
 
         Inside a grid step the state comes from the step integrated ahead (cubic Hermite, exact current
         lag); where the friction mode is stuck or changes within the step, or a profile breakpoint comes
         before its end, it is one partial RK4 step from a copy instead.
         """
-        cache = self._cache
-        if cache is not None and cache[0] == t_s:
-            return cache[1]
+        if t_s == self._cache_t:
+            return self._cache_x
         self._check_time(t_s)
         self._commit_grid(t_s)
         h = t_s - self._t
@@ -289,16 +310,17 @@ class Plant:
         if h > 0.0:
             dt = self.step_s
             ahead = self._ahead
-            if ahead is None or ahead[0] != self._t0 or ahead[1] != self._k:
+            if ahead is None or not ahead.starts(self._t0, self._k):
                 ahead = self._step_ahead(dt)
-            if ahead is not None and x[3] and ahead[2][3] == x[3]:
-                x = hermite(x, ahead[2], ahead[3], ahead[4], dt, h, ahead[5], self._c.tau)
+            if ahead is not None and x[3] and ahead.x1[3] == x[3]:
+                x = hermite(x, ahead.x1, ahead.a0, ahead.a1, dt, h, ahead.target_a, self._c.tau)
             else:
-                x = integrate(self._c, self._drive, x, self._t, 0, 1, h, self._ea, self._eb, self._fn)
-        self._cache = (t_s, x)
+                x = self._partial_step(h)
+        self._cache_t = t_s
+        self._cache_x = x
         return x
 
-    def _step_ahead(self, dt: float) -> tuple[float, int, tuple[float, float, float, int], float, float, float] | None:
+    def _step_ahead(self, dt: float) -> StepAhead | None:
         """Integrate the next grid step from the committed state (kept for queries and the next commit).
 
         None when a load-profile breakpoint falls inside the step (the committed path stops there).
@@ -312,7 +334,7 @@ class Plant:
         t1 = self._t0 + (self._k + 1) * dt
         a0 = accel(c, x0[0], x0[1], x0[2], self._ext_value(t), x0[3])
         a1 = accel(c, x1[0], x1[1], x1[2], self._ext_value(t1), x1[3])
-        self._ahead = ahead = (self._t0, self._k, x1, a0, a1, lag_target(c, self._drive, x0[1]))
+        self._ahead = ahead = StepAhead(self._t0, self._k, x1, a0, a1, lag_target(c, self._drive, x0[1]))
         return ahead
 
     def _commit_event(self, t_s: float) -> None:
@@ -321,13 +343,17 @@ class Plant:
         self._commit_grid(t_s + EVENT_SNAP_S)
         if t_s - self._t > EVENT_SNAP_S:
             self._commit_partial(t_s)
-        self._cache = None
+        self._cache_t = math.nan
         self._ahead = None  # the input changes the step ahead
+
+    def _partial_step(self, h: float) -> State:
+        """The state h (< one grid step) after the committed one: one RK4 step from a copy."""
+        return integrate(self._c, self._drive, self._x, self._t, 0, 1, h, self._ea, self._eb, self._fn,
+                         lag_factors(h, self._c.tau))
 
     def _commit_partial(self, t_end: float) -> None:
         """Commit one short step to t_end (< one step away) and restart the step grid there."""
-        self._x = integrate(self._c, self._drive, self._x, self._t, 0, 1, t_end - self._t,
-                            self._ea, self._eb, self._fn)
+        self._x = self._partial_step(t_end - self._t)
         self._t0 = self._t = t_end
         self._k = 0
 
@@ -346,8 +372,8 @@ class Plant:
                 n += 1
             if n > 0:
                 ahead = self._ahead
-                if ahead is not None and ahead[0] == t0 and ahead[1] == k:  # first step done already
-                    self._x = ahead[2]
+                if ahead is not None and ahead.starts(t0, k):  # first step done already
+                    self._x = ahead.x1
                     k += 1
                     n -= 1
                 if n > 0:
@@ -365,6 +391,12 @@ class Plant:
                 self._t0, self._k = self._t, 0
             assert self._profile is not None
             self._ea, self._eb, self._t_break = self._profile.segment(self._t)
+
+
+def _check_finite(name: str, value: float) -> None:
+    """ValueError naming the value unless it is finite."""
+    if not -math.inf < value < math.inf:  # false for NaN too (compiled: no call into the math module)
+        raise ValueError(f"{name} = {value!r} must be finite")
 
 
 def _scaled_load(load: Load, factor: float) -> Load:
