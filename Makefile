@@ -11,9 +11,9 @@ ARGS ?=
 
 .PHONY: install test bench lint run clean
 
-# The hot path is compiled with mypyc (setup.py): any edit under firmware/, hal/ or rtos/ rebuilds it.
+# The hot path is compiled with mypyc: an edit of any module listed in setup.py's COMPILED rebuilds it.
 # PAFP_PURE_PYTHON=1 make install gives the pure-Python package instead.
-SOURCES := $(shell find firmware hal rtos -name '*.py' 2>/dev/null)
+SOURCES := $(shell sed -n 's/^ *"\([a-z0-9_/]*\.py\)",$$/\1/p' setup.py)
 EXTENSIONS = find firmware hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
 
 $(STAMP): pyproject.toml setup.py $(SOURCES)
