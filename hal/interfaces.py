@@ -12,6 +12,7 @@ import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 
@@ -27,7 +28,7 @@ __all__ = [
     "Watchdog",
 ]
 
-_MAX_BAUD = 20_000_000
+_MAX_BAUD: Final = 20_000_000
 
 
 @dataclass

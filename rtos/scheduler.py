@@ -6,6 +6,7 @@ import logging
 import random
 from collections.abc import Callable, Iterable
 from heapq import heappop, heappush
+from typing import Final
 
 from rtos.clock import Clock, VirtualClock
 from rtos.interrupts import InterruptSource, bind_sources, is_interrupt_source, solve_bound
@@ -16,12 +17,12 @@ from rtos.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
-_SHIFT = 8  # heap keys are (ready_cycle << _SHIFT) | priority rank
-_MASK = (1 << _SHIFT) - 1
-_FAR = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
-_LATE = OverrunPolicy.LATE
-_FAULT = OverrunPolicy.FAULT
-_QUEUE = OverrunPolicy.QUEUE
+_SHIFT: Final = 8  # heap keys are (ready_cycle << _SHIFT) | priority rank
+_MASK: Final = (1 << _SHIFT) - 1
+_FAR: Final = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
+_LATE: Final = OverrunPolicy.LATE
+_FAULT: Final = OverrunPolicy.FAULT
+_QUEUE: Final = OverrunPolicy.QUEUE
 
 
 class Scheduler:
@@ -225,6 +226,7 @@ class Scheduler:
         plain = [t.overrun is not _QUEUE for t in tasks]  # policies that drop releases
         nrel, nnext, ready, blocked = self._nrel, self._nnext, self._ready, self._blocked
         heap, trace, rng = self._heap, self.trace, self._rng
+        push, pop = heappush, heappop  # locals: no module-dict lookup per call in compiled code
         irqs = [] if realtime else bind_sources(self._interrupts)
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
@@ -253,7 +255,7 @@ class Scheduler:
                         break
                 lim = (now << _SHIFT) | _MASK
                 while heap and heap[0] <= lim:
-                    key = heappop(heap)
+                    key = pop(heap)
                     i = key & _MASK
                     mask |= 1 << i
                     if prev > i and (key >> _SHIFT) < now:
@@ -352,7 +354,7 @@ class Scheduler:
                     nrel[i] = nxt
                 a = nxt + rng.randint(0, jitters[i]) if jitters[i] else nxt
                 ready[i] = a
-                heappush(heap, (a << _SHIFT) | i)
+                push(heap, (a << _SHIFT) | i)
                 prev, nrel_prev, now = i, r, f
                 if fault is not None:
                     self._now = f

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from bisect import bisect_left
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import Any, Final
 
 __all__ = ["EventTimesInterrupt", "InterruptSourceBase"]
 
-_COMPACT_AT = 4096
+_COMPACT_AT: Final = 4096
 
 
 class InterruptSourceBase:

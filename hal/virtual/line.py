@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from itertools import accumulate
 from math import gcd
+from typing import Final
 
 __all__ = ["BITS_PER_BYTE_8N1", "ByteLine", "ceil_div"]
 
 BITS_PER_BYTE_8N1 = 10  # start + 8 data + stop
-_MAX_PATTERN = 4096  # longest period of the per-byte increments kept as a table
+_MAX_PATTERN: Final = 4096  # longest period of the per-byte increments kept as a table
 
 
 def ceil_div(a: int, b: int) -> int:
