@@ -241,7 +241,7 @@ class VirtualUart(Uart):
         self._drop_tx -= drop
         self.dropped_tx += drop
         if self._peer is not None and n > drop:
-            self._peer.on_bytes(data[drop:n], ends[drop:])
+            self._peer.on_bytes(data[drop:n], ends[drop:] if drop else ends)
         return n
 
     def _tx_space(self) -> int:
