@@ -15,10 +15,10 @@ from bisect import bisect_right
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal, Protocol, cast
 
 from hal.interfaces import Uart
-from hal.virtual.irq import EventTimesInterrupt
+from hal.virtual.irq import EventTimesInterrupt, Horizon
 from hal.virtual.line import ByteLine
 
 __all__ = ["UartPeer", "VirtualUart"]
@@ -104,7 +104,7 @@ class VirtualUart(Uart):
         for source in self._irq_sources:
             source.horizon = self._horizon()
 
-    def _horizon(self) -> UartPeer | None:
+    def _horizon(self) -> Horizon | None:
         """The peer if it announces ``next_event``: it sends nothing ending at or before that tick.
 
         A peer with ``next_event`` promises that every byte it has not yet transmitted ends after its
@@ -112,7 +112,7 @@ class VirtualUart(Uart):
         ending by then needs no catch-up of the peer.
         """
         peer = self._peer
-        return peer if isinstance(getattr(peer, "next_event", None), int) else None
+        return cast(Horizon, peer) if isinstance(getattr(peer, "next_event", None), int) else None
 
     @property
     def byte_cycles(self) -> float:
