@@ -329,10 +329,12 @@ class Scheduler:
                         target = wd_due
                     if target > t_end:
                         target = t_end
-                    for j, count_in, _ in irqs:
-                        k = count_in(now, target)
+                    t0: object = now  # boxed once for all the sources (see BoundSource)
+                    t1: object = target
+                    for b in irqs:
+                        k = b.count_in(t0, t1)
                         if k:
-                            irq_idle[j] += k
+                            irq_idle[b.index] += k
                     now = clock.wait_until(target) if realtime else target
                     prev = -1
                     continue
