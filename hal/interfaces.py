@@ -12,6 +12,7 @@ import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 
@@ -27,7 +28,7 @@ __all__ = [
     "Watchdog",
 ]
 
-_MAX_BAUD = 20_000_000
+_MAX_BAUD: Final = 20_000_000
 
 
 @dataclass
@@ -92,9 +93,12 @@ class Uart(ABC):
     def write(self, data: bytes | bytearray | memoryview) -> int:
         """Queue bytes without blocking; return how many were accepted (the refused rest is counted)."""
         self._check_open()
-        if not isinstance(data, (bytes, bytearray, memoryview)):
+        if type(data) is bytes:  # the usual case: immutable already, no copy
+            payload = data
+        elif isinstance(data, (bytes, bytearray, memoryview)):
+            payload = bytes(data)
+        else:
             raise TypeError(f"write() takes bytes, bytearray or memoryview, not {type(data).__name__}")
-        payload = bytes(data)
         if not payload:
             return 0
         accepted = self._send(payload)

@@ -122,13 +122,31 @@ class TimestampedInterrupt:
         return bisect.bisect_left(buf, t1, lo) - lo
 
 
-BoundSources = list[tuple[int, Callable[[int, int], int], int]]
-"""Interrupt sources as (index, bound ``count_in``, cost in cycles), see :func:`bind_sources`."""
+class BoundSource:
+    """One interrupt source as :func:`solve_bound` reads it: its index, bound ``count_in`` and cost.
+
+    ``label`` names it in error messages (the name of the object ``count_in`` is bound to, else the
+    index); ``hits`` is scratch space of the solver (firings in the window of the current pass).
+    """
+
+    def __init__(self, index: int, count_in: Callable[[int, int], int], cost: int) -> None:
+        """Keep the source's index in the caller's tables, its counting method and its cost."""
+        self.index = index
+        # typed loosely so that compiled callers can pass window ends boxed once for all sources
+        # (an int argument is boxed again at every call); they pass ints all the same
+        self.count_in: Callable[..., int] = count_in
+        self.cost = cost
+        self.label: object = getattr(getattr(count_in, "__self__", None), "name", index)
+        self.hits = 0
+
+
+BoundSources = list[BoundSource]
+"""Interrupt sources bound for the hot loop, see :func:`bind_sources`."""
 
 
 def bind_sources(sources: Sequence[InterruptSource]) -> BoundSources:
-    """The sources as (index, bound count_in, cost) triples, for :func:`solve_bound` in a hot loop."""
-    return [(j, src.count_in, src.cost_cycles) for j, src in enumerate(sources)]
+    """The sources with their ``count_in`` bound once, for :func:`solve_bound` in a hot loop."""
+    return [BoundSource(j, src.count_in, src.cost_cycles) for j, src in enumerate(sources)]
 
 
 def solve_finish(start: int, cost: int, sources: Sequence[InterruptSource], counts: list[int]) -> int:
@@ -146,25 +164,26 @@ def solve_bound(start: int, cost: int, bound: BoundSources, counts: list[int]) -
     """:func:`solve_finish` on sources already bound with :func:`bind_sources`."""
     base = start + cost
     finish = base
-    for _ in range(MAX_FIXED_POINT_STEPS):
+    t0: object = start  # the window ends as objects, boxed once per pass for all the sources
+    for _step in range(MAX_FIXED_POINT_STEPS):
         extra = 0
-        hits = None
-        for j, count_in, c in bound:
-            k = count_in(start, finish)
+        fired = False
+        t1: object = finish
+        for b in bound:
+            k = b.count_in(t0, t1)
+            b.hits = k
             if k:
-                extra += k * c
-                if hits is None:
-                    hits = [(j, k)]
-                else:
-                    hits.append((j, k))
+                extra += k * b.cost
+                fired = True
         nxt = base + extra
         if nxt == finish:
-            if hits is not None:
-                for j, k in hits:
-                    counts[j] += k
+            if fired:
+                for b in bound:
+                    if b.hits:
+                        counts[b.index] += b.hits
             return finish
         finish = nxt
     raise RuntimeError(
         f"interrupt load never lets the job started at cycle {start} finish: the sources "
-        f"{[getattr(getattr(fn, '__self__', None), 'name', j) for j, fn, _ in bound]} saturate the CPU"
+        f"{[b.label for b in bound]} saturate the CPU"
     )

@@ -1,27 +1,60 @@
-"""The cooperative (non-preemptive) fixed-priority scheduler: one heap of releases, one ready bitmask."""
+"""The cooperative (non-preemptive) fixed-priority scheduler: one slot per task, one ready bitmask."""
 
 from __future__ import annotations
 
 import logging
 import random
 from collections.abc import Callable, Iterable
-from heapq import heappop, heappush
+from typing import Final
 
 from rtos.clock import Clock, VirtualClock
 from rtos.interrupts import InterruptSource, bind_sources, is_interrupt_source, solve_bound
 from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
-from rtos.task import Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
+from rtos.task import Body, Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
 from rtos.trace import Trace
 from rtos.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
-_SHIFT = 8  # heap keys are (ready_cycle << _SHIFT) | priority rank
-_MASK = (1 << _SHIFT) - 1
-_FAR = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
-_LATE = OverrunPolicy.LATE
-_FAULT = OverrunPolicy.FAULT
-_QUEUE = OverrunPolicy.QUEUE
+_MAX_TASKS: Final = 256  # tasks per scheduler: the limit of the former heap keys, still enforced
+_FAR: Final = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
+_LATE: Final = OverrunPolicy.LATE
+_FAULT: Final = OverrunPolicy.FAULT
+_QUEUE: Final = OverrunPolicy.QUEUE
+
+
+class _Slot:
+    """One task as the dispatch loop sees it: its constants and release state in native fields.
+
+    A task is either waiting for its next ready time (``waiting``) or pending in the scheduler's
+    ready bitmask (or running).
+    """
+
+    def __init__(self, rank: int, task: Task, stats: TaskStats, ready: int) -> None:
+        """Take the task's (frozen) parameters; the first release is at its offset, ready at ``ready``."""
+        self.rank = rank
+        self.task = task
+        self.name = task.name
+        self.period = task.period
+        self.offset = task.offset
+        self.deadline = task.relative_deadline
+        self.jitter = task.jitter
+        cost = task.cost
+        self.cost_model: Callable[[object], object] | None = cost if callable(cost) else None
+        self.cost = 0 if callable(cost) else cost
+        self.body: Body | None = task.body
+        self.plain = task.overrun is not _QUEUE  # a policy that drops releases
+        self.job = Job(task)
+        self.stats = stats
+        self.nrel = task.offset  # nominal release of the pending (or next) job
+        self.nnext = task.offset + task.period  # the release after it
+        self.ready = ready  # nrel after jitter
+        self.waiting = True
+        self.blocked: Blocker | None = None  # what delayed the pending job
+
+    def index_of(self, release: int) -> int:
+        """Release index k of the nominal release ``release`` (= offset + k * period)."""
+        return (release - self.offset) // self.period
 
 
 class Scheduler:
@@ -51,8 +84,8 @@ class Scheduler:
         """Set up the tasks (priorities unique, smaller = higher); ``clock`` defaults to 1 MHz virtual."""
         self.clock: Clock = clock if clock is not None else VirtualClock(1_000_000)
         self._tasks = by_priority(tasks)
-        if len(self._tasks) > _MASK + 1:
-            raise ValueError(f"at most {_MASK + 1} tasks are supported, got {len(self._tasks)}")
+        if len(self._tasks) > _MAX_TASKS:
+            raise ValueError(f"at most {_MAX_TASKS} tasks are supported, got {len(self._tasks)}")
         self._interrupts: list[InterruptSource] = list(interrupts)
         for src in self._interrupts:
             if not is_interrupt_source(src):
@@ -70,21 +103,13 @@ class Scheduler:
         self._stat_list = [self.stats[t.name] for t in self._tasks]
         self._irq_in_job = [0] * len(self._interrupts)
         self._irq_idle = [0] * len(self._interrupts)
-        self._jobs = [Job(t) for t in self._tasks]
-        self._heap: list[int] = []
         self._mask = 0
         self._prev = -1  # rank of the job that ran last (-1: the CPU was idle)
         self._prev_release = 0  # its nominal release
-        self._nrel: list[int] = []
-        self._nnext: list[int] = []
-        self._ready: list[int] = []
-        self._blocked: list[Blocker | None] = [None] * len(self._tasks)
+        self._slots: list[_Slot] = []
         for i, t in enumerate(self._tasks):
-            self._nrel.append(t.offset)
-            self._nnext.append(t.offset + t.period)
             ready = t.offset + (self._rng.randint(0, t.jitter) if t.jitter else 0)
-            self._ready.append(ready)
-            heappush(self._heap, (ready << _SHIFT) | i)
+            self._slots.append(_Slot(i, t, self._stat_list[i], ready))
 
     @property
     def now(self) -> int:
@@ -123,7 +148,7 @@ class Scheduler:
         if i is None:
             raise ValueError(f"no task named {name!r}: tasks are {[t.name for t in self._tasks]}")
         end = self._now if before is None else min(before, self._now)
-        st, pending_from, period = self._stat_list[i], self._nrel[i], self._tasks[i].period
+        st, pending_from, period = self._stat_list[i], self._slots[i].nrel, self._tasks[i].period
         due = -(-(end - pending_from) // period) if pending_from < end else 0
         return st.jobs + st.skipped + due
 
@@ -169,22 +194,22 @@ class Scheduler:
             if self.trace is not None:
                 self.trace.add_event("watchdog_reset", t, "watchdog")
 
-    def _overrun(self, i: int, release: int, nxt: int, finish: int) -> Fault | None:
-        """Apply task ``i``'s policy to its releases in [nxt, finish); set its next job; maybe a Fault."""
-        task, st = self._tasks[i], self._stat_list[i]
-        period = task.period
+    def _overrun(self, slot: _Slot, release: int, nxt: int, finish: int) -> Fault | None:
+        """Apply the slot's policy to its releases in [nxt, finish); set its next job; maybe a Fault."""
+        task, st = slot.task, slot.stats
+        period = slot.period
         n = (finish - 1 - nxt) // period + 1
         fault = None
         if task.overrun is _LATE:  # keep the first as the pending job, drop the others
             st.skipped += n - 1
-            self._nnext[i] = nxt + n * period
+            slot.nnext = nxt + n * period
         else:
             st.skipped += n
             if task.overrun is _FAULT:
-                fault = Fault(nxt, task.name, (release - task.offset) // period, n)
+                fault = Fault(nxt, task.name, slot.index_of(release), n)
             nxt += n * period
-            self._nnext[i] = nxt + period
-        self._nrel[i] = nxt
+            slot.nnext = nxt + period
+        slot.nrel = nxt
         return fault
 
     def _overrun_fault(self, i: int, fault: Fault) -> None:
@@ -196,6 +221,57 @@ class Scheduler:
         if self.on_fault is None:
             raise OverrunError(fault)
         self.on_fault(fault)
+
+    def _admit(self, now: int, prev: int, prev_release: int) -> tuple[int, int]:
+        """Move every waiting slot whose ready time has come (<= ``now``) into the ready set.
+
+        Returns (their bits for the ready mask, the earliest ready time still waiting or _FAR). A job
+        that became ready while a lower-priority job (rank ``prev``, release ``prev_release``) ran
+        records that job as its blocker.
+        """
+        bits = 0
+        earliest = _FAR
+        for slot in self._slots:
+            if slot.waiting:
+                r = slot.ready
+                if r <= now:
+                    slot.waiting = False
+                    bits |= 1 << slot.rank
+                    if prev > slot.rank and r < now:
+                        p = self._slots[prev]
+                        slot.blocked = Blocker(p.name, p.index_of(prev_release), now - r)
+                elif r < earliest:
+                    earliest = r
+        return bits, earliest
+
+    def _account(self, slot: _Slot, release: int, start: int, finish: int, cost: int) -> None:
+        """Add a finished job (nominal release, start, finish, cycles of its own) to the slot's statistics."""
+        st = slot.stats
+        resp = finish - release
+        st.jobs += 1
+        st.response_sum += resp
+        st.busy_cycles += cost
+        if resp > st.worst:
+            st.worst = resp
+            st.worst_job = slot.index_of(release)
+            st.worst_blocker = slot.blocked
+        if resp < st.best:
+            st.best = resp
+        d = start - release
+        if d > st.delay_max:
+            st.delay_max = d
+        if d < st.delay_min:
+            st.delay_min = d
+        slot.blocked = None
+        if resp > slot.deadline:
+            st.deadline_misses += 1
+            st.miss_streak += 1
+            if st.miss_streak > st.longest_miss_streak:
+                st.longest_miss_streak = st.miss_streak
+            if self.trace is not None:
+                self.trace.add_event("deadline_miss", release + slot.deadline, slot.name, slot.index_of(release))
+        elif st.miss_streak:
+            st.miss_streak = 0
 
     def run_until(self, t_end: int, progress: Callable[[float], None] | None = None) -> None:
         """Run every job that can start before cycle ``t_end``; then ``now`` is ``max(t_end, last finish)``.
@@ -215,23 +291,14 @@ class Scheduler:
             self._started = True
             clock.start(self._now)
         self._stop = False
-        tasks, stats, jobs = self._tasks, self._stat_list, self._jobs
-        periods = [t.period for t in tasks]
-        deadlines = [t.relative_deadline for t in tasks]
-        costs = [None if callable(t.cost) else t.cost for t in tasks]
-        bodies = [t.body for t in tasks]
-        jitters = [t.jitter for t in tasks]
-        offsets = [t.offset for t in tasks]
-        plain = [t.overrun is not _QUEUE for t in tasks]  # policies that drop releases
-        nrel, nnext, ready, blocked = self._nrel, self._nnext, self._ready, self._blocked
-        heap, trace, rng = self._heap, self.trace, self._rng
+        slots, trace, rng = self._slots, self.trace, self._rng
         irqs = [] if realtime else bind_sources(self._interrupts)
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
         wds = self._watchdogs
-        names = [t.name for t in tasks]
         trace_job = trace.job_appender() if trace is not None else None
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
+        next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
         t_begin = now
         span = max(1, t_end - t_begin)
         step = max(1, span // 100)
@@ -251,38 +318,36 @@ class Scheduler:
                     if self._stop:
                         stopped = True
                         break
-                lim = (now << _SHIFT) | _MASK
-                while heap and heap[0] <= lim:
-                    key = heappop(heap)
-                    i = key & _MASK
-                    mask |= 1 << i
-                    if prev > i and (key >> _SHIFT) < now:
-                        blocked[i] = Blocker(tasks[prev].name, (nrel_prev - offsets[prev]) // periods[prev],
-                                             now - (key >> _SHIFT))
+                if now >= next_ready:
+                    admitted, next_ready = self._admit(now, prev, nrel_prev)
+                    mask |= admitted
                 if now >= t_end:
                     break
                 if not mask:  # idle: jump to the next release, watchdog deadline or the end
-                    target = heap[0] >> _SHIFT if heap else _FAR
+                    target = next_ready
                     if wd_due < target:
                         target = wd_due
                     if target > t_end:
                         target = t_end
-                    for j, count_in, _ in irqs:
-                        k = count_in(now, target)
+                    t0: object = now  # boxed once for all the sources (see BoundSource)
+                    t1: object = target
+                    for b in irqs:
+                        k = b.count_in(t0, t1)
                         if k:
-                            irq_idle[j] += k
+                            irq_idle[b.index] += k
                     now = clock.wait_until(target) if realtime else target
                     prev = -1
                     continue
                 i = (mask & -mask).bit_length() - 1
                 mask ^= 1 << i
-                r = nrel[i]
+                slot = slots[i]
+                r = slot.nrel
                 start = now
-                body = bodies[i]
-                result = None
+                body = slot.body
+                result: object = None
                 if body is not None:
-                    job = jobs[i]
-                    job.index, job.release, job.ready, job.start = (r - offsets[i]) // periods[i], r, ready[i], start
+                    job = slot.job
+                    job.index, job.release, job.ready, job.start = slot.index_of(r), r, slot.ready, start
                     self._now = start
                     try:
                         result = body(job)
@@ -298,13 +363,14 @@ class Scheduler:
                         next_check = min(wd_due, next_progress)
                     if self._stop:
                         stopped = True
-                c = costs[i]
-                if c is None:
-                    c = tasks[i].cost(result)  # type: ignore[operator]
-                    if type(c) is not int or c < 0:
+                c = slot.cost
+                if slot.cost_model is not None:
+                    modelled = slot.cost_model(result)
+                    if type(modelled) is not int or modelled < 0:
                         mask |= 1 << i
                         raise ValueError(
-                            f"task {tasks[i].name!r}: cost model returned {c!r}; need an int >= 0 cycles")
+                            f"task {slot.name!r}: cost model returned {modelled!r}; need an int >= 0 cycles")
+                    c = modelled
                 if realtime:
                     f = max(start, clock.now_cycles())
                     c = f - start
@@ -312,47 +378,23 @@ class Scheduler:
                     f = solve_bound(start, c, irqs, irq_in_job)
                 else:
                     f = start + c
-                st = stats[i]
-                resp = f - r
-                st.jobs += 1
-                st.response_sum += resp
-                st.busy_cycles += c
-                if resp > st.worst:
-                    st.worst = resp
-                    st.worst_job = (r - offsets[i]) // periods[i]
-                    st.worst_blocker = blocked[i]
-                if resp < st.best:
-                    st.best = resp
-                d = start - r
-                if d > st.delay_max:
-                    st.delay_max = d
-                if d < st.delay_min:
-                    st.delay_min = d
-                blocked[i] = None
-                if resp > deadlines[i]:
-                    st.deadline_misses += 1
-                    st.miss_streak += 1
-                    if st.miss_streak > st.longest_miss_streak:
-                        st.longest_miss_streak = st.miss_streak
-                    if trace is not None:
-                        trace.add_event("deadline_miss", r + deadlines[i], tasks[i].name,
-                                        (r - offsets[i]) // periods[i])
-                elif st.miss_streak:
-                    st.miss_streak = 0
+                self._account(slot, r, start, f, c)
                 if trace_job is not None:
-                    trace_job((names[i], (r - offsets[i]) // periods[i], r, ready[i], start, f))
+                    trace_job((slot.name, slot.index_of(r), r, slot.ready, start, f))
                 # the task's next job: releases that came while this one was pending or running overran
-                nxt = nnext[i]
+                nxt = slot.nnext
                 fault = None
-                if nxt < f and plain[i]:
-                    fault = self._overrun(i, r, nxt, f)
-                    nxt = nrel[i]
+                if nxt < f and slot.plain:
+                    fault = self._overrun(slot, r, nxt, f)
+                    nxt = slot.nrel
                 else:
-                    nnext[i] = nxt + periods[i]
-                    nrel[i] = nxt
-                a = nxt + rng.randint(0, jitters[i]) if jitters[i] else nxt
-                ready[i] = a
-                heappush(heap, (a << _SHIFT) | i)
+                    slot.nnext = nxt + slot.period
+                    slot.nrel = nxt
+                a = nxt + rng.randint(0, slot.jitter) if slot.jitter else nxt
+                slot.ready = a
+                slot.waiting = True
+                if a < next_ready:
+                    next_ready = a
                 prev, nrel_prev, now = i, r, f
                 if fault is not None:
                     self._now = f

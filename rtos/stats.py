@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 
-_NONE_YET = 1 << 80  # larger than any response time
+_NONE_YET: Final = 1 << 80  # larger than any response time
 
 
 @dataclass(frozen=True)

@@ -8,13 +8,18 @@ and the source of the virtual UARTs.
 
 from __future__ import annotations
 
-from bisect import bisect_left
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import Final, Protocol
 
-__all__ = ["EventTimesInterrupt", "InterruptSourceBase"]
+__all__ = ["EventTimesInterrupt", "Horizon", "InterruptSourceBase"]
 
-_COMPACT_AT = 4096
+_COMPACT_AT: Final = 4096
+
+
+class Horizon(Protocol):
+    """A promise about events not yet recorded: none is earlier than ``next_event`` (an int tick)."""
+
+    next_event: int
 
 
 class InterruptSourceBase:
@@ -61,7 +66,7 @@ class EventTimesInterrupt(InterruptSourceBase):
         self._lo = 0
         self._before_count = before_count
         self._advanced_to = -1  # the largest t1 handed to before_count so far
-        self.horizon: Any = None  # see the class docstring
+        self.horizon: Horizon | None = None  # see the class docstring
 
     def add_times(self, times: Iterable[int]) -> None:
         """Record event times (non-decreasing, and not earlier than those already recorded)."""
@@ -79,15 +84,21 @@ class EventTimesInterrupt(InterruptSourceBase):
                 if self._before_count is not None:
                     self._before_count(t1)
         times = self._times
-        lo = self._lo
-        if not times or times[-1] < t0:  # every recorded event is past: forget them all
-            if times:
+        n = len(times)
+        lo = self._lo  # t0 never decreases: the events before self._lo are past for good
+        while lo < n and times[lo] < t0:
+            lo += 1
+        if lo == n:  # every recorded event is past: forget them all
+            if n:
                 times.clear()
             self._lo = 0
             return 0
-        lo = bisect_left(times, t0, lo)
         if lo >= _COMPACT_AT:
             del times[:lo]
+            n -= lo
             lo = 0
         self._lo = lo
-        return bisect_left(times, t1, lo) - lo
+        hi = lo
+        while hi < n and times[hi] < t1:  # a window holds few events: a scan beats a bisect call
+            hi += 1
+        return hi - lo

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from itertools import accumulate
-from math import gcd
+from mypy_extensions import i64
 
 __all__ = ["BITS_PER_BYTE_8N1", "ByteLine", "ceil_div"]
 
 BITS_PER_BYTE_8N1 = 10  # start + 8 data + stop
-_MAX_PATTERN = 4096  # longest period of the per-byte increments kept as a table
 
 
 def ceil_div(a: int, b: int) -> int:
@@ -40,17 +38,17 @@ class ByteLine:
         for label, value in (("f_cpu_hz", f_cpu_hz), ("baud", baud), ("bits_per_byte", bits_per_byte)):
             if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
                 raise ValueError(f"{label} {value!r} out of range: a positive int")
+        # the burst state is in native 64-bit ints (plain C arithmetic when compiled): cycle counts
+        # stay far below 2**63
         self._num = bits_per_byte * f_cpu_hz  # cycles per byte = num / den
-        self._den = baud
-        self._origin = 0
-        self._count = 0
-        # byte k of a burst lasts ceil(k*num/den) - ceil((k-1)*num/den) cycles: periodic in k with
-        # period den / gcd(num, den), so a table of one period gives every end by a running sum
-        period = baud // gcd(self._num, baud)
-        self._period = period
-        self._pattern = ([ceil_div(k * self._num, baud) - ceil_div((k - 1) * self._num, baud)
-                          for k in range(1, period + 1)] if period <= _MAX_PATTERN else [])
-        self._cycle = list(self._pattern)
+        self._den: i64 = baud
+        step, extra = divmod(self._num, baud)
+        self._step: i64 = step  # one byte adds step + extra / den cycles
+        self._extra: i64 = extra
+        self._origin: i64 = 0  # the current burst's start cycle
+        self._count = 0  # bytes queued in it
+        self._whole: i64 = 0  # count * num = whole * den + rem, 0 <= rem < den: the burst lasts whole + rem/den
+        self._rem: i64 = 0
 
     @property
     def byte_cycles(self) -> float:
@@ -60,30 +58,34 @@ class ByteLine:
     @property
     def busy_until(self) -> int:
         """Cycle at which the last queued byte's stop bit ends (the line is idle from then)."""
-        return self._origin + ceil_div(self._count * self._num, self._den)
+        return self._origin + self._whole + (1 if self._rem else 0)
 
     def schedule(self, n_bytes: int, start_cycles: int) -> list[int]:
-        """Queue n_bytes from start_cycles (or when the line frees up); return their end cycles."""
+        """Queue n_bytes from start_cycles (or when the line frees up); return their end cycles.
+
+        The ends are exact running sums (whole cycles and a remainder in 1/den), no division per byte.
+        """
         if n_bytes < 0:
             raise ValueError(f"n_bytes {n_bytes!r} out of range: >= 0")
         if start_cycles < 0:
             raise ValueError(f"start_cycles {start_cycles!r} out of range: >= 0")
-        if start_cycles * self._den > self._origin * self._den + self._count * self._num:
-            self._origin = start_cycles  # the line is idle (exactly) before start_cycles: new burst
-            self._count = 0
-        count = self._count
-        self._count = count + n_bytes
-        if not self._pattern:
-            num, den, origin = self._num, self._den, self._origin
-            return [origin - (-(k * num) // den) for k in range(count + 1, count + n_bytes + 1)]
-        phase = count % self._period
-        cycle = self._cycle
-        if len(cycle) < phase + n_bytes:
-            cycle = self._cycle = self._pattern * ((phase + n_bytes) // self._period + 1)
-        incs = cycle[phase : phase + n_bytes]
-        if incs:
-            incs[0] += self._origin - (-(count * self._num) // self._den)
-        return list(accumulate(incs))
+        if start_cycles - self._origin > self._whole:  # idle (exactly) before start_cycles: a new burst
+            self._origin = start_cycles
+            self._count = self._whole = self._rem = 0
+        origin, whole, rem = self._origin, self._whole, self._rem
+        step, extra, den = self._step, self._extra, self._den
+        ends = [0] * n_bytes
+        k: i64
+        for k in range(n_bytes):
+            whole += step
+            rem += extra
+            if rem >= den:
+                rem -= den
+                whole += 1
+            ends[k] = origin + whole + (1 if rem else 0)
+        self._count += n_bytes
+        self._whole, self._rem = whole, rem
+        return ends
 
     def pending(self, t_cycles: int) -> int:
         """Bytes queued whose stop bit has not ended by t_cycles."""

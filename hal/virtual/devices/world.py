@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Protocol
+from typing import Protocol
 
 from hal.virtual.plant import Plant
 
@@ -58,7 +58,7 @@ class World:
             raise ValueError(f"f_hz {f_hz!r} out of range: a positive int (ticks per second)")
         self.plant = plant
         self.f_hz = f_hz
-        self._devices: list[Any] = []
+        self._devices: list[WorldDevice] = []
         self._now = -1
         self._busy = False
 
