@@ -421,7 +421,7 @@ class Ak60:
 
     def _on_get_values(self, t: int) -> None:
         self._sample(t)
-        self._reply(vesc.Values(**self.values.read(vesc.VALUES_FIELDS)), t)  # type: ignore[arg-type]  # int fields read as int
+        self._send(vesc.encode_frame(self.values.values_payload()), t + self._latency)
 
     def _reply(self, message: Any, t: int) -> None:
         self._send(message.encode(), t + self._latency)
