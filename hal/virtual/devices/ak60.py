@@ -96,6 +96,8 @@ class Ak60:
         self.config = cfg = config if config is not None else Ak60Config()
         self.plant = plant = world.plant
         self.params = p = plant.params
+        self._gear_ratio = p.gearbox_ratio
+        self._peak_a = p.peak_current_a
         self.link = link
         self.decoder = vesc.Decoder("to-motor")
         self.stats = Ak60Stats()
@@ -234,7 +236,7 @@ class Ak60:
 
     def _target(self, current_a: float, t: int) -> None:
         """From t on the q current heads for current_a (clamped to the peak; 0 when unpowered)."""
-        peak = self.params.peak_current_a
+        peak = self._peak_a
         value = max(-peak, min(peak, current_a)) if self.plant.powered else 0.0
         if self._sampled_at == t:
             self.meter.target_a = value
@@ -263,7 +265,7 @@ class Ak60:
         elif kind == _GET_VALUES_SELECTIVE:
             self._on_selective(msg.mask, t)
         elif kind == _SET_CURRENT_REL:
-            self._drive_current(msg.current_rel * self.params.peak_current_a, t)
+            self._drive_current(msg.current_rel * self._peak_a, t)
         elif kind == _SET_CURRENT_BRAKE or kind == _SET_HANDBRAKE:
             self._drive_brake(msg.current_a, t)
         elif kind == _SET_DUTY:
@@ -311,7 +313,7 @@ class Ak60:
     def _drive_brake(self, current_a: float, t: int) -> None:
         if self._accepts():
             self.mode, self._loop_at = DriveMode.BRAKE, NEVER
-            self._brake_a = min(abs(current_a), self.params.peak_current_a)
+            self._brake_a = min(abs(current_a), self._peak_a)
             self._apply(DriveMode.BRAKE, self._brake_a, t)
             if self._sampled_at == t:
                 self.meter.target_a = self._brake_target()
@@ -326,7 +328,7 @@ class Ak60:
     def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
         self._sample(t)
         target_deg = math.degrees(position_rad)
-        gear = self.params.gearbox_ratio
+        gear = self._gear_ratio
         if self.single_turn:
             delta = (target_deg - self.pid_pos_deg() + 180.0) % 360.0 - 180.0
             rotor_target = self._angle + math.radians(delta) * gear
@@ -374,21 +376,21 @@ class Ak60:
     # ----------------------------------------------------------------- reporting
     def pid_pos_deg(self) -> float:
         """Actuator output angle (rotor / 6) in degrees at the last sample, minus the origin."""
-        deg = math.degrees(self._angle / self.params.gearbox_ratio) - self.origin_deg
+        deg = math.degrees(self._angle / self._gear_ratio) - self.origin_deg
         return deg % 360.0 if self.single_turn else deg
 
     def position_error_deg(self) -> float:
         """Position-loop error (target - present) in pid_pos degrees; 0 outside position mode."""
         if self.mode is not DriveMode.LOOP or self.loops.mode is not LoopMode.POSITION:
             return 0.0
-        return math.degrees((self.loops.position_target_rad - self._angle) / self.params.gearbox_ratio)
+        return math.degrees((self.loops.position_target_rad - self._angle) / self._gear_ratio)
 
     def _on_set_origin(self, mode: int, t: int) -> None:
         self._sample(t)
         if mode == OriginMode.RESTORE_DEFAULT:
             self.origin_deg = 0.0
         else:
-            self.origin_deg = math.degrees(self._angle / self.params.gearbox_ratio)
+            self.origin_deg = math.degrees(self._angle / self._gear_ratio)
 
     def _on_set_detect(self, mode: int, t: int) -> None:
         streams = mode in (DetectMode.ENCODER, DetectMode.PID_POS, DetectMode.PID_POS_ERROR)

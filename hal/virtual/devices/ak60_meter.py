@@ -14,13 +14,14 @@ averages over the span since the previous read (VESC averages its 20-30 kHz samp
 from __future__ import annotations
 
 import math
+from typing import Final
 
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.plant import PlantParams
 
 __all__ = ["Ak60Meter", "tach_steps"]
 
-_TACH_PER_E_REV = 6  # tachometer steps per electrical revolution (VESC mcpwm_foc.c, 60 deg resolution)
+_TACH_PER_E_REV: Final = 6  # tachometer steps per electrical revolution (VESC mcpwm_foc.c, 60 deg resolution)
 _QUANTITIES = {"current": 1, "iq": 1, "input_current": 2, "vq": 3}
 """Averaged quantity -> its integral: 1 q current, 2 input current, 3 v_q."""
 

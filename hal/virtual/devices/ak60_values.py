@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from firmware.protocol.vesc_message import CommandId, WireField, to_raw
 from firmware.protocol.vesc_values import VALUES_FIELDS, selective_layout
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 __all__ = ["ValueSource", "wrap_int32"]
 
-_PID_POS_LIMIT_DEG = (2**31 - 1) / 1e6
+_PID_POS_LIMIT_DEG: Final = (2**31 - 1) / 1e6
 
 
 def wrap_int32(value: int) -> int:
