@@ -29,7 +29,7 @@ from typing import Any, Final
 from firmware.protocol import vesc
 from firmware.protocol.vesc import DetectMode, OriginMode
 from hal.virtual.devices.ak60_config import Ak60Config
-from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode
+from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode, degrees, radians
 from hal.virtual.devices.ak60_meter import Ak60Meter
 from hal.virtual.devices.ak60_values import ValueSource
 from hal.virtual.devices.vesc_rx import TimedBytes
@@ -327,13 +327,13 @@ class Ak60:
 
     def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
         self._sample(t)
-        target_deg = math.degrees(position_rad)
+        target_deg = degrees(position_rad)
         gear = self._gear_ratio
         if self.single_turn:
             delta = (target_deg - self.pid_pos_deg() + 180.0) % 360.0 - 180.0
-            rotor_target = self._angle + math.radians(delta) * gear
+            rotor_target = self._angle + radians(delta) * gear
         else:
-            rotor_target = math.radians(target_deg + self.origin_deg) * gear
+            rotor_target = radians(target_deg + self.origin_deg) * gear
         self._drive_loop(t, lambda i, w: self.loops.start_position(rotor_target, i, w, erpm, accel))
 
     def _loop_tick(self, t: int) -> None:
@@ -376,21 +376,21 @@ class Ak60:
     # ----------------------------------------------------------------- reporting
     def pid_pos_deg(self) -> float:
         """Actuator output angle (rotor / 6) in degrees at the last sample, minus the origin."""
-        deg = math.degrees(self._angle / self._gear_ratio) - self.origin_deg
+        deg = degrees(self._angle / self._gear_ratio) - self.origin_deg
         return deg % 360.0 if self.single_turn else deg
 
     def position_error_deg(self) -> float:
         """Position-loop error (target - present) in pid_pos degrees; 0 outside position mode."""
         if self.mode is not DriveMode.LOOP or self.loops.mode is not LoopMode.POSITION:
             return 0.0
-        return math.degrees((self.loops.position_target_rad - self._angle) / self._gear_ratio)
+        return degrees((self.loops.position_target_rad - self._angle) / self._gear_ratio)
 
     def _on_set_origin(self, mode: int, t: int) -> None:
         self._sample(t)
         if mode == OriginMode.RESTORE_DEFAULT:
             self.origin_deg = 0.0
         else:
-            self.origin_deg = math.degrees(self._angle / self._gear_ratio)
+            self.origin_deg = degrees(self._angle / self._gear_ratio)
 
     def _on_set_detect(self, mode: int, t: int) -> None:
         streams = mode in (DetectMode.ENCODER, DetectMode.PID_POS, DetectMode.PID_POS_ERROR)
@@ -404,7 +404,7 @@ class Ak60:
         self._sample(t)
         mode = self.detect_mode
         if mode == DetectMode.ENCODER:
-            deg = math.degrees(self._angle) % 360.0
+            deg = degrees(self._angle) % 360.0
         elif mode == DetectMode.PID_POS_ERROR:
             deg = self.position_error_deg()
         else:
@@ -412,7 +412,7 @@ class Ak60:
         scale = self.config.rotor_position_scale
         limit = (2**31 - 1) / scale
         deg = max(-limit, min(limit, deg))
-        self._send(vesc.RotorPosition(math.radians(deg), scale).encode(), t)
+        self._send(vesc.RotorPosition(radians(deg), scale).encode(), t)
         self.stats.stream_frames += 1
         self._stream_at = t + self._stream_period
 

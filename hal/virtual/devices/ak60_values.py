@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Final
 
 from firmware.protocol.vesc_message import CommandId, WireField, to_raw
 from firmware.protocol.vesc_values import VALUES_FIELDS, selective_layout
+from hal.virtual.devices.ak60_loops import radians
 
 if TYPE_CHECKING:
     from hal.virtual.devices.ak60 import Ak60
@@ -83,7 +84,7 @@ class ValueSource:
                 return self._dev.fault
             case "pid_pos_rad":  # clamped to the wire range
                 deg = self._dev.pid_pos_deg()
-                return math.radians(max(-_PID_POS_LIMIT_DEG, min(_PID_POS_LIMIT_DEG, deg)))
+                return radians(max(-_PID_POS_LIMIT_DEG, min(_PID_POS_LIMIT_DEG, deg)))
             case "controller_id":
                 return self._controller_id
             case "avg_id_a" | "temp_mos1_c" | "temp_mos2_c" | "temp_mos3_c" | "avg_vd_v":
