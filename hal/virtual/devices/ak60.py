@@ -269,9 +269,9 @@ class Ak60:
         elif kind == _SET_CURRENT_BRAKE or kind == _SET_HANDBRAKE:
             self._drive_brake(msg.current_a, t)
         elif kind == _SET_DUTY:
-            self._drive_loop(t, lambda i, w: self.loops.start_duty(msg.duty, i, w))
+            self._drive_duty(msg.duty, t)
         elif kind == _SET_RPM:
-            self._drive_loop(t, lambda i, w: self.loops.start_speed(msg.erpm, i, w))
+            self._drive_speed(msg.erpm, t)
         elif kind == _SET_POS:
             self._drive_position(msg.position_rad, 0, 0, t)
         elif kind == _SET_POS_SPD:
@@ -324,6 +324,12 @@ class Ak60:
             start(self.meter.current_a, self._velocity)
             self.mode = DriveMode.LOOP
             self._loop_tick(t)
+
+    def _drive_duty(self, duty: float, t: int) -> None:
+        self._drive_loop(t, lambda i, w: self.loops.start_duty(duty, i, w))
+
+    def _drive_speed(self, erpm: float, t: int) -> None:
+        self._drive_loop(t, lambda i, w: self.loops.start_speed(erpm, i, w))
 
     def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
         self._sample(t)
