@@ -24,12 +24,12 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any
+from typing import Any, Final
 
 from firmware.protocol import vesc
 from firmware.protocol.vesc import DetectMode, OriginMode
 from hal.virtual.devices.ak60_config import Ak60Config
-from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode
+from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode, degrees, radians
 from hal.virtual.devices.ak60_meter import Ak60Meter
 from hal.virtual.devices.ak60_values import ValueSource
 from hal.virtual.devices.vesc_rx import TimedBytes
@@ -39,7 +39,30 @@ __all__ = ["Ak60", "Ak60Stats", "DriveMode"]
 
 log = logging.getLogger(__name__)
 
-_QUERIES = (vesc.GetValues, vesc.GetValuesSelective, vesc.GetFwVersion)
+_MESSAGES: tuple[type[vesc.Message], ...] = (
+    vesc.SetCurrent, vesc.SetCurrentRel, vesc.SetCurrentBrake, vesc.SetHandbrake, vesc.SetDuty, vesc.SetRpm,
+    vesc.SetPos, vesc.SetPosSpd, vesc.Alive, vesc.SetDetect, vesc.SetPosOrigin, vesc.SetPosMulti,
+    vesc.SetPosSingle, vesc.GetValuesSelective, vesc.GetValues, vesc.GetFwVersion,
+)
+"""The messages the driver acts on; a message's kind is its index here (Unknown ids are ignored). Commands
+come first, then the requests (kinds from ``_FIRST_QUERY`` on), which do not reset the command timeout."""
+_SET_CURRENT: Final = 0
+_SET_CURRENT_REL: Final = 1
+_SET_CURRENT_BRAKE: Final = 2
+_SET_HANDBRAKE: Final = 3
+_SET_DUTY: Final = 4
+_SET_RPM: Final = 5
+_SET_POS: Final = 6
+_SET_POS_SPD: Final = 7
+_ALIVE: Final = 8
+_SET_DETECT: Final = 9
+_SET_POS_ORIGIN: Final = 10
+_SET_POS_MULTI: Final = 11
+_SET_POS_SINGLE: Final = 12
+_GET_VALUES_SELECTIVE: Final = 13
+_GET_VALUES: Final = 14
+_GET_FW_VERSION: Final = 15
+_FIRST_QUERY: Final = _GET_VALUES_SELECTIVE
 
 
 class DriveMode(Enum):
@@ -73,6 +96,8 @@ class Ak60:
         self.config = cfg = config if config is not None else Ak60Config()
         self.plant = plant = world.plant
         self.params = p = plant.params
+        self._gear_ratio = p.gearbox_ratio
+        self._peak_a = p.peak_current_a
         self.link = link
         self.decoder = vesc.Decoder("to-motor")
         self.stats = Ak60Stats()
@@ -103,25 +128,8 @@ class Ak60:
         self._seq = 0
         self.next_event = NEVER
         self.values = ValueSource(self)
-        self._handlers: dict[type, Callable[[Any, int], None]] = {
-            vesc.SetCurrent: lambda m, t: self._drive_current(m.current_a, t),
-            vesc.SetCurrentRel: lambda m, t: self._drive_current(m.current_rel * p.peak_current_a, t),
-            vesc.SetCurrentBrake: lambda m, t: self._drive_brake(m.current_a, t),
-            vesc.SetHandbrake: lambda m, t: self._drive_brake(m.current_a, t),
-            vesc.SetDuty: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_duty(m.duty, i, w)),
-            vesc.SetRpm: lambda m, t: self._drive_loop(t, lambda i, w: self.loops.start_speed(m.erpm, i, w)),
-            vesc.SetPos: lambda m, t: self._drive_position(m.position_rad, 0, 0, t),
-            vesc.SetPosSpd: lambda m, t: self._drive_position(m.position_rad, m.erpm, m.accel_erpm_per_s, t),
-            vesc.Alive: lambda m, t: None,  # only resets the timeout (below)
-            vesc.SetDetect: self._on_set_detect,
-            vesc.SetPosOrigin: self._on_set_origin,
-            vesc.SetPosMulti: lambda m, t: setattr(self, "single_turn", False),
-            vesc.SetPosSingle: lambda m, t: setattr(self, "single_turn", True),
-            vesc.GetValues: self._on_get_values,
-            vesc.GetValuesSelective: self._on_selective,
-            vesc.GetFwVersion: lambda m, t: self._reply(
-                vesc.FwVersion(cfg.fw_major, cfg.fw_minor, cfg.hw_name, cfg.uuid), t),
-        }
+        self._kinds: dict[type, int] = {cls: kind for kind, cls in enumerate(_MESSAGES)}
+        world.add(self)
         world.add(self)
 
     # ---------------------------------------------------------------- UART peer
@@ -172,7 +180,8 @@ class Ak60:
 
     # --------------------------------------------------------------- world device
     def _update_next(self) -> None:
-        nxt = min(self._rx.next_at, self._timeout_at, self._loop_at, self._stream_at, self._fault_until)
+        nxt = min(min(self._rx.next_at, self._timeout_at), min(self._loop_at, self._stream_at))
+        nxt = min(nxt, self._fault_until)
         if self._actions and self._actions[0][0] < nxt:
             nxt = self._actions[0][0]
         self.next_event = nxt
@@ -227,7 +236,7 @@ class Ak60:
 
     def _target(self, current_a: float, t: int) -> None:
         """From t on the q current heads for current_a (clamped to the peak; 0 when unpowered)."""
-        peak = self.params.peak_current_a
+        peak = self._peak_a
         value = max(-peak, min(peak, current_a)) if self.plant.powered else 0.0
         if self._sampled_at == t:
             self.meter.target_a = value
@@ -236,18 +245,49 @@ class Ak60:
 
     def _receive(self, t: int) -> None:
         messages = self.decoder.feed(self._rx.take())
-        handlers = self._handlers
+        kinds = self._kinds
         for msg in messages:
-            handler = handlers.get(type(msg))
-            if handler is None:
+            kind = kinds.get(type(msg), -1)
+            if kind < 0:
                 continue  # Unknown ids are counted by the decoder and ignored
-            if isinstance(msg, _QUERIES):
+            if kind >= _FIRST_QUERY:
                 self.stats.requests += 1
             else:
                 self.stats.commands += 1
                 self._timeout_at = t + self._timeout if self._timeout else NEVER
                 self.timed_out = False
-            handler(msg, t)
+            self._handle(kind, msg, t)
+
+    def _handle(self, kind: int, msg: Any, t: int) -> None:
+        """Act on msg, a message of the given kind (an index into ``_MESSAGES``), received at t."""
+        if kind == _SET_CURRENT:
+            self._drive_current(msg.current_a, t)
+        elif kind == _GET_VALUES_SELECTIVE:
+            self._on_selective(msg.mask, t)
+        elif kind == _SET_CURRENT_REL:
+            self._drive_current(msg.current_rel * self._peak_a, t)
+        elif kind == _SET_CURRENT_BRAKE or kind == _SET_HANDBRAKE:
+            self._drive_brake(msg.current_a, t)
+        elif kind == _SET_DUTY:
+            self._drive_duty(msg.duty, t)
+        elif kind == _SET_RPM:
+            self._drive_speed(msg.erpm, t)
+        elif kind == _SET_POS:
+            self._drive_position(msg.position_rad, 0, 0, t)
+        elif kind == _SET_POS_SPD:
+            self._drive_position(msg.position_rad, msg.erpm, msg.accel_erpm_per_s, t)
+        elif kind == _SET_DETECT:
+            self._on_set_detect(msg.mode, t)
+        elif kind == _SET_POS_ORIGIN:
+            self._on_set_origin(msg.mode, t)
+        elif kind == _SET_POS_MULTI or kind == _SET_POS_SINGLE:
+            self.single_turn = kind == _SET_POS_SINGLE
+        elif kind == _GET_VALUES:
+            self._on_get_values(t)
+        elif kind == _GET_FW_VERSION:
+            cfg = self.config
+            self._reply(vesc.FwVersion(cfg.fw_major, cfg.fw_minor, cfg.hw_name, cfg.uuid), t)
+        # _ALIVE only resets the timeout (in _receive)
 
     # ------------------------------------------------------------------- driving
     def _apply(self, mode: DriveMode, current_a: float, t: int) -> None:
@@ -273,7 +313,7 @@ class Ak60:
     def _drive_brake(self, current_a: float, t: int) -> None:
         if self._accepts():
             self.mode, self._loop_at = DriveMode.BRAKE, NEVER
-            self._brake_a = min(abs(current_a), self.params.peak_current_a)
+            self._brake_a = min(abs(current_a), self._peak_a)
             self._apply(DriveMode.BRAKE, self._brake_a, t)
             if self._sampled_at == t:
                 self.meter.target_a = self._brake_target()
@@ -285,15 +325,21 @@ class Ak60:
             self.mode = DriveMode.LOOP
             self._loop_tick(t)
 
+    def _drive_duty(self, duty: float, t: int) -> None:
+        self._drive_loop(t, lambda i, w: self.loops.start_duty(duty, i, w))
+
+    def _drive_speed(self, erpm: float, t: int) -> None:
+        self._drive_loop(t, lambda i, w: self.loops.start_speed(erpm, i, w))
+
     def _drive_position(self, position_rad: float, erpm: float, accel: float, t: int) -> None:
         self._sample(t)
-        target_deg = math.degrees(position_rad)
-        gear = self.params.gearbox_ratio
+        target_deg = degrees(position_rad)
+        gear = self._gear_ratio
         if self.single_turn:
             delta = (target_deg - self.pid_pos_deg() + 180.0) % 360.0 - 180.0
-            rotor_target = self._angle + math.radians(delta) * gear
+            rotor_target = self._angle + radians(delta) * gear
         else:
-            rotor_target = math.radians(target_deg + self.origin_deg) * gear
+            rotor_target = radians(target_deg + self.origin_deg) * gear
         self._drive_loop(t, lambda i, w: self.loops.start_position(rotor_target, i, w, erpm, accel))
 
     def _loop_tick(self, t: int) -> None:
@@ -336,35 +382,35 @@ class Ak60:
     # ----------------------------------------------------------------- reporting
     def pid_pos_deg(self) -> float:
         """Actuator output angle (rotor / 6) in degrees at the last sample, minus the origin."""
-        deg = math.degrees(self._angle / self.params.gearbox_ratio) - self.origin_deg
+        deg = degrees(self._angle / self._gear_ratio) - self.origin_deg
         return deg % 360.0 if self.single_turn else deg
 
     def position_error_deg(self) -> float:
         """Position-loop error (target - present) in pid_pos degrees; 0 outside position mode."""
         if self.mode is not DriveMode.LOOP or self.loops.mode is not LoopMode.POSITION:
             return 0.0
-        return math.degrees((self.loops.position_target_rad - self._angle) / self.params.gearbox_ratio)
+        return degrees((self.loops.position_target_rad - self._angle) / self._gear_ratio)
 
-    def _on_set_origin(self, msg: vesc.SetPosOrigin, t: int) -> None:
+    def _on_set_origin(self, mode: int, t: int) -> None:
         self._sample(t)
-        if msg.mode == OriginMode.RESTORE_DEFAULT:
+        if mode == OriginMode.RESTORE_DEFAULT:
             self.origin_deg = 0.0
         else:
-            self.origin_deg = math.degrees(self._angle / self.params.gearbox_ratio)
+            self.origin_deg = degrees(self._angle / self._gear_ratio)
 
-    def _on_set_detect(self, msg: vesc.SetDetect, t: int) -> None:
-        streams = msg.mode in (DetectMode.ENCODER, DetectMode.PID_POS, DetectMode.PID_POS_ERROR)
+    def _on_set_detect(self, mode: int, t: int) -> None:
+        streams = mode in (DetectMode.ENCODER, DetectMode.PID_POS, DetectMode.PID_POS_ERROR)
         if streams and self._stream_at == NEVER:
             self._stream_at = t + self._stream_period
         elif not streams:
             self._stream_at = NEVER
-        self.detect_mode = msg.mode
+        self.detect_mode = mode
 
     def _stream_tick(self, t: int) -> None:
         self._sample(t)
         mode = self.detect_mode
         if mode == DetectMode.ENCODER:
-            deg = math.degrees(self._angle) % 360.0
+            deg = degrees(self._angle) % 360.0
         elif mode == DetectMode.PID_POS_ERROR:
             deg = self.position_error_deg()
         else:
@@ -372,18 +418,18 @@ class Ak60:
         scale = self.config.rotor_position_scale
         limit = (2**31 - 1) / scale
         deg = max(-limit, min(limit, deg))
-        self._send(vesc.RotorPosition(math.radians(deg), scale).encode(), t)
+        self._send(vesc.RotorPosition(radians(deg), scale).encode(), t)
         self.stats.stream_frames += 1
         self._stream_at = t + self._stream_period
 
-    def _on_selective(self, msg: vesc.GetValuesSelective, t: int) -> None:
+    def _on_selective(self, mask: int, t: int) -> None:
         self._sample(t)
-        payload = self.values.selective_payload(msg.mask, self.config.selective_mask_echo)
+        payload = self.values.selective_payload(mask, self.config.selective_mask_echo)
         self._send(vesc.encode_frame(payload), t + self._latency)
 
-    def _on_get_values(self, msg: vesc.GetValues, t: int) -> None:
+    def _on_get_values(self, t: int) -> None:
         self._sample(t)
-        self._reply(vesc.Values(**self.values.read(vesc.VALUES_FIELDS)), t)  # type: ignore[arg-type]  # int fields read as int
+        self._send(vesc.encode_frame(self.values.values_payload()), t + self._latency)
 
     def _reply(self, message: Any, t: int) -> None:
         self._send(message.encode(), t + self._latency)

@@ -14,14 +14,16 @@ averages over the span since the previous read (VESC averages its 20-30 kHz samp
 from __future__ import annotations
 
 import math
+from typing import Final
 
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.plant import PlantParams
 
 __all__ = ["Ak60Meter", "tach_steps"]
 
-_TACH_PER_E_REV = 6  # tachometer steps per electrical revolution (VESC mcpwm_foc.c, 60 deg resolution)
+_TACH_PER_E_REV: Final = 6  # tachometer steps per electrical revolution (VESC mcpwm_foc.c, 60 deg resolution)
 _QUANTITIES = {"current": 1, "iq": 1, "input_current": 2, "vq": 3}
+"""Averaged quantity -> its integral: 1 q current, 2 input current, 3 v_q."""
 
 
 def tach_steps(motor_angle_rad: float, pole_pairs: int) -> int:
@@ -68,11 +70,14 @@ class Ak60Meter:
         self._tach_last = self._tach0
         self.tachometer = 0
         self.tachometer_abs = 0
-        # cumulative integrals since start: [time, q current, input current, v_q]; averages are read
+        # cumulative integrals since start of time, q current, input current and v_q; averages are read
         # against the totals remembered at each quantity's previous read (each resets on its own, as
         # VESC's read-and-reset functions do)
-        self._totals = [0.0, 0.0, 0.0, 0.0]
-        self._marks: dict[str, tuple[float, float]] = {}
+        self._time_total = 0.0
+        self._current_total = 0.0
+        self._input_current_total = 0.0
+        self._vq_total = 0.0
+        self._marks = {quantity: _Mark(index) for quantity, index in _QUANTITIES.items()}
 
     def sample(self, t_s: float, current_a: float, motor_velocity_rad_s: float, motor_angle_rad: float) -> None:
         """Take the plant's values at t_s (>= the previous sample) and integrate the interval since then."""
@@ -92,11 +97,10 @@ class Ak60Meter:
             i_in = self._input_current(power_w)
             v_in = self.v_supply_v - self.r_src_ohm * i_in
             self.input_current_a, self.v_in_v = i_in, v_in
-            tot = self._totals
-            tot[0] += dt
-            tot[1] += int_i
-            tot[2] += i_in * dt
-            tot[3] += self.r_ohm * int_i + self.ke * int_w
+            self._time_total += dt
+            self._current_total += int_i
+            self._input_current_total += i_in * dt
+            self._vq_total += self.r_ohm * int_i + self.ke * int_w
             if i_in >= 0.0:
                 self.amp_seconds += i_in * dt
                 self.watt_seconds += v_in * i_in * dt
@@ -141,13 +145,24 @@ class Ak60Meter:
         'current' and 'iq' are the same signal (i_d = 0) but, as in VESC, each has its own reset. With no
         time elapsed since the previous read the present value is returned.
         """
-        index = _QUANTITIES.get(quantity)
-        if index is None:
+        mark = self._marks.get(quantity)
+        if mark is None:
             raise ValueError(f"quantity {quantity!r} unknown: one of {sorted(_QUANTITIES)}")
-        tot = self._totals
-        span0, sum0 = self._marks.get(quantity, (0.0, 0.0))
-        self._marks[quantity] = (tot[0], tot[index])
-        span = tot[0] - span0
+        index = mark.index
+        total = self._current_total if index == 1 else self._input_current_total if index == 2 else self._vq_total
+        span0, sum0 = mark.time_total, mark.total
+        mark.time_total, mark.total = self._time_total, total
+        span = self._time_total - span0
         if span > 0.0:
-            return (tot[index] - sum0) / span
-        return (self.current_a, self.input_current_a, self.vq_v)[index - 1]
+            return (total - sum0) / span
+        return self.current_a if index == 1 else self.input_current_a if index == 2 else self.vq_v
+
+
+class _Mark:
+    """The totals at the previous read of one averaged quantity (0 before its first read)."""
+
+    def __init__(self, index: int) -> None:
+        """Mark the quantity whose integral is number index (see ``_QUANTITIES``) at zero."""
+        self.index = index
+        self.time_total = 0.0
+        self.total = 0.0

@@ -12,18 +12,19 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Final
 
-from firmware.protocol.vesc import CommandId, WireField
-from firmware.protocol.vesc_values import selective_layout
+from firmware.protocol.vesc_message import CommandId, WireField, to_raw
+from firmware.protocol.vesc_values import VALUES_FIELDS, selective_layout
+from hal.virtual.devices.ak60_loops import radians
 
 if TYPE_CHECKING:
     from hal.virtual.devices.ak60 import Ak60
 
 __all__ = ["ValueSource", "wrap_int32"]
 
-_PID_POS_LIMIT_DEG = (2**31 - 1) / 1e6
+_PID_POS_LIMIT_DEG: Final = (2**31 - 1) / 1e6
 
 
 def wrap_int32(value: int) -> int:
@@ -36,70 +37,114 @@ def wrap_int32(value: int) -> int:
 
 
 class ValueSource:
-    """Field getters of one driver: ``read(fields)`` returns {field name: SI value}."""
+    """The GET_VALUES fields of one driver: ``value(name)``, ``read(fields)`` and the reply payloads."""
 
     def __init__(self, dev: Ak60) -> None:
-        """Bind the getters to the driver dev (its meter, fault, position and configuration)."""
+        """Read the fields from the driver dev (its meter, fault, position and configuration)."""
         self._dev = dev
-        self._layouts: dict[tuple[int, bool], tuple[tuple[WireField, ...], bytes, Callable[..., bytes]]] = {}
-        m = dev.meter
-        rpm_to_erpm = 60.0 / math.tau * dev.params.pole_pairs
-        controller_id = dev.config.controller_id
+        self._meter = dev.meter
+        self._rpm_to_erpm = 60.0 / math.tau * dev.params.pole_pairs
+        self._controller_id = dev.config.controller_id
+        self._layouts: dict[int, _Layout] = {}
+        self._values_layout: _Layout | None = None
 
-        def zero() -> float:
-            """A field CubeMars reports as 0."""
-            return 0.0
-
-        def pid_pos() -> float:
-            """pid_pos in radians, clamped to the wire range."""
-            deg = dev.pid_pos_deg()
-            return math.radians(max(-_PID_POS_LIMIT_DEG, min(_PID_POS_LIMIT_DEG, deg)))
-
-        self._getters: dict[str, Callable[[], float]] = {
-            "temp_fet_c": lambda: m.temp_fet_c,
-            "temp_motor_c": lambda: m.temp_motor_c,
-            "avg_motor_current_a": lambda: m.read_reset("current"),
-            "avg_input_current_a": lambda: m.read_reset("input_current"),
-            "avg_id_a": zero,
-            "avg_iq_a": lambda: m.read_reset("iq"),
-            "duty": lambda: m.duty,
-            "erpm": lambda: int(m.motor_velocity_rad_s * rpm_to_erpm),
-            "v_in_v": lambda: m.v_in_v,
-            "amp_hours": lambda: m.amp_seconds / 3600.0,
-            "amp_hours_charged": lambda: m.amp_seconds_charged / 3600.0,
-            "watt_hours": lambda: m.watt_seconds / 3600.0,
-            "watt_hours_charged": lambda: m.watt_seconds_charged / 3600.0,
-            "tachometer": lambda: wrap_int32(m.tachometer),
-            "tachometer_abs": lambda: wrap_int32(m.tachometer_abs),
-            "fault": lambda: dev.fault,
-            "pid_pos_rad": pid_pos,
-            "controller_id": lambda: controller_id,
-            "temp_mos1_c": zero,
-            "temp_mos2_c": zero,
-            "temp_mos3_c": zero,
-            "avg_vd_v": zero,
-            "avg_vq_v": lambda: m.read_reset("vq"),
-            "status": lambda: int(dev.timed_out),
-        }
+    def value(self, name: str) -> float:
+        """The SI value of the field called name now (reading an average resets it); KeyError if unknown."""
+        m = self._meter
+        match name:
+            case "temp_fet_c":
+                return m.temp_fet_c
+            case "temp_motor_c":
+                return m.temp_motor_c
+            case "avg_motor_current_a":
+                return m.read_reset("current")
+            case "avg_input_current_a":
+                return m.read_reset("input_current")
+            case "avg_iq_a":
+                return m.read_reset("iq")
+            case "duty":
+                return m.duty
+            case "erpm":
+                return int(m.motor_velocity_rad_s * self._rpm_to_erpm)
+            case "v_in_v":
+                return m.v_in_v
+            case "amp_hours":
+                return m.amp_seconds / 3600.0
+            case "amp_hours_charged":
+                return m.amp_seconds_charged / 3600.0
+            case "watt_hours":
+                return m.watt_seconds / 3600.0
+            case "watt_hours_charged":
+                return m.watt_seconds_charged / 3600.0
+            case "tachometer":
+                return wrap_int32(m.tachometer)
+            case "tachometer_abs":
+                return wrap_int32(m.tachometer_abs)
+            case "fault":
+                return self._dev.fault
+            case "pid_pos_rad":  # clamped to the wire range
+                deg = self._dev.pid_pos_deg()
+                return radians(max(-_PID_POS_LIMIT_DEG, min(_PID_POS_LIMIT_DEG, deg)))
+            case "controller_id":
+                return self._controller_id
+            case "avg_id_a" | "temp_mos1_c" | "temp_mos2_c" | "temp_mos3_c" | "avg_vd_v":
+                return 0.0  # fields CubeMars reports as 0
+            case "avg_vq_v":
+                return m.read_reset("vq")
+            case "status":
+                return int(self._dev.timed_out)
+        raise KeyError(name)
 
     def read(self, fields: Iterable[WireField]) -> dict[str, float]:
         """The values of fields now (reading an average resets it)."""
-        getters = self._getters
-        return {f.name: getters[f.name]() for f in fields}
+        return {f.name: self.value(f.name) for f in fields}
+
+    def values_payload(self) -> bytes:
+        """The GET_VALUES reply payload (same bytes as ``Values(**read(VALUES_FIELDS)).payload()``)."""
+        layout = self._values_layout
+        if layout is None:
+            codes = "".join(f.code for f in VALUES_FIELDS)
+            layout = self._values_layout = _Layout(bytes((int(CommandId.GET_VALUES),)), struct.Struct(">" + codes),
+                                                   VALUES_FIELDS)
+        return self._payload(layout)
 
     def selective_payload(self, mask: int, mask_echo: bool = True) -> bytes:
         """The GET_VALUES_SELECTIVE reply payload for mask (same bytes as ``ValuesSelective.payload``).
 
         The layout for each mask is compiled once: the codec's ``selective_layout`` (one ``struct`` for
-        the fields present, bits > 21 ignored) and its ``WireField.to_raw`` scaling.
+        the fields present, bits > 21 ignored) and its ``to_raw`` scaling.
         """
-        entry = self._layouts.get((mask, mask_echo))
-        if entry is None:
+        key = mask * 2 + mask_echo
+        layout = self._layouts.get(key)
+        if layout is None:
             packer, present = selective_layout(mask & 0x3FFFFF)
             cid = int(CommandId.GET_VALUES_SELECTIVE)
             head = struct.pack(">BI", cid, mask) if mask_echo else bytes((cid,))
-            entry = (present, head, packer.pack)
-            self._layouts[(mask, mask_echo)] = entry
-        present, head, pack = entry
-        getters = self._getters
-        return head + pack(*[f.to_raw(getters[f.name]()) for f in present])
+            layout = self._layouts[key] = _Layout(head, packer, present)
+        return self._payload(layout)
+
+    def _payload(self, layout: _Layout) -> bytes:
+        """The payload of layout now: its head, then its fields read in order, scaled and packed."""
+        return layout.head + layout.pack(*[
+            to_raw(self.value(f.name), f.divisor, f.code, f.name, f.is_int) for f in layout.fields])
+
+
+class _Scaling:
+    """Name and wire scaling of one field (the arguments of the codec's ``to_raw``), in native attributes."""
+
+    def __init__(self, field: WireField) -> None:
+        """Copy field's name, divisor, struct code and integer flag."""
+        self.name: str = field.name
+        self.divisor: float = field.divisor
+        self.code: str = field.code
+        self.is_int: bool = field.is_int
+
+
+class _Layout:
+    """A reply payload layout: fixed head bytes, then the fields packed by one ``struct``."""
+
+    def __init__(self, head: bytes, packer: struct.Struct, fields: Sequence[WireField]) -> None:
+        """Pack fields with packer after head."""
+        self.head = head
+        self.pack = packer.pack
+        self.fields = [_Scaling(f) for f in fields]

@@ -22,6 +22,7 @@ import math
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
+from typing import Final
 
 from firmware.protocol.rvc import RvcFrame
 from hal.virtual.devices.world import NEVER, Link, World
@@ -35,8 +36,8 @@ BANNER_LINES: tuple[str, ...] = (
 )
 """The ASCII lines printed after reset (BNO080 datasheet 1000-3927 section 5.1, PROTOCOLS.md D.1)."""
 
-STANDARD_GRAVITY = 9.80665
-_FULL_SCALE_MPS2 = 8 * STANDARD_GRAVITY  # BNO08x accelerometer range +-8 g
+STANDARD_GRAVITY: Final = 9.80665
+_FULL_SCALE_MPS2: Final = 8 * STANDARD_GRAVITY  # BNO08x accelerometer range +-8 g
 
 _RANGES: dict[str, tuple[float, float]] = {
     "rate_hz": (0.1, 1000.0),

@@ -1,21 +1,23 @@
 """Bytes received by a VESC device, held with their stop-bit end times until they can complete a frame.
 
-A VESC frame ends with the byte 03, so a frame can only complete on an 03. :class:`TimedBytes` keeps the
-received bytes and hands them out in slices that end at each 03 (``next_at`` is that byte's end time),
-so a device feeding its decoder slice by slice knows, without per-byte work, the exact instant each
-decoded message completed.
+A VESC frame ends with the byte 03, so a frame can only complete on an 03. :class:`TimedBytes` cuts the
+received bytes into slices that end at each 03 (``next_at`` is that byte's end time) and hands them out
+one by one, so a device feeding its decoder slice by slice knows, without per-byte work, the exact
+instant each decoded message completed.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Final
 
 from hal.virtual.devices.world import NEVER
 
 __all__ = ["TimedBytes"]
 
-_COMPACT_AT = 4096
-_END = 3
+_COMPACT_AT: Final = 1024
+"""Slices handed out before the lists drop them (when they are not emptied first)."""
+_END: Final = 3
 
 
 class TimedBytes:
@@ -29,45 +31,59 @@ class TimedBytes:
 
     def __init__(self) -> None:
         """Start empty."""
-        self._data = bytearray()
-        self._ends: list[int] = []
-        self._fed = 0
-        self._idx = -1
+        self._slices: list[bytes] = []
+        """Complete slices (each ending with 03), from ``_taken`` on not handed out yet."""
+        self._slice_ends: list[int] = []
+        """End time of the last byte of each slice."""
+        self._taken = 0
+        self._tail = bytearray()
+        """Bytes after the last 03 (the start of the next slice)."""
+        self._held = 0
         self.next_at = NEVER
         """End time of the next 03 byte (NEVER if none is held)."""
 
     def __len__(self) -> int:
         """Bytes held and not handed out yet."""
-        return len(self._data) - self._fed
+        return self._held
 
     def push(self, data: bytes, end_times: Sequence[int]) -> None:
         """Add bytes and their stop-bit end times (non-decreasing, one per byte)."""
         if len(data) != len(end_times):
             raise ValueError(f"{len(data)} bytes but {len(end_times)} end times: need one per byte")
-        base = len(self._data)
-        self._data += data
-        self._ends.extend(end_times)
-        if self._idx < 0:
-            j = self._data.find(_END, base)
-            if j >= 0:
-                self._idx, self.next_at = j, self._ends[j]
+        self._held += len(data)
+        start = 0
+        for j in range(len(data)):
+            if data[j] == _END:
+                piece = data[start : j + 1]
+                if self._tail:
+                    piece = bytes(self._tail) + piece
+                    self._tail.clear()
+                self._slices.append(piece)
+                self._slice_ends.append(end_times[j])
+                start = j + 1
+        if start < len(data):
+            self._tail += data[start:]
+        if self.next_at == NEVER and self._taken < len(self._slices):
+            self.next_at = self._slice_ends[self._taken]
 
     def take(self) -> bytes:
         """Hand out the bytes up to and including the next 03 (empty if there is none)."""
-        if self._idx < 0:
+        taken = self._taken
+        slices = self._slices
+        if taken == len(slices):
             return b""
-        end = self._idx + 1
-        out = bytes(self._data[self._fed : end])
-        self._fed = end
-        if end == len(self._data):
-            self._data.clear()
-            self._ends.clear()
-            self._fed, self._idx, self.next_at = 0, -1, NEVER
+        out = slices[taken]
+        self._held -= len(out)
+        taken += 1
+        if taken == len(slices):
+            slices.clear()
+            self._slice_ends.clear()
+            self._taken, self.next_at = 0, NEVER
             return out
-        if self._fed > _COMPACT_AT:
-            del self._data[: self._fed]
-            del self._ends[: self._fed]
-            self._fed = 0
-        j = self._data.find(_END, self._fed)
-        self._idx, self.next_at = (j, self._ends[j]) if j >= 0 else (-1, NEVER)
+        self.next_at = self._slice_ends[taken]
+        if taken >= _COMPACT_AT:
+            del slices[:taken]
+            del self._slice_ends[:taken]
+            taken = 0
+        self._taken = taken
         return out
