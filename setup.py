@@ -27,6 +27,7 @@ COMPILED = [
     "rtos/scheduler.py",
     "rtos/interrupts.py",
     "rtos/stats.py",
+    "rtos/job.py",
     "hal/interfaces.py",
     "hal/virtual/gpio.py",
     "hal/virtual/irq.py",
