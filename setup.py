@@ -28,6 +28,7 @@ COMPILED = [
     "rtos/interrupts.py",
     "rtos/stats.py",
     "rtos/job.py",
+    "rtos/watchdog.py",
     "hal/interfaces.py",
     "hal/virtual/gpio.py",
     "hal/virtual/irq.py",

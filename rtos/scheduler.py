@@ -314,7 +314,8 @@ class Scheduler:
             self._started = True
             clock.start(self._now)
         self._stop = False
-        slots, trace, rng = self._slots, self.trace, self._rng
+        slots, trace = self._slots, self.trace
+        jitter_draw = self._rng.randint  # bound once: the generator's draws, in the same order
         irqs = [] if realtime else bind_sources(self._interrupts)
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
@@ -413,7 +414,7 @@ class Scheduler:
                 else:
                     slot.nnext = nxt + slot.period
                     slot.nrel = nxt
-                a = nxt + rng.randint(0, slot.jitter) if slot.jitter else nxt
+                a = nxt + jitter_draw(0, slot.jitter) if slot.jitter else nxt
                 slot.ready = a
                 slot.waiting = True
                 if a < next_ready:
