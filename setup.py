@@ -1,7 +1,8 @@
 """Build hook: compile the simulation's hot path to C extensions with mypyc (everything else is in pyproject.toml).
 
-The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop, the interrupt
-interference solve, the virtual peripherals and device models, the plant, and the firmware's tasks.
+The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop (with the job record
+its task bodies read and its watchdog), the interrupt interference solve, the virtual peripherals and
+device models, the plant, and the firmware's tasks.
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
@@ -11,7 +12,8 @@ metaprogramming mypyc does not support; their frame decoder and their per-messag
 unpacking, ``vesc_codec``, are compiled), the telemetry records (enum fields that compiled code would
 store as plain ints; their framing, ``telemetry_frame``, is compiled), the configuration value classes and the plant
 parameters (their checks must see the values as given: compiled code turns a bool into an int at the
-boundary), the gait reference (tests replace its constructors), the analysis and the host tools.
+boundary), the gait reference (tests replace its constructors), the RTOS task declarations
+(``rtos.task``: their checks must see bools), the analysis and the host tools.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ COMPILED = [
     "rtos/scheduler.py",
     "rtos/interrupts.py",
     "rtos/stats.py",
+    "rtos/job.py",
+    "rtos/watchdog.py",
     "hal/interfaces.py",
     "hal/virtual/gpio.py",
     "hal/virtual/irq.py",

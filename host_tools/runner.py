@@ -21,6 +21,7 @@ from hal.virtual.bench import VirtualBench
 from host_tools.probe import Action, Probe, ProbeBody
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
+from rtos.scheduler import SchedulerNow
 from rtos.stats import DeadlineHealth
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
@@ -108,8 +109,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
-    holder: dict[str, Scheduler] = {}
-    bench = VirtualBench(lambda: holder["s"].now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
+    now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
+    bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
     fw = Firmware(bench.board, fw_cfg, reference=reference)
     probe = Probe()
@@ -120,7 +121,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
     sched = Scheduler([*fw.tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
-    holder["s"] = sched
+    now.bind(sched)
     fw.kernel_health = kernel_health(sched, fw)
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
     sched.add_watchdog(wd)

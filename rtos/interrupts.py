@@ -6,6 +6,8 @@ import bisect
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Protocol
 
+from mypy_extensions import mypyc_attr
+
 MAX_FIXED_POINT_STEPS = 1_000_000
 
 
@@ -34,6 +36,22 @@ def is_interrupt_source(obj: object) -> bool:
             and callable(getattr(obj, "count_in", None)))
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
+class CountingSource:
+    """Base class of interrupt sources that compiled callers count with a direct (native) call.
+
+    A subclass sets ``name`` and ``cost_cycles`` and overrides ``count_in``. Any other object of the
+    :class:`InterruptSource` shape is counted too, through a generic call of its bound ``count_in``.
+    """
+
+    name: str
+    cost_cycles: int
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """Number of firings in [t0, t1)."""
+        raise NotImplementedError(f"{type(self).__name__} must define count_in(t0, t1)")
+
+
 def _check_cost(name: str, cost: object) -> int:
     """Return ``cost`` if it is an int >= 0, else raise ValueError naming the source."""
     if isinstance(cost, bool) or not isinstance(cost, int) or cost < 0:
@@ -41,7 +59,7 @@ def _check_cost(name: str, cost: object) -> int:
     return cost
 
 
-class PeriodicInterrupt:
+class PeriodicInterrupt(CountingSource):
     """An interrupt that fires at ``offset + k * period`` for k = 0, 1, ... (e.g. SysTick).
 
     >>> PeriodicInterrupt("systick", period=1000, cost=80).count_in(0, 2500)
@@ -77,7 +95,7 @@ class PeriodicInterrupt:
             f"offset={self.offset})"
 
 
-class TimestampedInterrupt:
+class TimestampedInterrupt(CountingSource):
     """An interrupt that fires at given, sorted cycle times, read lazily from any iterable.
 
     >>> irq = TimestampedInterrupt("uart_rx", cost=120, times=[10, 20, 20, 35])
@@ -127,11 +145,14 @@ class BoundSource:
 
     ``label`` names it in error messages (the name of the object ``count_in`` is bound to, else the
     index); ``hits`` is scratch space of the solver (firings in the window of the current pass).
+    ``native`` is the source itself when it is a :class:`CountingSource` (counted by a direct call).
     """
 
-    def __init__(self, index: int, count_in: Callable[[int, int], int], cost: int) -> None:
+    def __init__(self, index: int, count_in: Callable[[int, int], int], cost: int,
+                 native: CountingSource | None = None) -> None:
         """Keep the source's index in the caller's tables, its counting method and its cost."""
         self.index = index
+        self.native = native
         # typed loosely so that compiled callers can pass window ends boxed once for all sources
         # (an int argument is boxed again at every call); they pass ints all the same
         self.count_in: Callable[..., int] = count_in
@@ -146,7 +167,8 @@ BoundSources = list[BoundSource]
 
 def bind_sources(sources: Sequence[InterruptSource]) -> BoundSources:
     """The sources with their ``count_in`` bound once, for :func:`solve_bound` in a hot loop."""
-    return [BoundSource(j, src.count_in, src.cost_cycles) for j, src in enumerate(sources)]
+    return [BoundSource(j, src.count_in, src.cost_cycles, src if isinstance(src, CountingSource) else None)
+            for j, src in enumerate(sources)]
 
 
 def solve_finish(start: int, cost: int, sources: Sequence[InterruptSource], counts: list[int]) -> int:
@@ -170,7 +192,8 @@ def solve_bound(start: int, cost: int, bound: BoundSources, counts: list[int]) -
         fired = False
         t1: object = finish
         for b in bound:
-            k = b.count_in(t0, t1)
+            src = b.native  # a direct call for a CountingSource, else the generic bound count_in
+            k = src.count_in(start, finish) if src is not None else b.count_in(t0, t1)
             b.hits = k
             if k:
                 extra += k * b.cost

@@ -23,6 +23,29 @@ _FAULT: Final = OverrunPolicy.FAULT
 _QUEUE: Final = OverrunPolicy.QUEUE
 
 
+class SchedulerNow:
+    """A callable giving a scheduler's ``now``, for objects built before the scheduler (a bench's clock).
+
+    Create it, hand it out, then ``bind`` the scheduler; calling it before that raises RuntimeError.
+    Being compiled, a call from compiled code costs a native call and a field read.
+    """
+
+    def __init__(self) -> None:
+        """An unbound source (no scheduler yet)."""
+        self._scheduler: Scheduler | None = None
+
+    def bind(self, scheduler: Scheduler) -> None:
+        """Read ``scheduler``'s time from now on."""
+        self._scheduler = scheduler
+
+    def __call__(self) -> int:
+        """The bound scheduler's current time in cycles (during a job body: the job's start)."""
+        s = self._scheduler
+        if s is None:
+            raise RuntimeError("SchedulerNow called before a scheduler was bound to it")
+        return s._now
+
+
 class _Slot:
     """One task as the dispatch loop sees it: its constants and release state in native fields.
 
@@ -291,7 +314,8 @@ class Scheduler:
             self._started = True
             clock.start(self._now)
         self._stop = False
-        slots, trace, rng = self._slots, self.trace, self._rng
+        slots, trace = self._slots, self.trace
+        jitter_draw = self._rng.randint  # bound once: the generator's draws, in the same order
         irqs = [] if realtime else bind_sources(self._interrupts)
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
@@ -332,7 +356,8 @@ class Scheduler:
                     t0: object = now  # boxed once for all the sources (see BoundSource)
                     t1: object = target
                     for b in irqs:
-                        k = b.count_in(t0, t1)
+                        src = b.native  # as in solve_bound: direct call for a CountingSource
+                        k = src.count_in(now, target) if src is not None else b.count_in(t0, t1)
                         if k:
                             irq_idle[b.index] += k
                     now = clock.wait_until(target) if realtime else target
@@ -390,7 +415,7 @@ class Scheduler:
                 else:
                     slot.nnext = nxt + slot.period
                     slot.nrel = nxt
-                a = nxt + rng.randint(0, slot.jitter) if slot.jitter else nxt
+                a = nxt + jitter_draw(0, slot.jitter) if slot.jitter else nxt
                 slot.ready = a
                 slot.waiting = True
                 if a < next_ready:

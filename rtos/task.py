@@ -7,6 +7,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from rtos.job import Job as Job  # re-exported: the job record is compiled with the scheduler
+
 CostModel = int | Callable[[Any], int]
 Body = Callable[["Job"], object]
 
@@ -92,33 +94,6 @@ def by_priority(tasks: Iterable[Task]) -> list[Task]:
             raise ValueError(f"task name {t.name!r} is used twice; names must be unique")
         seen_names.add(t.name)
     return ordered
-
-
-class Job:
-    """One job of a task as its body sees it; the scheduler reuses one Job per task, so copy what you keep.
-
-    ``release`` is the nominal release (cycles), ``ready`` the release after jitter, ``start`` the cycle
-    the body runs at (also ``scheduler.now`` during the body), ``deadline`` the absolute deadline.
-    """
-
-    __slots__ = ("task", "index", "release", "ready", "start")
-
-    def __init__(self, task: Task) -> None:
-        """Create the job record of ``task`` (filled in by the scheduler before each call)."""
-        self.task = task
-        self.index = 0
-        self.release = 0
-        self.ready = 0
-        self.start = 0
-
-    @property
-    def deadline(self) -> int:
-        """Absolute deadline of this job in cycles."""
-        return self.release + self.task.relative_deadline
-
-    def __repr__(self) -> str:
-        """Show which job this is."""
-        return f"Job({self.task.name!r}, index={self.index}, release={self.release}, start={self.start})"
 
 
 @dataclass(frozen=True)

@@ -120,3 +120,27 @@ def test_interrupt_source_validation():
         TimestampedInterrupt("t", -1, [])
     with pytest.raises(ValueError, match="InterruptSource"):
         Scheduler([Task("x", 1, 10, cost=1)], interrupts=[object()])  # type: ignore[list-item]
+
+
+def test_counting_source_subclass_and_duck_typed_source_give_the_same_finish():
+    from rtos.interrupts import CountingSource, bind_sources
+
+    class Every30(CountingSource):  # an interpreted subclass: counted through the direct call
+        def __init__(self) -> None:
+            self.name, self.cost_cycles = "every30", 10
+
+        def count_in(self, t0: int, t1: int) -> int:
+            return max(0, -(-t1 // 30) - -(-t0 // 30))
+
+    class Duck:  # only the InterruptSource shape: counted through its bound count_in
+        name, cost_cycles = "duck", 10
+
+        def count_in(self, t0: int, t1: int) -> int:
+            return Every30().count_in(t0, t1)
+
+    assert bind_sources([Every30()])[0].native is not None and bind_sources([Duck()])[0].native is None
+    counts_native, counts_duck = [0], [0]
+    assert solve_finish(0, 100, [Every30()], counts_native) == solve_finish(0, 100, [Duck()], counts_duck) == 150
+    assert counts_native == counts_duck == [5]
+    with pytest.raises(NotImplementedError, match="count_in"):
+        CountingSource().count_in(0, 1)
