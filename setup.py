@@ -29,6 +29,7 @@ COMPILED = [
     "rtos/stats.py",
     "hal/interfaces.py",
     "hal/virtual/gpio.py",
+    "hal/virtual/events.py",
     "hal/virtual/irq.py",
     "hal/virtual/uart.py",
     "hal/virtual/line.py",
