@@ -33,6 +33,7 @@ COMPILED = [
     "rtos/watchdog.py",
     "hal/interfaces.py",
     "hal/virtual/gpio.py",
+    "hal/virtual/events.py",
     "hal/virtual/irq.py",
     "hal/virtual/uart.py",
     "hal/virtual/line.py",

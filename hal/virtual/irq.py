@@ -9,17 +9,13 @@ and the source of the virtual UARTs.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from typing import Final, Protocol
+from typing import Final
+
+from hal.virtual.events import Horizon
 
 __all__ = ["EventTimesInterrupt", "Horizon", "InterruptSourceBase"]
 
 _COMPACT_AT: Final = 4096
-
-
-class Horizon(Protocol):
-    """A promise about events not yet recorded: none is earlier than ``next_event`` (an int tick)."""
-
-    next_event: int
 
 
 class InterruptSourceBase:
@@ -53,8 +49,8 @@ class EventTimesInterrupt(InterruptSourceBase):
     Event times are pushed in non-decreasing order by the peripheral; ``before_count`` (if given)
     is called with t1 first so that the peripheral can bring its world up to t1 (only when t1 is
     later than every t1 before: the world has already been brought up to those). ``horizon``, if
-    set, is an object whose ``next_event`` (int) promises that no event time not yet recorded is
-    earlier than it: windows ending at or before it need no ``before_count``.
+    set, is a :class:`~hal.virtual.events.Horizon` whose ``next_event`` (int) promises that no event
+    time not yet recorded is earlier than it: windows ending at or before it need no ``before_count``.
     """
 
     def __init__(

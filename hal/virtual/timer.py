@@ -59,7 +59,7 @@ class VirtualEncoderTimer(EncoderTimer):
     def counts_at(self, t_cycles: int) -> int:
         """Unwrapped count at t_cycles (before the modulo ARR+1), including any set_cnt offset."""
         angle = self._angle_rad(t_cycles)
-        if not math.isfinite(angle):
+        if math.isnan(angle) or math.isinf(angle):  # not finite (isnan/isinf are native C calls compiled)
             raise ValueError(f"angle_rad {angle!r} at cycle {t_cycles} is not finite")
         return math.floor(self.polarity * angle * self.counts_per_rev / math.tau) + self._offset
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Sequence
-from typing import Literal, Protocol, cast
+from typing import Literal, Protocol
 
 from hal.interfaces import Uart
 from hal.virtual.irq import EventTimesInterrupt, Horizon
@@ -106,14 +106,16 @@ class VirtualUart(Uart):
             source.horizon = self._horizon()
 
     def _horizon(self) -> Horizon | None:
-        """The peer if it announces ``next_event``: it sends nothing ending at or before that tick.
+        """The peer if it is a :class:`Horizon` (announces ``next_event``): it sends nothing ending by that tick.
 
         A peer with ``next_event`` promises that every byte it has not yet transmitted ends after its
         ``next_event`` (bytes are sent from events at that tick or later), so an RX interrupt window
         ending by then needs no catch-up of the peer.
         """
-        peer = self._peer
-        return cast(Horizon, peer) if isinstance(getattr(peer, "next_event", None), int) else None
+        peer: object = self._peer
+        if isinstance(peer, Horizon):
+            return peer
+        return None
 
     @property
     def byte_cycles(self) -> float:

@@ -34,6 +34,7 @@ from hal.virtual.devices.ak60_meter import Ak60Meter
 from hal.virtual.devices.ak60_values import ValueSource
 from hal.virtual.devices.vesc_rx import TimedBytes
 from hal.virtual.devices.world import NEVER, Link, World
+from hal.virtual.events import EventDevice
 
 __all__ = ["Ak60", "Ak60Stats", "DriveMode"]
 
@@ -87,11 +88,12 @@ class Ak60Stats:
     bytes_out: int = 0
 
 
-class Ak60:
+class Ak60(EventDevice):
     """The AK60-6 driver speaking VESC servo-mode packets on one UART, driving the world's plant."""
 
     def __init__(self, world: World, config: Ak60Config | None = None, *, link: Link | None = None) -> None:
         """Build the driver on world's plant; connect its transmit side with ``link`` (or ``connect``)."""
+        super().__init__()
         self.world = world
         self.config = cfg = config if config is not None else Ak60Config()
         self.plant = plant = world.plant
@@ -126,10 +128,8 @@ class Ak60:
         self._fault_until = NEVER
         self._actions: list[tuple[int, int, Callable[[int], None]]] = []
         self._seq = 0
-        self.next_event = NEVER
         self.values = ValueSource(self)
         self._kinds: dict[type, int] = {cls: kind for kind, cls in enumerate(_MESSAGES)}
-        world.add(self)
         world.add(self)
 
     # ---------------------------------------------------------------- UART peer

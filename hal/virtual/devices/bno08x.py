@@ -26,6 +26,7 @@ from typing import Final
 
 from firmware.protocol.rvc import RvcFrame
 from hal.virtual.devices.world import NEVER, Link, World
+from hal.virtual.events import EventDevice
 
 __all__ = ["BANNER_LINES", "Bno08x", "Bno08xConfig"]
 
@@ -110,12 +111,13 @@ class Bno08xConfig:
                              f"the period, {0.5 / self.rate_hz!r} s")
 
 
-class Bno08x:
+class Bno08x(EventDevice):
     """The BNO08x in UART-RVC mode: a world device and an output-only UART peer."""
 
     def __init__(self, world: World, config: Bno08xConfig | None = None, *, seed: int = 0,
                  link: Link | None = None) -> None:
         """Power the sensor up at the plant's present time; its banner follows after boot_delay_s."""
+        super().__init__()
         self.world = world
         self.config = cfg = config if config is not None else Bno08xConfig()
         self.plant = plant = world.plant

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from hal.virtual.devices.world import NEVER
+from hal.virtual.events import Horizon
 
 __all__ = ["ByteSink"]
 
 
-class ByteSink:
+class ByteSink(Horizon):
     """Records every byte the MCU sends, with the stop-bit end time of the last byte of each write.
 
     >>> sink = ByteSink()
@@ -17,14 +17,12 @@ class ByteSink:
     (b'ab', 20)
     """
 
-    next_event: int = NEVER
-    """It never transmits: an RX interrupt window on its UART needs no catch-up (see ``VirtualUart``)."""
-
     def __init__(self, max_bytes: int | None = None) -> None:
         """Keep at most max_bytes (None: everything); older bytes beyond it are counted in ``discarded``."""
         if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, int)
                                       or max_bytes < 1):
             raise ValueError(f"max_bytes {max_bytes!r} out of range: None or an int >= 1")
+        super().__init__()  # next_event stays NEVER: it never transmits, an RX window needs no catch-up
         self.max_bytes = max_bytes
         self.data = bytearray()
         self.discarded = 0

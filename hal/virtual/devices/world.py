@@ -2,11 +2,12 @@
 
 Every device model (AK60-6, BNO08x, encoder) reads or drives the same lazily integrated
 :class:`~hal.virtual.plant.Plant`, and the plant only accepts times that never go back. The world
-keeps that promise: each device announces the time of its next internal event (``next_event``, in
-integer ticks of ``f_hz``; :data:`NEVER` when idle) and ``World.advance_to(t)`` runs every event up to
-``t`` across all devices in time order (ties: in the order the devices were added). A device's own
-``advance_to`` (the UART-peer hook) just asks the world. Time is an integer count of ticks: CPU cycles
-on the virtual bench, nanoseconds (``f_hz = 10**9``) when a device runs on the wall clock.
+keeps that promise: each device (an ``EventDevice``, :mod:`hal.virtual.events`) announces the time
+of its next internal event (``next_event``, in integer ticks of ``f_hz``; :data:`NEVER` when idle)
+and ``World.advance_to(t)`` runs every event up to ``t`` across all devices in time order (ties: in
+the order the devices were added). A device's own ``advance_to`` (the UART-peer hook) just asks the
+world. Time is an integer count of ticks: CPU cycles on the virtual bench, nanoseconds
+(``f_hz = 10**9``) when a device runs on the wall clock.
 """
 
 from __future__ import annotations
@@ -15,16 +16,12 @@ import logging
 import math
 from typing import Protocol
 
+from hal.virtual.events import NEVER, EventDevice
 from hal.virtual.plant import Plant
 
 __all__ = ["NEVER", "Link", "World", "WorldDevice"]
 
 log = logging.getLogger(__name__)
-
-NEVER = 1 << 61
-"""``next_event`` of a device with nothing scheduled (later than any reachable tick: 435 years at 168 MHz;
-below 2**62 so that compiled code keeps it an unboxed int)."""
-
 
 class Link(Protocol):
     """Where a device's bytes go: the MCU side of a UART (``VirtualUart`` has this method)."""
@@ -34,14 +31,8 @@ class Link(Protocol):
         ...
 
 
-class WorldDevice(Protocol):
-    """A device model living in a :class:`World`."""
-
-    next_event: int
-
-    def run_event(self) -> None:
-        """Run the device's event scheduled at ``next_event`` and update ``next_event``."""
-        ...
+WorldDevice = EventDevice
+"""A device model living in a :class:`World` (:class:`hal.virtual.events.EventDevice`, re-exported)."""
 
 
 class World:
@@ -67,10 +58,12 @@ class World:
         """The tick up to which every device event has been run (-1 before the first advance)."""
         return self._now
 
-    def add(self, device: WorldDevice) -> None:
-        """Register a device; its events run from the next ``advance_to`` on."""
+    def add(self, device: object) -> None:
+        """Register a device (an ``EventDevice``, else TypeError); its events run from the next ``advance_to``."""
         if not hasattr(device, "next_event") or not callable(getattr(device, "run_event", None)):
             raise TypeError(f"device {device!r} lacks next_event and run_event()")
+        if not isinstance(device, EventDevice):
+            raise TypeError(f"device {device!r} is not an EventDevice (hal.virtual.events)")
         self._devices.append(device)
 
     def seconds(self, ticks: int) -> float:
