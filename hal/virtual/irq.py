@@ -2,8 +2,9 @@
 
 The RTOS (which imports nothing of ours) asks each source ``count_in(t0, t1)``: how many times it
 fires in the half-open cycle window [t0, t1), with non-decreasing t0 (the shape
-``rtos.interrupts.InterruptSource``). This module holds a small base class that validates the windows
-and the source of the virtual UARTs.
+``rtos.interrupts.InterruptSource``). This module holds a small base class that validates the windows,
+on the RTOS's ``CountingSource`` so that the compiled solver calls ``count_in`` directly (the one
+import of hal.virtual from rtos), and the source of the virtual UARTs.
 """
 
 from __future__ import annotations
@@ -12,13 +13,14 @@ from collections.abc import Callable, Iterable
 from typing import Final
 
 from hal.virtual.events import Horizon
+from rtos.interrupts import CountingSource
 
 __all__ = ["EventTimesInterrupt", "Horizon", "InterruptSourceBase"]
 
 _COMPACT_AT: Final = 4096
 
 
-class InterruptSourceBase:
+class InterruptSourceBase(CountingSource):
     """Shared checks for interrupt sources: a name, a cost and monotone, well-formed windows."""
 
     def __init__(self, name: str, cost_cycles: int) -> None:
