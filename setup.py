@@ -2,7 +2,8 @@
 
 The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop (with the job record
 its task bodies read and its watchdog), the interrupt interference solve, the virtual peripherals and
-device models, the plant, and the firmware's tasks.
+device models with their event base classes, the plant, the firmware's tasks, drivers and codecs, and
+the bench probe of a virtual run.
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
@@ -12,8 +13,9 @@ metaprogramming mypyc does not support; their frame decoder and their per-messag
 unpacking, ``vesc_codec``, are compiled), the telemetry records (enum fields that compiled code would
 store as plain ints; their framing, ``telemetry_frame``, is compiled), the configuration value classes and the plant
 parameters (their checks must see the values as given: compiled code turns a bool into an int at the
-boundary), the gait reference (tests replace its constructors), the RTOS task declarations
-(``rtos.task``: their checks must see bools), the analysis and the host tools.
+boundary), the gait reference (tests replace its constructors; the curve it samples,
+``firmware.control.curve``, is compiled), the RTOS task declarations (``rtos.task``: their checks must
+see bools), the analysis and the host tools other than the probe.
 """
 
 from __future__ import annotations
