@@ -63,41 +63,39 @@ def _verdict(role: str, port: str, baud: int, seen: bytes, timeout_s: float) -> 
 def check_motor(uart: Uart, port: str, *, timeout_s: float = 1.0,
                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> int:
     """Ask for feedback until a valid VESC reply comes; return the bytes seen; StartupError otherwise."""
-    request = GetValuesSelective(FEEDBACK_MASK).encode()
     decoder = Decoder("from-motor")
-    seen = bytearray()
-    t0 = clock()
-    next_request = t0
-    try:
-        while clock() - t0 < timeout_s:
-            if clock() >= next_request:
-                uart.write(request)
-                next_request += REQUEST_EVERY_S
-            data = uart.read()
-            seen += data
-            if any(isinstance(m, (ValuesSelective, Values)) for m in decoder.feed(data)):
-                log.info("motor port %s answered after %.1f ms", port, (clock() - t0) * 1e3)
-                return len(seen)
-            sleep(0.002)
-    except HalError as exc:
-        raise StartupError(f"motor port {port!r}: {exc}; expected {EXPECTED['motor']}") from exc
-    raise _verdict("motor", port, uart.baud, bytes(seen), timeout_s)
+    return _await_valid("motor", uart, port,
+                        lambda data: any(isinstance(m, (ValuesSelective, Values)) for m in decoder.feed(data)),
+                        GetValuesSelective(FEEDBACK_MASK).encode(), timeout_s, clock, sleep)
 
 
 def check_imu(uart: Uart, port: str, *, timeout_s: float = 1.0,
               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> int:
     """Listen until a valid UART-RVC frame comes; return the bytes seen; StartupError otherwise."""
     decoder = RvcDecoder()
+    return _await_valid("imu", uart, port, lambda data: bool(decoder.feed(data)), None, timeout_s, clock, sleep)
+
+
+def _await_valid(role: str, uart: Uart, port: str, valid: Callable[[bytes], bool], request: bytes | None,
+                 timeout_s: float, clock: Callable[[], float], sleep: Callable[[float], None]) -> int:
+    """Read (writing ``request`` every REQUEST_EVERY_S if given) until ``valid(data)``; return the bytes seen.
+
+    StartupError naming the port and what was expected if the port fails or nothing valid comes in time.
+    """
     seen = bytearray()
     t0 = clock()
+    next_request = t0
     try:
         while clock() - t0 < timeout_s:
+            if request is not None and clock() >= next_request:
+                uart.write(request)
+                next_request += REQUEST_EVERY_S
             data = uart.read()
             seen += data
-            if decoder.feed(data):
-                log.info("imu port %s streams after %.1f ms", port, (clock() - t0) * 1e3)
+            if valid(data):
+                log.info("%s port %s answered after %.1f ms", role, port, (clock() - t0) * 1e3)
                 return len(seen)
             sleep(0.002)
     except HalError as exc:
-        raise StartupError(f"imu port {port!r}: {exc}; expected {EXPECTED['imu']}") from exc
-    raise _verdict("imu", port, uart.baud, bytes(seen), timeout_s)
+        raise StartupError(f"{role} port {port!r}: {exc}; expected {EXPECTED[role]}") from exc
+    raise _verdict(role, port, uart.baud, bytes(seen), timeout_s)

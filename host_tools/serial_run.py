@@ -35,6 +35,7 @@ from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile
 from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
 from host_tools.serial_io import CaptureUart
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
+from rtos.scheduler import SchedulerNow
 
 __all__ = ["BELT_RATIO", "FeedbackAngle", "SerialRunConfig", "SerialRunResult", "StartupError", "run_serial"]
 
@@ -237,7 +238,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
          reference: GaitReference, seen: dict[str, int], progress: Callable[[float], None] | None) -> SerialRunResult:
     """Build the board, the firmware and the wall-clock RTOS on opened ports, run, collect."""
     clock = WallClock(f_cpu)
-    holder: dict[str, Scheduler] = {}
+    now = SchedulerNow()  # the board is built before the scheduler: bound to it below
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu))
     feedback_angle = FeedbackAngle()
     if cfg.encoder == "sim":
@@ -248,7 +249,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
         encoder = VirtualEncoderTimer(lambda: 0, feedback_angle.angle_rad)
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=capture, encoder=encoder,
                   estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
-                  now_cycles=lambda: holder["s"].now, f_cpu_hz=f_cpu)
+                  now_cycles=now, f_cpu_hz=f_cpu)
     fw = Firmware(board, fw_cfg, reference=reference)
     wd.on_reset = fw.on_watchdog_reset
     feedback_angle.feedback = fw.motor.feedback
@@ -261,7 +262,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
         probe.sample(t, fw, plant.output_angle_rad(plant.latest_time_s) if plant is not None
                      else fw.out.fused_angle_rad)
         if link.step(t):
-            holder["s"].request_stop()
+            sched.request_stop()
         if job.index % GC_EVERY_TICKS == 0:
             gc.collect(0)  # young objects only: tens of µs, never a full scan in the loop
 
@@ -270,7 +271,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
-    holder["s"] = sched
+    now.bind(sched)
     fw.kernel_health = kernel_health(sched, fw)
     sched.add_watchdog(wd)
     interrupted = False
