@@ -73,7 +73,11 @@ class _Slot:
         self.nnext = task.offset + task.period  # the release after it
         self.ready = ready  # nrel after jitter
         self.waiting = True
-        self.blocked: Blocker | None = None  # what delayed the pending job
+        # what delayed the pending job: the blocking slot's rank (-1: nothing), its job's release, the delay;
+        # a Blocker is built from them only when the job sets a new worst response
+        self.blocked_by = -1
+        self.blocked_release = 0
+        self.blocked_cycles = 0
 
     def index_of(self, release: int) -> int:
         """Release index k of the nominal release ``release`` (= offset + k * period)."""
@@ -261,8 +265,7 @@ class Scheduler:
                     slot.waiting = False
                     bits |= 1 << slot.rank
                     if prev > slot.rank and r < now:
-                        p = self._slots[prev]
-                        slot.blocked = Blocker(p.name, p.index_of(prev_release), now - r)
+                        slot.blocked_by, slot.blocked_release, slot.blocked_cycles = prev, prev_release, now - r
                 elif r < earliest:
                     earliest = r
         return bits, earliest
@@ -277,7 +280,11 @@ class Scheduler:
         if resp > st.worst:
             st.worst = resp
             st.worst_job = slot.index_of(release)
-            st.worst_blocker = slot.blocked
+            if slot.blocked_by < 0:
+                st.worst_blocker = None
+            else:
+                p = self._slots[slot.blocked_by]
+                st.worst_blocker = Blocker(p.name, p.index_of(slot.blocked_release), slot.blocked_cycles)
         if resp < st.best:
             st.best = resp
         d = start - release
@@ -285,7 +292,7 @@ class Scheduler:
             st.delay_max = d
         if d < st.delay_min:
             st.delay_min = d
-        slot.blocked = None
+        slot.blocked_by = -1
         if resp > slot.deadline:
             st.deadline_misses += 1
             st.miss_streak += 1
