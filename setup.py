@@ -44,7 +44,6 @@ COMPILED = [
     "hal/virtual/plant/model.py",
     "hal/virtual/devices/world.py",
     "hal/virtual/devices/ak60.py",
-    "hal/virtual/devices/ak60_config.py",
     "hal/virtual/devices/ak60_loops.py",
     "hal/virtual/devices/ak60_meter.py",
     "hal/virtual/devices/ak60_values.py",

@@ -176,3 +176,9 @@ def test_origin_and_single_turn() -> None:
     rig.send(SetPosSingle().encode())
     _, single = _erpm_now(rig, 0.03)
     assert 0.0 <= single < 360.0
+
+
+@pytest.mark.parametrize(("field", "value"), [("timeout_s", True), ("timeout_s", -1.0), ("max_duty", math.nan)])
+def test_config_refuses_a_value_outside_its_range_naming_it(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=rf"Ak60Config\.{field} = {value!r} is outside the allowed range"):
+        Ak60Config(**{field: value})  # type: ignore[arg-type]

@@ -176,4 +176,6 @@ def test_output_only_and_config_checks() -> None:
         Bno08xConfig(pitch_sign=2)
     with pytest.raises(ValueError, match="half"):
         Bno08xConfig(period_jitter_s=0.006)
+    with pytest.raises(ValueError, match=r"rate_hz = True is outside"):  # a bool is no rate, compiled or not
+        Bno08xConfig(rate_hz=True)  # type: ignore[arg-type]
     assert isinstance(RvcFrame.from_bytes(rig.read_until(0.06)[-19:]), RvcFrame)

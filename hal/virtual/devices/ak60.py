@@ -112,6 +112,9 @@ class Ak60(EventDevice):
         self._loop_period = max(1, world.ticks(cfg.inner_loop_period_s))
         self._timeout = world.ticks(cfg.timeout_s)
         self._fault_stop = world.ticks(cfg.fault_stop_time_s)
+        # read at every event: copied from the (interpreted, frozen) configuration into native fields
+        self._limits = (cfg.abs_max_current_a, cfg.temp_fet_max_c, cfg.temp_motor_max_c, cfg.min_input_voltage_v)
+        self._mask_echo = cfg.selective_mask_echo
         self.mode = DriveMode.RELEASED
         self.fault = 0
         self.timed_out = False
@@ -366,14 +369,15 @@ class Ak60(EventDevice):
         self._release(t)
 
     def _check_limits(self, t: int) -> None:
-        cfg, m = self.config, self.meter
-        if abs(m.current_a) > cfg.abs_max_current_a:
+        m = self.meter
+        max_current_a, temp_fet_max_c, temp_motor_max_c, min_input_voltage_v = self._limits
+        if abs(m.current_a) > max_current_a:
             code = vesc.FaultCode.ABS_OVER_CURRENT
-        elif m.temp_fet_c > cfg.temp_fet_max_c:
+        elif m.temp_fet_c > temp_fet_max_c:
             code = vesc.FaultCode.OVER_TEMP_FET
-        elif m.temp_motor_c > cfg.temp_motor_max_c:
+        elif m.temp_motor_c > temp_motor_max_c:
             code = vesc.FaultCode.OVER_TEMP_MOTOR
-        elif m.v_in_v < cfg.min_input_voltage_v:
+        elif m.v_in_v < min_input_voltage_v:
             code = vesc.FaultCode.UNDER_VOLTAGE
         else:
             return
@@ -424,7 +428,7 @@ class Ak60(EventDevice):
 
     def _on_selective(self, mask: int, t: int) -> None:
         self._sample(t)
-        payload = self.values.selective_payload(mask, self.config.selective_mask_echo)
+        payload = self.values.selective_payload(mask, self._mask_echo)
         self._send(vesc.encode_frame(payload), t + self._latency)
 
     def _on_get_values(self, t: int) -> None:

@@ -6,8 +6,9 @@ See docs/devices.md for the reasoning behind each number.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+
+from hal.virtual.devices.config_checks import check_field_ranges
 
 __all__ = ["Ak60Config"]
 
@@ -107,14 +108,7 @@ class Ak60Config:
 
     def __post_init__(self) -> None:
         """Check every number against its allowed range."""
-        for f in fields(self):
-            if f.name not in _RANGES:
-                continue
-            lo, hi = _RANGES[f.name]
-            value = getattr(self, f.name)
-            bad = isinstance(value, bool) or not isinstance(value, (int, float))
-            if bad or not math.isfinite(value) or not lo <= value <= hi:
-                raise ValueError(f"Ak60Config.{f.name} = {value!r} is outside the allowed range [{lo}, {hi}]")
+        check_field_ranges(self, _RANGES)
         if len(self.uuid) != 12:
             raise ValueError(f"Ak60Config.uuid must be exactly 12 bytes, got {len(self.uuid)}")
         if "\0" in self.hw_name or not self.hw_name.isprintable():

@@ -1,0 +1,35 @@
+"""The range check shared by the device models' configuration dataclasses."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import fields
+from typing import Any
+
+__all__ = ["check_field_ranges"]
+
+
+def check_field_ranges(config: Any, ranges: Mapping[str, tuple[float, float]]) -> None:
+    """Raise ValueError naming the first field of dataclass ``config`` not a finite number in its [lo, hi].
+
+    Fields without an entry in ``ranges`` are not checked; a bool is not a number here.
+
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Cfg:
+    ...     rate_hz: float = 100.0
+    >>> check_field_ranges(Cfg(5e3), {"rate_hz": (1.0, 1000.0)})
+    Traceback (most recent call last):
+    ...
+    ValueError: Cfg.rate_hz = 5000.0 is outside the allowed range [1.0, 1000.0]
+    """
+    for f in fields(config):
+        bounds = ranges.get(f.name)
+        if bounds is None:
+            continue
+        lo, hi = bounds
+        value = getattr(config, f.name)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not (
+                math.isfinite(value) and lo <= value <= hi):
+            raise ValueError(f"{type(config).__name__}.{f.name} = {value!r} is outside the allowed range [{lo}, {hi}]")
