@@ -176,7 +176,7 @@ class EncoderTimer(ABC):
     own wrap-safe arithmetic, e.g. ``(int16_t)(cnt - prev)``.
     """
 
-    def __init__(self, bits: int = 16, arr: int | None = None) -> None:
+    def __init__(self, bits: int = 16, arr: object = None) -> None:
         """Validate the counter width (16 or 32) and the auto-reload value (default 2**bits - 1)."""
         if bits not in (16, 32):
             raise ValueError(f"bits {bits!r} not supported: 16 (TIM1/3/4/8) or 32 (TIM2/5)")

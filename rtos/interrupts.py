@@ -66,7 +66,7 @@ class PeriodicInterrupt(CountingSource):
     3
     """
 
-    def __init__(self, name: str, period: int, cost: int, offset: int = 0) -> None:
+    def __init__(self, name: str, period: object, cost: object, offset: object = 0) -> None:
         """Check and store the firing pattern; ``period`` is also the minimum inter-arrival time."""
         if isinstance(period, bool) or not isinstance(period, int) or period <= 0:
             raise ValueError(f"interrupt {name!r}: period must be an int >= 1 cycles, got {period!r}")
@@ -103,7 +103,7 @@ class TimestampedInterrupt(CountingSource):
     (1, 3)
     """
 
-    def __init__(self, name: str, cost: int, times: Iterable[int]) -> None:
+    def __init__(self, name: str, cost: object, times: Iterable[int]) -> None:
         """Store the source; ``times`` must be non-decreasing."""
         self.name = name
         self.cost_cycles = _check_cost(name, cost)

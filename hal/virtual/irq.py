@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Final
 
+from hal.virtual.checks import check_int
 from hal.virtual.events import Horizon
 from rtos.interrupts import CountingSource
 
@@ -23,14 +24,12 @@ _COMPACT_AT: Final = 4096
 class InterruptSourceBase(CountingSource):
     """Shared checks for interrupt sources: a name, a cost and monotone, well-formed windows."""
 
-    def __init__(self, name: str, cost_cycles: int) -> None:
-        """Validate and keep the name and the per-firing cost in cycles."""
-        if isinstance(cost_cycles, bool) or not isinstance(cost_cycles, int) or cost_cycles < 0:
-            raise ValueError(f"cost_cycles {cost_cycles!r} out of range: an int >= 0")
+    def __init__(self, name: str, cost_cycles: object) -> None:
+        """Validate and keep the name and the per-firing cost in cycles (an int >= 0)."""
         if not name:
             raise ValueError("an interrupt source needs a non-empty name")
         self.name = name
-        self.cost_cycles = cost_cycles
+        self.cost_cycles = check_int("cost_cycles", cost_cycles, 0)
         self._last_t0 = 0
 
     def _check_window(self, t0: int, t1: int) -> None:
@@ -56,7 +55,7 @@ class EventTimesInterrupt(InterruptSourceBase):
     """
 
     def __init__(
-        self, name: str, cost_cycles: int, before_count: Callable[[int], None] | None = None
+        self, name: str, cost_cycles: object, before_count: Callable[[int], None] | None = None
     ) -> None:
         """Start with no recorded events."""
         super().__init__(name, cost_cycles)

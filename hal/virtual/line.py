@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from mypy_extensions import i64
 
+from hal.virtual.checks import check_int
+
 __all__ = ["BITS_PER_BYTE_8N1", "ByteLine", "ceil_div"]
 
 BITS_PER_BYTE_8N1 = 10  # start + 8 data + stop
@@ -33,16 +35,16 @@ class ByteLine:
     142188
     """
 
-    def __init__(self, f_cpu_hz: int, baud: int, bits_per_byte: int = BITS_PER_BYTE_8N1) -> None:
-        """Set the byte time from the clock, the baud rate and the bits per character."""
-        for label, value in (("f_cpu_hz", f_cpu_hz), ("baud", baud), ("bits_per_byte", bits_per_byte)):
-            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-                raise ValueError(f"{label} {value!r} out of range: a positive int")
+    def __init__(self, f_cpu_hz: object, baud: object, bits_per_byte: object = BITS_PER_BYTE_8N1) -> None:
+        """Set the byte time from the clock, the baud rate and the bits per character (ints >= 1)."""
+        f_cpu = check_int("f_cpu_hz", f_cpu_hz, 1)
+        den = check_int("baud", baud, 1)
+        bits = check_int("bits_per_byte", bits_per_byte, 1)
         # the burst state is in native 64-bit ints (plain C arithmetic when compiled): cycle counts
         # stay far below 2**63
-        self._num = bits_per_byte * f_cpu_hz  # cycles per byte = num / den
-        self._den: i64 = baud
-        step, extra = divmod(self._num, baud)
+        self._num = bits * f_cpu  # cycles per byte = num / den
+        self._den: i64 = den
+        step, extra = divmod(self._num, den)
         self._step: i64 = step  # one byte adds step + extra / den cycles
         self._extra: i64 = extra
         self._origin: i64 = 0  # the current burst's start cycle

@@ -6,6 +6,7 @@ import math
 from collections.abc import Callable
 
 from hal.interfaces import EncoderTimer
+from hal.virtual.checks import check_int
 from hal.virtual.irq import InterruptSourceBase
 
 __all__ = ["SysTick", "VirtualEncoderTimer"]
@@ -31,20 +32,19 @@ class VirtualEncoderTimer(EncoderTimer):
         self,
         now: Callable[[], int],
         angle_rad: Callable[[int], float],
-        counts_per_rev: int = 4000,
+        counts_per_rev: object = 4000,
         bits: int = 16,
-        arr: int | None = None,
+        arr: object = None,
         polarity: int = 1,
     ) -> None:
         """Attach to an angle source (radians at a given cycle) with the encoder's resolution."""
         super().__init__(bits, arr)
-        if isinstance(counts_per_rev, bool) or not isinstance(counts_per_rev, int) or counts_per_rev < 1:
-            raise ValueError(f"counts_per_rev {counts_per_rev!r} out of range: an int >= 1")
+        counts = check_int("counts_per_rev", counts_per_rev, 1)
         if polarity not in (1, -1):
             raise ValueError(f"polarity {polarity!r} invalid: +1 or -1 (CC1P inverted)")
         self._now = now
         self._angle_rad = angle_rad
-        self.counts_per_rev = counts_per_rev
+        self.counts_per_rev = counts
         self.polarity = polarity
         self._offset = 0
         self._last = 0  # CNT reset value: the counter starts at 0 with DIR = 0
@@ -87,7 +87,7 @@ class VirtualEncoderTimer(EncoderTimer):
         self._offset = value - raw
         self._last = value
 
-    def update_interrupt(self, cost_cycles: int, name: str = "tim_update") -> InterruptSourceBase:
+    def update_interrupt(self, cost_cycles: object, name: str = "tim_update") -> InterruptSourceBase:
         """An interrupt source counting wraps in a window, assuming monotone motion within it.
 
         It evaluates angle_rad at both window ends, which may drive the plant up to t1.
@@ -98,7 +98,7 @@ class VirtualEncoderTimer(EncoderTimer):
 class _EncoderWrapInterrupt(InterruptSourceBase):
     """Counter wraps between the window ends of an encoder timer (UIF)."""
 
-    def __init__(self, timer: VirtualEncoderTimer, name: str, cost_cycles: int) -> None:
+    def __init__(self, timer: VirtualEncoderTimer, name: str, cost_cycles: object) -> None:
         super().__init__(name, cost_cycles)
         self._timer = timer
         self._cache: dict[int, int] = {}
@@ -125,19 +125,18 @@ class SysTick:
     (167999, 5)
     """
 
-    def __init__(self, f_cpu_hz: int, tick_hz: int = 1000) -> None:
-        """Compute and validate the 24-bit reload value."""
-        for label, value in (("f_cpu_hz", f_cpu_hz), ("tick_hz", tick_hz)):
-            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-                raise ValueError(f"{label} {value!r} out of range: a positive int")
-        load = f_cpu_hz // tick_hz - 1
+    def __init__(self, f_cpu_hz: object, tick_hz: object = 1000) -> None:
+        """Compute and validate the 24-bit reload value (clock and tick rate: ints >= 1)."""
+        f_cpu = check_int("f_cpu_hz", f_cpu_hz, 1)
+        tick = check_int("tick_hz", tick_hz, 1)
+        load = f_cpu // tick - 1
         if not 1 <= load <= SYSTICK_LOAD_MAX:
             raise ValueError(
-                f"SysTick LOAD {load} for f_cpu_hz {f_cpu_hz} and tick_hz {tick_hz} out of range: "
+                f"SysTick LOAD {load} for f_cpu_hz {f_cpu} and tick_hz {tick} out of range: "
                 f"1..{SYSTICK_LOAD_MAX} (24 bits)"
             )
-        self.f_cpu_hz = f_cpu_hz
-        self.tick_hz = tick_hz
+        self.f_cpu_hz = f_cpu
+        self.tick_hz = tick
         self.load = load
 
     @property
@@ -153,7 +152,7 @@ class SysTick:
         """The SysTick VAL down-counter at now_cycles (LOAD just after each tick, down to 0)."""
         return self.load - now_cycles % self.period_cycles
 
-    def interrupt(self, cost_cycles: int, name: str = "systick") -> InterruptSourceBase:
+    def interrupt(self, cost_cycles: object, name: str = "systick") -> InterruptSourceBase:
         """An interrupt source firing at every tick k * period_cycles, k >= 1."""
         return _PeriodicInterrupt(name, cost_cycles, self.period_cycles)
 
@@ -161,7 +160,7 @@ class SysTick:
 class _PeriodicInterrupt(InterruptSourceBase):
     """Fires at k * period for k >= 1."""
 
-    def __init__(self, name: str, cost_cycles: int, period_cycles: int) -> None:
+    def __init__(self, name: str, cost_cycles: object, period_cycles: int) -> None:
         super().__init__(name, cost_cycles)
         self._period = period_cycles
 

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Literal, Protocol
 
 from hal.interfaces import Uart
+from hal.virtual.checks import check_int
 from hal.virtual.irq import EventTimesInterrupt, Horizon
 from hal.virtual.line import ByteLine
 
@@ -60,21 +61,18 @@ class VirtualUart(Uart):
     def __init__(
         self,
         now: Callable[[], int],
-        f_cpu_hz: int,
-        baud: int,
-        rx_buffer_size: int = 256,
-        tx_queue_size: int = 256,
+        f_cpu_hz: object,
+        baud: object,
+        rx_buffer_size: object = 256,
+        tx_queue_size: object = 256,
         name: str = "uart",
     ) -> None:
-        """Create an idle UART with empty buffers and no peer."""
+        """Create an idle UART with empty buffers and no peer (sizes and clock: ints >= 1)."""
         super().__init__(baud, name)
-        for label, value in (("rx_buffer_size", rx_buffer_size), ("tx_queue_size", tx_queue_size)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{label} {value!r} out of range: an int >= 1")
         self._now = now
-        self.f_cpu_hz = f_cpu_hz
-        self.rx_buffer_size = rx_buffer_size
-        self.tx_queue_size = tx_queue_size
+        self.f_cpu_hz = check_int("f_cpu_hz", f_cpu_hz, 1)
+        self.rx_buffer_size = check_int("rx_buffer_size", rx_buffer_size, 1)
+        self.tx_queue_size = check_int("tx_queue_size", tx_queue_size, 1)
         self._tx_line = ByteLine(f_cpu_hz, baud)
         self._rx_line = ByteLine(f_cpu_hz, baud)
         self._pending: deque[_Chunk] = deque()
@@ -132,7 +130,7 @@ class VirtualUart(Uart):
         """Cycle at which the last byte the MCU queued ends."""
         return self._tx_line.busy_until
 
-    def rx_interrupt(self, cost_cycles: int, name: str | None = None) -> EventTimesInterrupt:
+    def rx_interrupt(self, cost_cycles: object, name: str | None = None) -> EventTimesInterrupt:
         """An interrupt source firing once per byte arriving on the RX wire, at its stop-bit end."""
         source = EventTimesInterrupt(name or f"{self.name}_rx", cost_cycles, self._advance_peer)
         source.horizon = self._horizon()
@@ -158,14 +156,16 @@ class VirtualUart(Uart):
             raise ValueError(f"count {count!r} out of range: >= 1")
         return self._schedule_rx(b"\x00" * count, start_cycles, _FRAMING)
 
-    def drop_next(self, n: int, direction: Literal["rx", "tx"] = "rx") -> None:
-        """Lose the next n bytes on a wire: they take line time but never arrive (rx: MCU, tx: peer)."""
-        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-            raise ValueError(f"n {n!r} out of range: an int >= 0")
+    def drop_next(self, n: object, direction: Literal["rx", "tx"] = "rx") -> None:
+        """Lose the next n bytes (an int >= 0) on a wire: they take line time but never arrive.
+
+        ``direction`` "rx": towards the MCU; "tx": towards the peer.
+        """
+        count = check_int("n", n, 0)
         if direction == "rx":
-            self._drop_rx += n
+            self._drop_rx += count
         elif direction == "tx":
-            self._drop_tx += n
+            self._drop_tx += count
         else:
             raise ValueError(f"direction {direction!r} invalid: 'rx' or 'tx'")
 

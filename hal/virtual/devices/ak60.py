@@ -154,12 +154,13 @@ class Ak60(EventDevice):
         self.world.advance_to(t_cycles)
 
     # ------------------------------------------------------------ fault injection
-    def inject_fault(self, code: int, t_s: float, duration_s: float | None = None) -> None:
+    def inject_fault(self, code: object, t_s: float, duration_s: float | None = None) -> None:
         """At t_s raise fault ``code`` (1..255, see FaultCode): motor released, reported, held duration_s."""
         if isinstance(code, bool) or not isinstance(code, int) or not 1 <= code <= 255:
             raise ValueError(f"fault code {code!r} out of range: an int in 1..255 (FaultCode)")
+        fault: int = code
         hold = self._fault_stop if duration_s is None else self._check_duration(duration_s)
-        self._schedule(t_s, lambda t: self._raise_fault(code, t, hold))
+        self._schedule(t_s, lambda t: self._raise_fault(fault, t, hold))
 
     def set_supply_voltage(self, voltage_v: float, t_s: float) -> None:
         """From t_s on, the supply behind the source resistance is voltage_v (e.g. to provoke UNDER_VOLTAGE)."""

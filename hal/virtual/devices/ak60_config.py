@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hal.virtual.devices.config_checks import check_field_ranges
+from hal.virtual.checks import check_field_ranges
 
 __all__ = ["Ak60Config"]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hal.virtual.devices.config_checks import check_field_ranges
+from hal.virtual.checks import check_field_ranges
 
 __all__ = ["BANNER_LINES", "Bno08xConfig"]
 

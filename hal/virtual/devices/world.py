@@ -16,6 +16,7 @@ import logging
 import math
 from typing import Protocol
 
+from hal.virtual.checks import check_int
 from hal.virtual.events import NEVER, EventDevice
 from hal.virtual.plant import Plant
 
@@ -43,12 +44,10 @@ class World:
     (500, 0.0015)
     """
 
-    def __init__(self, plant: Plant, f_hz: int) -> None:
-        """Wrap ``plant`` with a time base of ``f_hz`` ticks per second."""
-        if isinstance(f_hz, bool) or not isinstance(f_hz, int) or f_hz <= 0:
-            raise ValueError(f"f_hz {f_hz!r} out of range: a positive int (ticks per second)")
+    def __init__(self, plant: Plant, f_hz: object) -> None:
+        """Wrap ``plant`` with a time base of ``f_hz`` ticks per second (an int >= 1)."""
         self.plant = plant
-        self.f_hz = f_hz
+        self.f_hz = check_int("f_hz", f_hz, 1)
         self._devices: list[WorldDevice] = []
         self._now = -1
         self._busy = False

@@ -1,4 +1,8 @@
-"""The range check shared by the device models' configuration dataclasses."""
+"""Argument checks shared by the virtual MCU's pieces: counts and rates given as ints, configuration ranges.
+
+Parameters checked here are typed ``object`` at their constructors: in the compiled build an ``int``
+parameter would already have turned a bool into 0 or 1, so the check would never see it.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,20 @@ from collections.abc import Mapping
 from dataclasses import fields
 from typing import Any
 
-__all__ = ["check_field_ranges"]
+__all__ = ["check_field_ranges", "check_int"]
+
+
+def check_int(label: str, value: object, minimum: int) -> int:
+    """Return ``value`` if it is an int >= minimum (a bool is not), else ValueError naming label and value.
+
+    >>> check_int("baud", True, 1)
+    Traceback (most recent call last):
+    ...
+    ValueError: baud True out of range: an int >= 1
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{label} {value!r} out of range: an int >= {minimum}")
+    return value
 
 
 def check_field_ranges(config: Any, ranges: Mapping[str, tuple[float, float]]) -> None:
