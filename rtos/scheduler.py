@@ -303,14 +303,20 @@ class Scheduler:
         elif st.miss_streak:
             st.miss_streak = 0
 
-    def run_until(self, t_end: int, progress: Callable[[float], None] | None = None) -> None:
+    def run_until(self, t_end: object, progress: Callable[[float], None] | None = None) -> None:
         """Run every job that can start before cycle ``t_end``; then ``now`` is ``max(t_end, last finish)``.
 
         A job started before ``t_end`` runs to completion even if it ends later. ``progress(fraction)``
         is called about every 1 % of the span and once with 1.0 at the end (unless stopped).
+        ``t_end`` is typed ``object`` so that the compiled build refuses a bool too (an ``int``
+        parameter would already have turned it into 0 or 1); the loop runs on the checked int.
         """
         if isinstance(t_end, bool) or not isinstance(t_end, int):
             raise ValueError(f"t_end must be an int number of cycles, got {t_end!r}")
+        self._run(t_end, progress)
+
+    def _run(self, t_end: int, progress: Callable[[float], None] | None) -> None:
+        """:meth:`run_until` after its type check."""
         if t_end < self._now:
             raise ValueError(f"t_end {t_end} is in the past (now = {self._now} cycles)")
         if t_end >= _FAR:

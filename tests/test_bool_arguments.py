@@ -17,6 +17,7 @@ from hal.virtual.line import ByteLine
 from hal.virtual.plant import Plant
 from hal.virtual.timer import SysTick, VirtualEncoderTimer
 from hal.virtual.uart import VirtualUart
+from rtos import Scheduler, Task
 from rtos.interrupts import PeriodicInterrupt, TimestampedInterrupt
 
 F_CPU = 168_000_000
@@ -45,6 +46,7 @@ CASES: dict[str, Callable[[], object]] = {
     "PeriodicInterrupt cost": lambda: PeriodicInterrupt("systick", 1000, True),
     "PeriodicInterrupt offset": lambda: PeriodicInterrupt("systick", 1000, 80, offset=True),
     "TimestampedInterrupt cost": lambda: TimestampedInterrupt("rx", True, []),
+    "Scheduler.run_until t_end": lambda: Scheduler([Task("a", 1, period=10, cost=1)]).run_until(True),
 }
 
 
