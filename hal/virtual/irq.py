@@ -16,7 +16,7 @@ from hal.virtual.checks import check_int
 from hal.virtual.events import Horizon
 from rtos.interrupts import CountingSource
 
-__all__ = ["EventTimesInterrupt", "Horizon", "InterruptSourceBase"]
+__all__ = ["EventTimesInterrupt", "InterruptSourceBase"]
 
 _COMPACT_AT: Final = 4096
 

@@ -17,7 +17,8 @@ from typing import Literal, Protocol
 
 from hal.interfaces import Uart
 from hal.virtual.checks import check_int
-from hal.virtual.irq import EventTimesInterrupt, Horizon
+from hal.virtual.events import Horizon
+from hal.virtual.irq import EventTimesInterrupt
 from hal.virtual.line import ByteLine
 
 __all__ = ["UartPeer", "VirtualUart"]
@@ -106,9 +107,9 @@ class VirtualUart(Uart):
     def _horizon(self) -> Horizon | None:
         """The peer if it is a :class:`Horizon` (announces ``next_event``): it sends nothing ending by that tick.
 
-        A peer with ``next_event`` promises that every byte it has not yet transmitted ends after its
+        A ``Horizon`` peer promises that every byte it has not yet transmitted ends after its
         ``next_event`` (bytes are sent from events at that tick or later), so an RX interrupt window
-        ending by then needs no catch-up of the peer.
+        ending by then needs no catch-up of the peer. Any other peer is caught up for every window.
         """
         peer: object = self._peer
         if isinstance(peer, Horizon):

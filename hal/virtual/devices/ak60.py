@@ -114,7 +114,6 @@ class Ak60(EventDevice):
         self._fault_stop = world.ticks(cfg.fault_stop_time_s)
         # read at every event: copied from the (interpreted, frozen) configuration into native fields
         self._limits = (cfg.abs_max_current_a, cfg.temp_fet_max_c, cfg.temp_motor_max_c, cfg.min_input_voltage_v)
-        self._mask_echo = cfg.selective_mask_echo
         self.mode = DriveMode.RELEASED
         self.fault = 0
         self.timed_out = False
@@ -429,7 +428,7 @@ class Ak60(EventDevice):
 
     def _on_selective(self, mask: int, t: int) -> None:
         self._sample(t)
-        payload = self.values.selective_payload(mask, self._mask_echo)
+        payload = self.values.selective_payload(mask)
         self._send(vesc.encode_frame(payload), t + self._latency)
 
     def _on_get_values(self, t: int) -> None:

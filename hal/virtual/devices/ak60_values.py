@@ -15,8 +15,8 @@ import struct
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Final
 
-from firmware.protocol.vesc_message import CommandId, WireField, to_raw
-from firmware.protocol.vesc_values import VALUES_FIELDS, selective_layout
+from firmware.protocol.vesc_message import CommandId, WireField
+from firmware.protocol.vesc_values import selective_layout
 from hal.virtual.devices.ak60_loops import radians
 
 if TYPE_CHECKING:
@@ -25,6 +25,8 @@ if TYPE_CHECKING:
 __all__ = ["ValueSource", "wrap_int32"]
 
 _PID_POS_LIMIT_DEG: Final = (2**31 - 1) / 1e6
+_MAX_LAYOUTS: Final = 256  # selective reply layouts kept
+_VALUES_MASK: Final = (1 << 21) - 1  # bits 0..20: the fields of the 73-byte GET_VALUES reply
 
 
 def wrap_int32(value: int) -> int:
@@ -45,8 +47,10 @@ class ValueSource:
         self._meter = dev.meter
         self._rpm_to_erpm = 60.0 / math.tau * dev.params.pole_pairs
         self._controller_id = dev.config.controller_id
-        self._layouts: dict[int, _Layout] = {}
-        self._values_layout: _Layout | None = None
+        self._mask_echo = dev.config.selective_mask_echo
+        self._layouts: dict[int, _Layout] = {}  # by selective mask
+        packer, fields = selective_layout(_VALUES_MASK)  # GET_VALUES carries the fields of bits 0..20
+        self._values_layout = _Layout(bytes((int(CommandId.GET_VALUES),)), packer, fields)
 
     def value(self, name: str) -> float:
         """The SI value of the field called name now (reading an average resets it); KeyError if unknown."""
@@ -101,43 +105,27 @@ class ValueSource:
 
     def values_payload(self) -> bytes:
         """The GET_VALUES reply payload (same bytes as ``Values(**read(VALUES_FIELDS)).payload()``)."""
-        layout = self._values_layout
-        if layout is None:
-            codes = "".join(f.code for f in VALUES_FIELDS)
-            layout = self._values_layout = _Layout(bytes((int(CommandId.GET_VALUES),)), struct.Struct(">" + codes),
-                                                   VALUES_FIELDS)
-        return self._payload(layout)
+        return self._payload(self._values_layout)
 
-    def selective_payload(self, mask: int, mask_echo: bool = True) -> bytes:
+    def selective_payload(self, mask: int) -> bytes:
         """The GET_VALUES_SELECTIVE reply payload for mask (same bytes as ``ValuesSelective.payload``).
 
         The layout for each mask is compiled once: the codec's ``selective_layout`` (one ``struct`` for
-        the fields present, bits > 21 ignored) and its ``to_raw`` scaling.
+        the fields present, bits > 21 ignored); the mask is echoed as the driver's configuration says.
         """
-        key = mask * 2 + mask_echo
-        layout = self._layouts.get(key)
+        layout = self._layouts.get(mask)
         if layout is None:
+            if len(self._layouts) >= _MAX_LAYOUTS:  # masks come off the wire: keep the cache bounded
+                self._layouts.clear()
             packer, present = selective_layout(mask & 0x3FFFFF)
             cid = int(CommandId.GET_VALUES_SELECTIVE)
-            head = struct.pack(">BI", cid, mask) if mask_echo else bytes((cid,))
-            layout = self._layouts[key] = _Layout(head, packer, present)
+            head = struct.pack(">BI", cid, mask) if self._mask_echo else bytes((cid,))
+            layout = self._layouts[mask] = _Layout(head, packer, present)
         return self._payload(layout)
 
     def _payload(self, layout: _Layout) -> bytes:
         """The payload of layout now: its head, then its fields read in order, scaled and packed."""
-        return layout.head + layout.pack(*[
-            to_raw(self.value(f.name), f.divisor, f.code, f.name, f.is_int) for f in layout.fields])
-
-
-class _Scaling:
-    """Name and wire scaling of one field (the arguments of the codec's ``to_raw``), in native attributes."""
-
-    def __init__(self, field: WireField) -> None:
-        """Copy field's name, divisor, struct code and integer flag."""
-        self.name: str = field.name
-        self.divisor: float = field.divisor
-        self.code: str = field.code
-        self.is_int: bool = field.is_int
+        return layout.head + layout.pack(*[f.to_raw(self.value(f.name)) for f in layout.fields])
 
 
 class _Layout:
@@ -147,4 +135,4 @@ class _Layout:
         """Pack fields with packer after head."""
         self.head = head
         self.pack = packer.pack
-        self.fields = [_Scaling(f) for f in fields]
+        self.fields = fields

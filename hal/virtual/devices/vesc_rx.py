@@ -52,15 +52,16 @@ class TimedBytes:
             raise ValueError(f"{len(data)} bytes but {len(end_times)} end times: need one per byte")
         self._held += len(data)
         start = 0
-        for j in range(len(data)):
-            if data[j] == _END:
-                piece = data[start : j + 1]
-                if self._tail:
-                    piece = bytes(self._tail) + piece
-                    self._tail.clear()
-                self._slices.append(piece)
-                self._slice_ends.append(end_times[j])
-                start = j + 1
+        j = data.find(_END)
+        while j >= 0:
+            piece = data[start : j + 1]
+            if self._tail:
+                piece = bytes(self._tail) + piece
+                self._tail.clear()
+            self._slices.append(piece)
+            self._slice_ends.append(end_times[j])
+            start = j + 1
+            j = data.find(_END, start)
         if start < len(data):
             self._tail += data[start:]
         if self.next_at == NEVER and self._taken < len(self._slices):
