@@ -11,7 +11,7 @@ from typing import Any
 
 from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
-from firmware.control.validation import check_int_range
+from firmware.control.validation import check_int_range, is_number
 from firmware.safety import SafetyLimits
 
 __all__ = ["DEFAULT_PROFILE", "CostModel", "FirmwareConfig", "load_firmware_config"]
@@ -99,10 +99,12 @@ def _safety(table: dict[str, Any]) -> dict[str, Any]:
     known = {f.name for f in fields(SafetyLimits)}
     out = {}
     for key, value in table.items():
-        name, converted = (key[:-len("_deg")] + "_rad", math.radians(value)) if key.endswith("_deg") else (key, value)
+        degrees = key.endswith("_deg")
+        name = key[:-len("_deg")] + "_rad" if degrees else key
         if name not in known:
             raise TypeError(f"[safety] has no key {key!r}")
-        out[name] = converted
+        # a value that is no number goes on unconverted: SafetyLimits' check names it and its range
+        out[name] = math.radians(value) if degrees and is_number(value) else value
     return out
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Protocol
 
 from mypy_extensions import mypyc_attr
@@ -140,24 +140,33 @@ class TimestampedInterrupt(CountingSource):
         return bisect.bisect_left(buf, t1, lo) - lo
 
 
-class BoundSource:
-    """One interrupt source as :func:`solve_bound` reads it: its index, bound ``count_in`` and cost.
+class _BoundCounter(CountingSource):
+    """Any object of the :class:`InterruptSource` shape as a :class:`CountingSource` (its bound count_in)."""
 
-    ``label`` names it in error messages (the name of the object ``count_in`` is bound to, else the
-    index); ``hits`` is scratch space of the solver (firings in the window of the current pass).
-    ``native`` is the source itself when it is a :class:`CountingSource` (counted by a direct call).
+    def __init__(self, src: InterruptSource) -> None:
+        """Bind src's ``count_in`` once."""
+        self.name = src.name
+        self.cost_cycles = src.cost_cycles
+        self._count_in = src.count_in
+
+    def count_in(self, t0: int, t1: int) -> int:
+        """The wrapped source's firings in [t0, t1)."""
+        return self._count_in(t0, t1)
+
+
+class BoundSource:
+    """One interrupt source as :func:`solve_bound` reads it: its index, the source and its cost.
+
+    ``src`` is a :class:`CountingSource` (any other source is wrapped once), so the compiled solver
+    counts it with a direct call; ``hits`` is scratch space of the solver (firings in the window of the
+    current pass).
     """
 
-    def __init__(self, index: int, count_in: Callable[[int, int], int], cost: int,
-                 native: CountingSource | None = None) -> None:
-        """Keep the source's index in the caller's tables, its counting method and its cost."""
+    def __init__(self, index: int, src: CountingSource, cost: int) -> None:
+        """Keep the source's index in the caller's tables, the source and its cost."""
         self.index = index
-        self.native = native
-        # typed loosely so that compiled callers can pass window ends boxed once for all sources
-        # (an int argument is boxed again at every call); they pass ints all the same
-        self.count_in: Callable[..., int] = count_in
+        self.src = src
         self.cost = cost
-        self.label: object = getattr(getattr(count_in, "__self__", None), "name", index)
         self.hits = 0
 
 
@@ -166,8 +175,8 @@ BoundSources = list[BoundSource]
 
 
 def bind_sources(sources: Sequence[InterruptSource]) -> BoundSources:
-    """The sources with their ``count_in`` bound once, for :func:`solve_bound` in a hot loop."""
-    return [BoundSource(j, src.count_in, src.cost_cycles, src if isinstance(src, CountingSource) else None)
+    """The sources as :class:`BoundSource` records for :func:`solve_bound` in a hot loop."""
+    return [BoundSource(j, src if isinstance(src, CountingSource) else _BoundCounter(src), src.cost_cycles)
             for j, src in enumerate(sources)]
 
 
@@ -186,14 +195,11 @@ def solve_bound(start: int, cost: int, bound: BoundSources, counts: list[int]) -
     """:func:`solve_finish` on sources already bound with :func:`bind_sources`."""
     base = start + cost
     finish = base
-    t0: object = start  # the window ends as objects, boxed once per pass for all the sources
     for _step in range(MAX_FIXED_POINT_STEPS):
         extra = 0
         fired = False
-        t1: object = finish
         for b in bound:
-            src = b.native  # a direct call for a CountingSource, else the generic bound count_in
-            k = src.count_in(start, finish) if src is not None else b.count_in(t0, t1)
+            k = b.src.count_in(start, finish)
             b.hits = k
             if k:
                 extra += k * b.cost
@@ -208,5 +214,5 @@ def solve_bound(start: int, cost: int, bound: BoundSources, counts: list[int]) -
         finish = nxt
     raise RuntimeError(
         f"interrupt load never lets the job started at cycle {start} finish: the sources "
-        f"{[b.label for b in bound]} saturate the CPU"
+        f"{[b.src.name for b in bound]} saturate the CPU"
     )

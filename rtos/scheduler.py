@@ -16,7 +16,7 @@ from rtos.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
-_MAX_TASKS: Final = 256  # tasks per scheduler: the limit of the former heap keys, still enforced
+_MAX_TASKS: Final = 256  # tasks per scheduler (a wider ready bitmask works, but no longer as a native int)
 _FAR: Final = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
 _LATE: Final = OverrunPolicy.LATE
 _FAULT: Final = OverrunPolicy.FAULT
@@ -366,11 +366,8 @@ class Scheduler:
                         target = wd_due
                     if target > t_end:
                         target = t_end
-                    t0: object = now  # boxed once for all the sources (see BoundSource)
-                    t1: object = target
                     for b in irqs:
-                        src = b.native  # as in solve_bound: direct call for a CountingSource
-                        k = src.count_in(now, target) if src is not None else b.count_in(t0, t1)
+                        k = b.src.count_in(now, target)
                         if k:
                             irq_idle[b.index] += k
                     now = clock.wait_until(target) if realtime else target

@@ -138,7 +138,8 @@ def test_counting_source_subclass_and_duck_typed_source_give_the_same_finish():
         def count_in(self, t0: int, t1: int) -> int:
             return Every30().count_in(t0, t1)
 
-    assert bind_sources([Every30()])[0].native is not None and bind_sources([Duck()])[0].native is None
+    duck = Duck()
+    assert isinstance(bind_sources([Every30()])[0].src, Every30) and bind_sources([duck])[0].src is not duck
     counts_native, counts_duck = [0], [0]
     assert solve_finish(0, 100, [Every30()], counts_native) == solve_finish(0, 100, [Duck()], counts_duck) == 150
     assert counts_native == counts_duck == [5]

@@ -31,6 +31,7 @@ RANGES: Final[dict[str, tuple[int, int, str]]] = {
 """Range and C type of each struct code a wire field may use."""
 _SNAP_ULPS: Final = 4.0
 _MASK: Final = struct.Struct(">I")
+_MAX_TABLES: Final = 256  # selective decode tables kept (as the lru_cache of selective_layout)
 _new: Final[Callable[[type], Any]] = object.__new__
 
 Payload = bytes | bytearray | memoryview
@@ -239,6 +240,8 @@ class SelectiveCodec:
             return table
         table = self._tables.get(mask)
         if table is None:
+            if len(self._tables) >= _MAX_TABLES:  # masks come off the wire: keep the cache bounded
+                self._tables.clear()
             unpacker, present = self._layout(mask)
             table = _SelectiveTable(mask, unpacker, present)
             self._tables[mask] = table
