@@ -16,7 +16,7 @@ from typing import Final
 from firmware.config import CostModel, FirmwareConfig
 from firmware.control.estimation import AngleEstimator
 from firmware.control.filters import ButterworthLowPass
-from firmware.control.pid import CascadeController, feedforward_current_a
+from firmware.control.pid import CascadeController, Feedforward
 from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
 from firmware.drivers.encoder import EncoderDriver
 from firmware.drivers.imu import ImuDriver
@@ -72,10 +72,10 @@ class Firmware:
                            if c.imu_lowpass_hz > 0 else None)
         self.cascade = CascadeController(c.position_gains, c.velocity_gains, self.ts_s,
                                          c.current_limit_a, c.velocity_limit_rad_s)
-        ff = c.feedforward_params
-        self._nm_per_a = ff.torque_constant_nm_per_a * ff.gear_ratio * ff.efficiency  # output torque per motor amp
+        feedforward = Feedforward(c.feedforward_params)
+        self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
         # what the control task reads of the (frozen, interpreted) configuration every period
-        self._feedforward = ff if c.feedforward else None
+        self._feedforward = feedforward if c.feedforward else None
         self._com_angle_rad = c.com_angle_rad
         self.kernel_health: KernelHealth = kernel_health or (lambda: (0, 0))
         self.out = ControlOutput()
@@ -165,8 +165,8 @@ class Firmware:
             self.gait_start_s = gait_start_s = now_s + ramp
         gait_t = now_s - gait_start_s
         ref = self._trajectory.sample(now_s) if gait_t < 0 else self._gait_curve.sample(gait_t)
-        ff_params = self._feedforward
-        ff = feedforward_current_a(ref[0] + self._com_angle_rad, ref[2], ff_params) if ff_params is not None else 0.0
+        feedforward = self._feedforward
+        ff = feedforward.current_a(ref[0] + self._com_angle_rad, ref[2]) if feedforward is not None else 0.0
         out.reference_rad = ref[0]
         out.current_cmd_a = self.cascade.update(ref[0], ref[1], fused, self.encoder.velocity_rad_s, ff)
         out.brake = False

@@ -60,3 +60,15 @@ def test_ak60_fault_code_refuses_a_bool() -> None:
     world = World(Plant(), F_CPU)
     with pytest.raises(ValueError, match="fault code True"):
         Ak60(world).inject_fault(True, 0.1)  # type: ignore[arg-type]
+
+
+def test_controller_and_safety_parameters_refuse_a_bool() -> None:
+    from firmware.control.pid import FeedforwardParams, PidGains
+    from firmware.safety import SafetyLimits
+
+    with pytest.raises(ValueError, match="kp = True"):
+        PidGains(True)
+    with pytest.raises(ValueError, match="inertia_kg_m2 = True"):
+        FeedforwardParams(True, 1.0, 0.1, 0.1, 6.0, 0.9)
+    with pytest.raises(ValueError, match="current_limit_a True"):
+        SafetyLimits(current_limit_a=True)

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import astuple, dataclass
-from typing import Any
 
+from firmware.control.gains import FeedforwardParams, PidGains
 from firmware.control.validation import check_range
 
 logger = logging.getLogger(__name__)
@@ -23,25 +22,6 @@ TS_RANGE_S: tuple[float, float] = (1e-6, 1.0)
 def _check_ts(ts_s: float) -> float:
     """Return ts_s if it lies in TS_RANGE_S, else ValueError."""
     return check_range("ts_s", ts_s, TS_RANGE_S[0], TS_RANGE_S[1], unit="s")
-
-
-@dataclass(frozen=True)
-class PidGains:
-    """PID gains: kp [1/unit], ki [1/(unit s)], kd [s/unit], derivative filter time constant [s]."""
-
-    kp: float
-    ki: float = 0.0
-    kd: float = 0.0
-    derivative_tau_s: float = 0.0
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        """Pickle through the constructor (compiled frozen instances cannot be restored field by field)."""
-        return type(self), astuple(self)
-
-    def __post_init__(self) -> None:
-        """Validate that every gain and the filter time constant are finite and non-negative."""
-        for name in ("kp", "ki", "kd", "derivative_tau_s"):
-            check_range(name, getattr(self, name), 0.0, math.inf, hi_open=True)
 
 
 class Pid:
@@ -145,29 +125,22 @@ class Pid:
         return self._saturated
 
 
-@dataclass(frozen=True)
-class FeedforwardParams:
-    """Physical parameters of the gravity + inertia feed-forward, all at the ankle (output) axis."""
+class Feedforward:
+    """The gravity + inertia feed-forward of one :class:`FeedforwardParams`, its constants taken once.
 
-    inertia_kg_m2: float
-    mass_kg: float
-    lever_m: float
-    torque_constant_nm_per_a: float
-    gear_ratio: float
-    efficiency: float
-    gravity_m_s2: float = 9.8
+    current_a(theta, a) = (J_total a + m g d sin(theta)) / (Kt N eta): the motor current for the foot model.
+    """
 
-    def __reduce__(self) -> tuple[Any, ...]:
-        """Pickle through the constructor (compiled frozen instances cannot be restored field by field)."""
-        return type(self), astuple(self)
+    def __init__(self, params: FeedforwardParams) -> None:
+        """Take J, m g d and the output torque per motor amp Kt N eta from params."""
+        self.inertia_kg_m2 = params.inertia_kg_m2
+        self.gravity_moment_nm = params.mass_kg * params.gravity_m_s2 * params.lever_m
+        self.nm_per_a = params.torque_constant_nm_per_a * params.gear_ratio * params.efficiency
 
-    def __post_init__(self) -> None:
-        """Validate the parameters (positive, efficiency in (0, 1])."""
-        for name in ("inertia_kg_m2", "mass_kg", "lever_m", "gravity_m_s2"):
-            check_range(name, getattr(self, name), 0.0, math.inf, hi_open=True)
-        for name in ("torque_constant_nm_per_a", "gear_ratio"):
-            check_range(name, getattr(self, name), 0.0, math.inf, lo_open=True, hi_open=True)
-        check_range("efficiency", self.efficiency, 0.0, 1.0, lo_open=True)
+    def current_a(self, ref_angle_rad: float, ref_accel_rad_s2: float) -> float:
+        """Motor current [A] for the reference angle [rad] and angular acceleration [rad/s^2]."""
+        torque_nm = self.inertia_kg_m2 * ref_accel_rad_s2 + self.gravity_moment_nm * math.sin(ref_angle_rad)
+        return torque_nm / self.nm_per_a
 
 
 def feedforward_current_a(ref_angle_rad: float, ref_accel_rad_s2: float, params: FeedforwardParams) -> float:
@@ -177,9 +150,7 @@ def feedforward_current_a(ref_angle_rad: float, ref_accel_rad_s2: float, params:
     >>> round(feedforward_current_a(math.pi / 2, 0.0, p), 6)   # 1*9.8*0.1 / (0.1*10)
     0.98
     """
-    torque_nm = (params.inertia_kg_m2 * ref_accel_rad_s2
-                 + params.mass_kg * params.gravity_m_s2 * params.lever_m * math.sin(ref_angle_rad))
-    return torque_nm / (params.torque_constant_nm_per_a * params.gear_ratio * params.efficiency)
+    return Feedforward(params).current_a(ref_angle_rad, ref_accel_rad_s2)
 
 
 class CascadeController:

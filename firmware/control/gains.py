@@ -1,0 +1,51 @@
+"""Controller parameters as given in a profile: PID gains and the feed-forward's physical parameters.
+
+Interpreted on purpose (not in setup.py's COMPILED): their checks must see the values as given, and a
+compiled class would turn a bool into a number before ``__post_init__`` sees it. The compiled
+controllers in :mod:`firmware.control.pid` read them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from firmware.control.validation import check_range
+
+__all__ = ["FeedforwardParams", "PidGains"]
+
+
+@dataclass(frozen=True)
+class PidGains:
+    """PID gains: kp [1/unit], ki [1/(unit s)], kd [s/unit], derivative filter time constant [s]."""
+
+    kp: float
+    ki: float = 0.0
+    kd: float = 0.0
+    derivative_tau_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Validate that every gain and the filter time constant are finite and non-negative."""
+        for name in ("kp", "ki", "kd", "derivative_tau_s"):
+            check_range(name, getattr(self, name), 0.0, math.inf, hi_open=True)
+
+
+@dataclass(frozen=True)
+class FeedforwardParams:
+    """Physical parameters of the gravity + inertia feed-forward, all at the ankle (output) axis."""
+
+    inertia_kg_m2: float
+    mass_kg: float
+    lever_m: float
+    torque_constant_nm_per_a: float
+    gear_ratio: float
+    efficiency: float
+    gravity_m_s2: float = 9.8
+
+    def __post_init__(self) -> None:
+        """Validate the parameters (positive, efficiency in (0, 1])."""
+        for name in ("inertia_kg_m2", "mass_kg", "lever_m", "gravity_m_s2"):
+            check_range(name, getattr(self, name), 0.0, math.inf, hi_open=True)
+        for name in ("torque_constant_nm_per_a", "gear_ratio"):
+            check_range(name, getattr(self, name), 0.0, math.inf, lo_open=True, hi_open=True)
+        check_range("efficiency", self.efficiency, 0.0, 1.0, lo_open=True)
