@@ -17,8 +17,7 @@ SOURCES := $(shell sed -n 's/^ *"\([a-z0-9_/]*\.py\)",$$/\1/p' setup.py)
 EXTENSIONS = find firmware hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
 
 $(STAMP): pyproject.toml setup.py $(SOURCES)
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
+	@test -x $(PY) || { $(PYTHON) -m venv $(VENV) && $(PY) -m pip install -q --upgrade pip; }
 	@$(EXTENSIONS)
 	$(PY) -m pip install -q -e '.[dev]'
 	@touch $(STAMP)

@@ -53,8 +53,7 @@ class ControlOutput:
 class Firmware:
     """The prosthesis firmware bound to `board`: build it, then hand `tasks` to the RTOS."""
 
-    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None,
-                 kernel_health: KernelHealth | None = None) -> None:
+    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None) -> None:
         """Bind drivers to the board's peripherals and build the controller."""
         self.board = board
         self.config = c = config
@@ -77,7 +76,8 @@ class Firmware:
         # what the control task reads of the (frozen, interpreted) configuration every period
         self._feedforward = feedforward if c.feedforward else None
         self._com_angle_rad = c.com_angle_rad
-        self.kernel_health: KernelHealth = kernel_health or (lambda: (0, 0))
+        # what the kernel says of deadlines; the runner sets it once the scheduler exists
+        self.kernel_health: KernelHealth = lambda: (0, 0)
         self.out = ControlOutput()
         self._safety_inputs = SafetyInputs(now_s=0.0, angle_rad=0.0)
         self.imu_pitch_rad = 0.0

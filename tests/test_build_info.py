@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import os
-import pickle
 from importlib.machinery import EXTENSION_SUFFIXES
 from pathlib import Path
 
-from firmware.config import load_firmware_config
 from host_tools.build_info import compiled_sources, describe, stale_sources
 
 
@@ -37,9 +35,3 @@ def test_an_edited_source_makes_its_extension_stale(tmp_path: Path) -> None:
     os.utime(src, (1_000_100, 1_000_100))  # edited after the build
     assert stale_sources(tmp_path) == [src]
     assert "1 STALE" in describe(tmp_path)
-
-
-def test_firmware_config_pickles_for_the_tuning_workers() -> None:
-    cfg = load_firmware_config()
-    back = pickle.loads(pickle.dumps(cfg))
-    assert back == cfg and back.position_gains == cfg.position_gains and back.safety == cfg.safety

@@ -2,6 +2,7 @@
 
 import json
 import math
+import pickle
 
 import pytest
 
@@ -99,3 +100,9 @@ def test_profile_with_a_misspelled_key_is_refused_naming_the_key(tmp_path, old, 
     with pytest.raises(ValueError, match="unknown or missing key") as info:
         load_firmware_config(bad)
     assert needle in str(info.value) and str(bad) in str(info.value)
+
+
+def test_firmware_config_pickles_for_the_tuning_workers() -> None:
+    cfg = load_firmware_config()
+    back = pickle.loads(pickle.dumps(cfg))
+    assert back == cfg and back.position_gains == cfg.position_gains and back.safety == cfg.safety
