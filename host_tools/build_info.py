@@ -7,10 +7,12 @@ Python imports the extension first, so an extension older than its source runs s
 from __future__ import annotations
 
 import shutil
+import subprocess
+import sys
 from importlib.machinery import EXTENSION_SUFFIXES
 from pathlib import Path
 
-__all__ = ["ROOT", "compiled_sources", "copy_pure_source", "describe", "stale_sources"]
+__all__ = ["ROOT", "compiled_sources", "copy_pure_source", "describe", "run_pure_python", "stale_sources"]
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("firmware", "hal", "rtos", "host_tools")
@@ -57,3 +59,18 @@ def copy_pure_source(dest: Path, root: Path = ROOT) -> Path:
     for name in (*PACKAGES, "profiles"):
         shutil.copytree(root / name, dest / name, ignore=shutil.ignore_patterns("*.so", "__pycache__"))
     return dest
+
+
+_PURE_CHECK = 'import rtos.scheduler; assert rtos.scheduler.__file__.endswith(".py"), rtos.scheduler.__file__\n'
+
+
+def run_pure_python(script: str, dest: Path, timeout_s: float = 600.0) -> str:
+    """Run Python ``script`` on a pure-Python copy of the source made in dest; return its stdout.
+
+    The script first checks that it imports the ``.py`` files; a failure raises
+    ``subprocess.CalledProcessError`` (its ``stderr`` says why).
+    """
+    copy_pure_source(dest)
+    out = subprocess.run([sys.executable, "-c", _PURE_CHECK + script], cwd=dest, capture_output=True, text=True,
+                         timeout=timeout_s, env={"PYTHONPATH": str(dest), "PATH": "/usr/bin:/bin"}, check=True)
+    return out.stdout

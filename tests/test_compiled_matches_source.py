@@ -7,20 +7,16 @@ install is pure Python already (nothing to compare).
 from __future__ import annotations
 
 import hashlib
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from host_tools.build_info import compiled_sources, copy_pure_source
+from host_tools.build_info import compiled_sources, run_pure_python
 from host_tools.runner import RunConfig, run_virtual
 
 SCRIPT = """
 import hashlib, sys
-import rtos.scheduler
 from host_tools.runner import RunConfig, run_virtual
-assert rtos.scheduler.__file__.endswith(".py"), rtos.scheduler.__file__
 r = run_virtual(RunConfig(strides=1, seed=5, trace_capacity=0))
 print(hashlib.sha256(r.telemetry).hexdigest(), r.scheduler.stats["control"].jobs)
 """
@@ -28,10 +24,7 @@ print(hashlib.sha256(r.telemetry).hexdigest(), r.scheduler.stats["control"].jobs
 
 @pytest.mark.skipif(not compiled_sources(), reason="pure-Python install: nothing compiled to compare")
 def test_compiled_run_matches_the_pure_python_source(tmp_path: Path) -> None:
-    copy_pure_source(tmp_path)
-    pure = subprocess.run([sys.executable, "-c", SCRIPT], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=300, env={"PYTHONPATH": str(tmp_path), "PATH": "/usr/bin:/bin"})
-    assert pure.returncode == 0, pure.stderr
+    pure = run_pure_python(SCRIPT, tmp_path, timeout_s=300)
     r = run_virtual(RunConfig(strides=1, seed=5, trace_capacity=0))
     compiled = f"{hashlib.sha256(r.telemetry).hexdigest()} {r.scheduler.stats['control'].jobs}"
-    assert pure.stdout.strip() == compiled
+    assert pure.strip() == compiled

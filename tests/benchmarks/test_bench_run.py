@@ -10,11 +10,10 @@ the ratio, measured side by side. ``default_run_realtime_factor`` is one default
 from __future__ import annotations
 
 import statistics
-import subprocess
 import sys
 from pathlib import Path
 
-from host_tools.build_info import compiled_sources, copy_pure_source, describe
+from host_tools.build_info import compiled_sources, describe, run_pure_python
 from host_tools.runner import RunConfig, run_virtual
 
 ROUNDS = 5
@@ -30,10 +29,7 @@ print(statistics.median(f))
 
 
 def _pure_python_factor(tmp: Path) -> float:
-    copy_pure_source(tmp)
-    out = subprocess.run([sys.executable, "-c", PURE_SCRIPT.format(rounds=ROUNDS)], cwd=tmp, capture_output=True,
-                         text=True, timeout=600, env={"PYTHONPATH": str(tmp), "PATH": "/usr/bin:/bin"}, check=True)
-    return float(out.stdout.strip())
+    return float(run_pure_python(PURE_SCRIPT.format(rounds=ROUNDS), tmp).strip())
 
 
 def test_bench_run_two_strides(benchmark, tmp_path: Path):
