@@ -119,6 +119,17 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
+def _strict(value: object) -> object:
+    """`value` with every NaN or infinity replaced by None (null): summary.json is strict JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value
+
+
 def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: list[str] | None = None) -> dict:
     """Write every output file into `out`; return the summary (`extra` merged in; `md_extra` ends report.md)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -140,6 +151,6 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         plot_tracking(out / "tracking.png", strides, (pct, band[:, 0], band[:, 1]), p["t_s"],
                       p["current_cmd_a"], p["current_meas_a"], err,
                       f"Gait tracking, {s['strides']} strides, RMS {s['rms_error_deg']:.2f}°")
-    (out / "summary.json").write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
+    (out / "summary.json").write_text(json.dumps(_strict(s), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     (out / "report.md").write_text(_report_md(s, md_extra), encoding="utf-8")
     return s

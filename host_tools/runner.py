@@ -19,6 +19,7 @@ from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
 from host_tools.probe import Action, Probe, ProbeBody
+from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 from rtos.scheduler import SchedulerNow
@@ -57,6 +58,7 @@ class RunConfig:
     # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
     actions: list[tuple[float, Action]] = field(default_factory=list)
+    capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -112,7 +114,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
-    fw = Firmware(bench.board, fw_cfg, reference=reference)
+    wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
+    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
     probe = Probe()
     # bench instrument, not firmware: zero cycles, lowest priority
     probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))
@@ -139,7 +142,11 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
 
     sim_s = cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05
     wall0 = time.perf_counter()
-    sched.run_until(int(sim_s * f_cpu), progress=progress)
+    try:
+        sched.run_until(int(sim_s * f_cpu), progress=progress)
+    finally:
+        if wire is not None:
+            wire.close()
     wall = time.perf_counter() - wall0
 
     return RunResult(cfg, fw, bench, sched, bounds, probe, bench.telemetry_bytes(), sched.now / f_cpu, wall,
