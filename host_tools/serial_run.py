@@ -313,15 +313,20 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     ports = _open_ports(cfg, telemetry_uart)
+    # the capture starts with the ports, so a start-up check that fails (wrong baud) leaves its bytes too
+    wire = WireCapture(cfg.capture_dir, _since_start(), side="host") if cfg.capture_dir is not None else None
+    if wire is not None:
+        ports.motor, ports.imu = wire.tap("motor", ports.motor), wire.tap("imu", ports.imu)
     try:
         seen = {"motor": check_motor(ports.motor, cfg.motor, timeout_s=cfg.startup_timeout_s),
                 "imu": check_imu(ports.imu, cfg.imu, timeout_s=cfg.startup_timeout_s)}
     except BaseException:
         ports.close()
+        if wire is not None:
+            wire.close()
         raise
     out.mkdir(parents=True, exist_ok=True)
     capture = CaptureUart(out / "telemetry.bin", cfg.telemetry_baud, inner=ports.telemetry)
-    wire = WireCapture(cfg.capture_dir, _since_start(), side="host") if cfg.capture_dir is not None else None
     try:
         return _run(cfg, ports, capture, wire, f_cpu, fw_cfg, reference, seen, progress, signals)
     finally:  # the stop path has run inside _run: the safe frames have left before any port closes
@@ -351,10 +356,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         encoder = VirtualEncoderTimer(devices.now, EncoderMount(devices.world).angle_rad)
     else:
         encoder = VirtualEncoderTimer(lambda: 0, feedback_angle.angle_rad)
-    uarts: dict[str, Uart] = {"motor": ports.motor, "imu": ports.imu, "telemetry": capture}
-    if wire is not None:
-        uarts = {role: wire.tap(role, u) for role, u in uarts.items()}
-    board = Board(motor_uart=uarts["motor"], imu_uart=uarts["imu"], telemetry_uart=uarts["telemetry"],
+    telemetry: Uart = capture if wire is None else wire.tap("telemetry", capture)  # the others are tapped already
+    board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
                   encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
                   now_cycles=now, f_cpu_hz=f_cpu)
     fw = Firmware(board, fw_cfg, reference=reference)

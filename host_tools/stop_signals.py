@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from types import FrameType, TracebackType
 
-__all__ = ["EXIT_CODES", "StopSignals"]
+__all__ = ["EXIT_CODES", "STOP_SIGNALS", "StopSignals"]
 
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 EXIT_CODES = {s.name: 128 + int(s) for s in STOP_SIGNALS}

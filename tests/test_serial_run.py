@@ -30,14 +30,14 @@ SETTLE_S = 0.5  # the emulated suspended foot starts level and rests on its -30 
 STALL_FAULTS = ("COMMAND_STALE", "MOTOR_TIMEOUT", "IMU_TIMEOUT")
 
 
-def _emulator(duration_s: float = 20.0) -> tuple[subprocess.Popen, str, str]:
+def _emulator(duration_s: float = 20.0, *options: str) -> tuple[subprocess.Popen, str, str]:
     """Start `pafp emulate bench --pty`; return it with its motor and IMU paths once the foot is at rest.
 
     A firmware started while the foot still falls sees its relative encoder (zeroed at the first reply)
     and the IMU part ways and rightly trips SENSOR_DISAGREEMENT; a real foot is at rest when powered up.
     """
     proc = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "bench", "--pty", "--duration",
-                             str(duration_s)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             str(duration_s), *options], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     paths = {}
     for _ in range(2):
         role, path = proc.stdout.readline().strip().split(": ")  # type: ignore[union-attr]
@@ -79,7 +79,7 @@ def assert_stopped_safely(motor_to_device: bytes) -> None:
 
 
 def test_e2e_against_emulated_bench_tracks_like_virtual(tmp_path: Path) -> None:
-    proc, motor, imu = _emulator()
+    proc, motor, imu = _emulator(20.0, "--capture", str(tmp_path / "device"))
     out, capture = tmp_path / "out", tmp_path / "capture"
     try:
         code = main(["run", "--motor", motor, "--imu", imu, "--duration", "3", "--out", str(out), "--quiet",
@@ -88,7 +88,15 @@ def test_e2e_against_emulated_bench_tracks_like_virtual(tmp_path: Path) -> None:
         _stop(proc)
     s = _summary(out)
     assert s["mode"] == "serial" and s["stop"]["reason"] == "duration" and s["stop"]["safe_on_wire"]
-    assert_stopped_safely((capture / "motor.tx.bin").read_bytes())
+    sent = (capture / "motor.tx.bin").read_bytes()
+    assert_stopped_safely(sent)
+    # both ends' captures agree (from the start-up check on): what the firmware wrote is what the emulated
+    # motor received; what the firmware read, the motor sent (it may have sent more after the stop)
+    device = tmp_path / "device"
+    assert (device / "motor.rx.bin").read_bytes() == sent
+    assert (device / "motor.tx.bin").read_bytes().startswith((capture / "motor.rx.bin").read_bytes())
+    manifest = json.loads((device / "capture.json").read_text())
+    assert manifest["files"]["motor.rx.bin"]["decode"] == "pafp decode --protocol vesc --direction to-motor motor.rx.bin"
     assert_faults_justified(s)
     assert code == (1 if s["faults"] else 0)  # a warning (a host stall) does not change the exit code
     rt = s["realtime"]
