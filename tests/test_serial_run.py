@@ -37,7 +37,8 @@ def _emulator(duration_s: float = 20.0, *options: str) -> tuple[subprocess.Popen
     and the IMU part ways and rightly trips SENSOR_DISAGREEMENT; a real foot is at rest when powered up.
     """
     proc = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "bench", "--pty", "--duration",
-                             str(duration_s), *options], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             str(duration_s), *options], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
     paths = {}
     for _ in range(2):
         role, path = proc.stdout.readline().strip().split(": ")  # type: ignore[union-attr]
@@ -96,7 +97,8 @@ def test_e2e_against_emulated_bench_tracks_like_virtual(tmp_path: Path) -> None:
     assert (device / "motor.rx.bin").read_bytes() == sent
     assert (device / "motor.tx.bin").read_bytes().startswith((capture / "motor.rx.bin").read_bytes())
     manifest = json.loads((device / "capture.json").read_text())
-    assert manifest["files"]["motor.rx.bin"]["decode"] == "pafp decode --protocol vesc --direction to-motor motor.rx.bin"
+    decode = manifest["files"]["motor.rx.bin"]["decode"]
+    assert decode == "pafp decode --protocol vesc --direction to-motor motor.rx.bin"
     assert_faults_justified(s)
     assert code == (1 if s["faults"] else 0)  # a warning (a host stall) does not change the exit code
     rt = s["realtime"]
