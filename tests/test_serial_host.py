@@ -13,11 +13,12 @@ import pytest
 
 from firmware.drivers.motor import MotorDriver
 from firmware.protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
+from hal.interfaces import Uart
 from host_tools.realtime import RealtimeSection, RealtimeSettings
 from host_tools.stop_signals import StopSignals
 from host_tools.telemetry_pty import TelemetryPty
-from hal.interfaces import Uart
 from host_tools.wire_capture import WireCapture
+
 
 class SinkUart(Uart):
     """Takes every byte (kept in `sent`) and is always drained."""
