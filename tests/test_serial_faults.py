@@ -148,7 +148,7 @@ def test_reconnect_waits_and_resumes_in_the_safe_state(tmp_path: Path, capsys: p
 def test_garbage_drops_and_late_replies_are_counted_and_survived(tmp_path: Path) -> None:
     bench, motor_dev, imu_dev = _emulator()
     # IMU: garbage only (a lost frame during the swing can leave the IMU 20 ms behind the encoder: see report)
-    # faults from 0.6 s to 2.4 s after the relay starts: inside the 3 s run, which starts well before 0.6 s.
+    # faults from 0.6 s to 2.4 s after the firmware's first byte (its start-up check): inside the 3 s run.
     # Seed 7's motor bursts hold no reply back (a false 0x02 header in other seeds holds the replies behind it
     # up to ~11 ms, as VESC does: with a 5 ms late reply and this host's jitter that can reach the 20 ms motor
     # timeout; docs/serial_mode.md). Worst injected gap here: 5 ms late + a damaged frame.
