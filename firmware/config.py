@@ -13,10 +13,11 @@ from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, is_number
 from firmware.safety import SafetyLimits
+from profiles import profile_path
 
 __all__ = ["DEFAULT_PROFILE", "CostModel", "FirmwareConfig", "load_firmware_config"]
 
-DEFAULT_PROFILE = Path(__file__).resolve().parents[1] / "profiles" / "firmware.toml"
+DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
 
 

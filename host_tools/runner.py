@@ -19,6 +19,7 @@ from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
 from host_tools.probe import Action, Probe, ProbeBody
+from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 from rtos.scheduler import SchedulerNow
@@ -26,16 +27,15 @@ from rtos.stats import DeadlineHealth
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
 
-PROFILES = Path(__file__).resolve().parents[1] / "profiles"
 PROBE_HZ = 500
 WATCHDOG_TIMEOUT_S = 0.050
 
 
 def board_profile(name: str = "stm32f4") -> dict:
     """Load profiles/board_<name>.toml (clock and interrupt costs)."""
-    path = PROFILES / f"board_{name}.toml"
-    if not path.exists():
-        choices = sorted(p.stem.removeprefix("board_") for p in PROFILES.glob("board_*.toml"))
+    path = profile_path(f"board_{name}.toml")
+    if not path.is_file():
+        choices = [p.stem.removeprefix("board_") for p in profile_paths("board_*.toml")]
         raise ValueError(f"board profile {name!r} not found: choose one of {choices}")
     return tomllib.loads(path.read_text(encoding="utf-8"))
 
