@@ -8,7 +8,7 @@ import logging
 import os
 import sys
 
-from host_tools.build_info import ROOT, stale_sources
+from host_tools.build_info import ROOT, describe, stale_sources, version
 
 # name -> module under host_tools.commands; each module defines HELP, add_arguments(parser), run(args) -> int
 COMMANDS: dict[str, str] = {
@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Emulator of the firmware of a powered ankle-foot prosthesis.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages to stderr")
+    parser.add_argument("--version", action="version", version=f"pafp {version()} ({describe()})")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(f"host_tools.commands.{module_name}")
