@@ -176,7 +176,10 @@ class GaitReference(_Sampled):
         select, e.g. {"speed_category": "Slow"}, keeps only rows whose named columns equal the values
         (for long-format files holding several groups).
         """
-        text = Path(path).read_text(encoding="utf-8")
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            raise ValueError(f"gait reference {path} is not a text CSV file (byte {e.start} is not UTF-8)") from None
         percent, mean, sd = _read_gait_csv(text, str(path), select)
         return cls(percent, mean, sd, stride_s=stride_s, rom_deg=rom_deg, source=str(path))
 
