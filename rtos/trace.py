@@ -6,7 +6,7 @@ import csv
 import io
 import json
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
@@ -89,6 +89,10 @@ class Trace:
 
     def to_chrome(self, f_cpu_hz: int) -> dict[str, list[dict[str, object]]]:
         """Return a Chrome trace-event document: one "X" event per job (ts/dur in µs), one tid per task."""
+        return {"traceEvents": list(self.chrome_events(f_cpu_hz))}
+
+    def chrome_events(self, f_cpu_hz: int) -> Iterator[dict[str, object]]:
+        """The events of :meth:`to_chrome` one at a time (metadata, jobs, then instants)."""
         if f_cpu_hz <= 0:
             raise ValueError(f"f_cpu_hz must be > 0 Hz, got {f_cpu_hz!r}")
         us = 1e6 / f_cpu_hz
@@ -97,30 +101,37 @@ class Trace:
             if r[0] not in names:
                 names.append(r[0])
         tid = {n: k + 1 for k, n in enumerate(names)}
-        out: list[dict[str, object]] = [
-            {"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": "rtos"}},
-        ]
+        yield {"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": "rtos"}}
         for n in names:
-            out.append({"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}})
-            out.append({"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n],
-                        "args": {"sort_index": tid[n]}})
+            yield {"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}}
+            yield {"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n], "args": {"sort_index": tid[n]}}
         for task, job, release, ready, start, finish in self._jobs:
-            out.append({
+            yield {
                 "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
                 "ts": start * us, "dur": (finish - start) * us,
                 "args": {"job": job, "release_cycles": release, "ready_cycles": ready,
                          "response_cycles": finish - release},
-            })
+            }
         for kind, time, source, job in self._events:
-            out.append({
+            yield {
                 "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
                 "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": job},
-            })
-        return {"traceEvents": out}
+            }
 
     def write_chrome(self, path: str | Path, f_cpu_hz: int) -> None:
-        """Write the Chrome trace-event JSON to ``path`` (open it in Perfetto or chrome://tracing)."""
-        Path(path).write_text(json.dumps(self.to_chrome(f_cpu_hz)), encoding="utf-8")
+        """Write the Chrome trace-event JSON to ``path`` (open it in Perfetto or chrome://tracing).
+
+        The events are written one at a time (no document in memory), to a temporary name renamed when done.
+        """
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.tmp")
+        encode = json.JSONEncoder().encode
+        with tmp.open("w", encoding="utf-8") as f:
+            f.write('{"traceEvents": [')
+            for k, event in enumerate(self.chrome_events(f_cpu_hz)):
+                f.write(", " + encode(event) if k else encode(event))
+            f.write("]}")
+        tmp.replace(path)
 
     def __len__(self) -> int:
         """Number of recorded jobs."""
