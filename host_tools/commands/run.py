@@ -198,6 +198,13 @@ def _run_serial(args: argparse.Namespace) -> int:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    from host_tools.outdir import OutDirError, check_out_dir
+
+    try:
+        check_out_dir(out)  # before any port is opened (serial mode writes into out itself, not staged)
+    except OutDirError as e:
+        print(f"pafp run: {e}", file=sys.stderr)
+        return 2
     print(f"pafp run: serial mode, motor {cfg.motor}, imu {cfg.imu}, {cfg.duration_s:g} s -> {out}", flush=True)
     bar = _Progress(not args.quiet)
     try:
