@@ -258,6 +258,28 @@ def _unstuff(encoded: bytes) -> bytes:
 _values_tuple: Callable[[dict[str, int | float]], tuple[int | float, ...]] = itemgetter(*RECORD_FIELDS)
 
 
+def decode_values(payload: bytes) -> tuple[int, tuple[int | float, ...]]:
+    """(seq, field values in RECORD_FIELDS order) of an unframed payload; FrameError subclasses on bad input.
+
+    A version-1 record of exactly the known fields is unpacked in one go; anything else (a newer writer's
+    extra fields) goes through :func:`decode_payload`.
+    """
+    if len(payload) == RECORD_PAYLOAD_LEN:
+        data = payload[:-2]
+        version, count, *values = _RECORD_DATA.unpack(data)
+        if version in SUPPORTED_VERSIONS and count == BASE_FIELD_COUNT:
+            if crc16(data) != _CRC.unpack(payload[-2:])[0]:
+                decode_payload(payload)  # raises the CrcError with its message
+            return int(values[0]), tuple(values)
+    values_tuple = _values_tuple(decode_payload(payload))
+    return int(values_tuple[0]), values_tuple
+
+
+def _record(payload: bytes) -> tuple[int, TelemetryRecord]:
+    rec = record_from_values(decode_payload(payload))
+    return rec.seq, rec
+
+
 def record_to_row(rec: TelemetryRecord) -> dict[str, int | float | str]:
     """One CSV row (keys = RECORD_COLUMNS): SI values, plus ``*_deg`` columns and enum names."""
     row: dict[str, int | float | str] = {}
@@ -309,16 +331,16 @@ class TelemetryDecoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[TelemetryRecord]:
         """Consume bytes and return the records whose frames they complete."""
-        return self._feed(data, record_from_values)
+        return self._feed(data, _record)
 
     def feed_values(self, data: bytes | bytearray | memoryview) -> list[tuple[int | float, ...]]:
         """As :meth:`feed`, but each record as the tuple of its field values (RECORD_FIELDS order, enums as ints).
 
         The same counters; no record objects (a long run's CSV is written from these).
         """
-        return self._feed(data, _values_tuple)
+        return self._feed(data, decode_values)
 
-    def _feed(self, data: bytes | bytearray | memoryview, build: Callable[[dict[str, int | float]], T]) -> list[T]:
+    def _feed(self, data: bytes | bytearray | memoryview, build: Callable[[bytes], tuple[int, T]]) -> list[T]:
         if not isinstance(data, bytes):
             data = bytes(data)
         self.stats.bytes_in += len(data)
@@ -357,13 +379,13 @@ class TelemetryDecoder:
         self._discarding = False
         self._last_seq = None
 
-    def _decode(self, encoded: bytes, build: Callable[[dict[str, int | float]], T]) -> T | None:
+    def _decode(self, encoded: bytes, build: Callable[[bytes], tuple[int, T]]) -> T | None:
         """Decode one delimited frame (its delimiter included in the byte counts) or count why not."""
         if not encoded:
             self.stats.dropped_bytes += 1  # idle delimiter
             return None
         try:
-            values = decode_payload(_unstuff(encoded))
+            seq, result = build(_unstuff(encoded))
         except UnknownVersionError:
             self.stats.unknown_versions += 1
         except CrcError:
@@ -372,9 +394,9 @@ class TelemetryDecoder:
             logger.debug("bad telemetry frame: %s", exc)
             self.stats.bad_frames += 1
         else:
-            self._count_sequence(int(values["seq"]))
+            self._count_sequence(seq)
             self.stats.records += 1
-            return build(values)
+            return result
         self.stats.dropped_bytes += len(encoded) + 1
         return None
 
