@@ -126,6 +126,11 @@ def _write_telemetry_csv(data: bytes, path: Path, f_cpu_hz: int, chunk_bytes: in
     return asdict(dec.stats)
 
 
+def _figure(value: float | None, digits: int, unit: str) -> str:
+    """A figure for report.md, rounded; n/a when the run has none (NaN here, null in summary.json)."""
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}{unit}"
+
+
 def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     lines = [
         "# pafp run report", "",
@@ -133,9 +138,9 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
         f"(realtime factor {s['realtime_factor']}; {s['build']}), motor link {s['baud']} baud, seed {s['seed']}.",
         "",
         "| metric | value |", "|---|---|",
-        f"| RMS tracking error | {s['rms_error_deg']:.3f}° |",
-        f"| max tracking error | {s['max_error_deg']:.3f}° |",
-        f"| lag | {s['lag_ms']:.1f} ms |",
+        f"| RMS tracking error | {_figure(s['rms_error_deg'], 3, '°')} |",
+        f"| max tracking error | {_figure(s['max_error_deg'], 3, '°')} |",
+        f"| lag | {_figure(s['lag_ms'], 1, ' ms')} |",
         f"| deadline misses | {s['deadline_misses']} |",
         f"| faults | {', '.join(s['faults']) or 'none'} |",
         f"| CPU utilisation | {100 * s['cpu_utilisation']:.2f} % |",
@@ -182,9 +187,11 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         pct = np.linspace(0, 100, 101)
         band = np.array([ref.band_deg(x) for x in pct])
         p = tracking.plot
-        plot_tracking(out / "tracking.png", tracking.strides, (pct, band[:, 0], band[:, 1]), p.t_s,
+        tmp = out / ".tracking.tmp.png"  # matplotlib picks the format from the name's end
+        plot_tracking(tmp, tracking.strides, (pct, band[:, 0], band[:, 1]), p.t_s,
                       p.current_cmd_a, p.current_meas_a, p.error_deg,
                       f"Gait tracking, {s['strides']} strides, RMS {s['rms_error_deg']:.2f}°")
+        tmp.replace(out / "tracking.png")
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)
     s["process_realtime_factor"] = round(r.sim_time_s / elapsed, 2) if elapsed > 0 else None

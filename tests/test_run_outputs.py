@@ -128,6 +128,7 @@ def test_summary_is_strict_json_with_null_for_what_a_run_does_not_have(tmp_path)
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in summary.json"))
     assert doc["rms_error_deg"] is None and doc["lag_ms"] is None and doc["complete"] is True
     assert doc["process_wall_time_s"] > 0 and doc["process_realtime_factor"] > 0
+    assert "| RMS tracking error | n/a |" in (tmp_path / "report.md").read_text()
 
 
 def test_streamed_run_gives_the_in_memory_run_s_telemetry_and_figures(tmp_path):

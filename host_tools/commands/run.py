@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import signal
 import sys
 import threading
@@ -178,7 +179,7 @@ def _stop_on_signals(stop: list[signal.Signals]) -> Iterator[None]:
 
 def _num(value: float | None, digits: int) -> str:
     """A summary figure for the terminal: rounded, or n/a when the run has none (null in summary.json)."""
-    return "n/a" if value is None else f"{value:.{digits}f}"
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
 def _run_serial(args: argparse.Namespace) -> int:
