@@ -20,7 +20,7 @@ from firmware.control.pid import CascadeController, Feedforward
 from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
 from firmware.drivers.encoder import EncoderDriver
 from firmware.drivers.imu import ImuDriver
-from firmware.drivers.motor import MotorDriver
+from firmware.drivers.motor import MotorDriver, SafeStop
 from firmware.logger import TelemetryLogger
 from firmware.protocol.rvc import RVC_RATE_HZ
 from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
@@ -87,6 +87,7 @@ class Firmware:
         self._heartbeat = 0
         self._kicked_heartbeat = -1
         self.watchdog_resets = 0
+        self.link_lost_seen_s: float | None = None
         self.tasks = self._task_table()
 
     # The task table ---------------------------------------------------------------------------
@@ -134,11 +135,14 @@ class Firmware:
         x.angle_rad = self.out.fused_angle_rad
         x.current_meas_a = feedback.current_a
         x.last_motor_reply_s = feedback.received_s
+        x.last_command_s = self.motor.last_command_s
         x.last_imu_frame_s = self.imu.last_frame_s
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_fault_code = feedback.fault
         x.estop_pressed = self.board.estop.read()
-        x.link_lost = self.motor.link_lost or self.imu.link_lost
+        x.link_lost = link_lost = self.motor.link_lost or self.imu.link_lost
+        if link_lost and self.link_lost_seen_s is None:
+            self.link_lost_seen_s = x.now_s  # whatever the state: the latency of seeing it is never negative
         self.supervisor.check(x)
 
     def _control_task(self, job: Job) -> None:
@@ -207,6 +211,10 @@ class Firmware:
             led.toggle()
 
     # Events from outside the task table ----------------------------------------------------------
+    def stop(self, now_s: float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path (power-down, end of run): zero current then the brake, on the wire before returning."""
+        return self.motor.send_stop(now_s, self.supervisor.limits.brake_current_a, timeout_s)
+
     def on_watchdog_reset(self, t_cycles: int) -> None:
         """The IWDG fired: count it and latch the safe state (a real MCU would reboot into INIT)."""
         self.watchdog_resets += 1

@@ -8,6 +8,7 @@ current first, then the brake). A trip latches: only `reset` (a power cycle) lea
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Final
 
@@ -27,6 +28,7 @@ class SafetyInputs:
     angle_rad: float
     current_meas_a: float = 0.0
     last_motor_reply_s: float | None = None
+    last_command_s: float | None = None
     last_imu_frame_s: float | None = None
     disagreement_rad: float = 0.0
     motor_fault_code: int = 0
@@ -52,6 +54,12 @@ class Supervisor:
         self.state = SupervisorState.INIT
         self.reason = FaultReason.NONE
         self.tripped_at_s: float | None = None
+        self.detail = ""  # what was measured when it tripped (e.g. "command age 23.4 ms > 20.0 ms")
+        # On a host's wall clock a late job is the host's stall, not the firmware's defect: a miss streak
+        # is then counted as a warning (the command and feedback ages judge whether it endangered anyone).
+        self.latch_deadline_misses = True
+        self.miss_streak_warnings = 0
+        self._streak_warned = False
 
     @property
     def healthy(self) -> bool:
@@ -65,7 +73,7 @@ class Supervisor:
         self.state = SupervisorState.SAFE
         self.reason = reason
         self.tripped_at_s = now_s
-        log.warning("safe state at %.4f s: %s", now_s, reason.name)
+        log.warning("safe state at %.4f s: %s %s", now_s, reason.name, self.detail)
 
     def check(self, x: SafetyInputs) -> SupervisorState:
         """Evaluate every rule once; return the (possibly new) state."""
@@ -74,6 +82,7 @@ class Supervisor:
             return state
         reason = self._first_fault(x)
         if reason is not _NONE:
+            self.detail = self._describe(reason, x)
             self.trip(reason, x.now_s)
         elif state is _INIT and x.last_motor_reply_s is not None and x.last_imu_frame_s is not None:
             self.state = _RUN
@@ -86,11 +95,33 @@ class Supervisor:
             return SafeCommand(brake=True, current_a=self.limits.brake_current_a)
         return SafeCommand(brake=False, current_a=0.0)
 
+    def _describe(self, reason: FaultReason, x: SafetyInputs) -> str:
+        """The measured value behind a trip and its limit (ages in ms), for the log and the summary."""
+        lim = self.limits
+        ages = {FaultReason.COMMAND_STALE: (x.last_command_s, lim.command_timeout_s, "command"),
+                FaultReason.MOTOR_TIMEOUT: (x.last_motor_reply_s, lim.motor_timeout_s, "motor feedback"),
+                FaultReason.IMU_TIMEOUT: (x.last_imu_frame_s, lim.imu_timeout_s, "IMU frame")}
+        if reason in ages:
+            last_s, limit_s, what = ages[reason]
+            if last_s is None:
+                return f"no {what} within the {lim.startup_grace_s * 1e3:.0f} ms start-up grace"
+            return f"{what} age {(x.now_s - last_s) * 1e3:.1f} ms > {limit_s * 1e3:.1f} ms"
+        if reason is FaultReason.SENSOR_DISAGREEMENT:
+            return f"encoder/IMU disagreement {math.degrees(x.disagreement_rad):.2f} deg > " \
+                   f"{math.degrees(lim.disagreement_rad):.2f} deg"
+        if reason is FaultReason.ANGLE_LIMIT:
+            return f"angle {math.degrees(x.angle_rad):.2f} deg outside " \
+                   f"{math.degrees(lim.angle_min_rad):.1f}..{math.degrees(lim.angle_max_rad):.1f} deg"
+        if reason is FaultReason.CURRENT_LIMIT:
+            return f"current {x.current_meas_a:.2f} A beyond {lim.current_limit_a:.1f} A"
+        return ""
+
     def _first_fault(self, x: SafetyInputs) -> FaultReason:
         """The highest-ranked fault present in `x`, or NONE.
 
         A source is stale when silent longer than its timeout; one never heard from counts as stale
-        once the start-up grace has passed.
+        once the start-up grace has passed. The motor's command is stale when the last one the port took
+        whole is older than ``command_timeout_s`` (the motor has been running on it unsupervised).
         """
         lim = self.limits
         if x.estop_pressed:
@@ -100,8 +131,19 @@ class Supervisor:
         if x.motor_fault_code:
             return FaultReason.MOTOR_FAULT
         if x.deadline_miss_streak >= lim.deadline_miss_streak:
-            return FaultReason.DEADLINE_MISSES
+            if self.latch_deadline_misses:
+                return FaultReason.DEADLINE_MISSES
+            if not self._streak_warned:
+                self._streak_warned = True
+                self.miss_streak_warnings += 1
+                log.warning("deadline-miss streak %d at %.4f s (host stall: a warning)", x.deadline_miss_streak,
+                            x.now_s)
+        elif self._streak_warned:
+            self._streak_warned = False
         now_s = x.now_s
+        last_s = x.last_command_s
+        if last_s is not None and now_s - last_s > lim.command_timeout_s:
+            return FaultReason.COMMAND_STALE
         last_s = x.last_motor_reply_s
         if (now_s > lim.startup_grace_s) if last_s is None else (now_s - last_s > lim.motor_timeout_s):
             return FaultReason.MOTOR_TIMEOUT

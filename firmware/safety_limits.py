@@ -23,6 +23,7 @@ class SafetyLimits:
     angle_max_rad: float = math.radians(38.0)
     current_limit_a: float = 20.0
     motor_timeout_s: float = 0.020
+    command_timeout_s: float = 0.020
     imu_timeout_s: float = 0.050
     disagreement_rad: float = math.radians(6.0)
     deadline_miss_streak: int = 3
@@ -36,7 +37,7 @@ class SafetyLimits:
             raise ValueError(
                 f"angle limits ({self.angle_min_rad}, {self.angle_max_rad}) rad: min must be below max"
             )
-        for name in ("current_limit_a", "motor_timeout_s", "imu_timeout_s", "disagreement_rad",
+        for name in ("current_limit_a", "motor_timeout_s", "command_timeout_s", "imu_timeout_s", "disagreement_rad",
                      "startup_grace_s", "brake_current_a"):
             value = getattr(self, name)
             if not (is_number(value) and value > 0):

@@ -126,6 +126,16 @@ class Uart(ABC):
         self._check_open()
         return self._rx_count()
 
+    def flush(self, timeout_s: float = 0.5) -> bool:
+        """Block until every accepted byte has left the transmitter (or ``timeout_s``); True when drained.
+
+        The stop path calls it so that the motor's safe command is on the wire before the port closes.
+        """
+        self._check_open()
+        if not 0 < timeout_s <= 60:
+            raise ValueError(f"timeout_s {timeout_s!r} out of range: 0 < timeout_s <= 60")
+        return self._drain(timeout_s)
+
     def close(self) -> None:
         """Release the port; further use raises HalError. Closing twice is harmless."""
         if not self._closed:
@@ -163,6 +173,10 @@ class Uart(ABC):
 
     def _refresh_errors(self) -> None:  # noqa: B027 (optional hook)
         """Bring ``self._errors`` up to date (backends with lazily computed counters override)."""
+
+    def _drain(self, timeout_s: float) -> bool:
+        """Wait until the transmit queue is empty; True when it is (default: nothing is ever held)."""
+        return True
 
     def _close(self) -> None:  # noqa: B027 (optional hook)
         """Release backend resources."""

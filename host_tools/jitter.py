@@ -3,6 +3,10 @@
 The RTOS's `TaskStats` keeps min/max only; percentiles need the distribution. A `TimingHistogram`
 has fixed 1 µs bins up to `limit_ns` plus one overflow bin, so memory is bounded whatever the run
 length, and the maximum is kept exactly. Percentiles are read off the bins (1 µs resolution).
+
+Each job whose response (start - release + execution) exceeds its deadline is put down to one cause:
+an *overrun* when its own execution took longer than the deadline (the code is too slow for its
+budget), else a *late release* (the host started it late: a stall, or a job before it that ran long).
 """
 
 from __future__ import annotations
@@ -91,10 +95,14 @@ class TaskTimings:
         self.clock_ns = clock_ns
         self.jitter = {n: TimingHistogram() for n in names}
         self.execution = {n: TimingHistogram() for n in names}
+        self.late_releases = dict.fromkeys(names, 0)
+        self.overruns = dict.fromkeys(names, 0)
+        self.running: str | None = None  # the task whose body is running (still set if it raised)
 
-    def as_dict(self) -> dict[str, dict[str, dict[str, float | int | None]]]:
-        """{task: {"release_jitter": {...}, "execution": {...}}}."""
-        return {n: {"release_jitter": self.jitter[n].as_dict(), "execution": self.execution[n].as_dict()}
+    def as_dict(self) -> dict[str, dict[str, object]]:
+        """{task: {"release_jitter": {...}, "execution": {...}, "late_releases": n, "overruns": n}}."""
+        return {n: {"release_jitter": self.jitter[n].as_dict(), "execution": self.execution[n].as_dict(),
+                    "late_releases": self.late_releases[n], "overruns": self.overruns[n]}
                 for n in self.jitter}
 
 
@@ -105,16 +113,26 @@ def instrument(task: Task, timings: TaskTimings) -> Task:
     body = task.body
     if body is None:
         return task
-    jit, exe = timings.jitter[task.name], timings.execution[task.name]
+    name = task.name
+    jit, exe = timings.jitter[name], timings.execution[name]
     f_cpu, clock_ns = timings.f_cpu_hz, timings.clock_ns
+    deadline_ns = task.deadline * 1_000_000_000 // f_cpu
 
     def timed(job: Job) -> object:
-        """Run the original body, timing it and noting how late it started."""
-        jit.add((job.start - job.release) * 1_000_000_000 // f_cpu)
+        """Run the original body, timing it, noting how late it started and why a miss happened."""
+        late_ns = (job.start - job.release) * 1_000_000_000 // f_cpu
+        jit.add(late_ns)
+        timings.running = name
         t0 = clock_ns()
-        try:
-            return body(job)
-        finally:
-            exe.add(clock_ns() - t0)
+        result = body(job)
+        ns = clock_ns() - t0
+        timings.running = None
+        exe.add(ns)
+        if late_ns + ns > deadline_ns:
+            if ns > deadline_ns:
+                timings.overruns[name] += 1
+            else:
+                timings.late_releases[name] += 1
+        return result
 
     return replace(task, body=timed)

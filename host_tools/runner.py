@@ -26,6 +26,7 @@ from hal.virtual.bench import VirtualBench
 from host_tools.probe import Action, Probe, ProbeBody
 from host_tools.run_files import RunFiles
 from host_tools.tracking_stream import TrackingStream
+from host_tools.wire_capture import WireCapture
 from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
@@ -66,6 +67,7 @@ class RunConfig:
     # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
     actions: list[tuple[float, Action]] = field(default_factory=list)
+    capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -124,7 +126,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
-    fw = Firmware(bench.board, fw_cfg, reference=reference)
+    wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
+    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
     probe = Probe()
     # bench instrument, not firmware: zero cycles, lowest priority
     probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))
@@ -159,17 +162,21 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     wall = 0.0
     complete = True
     segment = SEGMENT_S * f_cpu
-    for t in [*range(segment, t_end, segment), t_end]:
-        wall0 = time.perf_counter()
-        sched.run_until(t)
-        wall += time.perf_counter() - wall0
-        if files is not None:
-            files.drain(bench, probe, fw)
-        if progress is not None:
-            progress(t / t_end)
-        if should_stop is not None and should_stop() and t < t_end:
-            complete = False
-            break
+    try:
+        for t in [*range(segment, t_end, segment), t_end]:
+            wall0 = time.perf_counter()
+            sched.run_until(t)
+            wall += time.perf_counter() - wall0
+            if files is not None:
+                files.drain(bench, probe, fw)
+            if progress is not None:
+                progress(t / t_end)
+            if should_stop is not None and should_stop() and t < t_end:
+                complete = False
+                break
+    finally:
+        if wire is not None:
+            wire.close()
     if files is not None:
         files.close()
     telemetry = bench.telemetry_bytes() if files is None else b""

@@ -7,13 +7,20 @@ opened with pyserial (`hal.binding.open_uart`). Each port must pass its start-up
 the motor's position feedback (``motor``: pid_pos is the actuator's angle before the 28:6 belt,
 docs/devices.md) or the in-process plant (``sim``). A lowest-priority probe samples the run, handles a
 lost link (stop after the safe command went out, or reopen with ``reconnect``) and is not firmware.
+
+Every way out of the loop ends in the firmware's stop path before a port closes: the end of the duration,
+SIGINT / SIGTERM / SIGHUP (`StopSignals`), a lost port, an exception in a task. The stop path writes zero
+current then the brake to the motor and waits until the port has sent them (`Firmware.stop`); the result
+records the reason, the frames and how long after the signal they left (docs/serial_mode.md).
+On the wall clock a late job is the host's stall: a deadline-miss streak and a watchdog expiry are
+counted as warnings; the supervisor latches on the ages of the last command and the last feedback.
 """
 
 from __future__ import annotations
 
-import gc
 import logging
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +28,8 @@ from pathlib import Path
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
-from firmware.drivers.motor import MotorFeedback
+from firmware.drivers.motor import MotorFeedback, SafeStop
+from firmware.protocol.vesc import Decoder as VescDecoder
 from hal.binding import open_uart
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
@@ -31,13 +39,17 @@ from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.null import NullDigitalIn, NullDigitalOut
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.jitter import TaskTimings, instrument
+from host_tools.realtime import RealtimeSection, RealtimeSettings
 from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health
 from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
 from host_tools.serial_io import CaptureUart
+from host_tools.stop_signals import StopSignals
+from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
 from rtos.scheduler import SchedulerNow
 
-__all__ = ["BELT_RATIO", "FeedbackAngle", "SerialRunConfig", "SerialRunResult", "StartupError", "run_serial"]
+__all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "SerialRunConfig", "SerialRunResult",
+           "StartupError", "run_serial"]
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +57,8 @@ BELT_RATIO = 28 / 6  # rotor : output is 28 : 1 and the planetary 6 : 1, so pid_
 STOP_AFTER_LOSS_S = 0.030  # after a lost link: zero current, the brake (10 ms later), then stop
 RECONNECT_EVERY_S = 0.2
 GC_EVERY_TICKS = 100  # probe ticks between two young-generation collections (the collector is off meanwhile)
+STOP_DRAIN_TIMEOUT_S = 0.5  # the stop path waits at most this long for the port to send the safe frames
+EXIT_TASK_EXCEPTION = 3
 
 
 @dataclass
@@ -67,7 +81,9 @@ class SerialRunConfig:
     startup_timeout_s: float = 1.0
     trace_capacity: int = 200_000
     fixture: str = "suspended"
-    strides: int = 0  # whole gait strides completed (filled in after the run)
+    capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
+    realtime: RealtimeSettings = field(default_factory=RealtimeSettings)
+    strides: int = 0  # whole gait strides run in RUN (filled in after the run)
 
     def __post_init__(self) -> None:
         """Reject values serial mode cannot run."""
@@ -138,6 +154,50 @@ class LinkEvent:
 
 
 @dataclass
+class HostWarnings:
+    """What the host's stalls did that is not a firmware fault on the wall clock (counted, not latched)."""
+
+    watchdog_expiries: int = 0
+    first_watchdog_s: float | None = None
+
+    def on_watchdog(self, t_cycles: int, f_cpu_hz: int) -> None:
+        """The RTOS watchdog expired: the host did not run the loop for its timeout. Count and log it."""
+        self.watchdog_expiries += 1
+        t = t_cycles / f_cpu_hz
+        if self.first_watchdog_s is None:
+            self.first_watchdog_s = t
+        log.warning("watchdog expired at %.4f s: the host stalled the loop %.0f ms (a warning on the wall clock)",
+                    t, WATCHDOG_TIMEOUT_S * 1e3)
+
+
+@dataclass
+class StopRecord:
+    """Why and when the run ended, and what the stop path put on the motor's wire."""
+
+    reason: str  # duration | signal | link_lost | exception
+    at_s: float  # run time at which the stop began (signal: its arrival)
+    signal: str | None = None
+    task: str | None = None
+    error: str | None = None
+    traceback: str | None = None
+    safe: SafeStop | None = None
+    latency_ms: float | None = None  # from the stop's start (the signal) to the safe frames out of the port
+    goal_ms: float | None = None  # one control period plus the frames' wire time
+
+    def as_dict(self) -> dict:
+        """For summary.json: the safe frames decoded, whether they left the port, the latency."""
+        safe = self.safe
+        frames = [repr(m) for m in VescDecoder("to-motor").feed(safe.frames)] if safe is not None else []
+        return {"reason": self.reason, "at_s": round(self.at_s, 6), "signal": self.signal, "task": self.task,
+                "error": self.error, "safe_frames": frames,
+                "safe_bytes": len(safe.frames) if safe is not None else 0,
+                "safe_bytes_written": safe.written if safe is not None else 0,
+                "safe_on_wire": safe.on_wire if safe is not None else False,
+                "safe_error": (safe.error or None) if safe is not None else None,
+                "latency_ms": self.latency_ms, "goal_ms": self.goal_ms}
+
+
+@dataclass
 class SerialRunResult:
     """Everything a report needs from one serial run (the attributes `report.summarise` reads)."""
 
@@ -152,11 +212,33 @@ class SerialRunResult:
     gait_start_s: float | None
     started_unix_s: float
     angle_source: str
+    stop: StopRecord
+    warnings: HostWarnings
+    realtime_granted: dict[str, object]
     link: LinkEvent | None = None
-    interrupted: bool = False
     telemetry_port_error: str = ""
     startup_bytes: dict[str, int] = field(default_factory=dict)
     bounds: list = field(default_factory=list)  # no response-time bounds: host times are measured
+    time_in_run_s: float = 0.0
+
+    @property
+    def interrupted(self) -> bool:
+        """True when a signal ended the run."""
+        return self.stop.reason == "signal"
+
+    @property
+    def exit_code(self) -> int:
+        """docs/hardware.md: 0 done as asked with no latched fault, 1 a latched fault, 3 a task raised,
+        4 a port lost (without --reconnect), 128 + N signal N (129 SIGHUP, 130 SIGINT, 143 SIGTERM)."""
+        if self.stop.reason == "signal":
+            from host_tools.stop_signals import EXIT_CODES
+
+            return EXIT_CODES.get(self.stop.signal or "", 130)
+        if self.stop.reason == "exception":
+            return EXIT_TASK_EXCEPTION
+        if self.link is not None and not self.config.reconnect:
+            return 4
+        return 1 if self.firmware.supervisor.tripped_at_s is not None else 0
 
 
 @dataclass
@@ -176,8 +258,11 @@ class _Ports:
             self.devices.close()
 
 
-def _open_ports(cfg: SerialRunConfig) -> _Ports:
-    """Open every port (sim:// roles in-process on one plant); StartupError naming a port that fails."""
+def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Ports:
+    """Open every port (sim:// roles in-process on one plant); StartupError naming a port that fails.
+
+    `telemetry_uart`, when given, is the telemetry port already open (``--telemetry pty``).
+    """
     sim_roles = {r: parse_sim_url(u) for r, u in (("motor", cfg.motor), ("imu", cfg.imu)) if _is_sim(u)}
     for role, url in sim_roles.items():
         if url.role != role:
@@ -190,6 +275,9 @@ def _open_ports(cfg: SerialRunConfig) -> _Ports:
     try:
         for role, url, baud in (("motor", cfg.motor, cfg.baud), ("imu", cfg.imu, cfg.imu_baud),
                                 ("telemetry", cfg.telemetry, cfg.telemetry_baud)):
+            if role == "telemetry" and telemetry_uart is not None:
+                opened[role] = telemetry_uart
+                continue
             if url is None:
                 continue
             if role in sim_roles:
@@ -208,36 +296,57 @@ def _open_ports(cfg: SerialRunConfig) -> _Ports:
     return _Ports(opened["motor"], opened["imu"], opened.get("telemetry"), devices)
 
 
-def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None] | None = None) -> SerialRunResult:
+def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None] | None = None,
+               telemetry_uart: Uart | None = None, signals: StopSignals | None = None) -> SerialRunResult:
     """Check the ports, then run the firmware on them for cfg.duration_s of wall time; outputs go to `out`.
 
-    Raises StartupError (nothing written) when a port fails its check.
+    Raises StartupError (nothing written) when a port fails its check. `telemetry_uart`: an open telemetry
+    port to use instead of opening ``cfg.telemetry`` (it is closed with the others). `signals`: stop
+    signals already caught by the caller (entered); by default they are caught for the run alone.
     """
+    if signals is None:
+        with StopSignals() as own:
+            return run_serial(cfg, out, progress, telemetry_uart, own)
     board_cfg = board_profile(cfg.board)
     f_cpu = int(board_cfg["f_cpu_hz"])
     fw_cfg = cfg.firmware or load_firmware_config()
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
-    ports = _open_ports(cfg)
+    ports = _open_ports(cfg, telemetry_uart)
+    # the capture starts with the ports, so a start-up check that fails (wrong baud) leaves its bytes too
+    wire = WireCapture(cfg.capture_dir, _since_start(), side="host") if cfg.capture_dir is not None else None
+    if wire is not None:
+        ports.motor, ports.imu = wire.tap("motor", ports.motor), wire.tap("imu", ports.imu)
     try:
         seen = {"motor": check_motor(ports.motor, cfg.motor, timeout_s=cfg.startup_timeout_s),
                 "imu": check_imu(ports.imu, cfg.imu, timeout_s=cfg.startup_timeout_s)}
     except BaseException:
         ports.close()
+        if wire is not None:
+            wire.close()
         raise
     out.mkdir(parents=True, exist_ok=True)
     capture = CaptureUart(out / "telemetry.bin", cfg.telemetry_baud, inner=ports.telemetry)
     try:
-        return _run(cfg, ports, capture, f_cpu, fw_cfg, reference, seen, progress)
-    finally:
+        return _run(cfg, ports, capture, wire, f_cpu, fw_cfg, reference, seen, progress, signals)
+    finally:  # the stop path has run inside _run: the safe frames have left before any port closes
         capture.close()
         ports.close()
+        if wire is not None:
+            wire.close()
 
 
-def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, fw_cfg: FirmwareConfig,
-         reference: GaitReference, seen: dict[str, int], progress: Callable[[float], None] | None) -> SerialRunResult:
-    """Build the board, the firmware and the wall-clock RTOS on opened ports, run, collect."""
-    clock = WallClock(f_cpu)
+def _since_start() -> Callable[[], float]:
+    """Seconds since now on the monotonic clock (the capture's time base; the run's starts a moment later)."""
+    t0 = time.perf_counter()
+    return lambda: time.perf_counter() - t0
+
+
+def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCapture | None, f_cpu: int,
+         fw_cfg: FirmwareConfig, reference: GaitReference, seen: dict[str, int],
+         progress: Callable[[float], None] | None, signals: StopSignals) -> SerialRunResult:
+    """Build the board, the firmware and the wall-clock RTOS on opened ports, run, stop safely, collect."""
+    clock = WallClock(f_cpu, spin_s=cfg.realtime.spin_s)
     now = SchedulerNow()  # the board is built before the scheduler: bound to it below
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu))
     feedback_angle = FeedbackAngle()
@@ -247,15 +356,19 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
         encoder = VirtualEncoderTimer(devices.now, EncoderMount(devices.world).angle_rad)
     else:
         encoder = VirtualEncoderTimer(lambda: 0, feedback_angle.angle_rad)
-    board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=capture, encoder=encoder,
-                  estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
+    telemetry: Uart = capture if wire is None else wire.tap("telemetry", capture)  # the others are tapped already
+    board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
+                  encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
                   now_cycles=now, f_cpu_hz=f_cpu)
     fw = Firmware(board, fw_cfg, reference=reference)
-    wd.on_reset = fw.on_watchdog_reset
+    fw.supervisor.latch_deadline_misses = False  # on the wall clock a late job is the host's (see module doc)
+    warnings = HostWarnings()
+    wd.on_reset = lambda t: warnings.on_watchdog(t, f_cpu)
     feedback_angle.feedback = fw.motor.feedback
     plant = ports.devices.world.plant if ports.devices is not None and ports.devices.motor is not None else None
-    probe, link = Probe(), _LinkWatch(cfg, fw)
+    probe, link = Probe(), _LinkWatch(cfg, fw, wire)
     timings = TaskTimings([t.name for t in fw.tasks], f_cpu, time.perf_counter_ns)
+    section = RealtimeSection(cfg.realtime)
 
     def probe_body(job) -> None:  # bench instrument, not firmware
         t = job.start / f_cpu
@@ -264,7 +377,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
         if link.step(t):
             sched.request_stop()
         if job.index % GC_EVERY_TICKS == 0:
-            gc.collect(0)  # young objects only: tens of µs, never a full scan in the loop
+            section.collect_young()  # young objects only: tens of µs, never a full scan in the loop
 
     tasks = [instrument(t, timings) for t in fw.tasks]
     tasks.append(Task("serial_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body))
@@ -274,50 +387,80 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, f_cpu: int, 
     now.bind(sched)
     fw.kernel_health = kernel_health(sched, fw)
     sched.add_watchdog(wd)
-    interrupted = False
-    gc_was_enabled = gc.isenabled()
-    gc.collect()
-    gc.freeze()  # what exists now is never scanned again; the probe collects the young generation
-    gc.disable()
-    started_unix = time.time()  # the wall clock is anchored at cycle 0 right after this
-    wall0 = time.perf_counter()
-    try:
-        sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
-    except KeyboardInterrupt:
-        interrupted = True
-        log.warning("interrupted at %.3f s", sched.now / f_cpu)
-    finally:
-        gc.unfreeze()
-        if gc_was_enabled:
-            gc.enable()
-    wall = time.perf_counter() - wall0
-    run_s = sched.now / f_cpu
+    signals.on_stop = sched.request_stop
+    error: BaseException | None = None
+    failed_task: str | None = None
+    with section:
+        started_unix = time.time()  # the wall clock is anchored at cycle 0 right after this
+        wall0_ns = time.perf_counter_ns()
+        try:
+            if signals.name is None:  # a signal during the start-up: straight to the stop path
+                sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
+        except KeyboardInterrupt:  # a second signal, or one raised before the handlers were in
+            if signals.name is None:
+                signals.name, signals.at_ns = "SIGINT", time.perf_counter_ns()
+        except Exception as exc:  # a task raised: the firmware's bug, reported after the stop path
+            error, failed_task = exc, timings.running
+            log.error("task %s raised %s: stopping", failed_task, exc)
+        run_s = sched.now / f_cpu
+        stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s)
+        stop.safe = fw.stop(run_s, STOP_DRAIN_TIMEOUT_S)  # the stop path: on the wire before any port closes
+        done_ns = time.perf_counter_ns()
+        wall = (done_ns - wall0_ns) / 1e9
+    period_s = fw.ts_s
+    wire_s = len(stop.safe.frames) * 10 / fw.motor.uart.baud
+    start_ns = signals.at_ns if signals.at_ns is not None else wall0_ns + round(stop.at_s * 1e9)
+    stop.latency_ms = round(max(0, done_ns - start_ns) / 1e6, 3)
+    stop.goal_ms = round((period_s + wire_s) * 1e3, 3)
+    if not stop.safe.on_wire:
+        log.error("stop path: the safe frames did not all leave the motor port (%s)", stop.safe.error or
+                  f"{stop.safe.written} of {len(stop.safe.frames)} bytes, drained {stop.safe.drained}")
+    run_end = fw.supervisor.tripped_at_s if fw.supervisor.tripped_at_s is not None else run_s
+    time_in_run = 0.0
     strides = 0
     if fw.gait_start_s is not None:
-        strides = max(0, int((min(run_s, probe.t_s[-1] if probe.t_s else 0.0) - fw.gait_start_s)
-                             // fw_cfg.stride_s))
+        time_in_run = max(0.0, run_end - fw.gait_start_s)
+        strides = int(time_in_run // fw_cfg.stride_s)
     cfg.strides = strides
     return SerialRunResult(cfg, fw, sched, probe, timings, capture.captured(), run_s, wall, fw.gait_start_s,
-                           started_unix, "plant" if plant is not None else "fused estimate", link.event,
-                           interrupted, capture.inner_error, seen)
+                           started_unix, "plant" if plant is not None else "fused estimate", stop, warnings,
+                           section.granted, link.event, capture.inner_error, seen, time_in_run_s=time_in_run)
+
+
+def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: _LinkWatch,
+                 run_s: float, wall0_ns: int, duration_s: float) -> StopRecord:
+    """Why the loop ended: a signal, a task's exception, a lost link, or the duration."""
+    if signals.name is not None:
+        at = (signals.at_ns - wall0_ns) / 1e9 if signals.at_ns is not None else run_s
+        return StopRecord("signal", max(0.0, at), signal=signals.name)
+    if error is not None:
+        where = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
+        text = f"{type(error).__name__}: {error}" + (f" ({where.filename}:{where.lineno})" if where else "")
+        return StopRecord("exception", run_s, task=task, error=text,
+                          traceback="".join(traceback.format_exception(error)))
+    if link.stop_at is not None:
+        return StopRecord("link_lost", run_s)
+    return StopRecord("duration", min(run_s, duration_s))
 
 
 class _LinkWatch:
     """Watches for LINK_LOST: records the event; stops shortly after, or reopens the port with reconnect."""
 
-    def __init__(self, cfg: SerialRunConfig, fw: Firmware) -> None:
-        self.cfg, self.fw = cfg, fw
+    def __init__(self, cfg: SerialRunConfig, fw: Firmware, wire: WireCapture | None = None) -> None:
+        self.cfg, self.fw, self.wire = cfg, fw, wire
         self.event: LinkEvent | None = None
         self.stop_at: float | None = None
         self.next_try = 0.0
 
     def step(self, t: float) -> bool:
         """Called every probe tick at time t (s); True when the run should stop."""
-        sup, fw = self.fw.supervisor, self.fw
-        if self.event is None and (fw.motor.link_lost or fw.imu.link_lost) and sup.tripped_at_s is not None:
-            drv, role = (fw.motor, "motor") if fw.motor.link_lost else (fw.imu, "imu")
-            self.event = LinkEvent(role, getattr(self.cfg, role), drv.lost_reason, drv.lost_at_s,
-                                   sup.tripped_at_s)
+        fw = self.fw
+        if self.event is None and fw.link_lost_seen_s is not None:
+            # the port that failed first is the one named (both go when a whole adapter or emulator dies)
+            lost = [(d.lost_at_s, role, d) for role, d in (("motor", fw.motor), ("imu", fw.imu)) if d.link_lost]
+            lost_at, role, drv = min(lost, key=lambda x: (x[0] if x[0] is not None else float("inf"), x[1]))
+            # detection: from the first failed read or write to the supervisor's first look at it (>= 0)
+            self.event = LinkEvent(role, getattr(self.cfg, role), drv.lost_reason, lost_at, fw.link_lost_seen_s)
             log.warning("%s port %s lost at %.4f s: %s", role, self.event.port, t, drv.lost_reason)
             if not self.cfg.reconnect:
                 self.stop_at = t + STOP_AFTER_LOSS_S
@@ -341,7 +484,7 @@ class _LinkWatch:
                 log.debug("%s port not back yet: %s", role, exc)
                 continue
             drv.uart.close()
-            drv.relink(uart)
+            drv.relink(self.wire.tap(role, uart) if self.wire is not None else uart)
             assert self.event is not None
             self.event.reconnects += 1
             log.warning("%s port %s reopened; staying in the safe state", role, getattr(cfg, role))

@@ -5,8 +5,9 @@ timing does not share the GIL with the firmware under test. For each ``--link RO
 raw pty, prints ``ROLE: PATH`` (the path the firmware opens) and relays both directions. On the way from
 the device to the firmware it injects seeded bursts of random bytes, drops single bytes, and now and then
 holds everything back for ``--delay-s`` (a device replying late), from ``--start-s`` to ``--until-s``
-after its start. On SIGTERM it prints one JSON line with
-what it did per role and exits 0.
+after its start. With ``--capture DIR`` it writes every byte it relays, as it came in, to
+``DIR/<role>.to_device.bin`` and ``DIR/<role>.to_host.bin`` (before spoiling: what each side sent). On SIGTERM
+it relays what is still waiting, prints one JSON line with what it did per role and exits 0.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ class Link:
     next_garbage_s: float
     next_delay_s: float
     garbage_rng: random.Random
+    capture: dict[bool, object] = field(default_factory=dict)  # from_host -> open file
 
 
 def _open_link(role: str, device: str, now_s: float, args: argparse.Namespace) -> Link:
@@ -60,8 +62,12 @@ def _open_link(role: str, device: str, now_s: float, args: argparse.Namespace) -
     tty.setraw(dev)
     termios.tcflush(dev, termios.TCIFLUSH)  # what the device sent while nobody listened is gone
     print(f"{role}: {os.ttyname(slave)}", flush=True)
-    return Link(role, master, slave, dev, LinkCounts(), now_s + args.start_s, now_s + args.start_s,
+    link = Link(role, master, slave, dev, LinkCounts(), now_s + args.start_s, now_s + args.start_s,
                 random.Random(f"{args.seed}:{role}"))
+    if args.capture:
+        link.capture = {True: open(os.path.join(args.capture, f"{role}.to_device.bin"), "wb"),  # noqa: SIM115
+                        False: open(os.path.join(args.capture, f"{role}.to_host.bin"), "wb")}  # noqa: SIM115
+    return link
 
 
 def _write_all(fd: int, data: bytes, counts: LinkCounts) -> None:
@@ -110,16 +116,20 @@ def _spoil(link: Link, data: bytes, now_s: float, rng: random.Random, args: argp
 
 
 def serve(links: list[Link], rng: random.Random, args: argparse.Namespace, stop: list[int]) -> None:
-    """Relay until stop is non-empty."""
+    """Relay until stop is non-empty, then once more what is already waiting."""
     by_fd: dict[int, tuple[Link, bool]] = {}
     for link in links:
         by_fd[link.host_fd] = (link, True)
         by_fd[link.device_fd] = (link, False)
-    while not stop:
+    host_fds = [link.host_fd for link in links]
+    while True:
+        final = bool(stop)  # stopping: what the host has written so far still goes through, then out
         try:
-            readable, _, _ = select.select(list(by_fd), [], [], 0.01)
+            readable, _, _ = select.select(host_fds if final else list(by_fd), [], [], 0.0 if final else 0.01)
         except InterruptedError:
             continue
+        if final and not readable:
+            return
         for fd in readable:
             link, from_host = by_fd[fd]
             try:
@@ -127,8 +137,12 @@ def serve(links: list[Link], rng: random.Random, args: argparse.Namespace, stop:
             except (BlockingIOError, InterruptedError):
                 continue
             except OSError:  # the firmware closed its end (EIO on the master): wait for it to come back
+                if final:
+                    return
                 time.sleep(0.001)
                 continue
+            if link.capture:
+                link.capture[from_host].write(data)  # type: ignore[attr-defined]
             if from_host:
                 link.counts.to_device += len(data)
                 _write_all(link.device_fd, data, link.counts)
@@ -151,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--delay-every-s", type=float, default=0.1, help="0: never late")
     p.add_argument("--delay-s", type=float, default=0.005)
     p.add_argument("--lossy", default=None, metavar="ROLE,...", help="drops and delays on these links only")
+    p.add_argument("--capture", default=None, metavar="DIR", help="write the relayed bytes per role and direction")
     args = p.parse_args(argv)
     rng = random.Random(args.seed)  # which bytes are dropped
     now_s = args.t0_s = time.monotonic()
@@ -159,6 +174,9 @@ def main(argv: list[str] | None = None) -> int:
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(signum))
     serve(links, rng, args, stop)
+    for link in links:
+        for f in link.capture.values():
+            f.close()  # type: ignore[attr-defined]
     report: dict[str, object] = {link.role: asdict(link.counts) for link in links}
     report["faults_unix_s"] = [t0_unix_s + args.start_s, t0_unix_s + min(args.until_s, 1e6)]
     print(json.dumps(report), flush=True)

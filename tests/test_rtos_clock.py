@@ -65,7 +65,8 @@ def test_wall_clock_1khz_task_for_2s_is_released_2000_times():
     # How many jobs the host managed to run on time is a speed figure, measured in the wall-clock
     # benchmark, not asserted here (this machine's 2 cores are shared).
     assert abs(st.jobs + st.skipped - 2000) <= 1
-    assert abs(s.releases("tick") - 2000) <= 1
+    # a job started before the end may finish after it (a stall): count the releases of the span asked for
+    assert abs(s.releases("tick", before=2_000_000) - 2000) <= 1
     assert st.jobs > 0
     # no drift: the last job starts within a few ms of its absolute release time
     assert 0 <= starts[-1] - 1000 * (len(starts) - 1 + st.skipped) < 5_000

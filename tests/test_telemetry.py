@@ -65,9 +65,9 @@ def test_enum_codes_are_fixed():
     assert [(m.name, m.value) for m in SupervisorState] == [("INIT", 0), ("RUN", 1), ("SAFE", 2)]
     assert [m.name for m in FaultReason] == [
         "NONE", "ANGLE_LIMIT", "CURRENT_LIMIT", "MOTOR_TIMEOUT", "IMU_TIMEOUT", "SENSOR_DISAGREEMENT",
-        "MOTOR_FAULT", "DEADLINE_MISSES", "ESTOP", "WATCHDOG", "TASK_OVERRUN", "LINK_LOST",
+        "MOTOR_FAULT", "DEADLINE_MISSES", "ESTOP", "WATCHDOG", "TASK_OVERRUN", "LINK_LOST", "COMMAND_STALE",
     ]
-    assert [m.value for m in FaultReason] == list(range(12))
+    assert [m.value for m in FaultReason] == list(range(13))
 
 
 def test_crc16_is_ccitt_false():

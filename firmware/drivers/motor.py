@@ -33,7 +33,7 @@ from firmware.protocol.vesc_values import selective_layout
 from hal.errors import HalError
 from hal.interfaces import Uart
 
-__all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "selective_reply_bytes"]
+__all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "SafeStop", "selective_reply_bytes"]
 
 # The longest reply the driver asks for: the 73-byte GET_VALUES payload, 78 bytes on the wire.
 LONGEST_REPLY_BYTES: Final = len(Values().encode())
@@ -58,6 +58,25 @@ class MotorFeedback:
     temp_fet_c: float = math.nan
     v_in_v: float = math.nan
     received_s: float | None = None
+
+
+_COMMAND_BYTES: Final = len(SetCurrent(0.0).encode())  # SET_CURRENT and SET_CURRENT_BRAKE: 10 bytes
+
+
+@dataclass
+class SafeStop:
+    """What the stop path put on the motor's wire: the bytes, how many the port took, whether they left it."""
+
+    frames: bytes
+    at_s: float
+    written: int = 0
+    drained: bool = False
+    error: str = ""
+
+    @property
+    def on_wire(self) -> bool:
+        """True when every byte was accepted and the port reported its transmitter empty."""
+        return self.written == len(self.frames) and self.drained and not self.error
 
 
 @dataclass
@@ -96,6 +115,9 @@ class MotorDriver(LinkState):
         self.hold_timeout_s = LONGEST_REPLY_BYTES * 10 / uart.baud + 0.001
         self._count = 0
         self._skip_request = False
+        # when the last command frame was accepted whole by the port (None: never): its age is how long
+        # the motor has been applying an old command, which the supervisor bounds
+        self.last_command_s: float | None = None
 
     def relink(self, uart: Uart) -> None:
         """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
@@ -176,7 +198,29 @@ class MotorDriver(LinkState):
             return 0
         if written < len(frame):
             self.stats.tx_refused += 1
+        if written >= _COMMAND_BYTES:  # the command leads the frame: it went out whole
+            self.last_command_s = now_s
         return written
+
+    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: zero current, then the brake, in one write; wait until both have left the UART.
+
+        No feedback request follows: nothing will read a reply. A failing port is latched as lost.
+        """
+        frames = (self._current_codec.frame((0.0,)), self._brake_codec.frame((brake_current_a,)))
+        data = frames[0] + frames[1]
+        stop = SafeStop(data, now_s)
+        try:
+            stop.written = self.uart.write(data)
+            stop.drained = self.uart.flush(timeout_s)
+        except HalError as exc:
+            self._lose(exc, now_s)
+            stop.error = str(exc)
+        if stop.written < len(data):
+            self.stats.tx_refused += 1
+        elif stop.written:
+            self.last_command_s = now_s
+        return stop
 
     @property
     def crc_errors(self) -> int:

@@ -60,6 +60,7 @@ class FaultReason(IntEnum):
     WATCHDOG = 9
     TASK_OVERRUN = 10
     LINK_LOST = 11
+    COMMAND_STALE = 12
 
 
 def _wire(fmt: str, default: Any = MISSING) -> Any:

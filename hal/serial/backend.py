@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -148,6 +149,14 @@ class SerialUart(Uart):
         self._errors.framing = now.frame - base.frame
         self._errors.overrun = lost
         self._errors.rx_lost = lost
+
+    def _drain(self, timeout_s: float) -> bool:
+        # tcdrain() on a tty (pyserial's flush): returns once the driver has sent the last stop bit
+        deadline = time.monotonic() + timeout_s
+        while self._out_waiting() and time.monotonic() < deadline:
+            time.sleep(0.0002)
+        self._call("flush", self._port.flush)
+        return not self._out_waiting()
 
     def _close(self) -> None:
         try:

@@ -3,7 +3,7 @@
 ``pafp emulate motor|imu|bench (--pty | --port DEVICE [--imu-port DEVICE]) [--baud N] [--fixture NAME]
 [--seed S] [--duration S]``. ``bench`` serves the motor and the IMU on one shared plant. Before serving it
 prints one line per device, ``motor: PATH`` / ``imu: PATH``, and flushes. It then runs until Ctrl-C or
-SIGTERM (or ``--duration``) and exits 0 after one summary line. A port that cannot be opened or a bad
+SIGTERM or SIGHUP (or ``--duration``) and exits 0 after one summary line. A port that cannot be opened or a bad
 combination of options: one line on stderr, exit 2.
 
 Timing: bytes read from a port are stamped on arrival, the last one ending at the arrival instant and the
@@ -24,10 +24,13 @@ import sys
 import tty
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from types import FrameType
 
 from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
+from host_tools.stop_signals import STOP_SIGNALS
+from host_tools.wire_capture import WireCapture
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
 MAX_SLEEP_S = 0.001
@@ -66,6 +69,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default: run until Ctrl-C or SIGTERM)")
+    parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
+                        help="write the raw bytes each device received (<role>.rx.bin) and sent (<role>.tx.bin) "
+                             "with a time index into DIR (docs/serial_mode.md)")
 
 
 def _open_pty(role: str) -> Endpoint:
@@ -132,11 +138,18 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until stopped; print the paths first and a summary line last; 2 on bad options or ports."""
+    capture = None
     try:
         _check(args)
         devices = WallDevices(_ROLES[args.device], bauds=_bauds(args), fixture=args.fixture, seed=args.seed)
+        if args.capture is not None:
+            capture = WireCapture(args.capture, lambda: devices.now() / 1e9, side="device")
+            for role in _ROLES[args.device]:
+                capture.open(role, "rx", "tx")
         endpoints = _endpoints(args, devices)
-    except (EmulateError, ValueError) as exc:
+    except (EmulateError, ValueError, OSError) as exc:
+        if capture is not None:
+            capture.close()
         print(f"pafp emulate: {exc}", file=sys.stderr)
         return 2
     for ep in endpoints:
@@ -147,10 +160,12 @@ def run(args: argparse.Namespace) -> int:
         """Ask the serving loop to stop."""
         stop.append(signal.Signals(signum).name)
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
-        _serve(devices, endpoints, stop, args.duration)
+        _serve(devices, endpoints, stop, args.duration, capture)
     finally:
+        if capture is not None:
+            capture.close()
         for s, handler in previous.items():
             signal.signal(s, handler)
         for ep in endpoints:
@@ -160,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], duration_s: float | None) -> None:
+def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], duration_s: float | None,
+           capture: WireCapture | None = None) -> None:
     """The wall-clock loop: take bytes in, let the world catch up, write what has ended, sleep."""
     end_ns = None if duration_s is None else devices.now() + int(duration_s * 1e9)
     by_fd = {ep.fd: ep for ep in endpoints}
@@ -177,32 +193,37 @@ def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], dur
         readable, _, _ = select.select(live, [], [], timeout)
         now = devices.now()
         for fd in readable:
-            _take(devices, by_fd[fd], now)
+            data = _take(devices, by_fd[fd], now)
+            if capture is not None and data:
+                capture.record(by_fd[fd].role, "rx", data, now / 1e9)
         for ep in endpoints:
             data = devices.uarts[ep.role].read()
             if data and not ep.failed:
-                _give(ep, data)
+                written = _give(ep, data)
+                if capture is not None:
+                    capture.record(ep.role, "tx", data[:written])
 
 
-def _take(devices: WallDevices, ep: Endpoint, now: int) -> None:
-    """Read what the far end sent and hand it to the device with its arrival times."""
+def _take(devices: WallDevices, ep: Endpoint, now: int) -> bytes:
+    """Read what the far end sent and hand it to the device with its arrival times; return the bytes."""
     try:
         data = os.read(ep.fd, 4096)
     except BlockingIOError:
-        return
+        return b""
     except OSError as exc:
         ep.failed = f"read failed: {exc}"
-        return
+        return b""
     if not data:
-        return
+        return b""
     ep.bytes_in += len(data)
     after = max(ep.last_end_ns, devices.world.now)
     ends = arrival_end_times(len(data), now, devices.byte_ns(ep.role), after)
     ep.last_end_ns = ends[-1]
     devices.device(ep.role).on_bytes(data, ends)
+    return data
 
 
-def _give(ep: Endpoint, data: bytes) -> None:
+def _give(ep: Endpoint, data: bytes) -> int:
     """Write the device's bytes without blocking; what the far end cannot take is dropped and counted."""
     try:
         written = os.write(ep.fd, data)
@@ -213,6 +234,7 @@ def _give(ep: Endpoint, data: bytes) -> None:
         written = 0
     ep.bytes_out += written
     ep.dropped_out += len(data) - written
+    return written
 
 
 def _summary(devices: WallDevices, endpoints: list[Endpoint], reason: str) -> str:

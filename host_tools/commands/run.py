@@ -38,16 +38,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
     parser.add_argument("--no-trace", action="store_true", help="do not write trace.json")
+    parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
+                        help="write the raw bytes of every port, each direction, with a time index, into DIR "
+                             "(docs/serial_mode.md)")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
-    serial.add_argument("--telemetry", metavar="PORT", help="telemetry out port (always captured to telemetry.bin)")
+    serial.add_argument("--telemetry", metavar="PORT",
+                        help="telemetry out port (always captured to telemetry.bin); 'pty' opens a new pty and "
+                             "prints its path for `pafp monitor PATH`")
     serial.add_argument("--encoder", choices=("motor", "sim"), default="motor",
                         help="encoder from the motor's position feedback (default) or the in-process plant")
     serial.add_argument("--duration", type=float, default=10.0, metavar="S", help="run time in s (default 10)")
     serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
     serial.add_argument("--reconnect", action="store_true",
                         help="after a lost port, wait for it and resume in the safe state instead of exiting")
+    serial.add_argument("--no-realtime", action="store_true",
+                        help="ask the OS for nothing (no GC freeze, core pinning, SCHED_FIFO, mlockall, spin)")
 
 
 class _Progress:
@@ -98,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         fw_cfg = load_firmware_config(args.profile)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
-                        firmware=fw_cfg, reference_csv=args.reference)
+                        firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture)
         board_profile(args.board)  # fail early with a clear message, before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
@@ -183,56 +190,96 @@ def _num(value: float | None, digits: int) -> str:
 
 
 def _run_serial(args: argparse.Namespace) -> int:
-    """Serial mode: check the ports, run on the wall clock, write the same outputs; 2 if a port fails."""
+    """Serial mode: check the ports, run on the wall clock, stop safely, write the same outputs (exit codes:
+    docs/hardware.md)."""
     from firmware.config import load_firmware_config
+    from host_tools.realtime import RealtimeSettings
     from host_tools.serial_run import SerialRunConfig, StartupError, run_serial
+    from host_tools.stop_signals import StopSignals
 
     if not (args.motor and args.imu):
         print("pafp run: serial mode needs both --motor PORT and --imu PORT", file=sys.stderr)
         return 2
+    from host_tools.outdir import OutDirError, check_out_dir
+
+    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        check_out_dir(out)  # before any port is opened (serial mode writes into it, not staged)
+    except OutDirError as e:
+        print(f"pafp run: {e}", file=sys.stderr)
+        return 2
+    telemetry_pty = None
     try:
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
                               duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
                               board=args.board, firmware=load_firmware_config(args.profile),
-                              reference_csv=args.reference, reconnect=args.reconnect)
+                              reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
+                              realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
+        if args.capture is not None and (args.capture / "index.csv").exists():
+            raise ValueError(f"--capture {str(args.capture)!r} already holds a capture (index.csv): give a new "
+                             "directory")
+        if args.telemetry == "pty":
+            from host_tools.telemetry_pty import TelemetryPty
+
+            telemetry_pty = TelemetryPty()
+            cfg.telemetry = telemetry_pty.url
     except (ValueError, OSError) as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    from host_tools.outdir import OutDirError, check_out_dir
-
-    try:
-        check_out_dir(out)  # before any port is opened (serial mode writes into out itself, not staged)
-    except OutDirError as e:
-        print(f"pafp run: {e}", file=sys.stderr)
-        return 2
     print(f"pafp run: serial mode, motor {cfg.motor}, imu {cfg.imu}, {cfg.duration_s:g} s -> {out}", flush=True)
+    if telemetry_pty is not None:
+        print(f"telemetry: {telemetry_pty.path}  (watch it: pafp monitor {telemetry_pty.path})", flush=True)
     bar = _Progress(not args.quiet)
-    try:
-        result = run_serial(cfg, out, progress=bar)
-    except (StartupError, ValueError, OSError) as e:
+    with StopSignals() as signals:  # from the first port opened to the last file written
+        try:
+            result = run_serial(cfg, out, progress=bar, telemetry_uart=telemetry_pty, signals=signals)
+        except (StartupError, ValueError, OSError) as e:
+            bar.done()
+            if telemetry_pty is not None:
+                telemetry_pty.close()
+            print(f"pafp run: {e}", file=sys.stderr)
+            return signals.exit_code or 2
         bar.done()
-        print(f"pafp run: {e}", file=sys.stderr)
-        return 2
-    bar.done()
-    from host_tools.report import write_outputs  # matplotlib: imported after the run, not before it
-    from host_tools.serial_report import serial_extra
+        from host_tools.report import write_outputs  # matplotlib: imported after the run, not before it
+        from host_tools.serial_report import serial_extra
 
-    extra, md = serial_extra(result)
-    s = write_outputs(result, out, extra, md)
-    rt, j = s["realtime"], s["realtime"]["release_jitter_us"]
-    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock; {s['strides']} whole strides")
-    print(f"  tracking ({s['angle_source']}): RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg")
+        extra, md = serial_extra(result)
+        s = write_outputs(result, out, extra, md)
+    rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
+    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it tracking in RUN; "
+          f"{s['strides']} whole strides")
+    _print_tracking(s)
     print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
           f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
-    print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}")
-    print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv")
+    w = s["host_warnings"]
+    print(f"  host stalls: {rt['late_releases']} late releases, {rt['overruns']} overruns, "
+          f"{w['deadline_miss_streaks']} miss streaks, {w['watchdog_expiries']} watchdog expiries (warnings)")
+    print(f"  faults {s['faults'] or 'none'}")
+    print(f"  stop ({stop['reason']}{' ' + stop['signal'] if stop['signal'] else ''}): "
+          f"{', '.join(stop['safe_frames']) or 'nothing sent'}; "
+          f"{'on the wire' if stop['safe_on_wire'] else 'NOT confirmed on the wire'} {stop['latency_ms']} ms "
+          f"after the stop began (goal {stop['goal_ms']} ms)")
+    print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv"
+          + (f"; wire capture in {args.capture}" if args.capture else ""))
     link = s["link_lost"]
     if link is not None:
-        print(f"pafp run: {link['role']} port {link['port']!r} lost ({link['reason']}); safe state LINK_LOST "
-              f"{link['detection_ms']} ms after the loss was seen; files complete up to the fault", file=sys.stderr)
-        if not cfg.reconnect:
-            return 4
-    if result.interrupted:
-        return 130
-    return 0 if not s["deadline_misses"] and not s["faults"] else 1
+        print(f"pafp run: {link['role']} port {link['port']!r} lost ({link['reason']}); the supervisor saw it "
+              f"{link['detection_ms']} ms after the first failed read or write; files complete up to the fault",
+              file=sys.stderr)
+    if stop["reason"] == "exception":
+        print(result.stop.traceback, file=sys.stderr, end="")
+        print(f"pafp run: task {stop['task']!r} raised {stop['error']}; the motor was stopped and every file "
+              f"written", file=sys.stderr)
+    if not stop["safe_on_wire"]:
+        print(f"pafp run: the stop path could not confirm the safe frames left the motor port "
+              f"({stop['safe_error'] or 'not drained'})", file=sys.stderr)
+    return result.exit_code
+
+
+def _print_tracking(s: dict) -> None:
+    """The tracking line: only what was measured while the supervisor was in RUN."""
+    rms = s.get("rms_error_deg")
+    if rms is None or rms != rms:  # null (or NaN from an older metrics module): nothing measured
+        print("  tracking: not measured (too little time in RUN)")
+        return
+    print(f"  tracking ({s['angle_source']}): RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg")

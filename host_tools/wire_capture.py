@@ -1,0 +1,163 @@
+"""Wire capture: the raw bytes of every port in each direction, and an index that lines them up in time.
+
+A capture directory holds, per port (``motor``, ``imu``, ``telemetry``) and direction:
+
+* ``<port>.tx.bin`` / ``<port>.rx.bin``: the bytes this process wrote to / read from the port, raw and in
+  order, so ``pafp decode`` reads them as they are;
+* ``index.csv``: one row per read or write that moved bytes: ``t_s,file,offset,bytes``: at ``t_s``
+  (seconds on the run's clock: virtual time in a virtual run, wall time since the start otherwise)
+  ``bytes`` bytes went to ``file`` starting at ``offset``;
+* ``capture.json`` (written on close): per file its byte count, protocol and the ``pafp decode`` command
+  that reads it. Which way a file goes depends on the side: the firmware's ``motor.tx.bin`` is to-motor,
+  the emulated motor's ``motor.tx.bin`` (``pafp emulate --capture``) is from-motor.
+
+Files are appended as the run goes and flushed every ``FLUSH_EVERY`` records and on close, so a run that
+dies leaves them valid up to the last flush. Reference: docs/serial_mode.md, "Wire capture".
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import BinaryIO, TextIO
+
+from hal.interfaces import Board, Uart
+
+__all__ = ["TapUart", "WireCapture"]
+
+FLUSH_EVERY = 256
+PROTOCOLS = {"motor": "vesc", "imu": "rvc", "telemetry": "telemetry"}
+# the `pafp decode --direction` of a motor file, by the side that captured it and the file's direction
+_VESC_DIRECTION = {("host", "tx"): "to-motor", ("host", "rx"): "from-motor",
+                   ("device", "tx"): "from-motor", ("device", "rx"): "to-motor"}
+
+
+class WireCapture:
+    """Raw per-port, per-direction byte files plus a time index, in `directory`."""
+
+    def __init__(self, directory: Path, clock_s: Callable[[], float], side: str = "host") -> None:
+        """Create `directory` (it must not hold an earlier capture); `side` is 'host' or 'device'."""
+        if side not in ("host", "device"):
+            raise ValueError(f"capture side {side!r} invalid: 'host' (the firmware) or 'device' (an emulator)")
+        directory.mkdir(parents=True, exist_ok=True)
+        if (directory / "index.csv").exists():
+            raise ValueError(f"capture directory {str(directory)!r} already holds a capture (index.csv): "
+                             "give an empty or new directory")
+        self.directory = directory
+        self.clock_s = clock_s
+        self.side = side
+        self._files: dict[str, BinaryIO] = {}
+        self._sizes: dict[str, int] = {}
+        self._index: TextIO = (directory / "index.csv").open("w", encoding="ascii", newline="")
+        self._index.write("t_s,file,offset,bytes\n")
+        self._unflushed = 0
+        self.closed = False
+
+    def open(self, port: str, *directions: str) -> None:
+        """Create the files of `port` for `directions` ('tx', 'rx') now, so an idle direction is an empty file."""
+        for d in directions:
+            self._file(f"{port}.{d}.bin")
+
+    def _file(self, name: str) -> BinaryIO:
+        f = self._files.get(name)
+        if f is None:
+            f = self._files[name] = (self.directory / name).open("wb")
+            self._sizes[name] = 0
+        return f
+
+    def record(self, port: str, direction: str, data: bytes, t_s: float | None = None) -> None:
+        """Append `data` moved on `port` in `direction` ('tx' or 'rx') at `t_s` (default: now)."""
+        if not data or self.closed:
+            return
+        name = f"{port}.{direction}.bin"
+        f = self._file(name)
+        f.write(data)
+        offset = self._sizes[name]
+        self._sizes[name] = offset + len(data)
+        t = self.clock_s() if t_s is None else t_s
+        self._index.write(f"{t:.9f},{name},{offset},{len(data)}\n")
+        self._unflushed += 1
+        if self._unflushed >= FLUSH_EVERY:
+            self.flush()
+
+    def flush(self) -> None:
+        """Push everything recorded so far to the files."""
+        for f in self._files.values():
+            f.flush()
+        self._index.flush()
+        self._unflushed = 0
+
+    def tap(self, port: str, uart: Uart) -> TapUart:
+        """`uart` seen through a tap that records what crosses it as `port`."""
+        self.open(port, "tx", "rx")
+        return TapUart(uart, self, port)
+
+    def tap_board(self, board: Board) -> Board:
+        """The board with its three UARTs tapped (the firmware gets this one)."""
+        return replace(board, motor_uart=self.tap("motor", board.motor_uart),
+                       imu_uart=self.tap("imu", board.imu_uart),
+                       telemetry_uart=self.tap("telemetry", board.telemetry_uart))
+
+    def manifest(self) -> dict:
+        """Per file: bytes, protocol and how to decode it."""
+        files = {}
+        for name in sorted(self._sizes):
+            port, direction, _ = name.split(".")
+            protocol = PROTOCOLS.get(port, "raw")
+            cmd = f"pafp decode --protocol {protocol}"
+            if protocol == "vesc":
+                cmd += f" --direction {_VESC_DIRECTION[self.side, direction]}"
+            files[name] = {"bytes": self._sizes[name], "port": port, "direction": direction,
+                           "protocol": protocol, "decode": f"{cmd} {name}"}
+        return {"side": self.side, "clock": "seconds since the run's start", "files": files}
+
+    def close(self) -> None:
+        """Flush and close every file; write capture.json (atomically). Closing twice is harmless."""
+        if self.closed:
+            return
+        self.closed = True
+        for f in self._files.values():
+            f.close()
+        self._index.close()
+        tmp = self.directory / "capture.json.tmp"
+        tmp.write_text(json.dumps(self.manifest(), indent=2) + "\n", encoding="utf-8")
+        os.replace(tmp, self.directory / "capture.json")
+
+
+class TapUart(Uart):
+    """A `Uart` that forwards to `inner` and records every byte written and read (a logic analyser on the pins)."""
+
+    def __init__(self, inner: Uart, capture: WireCapture, port: str) -> None:
+        """Same baud and name as `inner`."""
+        super().__init__(inner.baud, name=inner.name)
+        self.inner = inner
+        self.capture = capture
+        self.port = port
+
+    def _send(self, data: bytes) -> int:
+        n = self.inner.write(data)
+        self.capture.record(self.port, "tx", data[:n])
+        return n
+
+    def _receive(self, max_bytes: int) -> bytes:
+        data = self.inner.read(max_bytes)
+        self.capture.record(self.port, "rx", data)
+        return data
+
+    def _rx_count(self) -> int:
+        return self.inner.in_waiting()
+
+    def _tx_space(self) -> int:
+        return self.inner.tx_free()
+
+    def _drain(self, timeout_s: float) -> bool:
+        return self.inner.flush(timeout_s)
+
+    def _refresh_errors(self) -> None:
+        self._errors = self.inner.errors  # the inner port's counters (it counted the refused bytes too)
+
+    def _close(self) -> None:
+        self.inner.close()
