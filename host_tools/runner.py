@@ -4,6 +4,11 @@ This is the composition root of virtual mode: the only place that knows the firm
 bench and the kernel together. The firmware gets a `Board`; the kernel gets the firmware's tasks and
 the bench's interrupt sources; a zero-cost bench probe (lowest priority, not part of the firmware)
 samples the plant's true angle for the tracking metrics.
+
+The scheduler runs in segments of SEGMENT_S simulated seconds (the outputs are the same byte for byte
+as in one go); with ``RunConfig.stream_to`` set, what each segment produced goes to the files at once
+(host_tools/run_files.py), so a run's memory does not grow with its length, and ``should_stop`` is asked
+between segments (a stop signal: the run ends there, marked incomplete).
 """
 
 from __future__ import annotations
@@ -19,7 +24,10 @@ from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
 from host_tools.probe import Action, Probe, ProbeBody
+from host_tools.run_files import RunFiles
+from host_tools.tracking_stream import TrackingStream
 from host_tools.wire_capture import WireCapture
+from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 from rtos.scheduler import SchedulerNow
@@ -27,16 +35,16 @@ from rtos.stats import DeadlineHealth
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
 
-PROFILES = Path(__file__).resolve().parents[1] / "profiles"
 PROBE_HZ = 500
+SEGMENT_S = 1  # simulated seconds between two hand-overs to the files (and two checks of should_stop)
 WATCHDOG_TIMEOUT_S = 0.050
 
 
 def board_profile(name: str = "stm32f4") -> dict:
     """Load profiles/board_<name>.toml (clock and interrupt costs)."""
-    path = PROFILES / f"board_{name}.toml"
-    if not path.exists():
-        choices = sorted(p.stem.removeprefix("board_") for p in PROFILES.glob("board_*.toml"))
+    path = profile_path(f"board_{name}.toml")
+    if not path.is_file():
+        choices = [p.stem.removeprefix("board_") for p in profile_paths("board_*.toml")]
         raise ValueError(f"board profile {name!r} not found: choose one of {choices}")
     return tomllib.loads(path.read_text(encoding="utf-8"))
 
@@ -52,7 +60,8 @@ class RunConfig:
     firmware: FirmwareConfig | None = None
     reference_csv: Path | None = None
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
-    trace_capacity: int = 200_000
+    trace_capacity: int = 100_000  # the trace keeps the last this many jobs (0: no trace)
+    stream_to: Path | None = None  # write telemetry.bin/.csv there as the run goes (see RunFiles)
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
     # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
@@ -82,6 +91,8 @@ class RunResult:
     sim_time_s: float
     wall_time_s: float
     gait_start_s: float | None
+    files: RunFiles | None = None  # the streamed files (then `telemetry` is empty and the probe drained)
+    complete: bool = True  # False when should_stop ended the run early
 
 
 def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
@@ -102,8 +113,9 @@ class _Sporadic:
     cost_cycles: int
 
 
-def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None) -> RunResult:
-    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides."""
+def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
+                should_stop: Callable[[], bool] | None = None) -> RunResult:
+    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides (or until should_stop())."""
     board_cfg = board_profile(cfg.board)
     f_cpu = int(board_cfg["f_cpu_hz"])
     isr = dict(board_cfg.get("isr_cycles", {}))
@@ -141,13 +153,32 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
         cfg.setup(bench, fw)
 
     sim_s = cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05
-    wall0 = time.perf_counter()
+    t_end = int(sim_s * f_cpu)
+    files = None
+    if cfg.stream_to is not None:
+        tracking = TrackingStream(stride_s=fw_cfg.stride_s, strides=cfg.strides, dt_s=1.0 / PROBE_HZ,
+                                  expected_samples=int(sim_s * PROBE_HZ))
+        files = RunFiles(cfg.stream_to, tracking, f_cpu)
+    wall = 0.0
+    complete = True
+    segment = SEGMENT_S * f_cpu
     try:
-        sched.run_until(int(sim_s * f_cpu), progress=progress)
+        for t in [*range(segment, t_end, segment), t_end]:
+            wall0 = time.perf_counter()
+            sched.run_until(t)
+            wall += time.perf_counter() - wall0
+            if files is not None:
+                files.drain(bench, probe, fw)
+            if progress is not None:
+                progress(t / t_end)
+            if should_stop is not None and should_stop() and t < t_end:
+                complete = False
+                break
     finally:
         if wire is not None:
             wire.close()
-    wall = time.perf_counter() - wall0
-
-    return RunResult(cfg, fw, bench, sched, bounds, probe, bench.telemetry_bytes(), sched.now / f_cpu, wall,
-                     fw.gait_start_s)
+    if files is not None:
+        files.close()
+    telemetry = bench.telemetry_bytes() if files is None else b""
+    return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
+                     files, complete)

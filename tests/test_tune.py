@@ -97,7 +97,7 @@ def test_profile_with_a_misspelled_key_is_refused_naming_the_key(tmp_path, old, 
     assert text.count(old) == 1
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace(old, new), encoding="utf-8")
-    with pytest.raises(ValueError, match="unknown or missing key") as info:
+    with pytest.raises(ValueError) as info:
         load_firmware_config(bad)
     assert needle in str(info.value) and str(bad) in str(info.value)
 

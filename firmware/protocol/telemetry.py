@@ -13,11 +13,11 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from enum import IntEnum
-from operator import attrgetter
-from typing import Any, NamedTuple
+from operator import attrgetter, itemgetter
+from typing import Any, NamedTuple, TypeVar
 
 from firmware.protocol.cobs import cobs_decode
 from firmware.protocol.telemetry_frame import RecordFramer, crc16
@@ -245,11 +245,40 @@ def record_from_values(values: dict[str, int | float]) -> TelemetryRecord:
 def decode_frame(frame: bytes) -> TelemetryRecord:
     """Decode one frame (COBS bytes, with or without the trailing 0x00); FrameError on bad input."""
     encoded = frame[:-1] if frame.endswith(b"\x00") else frame
+    return record_from_values(decode_payload(_unstuff(encoded)))
+
+
+def _unstuff(encoded: bytes) -> bytes:
+    """The payload of a COBS-encoded frame (no delimiter); FrameError if the encoding is broken."""
     try:
-        payload = cobs_decode(encoded)
+        return cobs_decode(encoded)
     except ValueError as exc:
         raise FrameError(str(exc)) from None
-    return record_from_values(decode_payload(payload))
+
+
+_values_tuple: Callable[[dict[str, int | float]], tuple[int | float, ...]] = itemgetter(*RECORD_FIELDS)
+
+
+def decode_values(payload: bytes) -> tuple[int, tuple[int | float, ...]]:
+    """(seq, field values in RECORD_FIELDS order) of an unframed payload; FrameError subclasses on bad input.
+
+    A version-1 record of exactly the known fields is unpacked in one go; anything else (a newer writer's
+    extra fields) goes through :func:`decode_payload`.
+    """
+    if len(payload) == RECORD_PAYLOAD_LEN:
+        data = payload[:-2]
+        version, count, *values = _RECORD_DATA.unpack(data)
+        if version in SUPPORTED_VERSIONS and count == BASE_FIELD_COUNT:
+            if crc16(data) != _CRC.unpack(payload[-2:])[0]:
+                decode_payload(payload)  # raises the CrcError with its message
+            return int(values[0]), tuple(values)
+    values_tuple = _values_tuple(decode_payload(payload))
+    return int(values_tuple[0]), values_tuple
+
+
+def _record(payload: bytes) -> tuple[int, TelemetryRecord]:
+    rec = record_from_values(decode_payload(payload))
+    return rec.seq, rec
 
 
 def record_to_row(rec: TelemetryRecord) -> dict[str, int | float | str]:
@@ -283,6 +312,9 @@ class TelemetryStats:
     sequence_resets: int = 0
 
 
+T = TypeVar("T")
+
+
 class TelemetryDecoder:
     """Streaming decoder: splits on 0x00, decodes each frame, counts every failure; never raises."""
 
@@ -300,10 +332,20 @@ class TelemetryDecoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[TelemetryRecord]:
         """Consume bytes and return the records whose frames they complete."""
+        return self._feed(data, _record)
+
+    def feed_values(self, data: bytes | bytearray | memoryview) -> list[tuple[int | float, ...]]:
+        """As :meth:`feed`, but each record as the tuple of its field values (RECORD_FIELDS order, enums as ints).
+
+        The same counters; no record objects (a long run's CSV is written from these).
+        """
+        return self._feed(data, decode_values)
+
+    def _feed(self, data: bytes | bytearray | memoryview, build: Callable[[bytes], tuple[int, T]]) -> list[T]:
         if not isinstance(data, bytes):
             data = bytes(data)
         self.stats.bytes_in += len(data)
-        records: list[TelemetryRecord] = []
+        records: list[T] = []
         start, n = 0, len(data)
         while start <= n:
             end = data.find(b"\x00", start)
@@ -324,7 +366,7 @@ class TelemetryDecoder:
                 self.stats.dropped_bytes += 1
                 self._discarding = False
             else:
-                rec = self._decode(bytes(self._buf))
+                rec = self._decode(bytes(self._buf), build)
                 self._buf.clear()
                 if rec is not None:
                     records.append(rec)
@@ -338,13 +380,13 @@ class TelemetryDecoder:
         self._discarding = False
         self._last_seq = None
 
-    def _decode(self, encoded: bytes) -> TelemetryRecord | None:
+    def _decode(self, encoded: bytes, build: Callable[[bytes], tuple[int, T]]) -> T | None:
         """Decode one delimited frame (its delimiter included in the byte counts) or count why not."""
         if not encoded:
             self.stats.dropped_bytes += 1  # idle delimiter
             return None
         try:
-            rec = decode_frame(encoded)
+            seq, result = build(_unstuff(encoded))
         except UnknownVersionError:
             self.stats.unknown_versions += 1
         except CrcError:
@@ -353,9 +395,9 @@ class TelemetryDecoder:
             logger.debug("bad telemetry frame: %s", exc)
             self.stats.bad_frames += 1
         else:
-            self._count_sequence(rec.seq)
+            self._count_sequence(seq)
             self.stats.records += 1
-            return rec
+            return result
         self.stats.dropped_bytes += len(encoded) + 1
         return None
 

@@ -7,9 +7,19 @@ ports not bound to ``sim://`` are opened with pyserial and the RTOS runs on the 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
+import signal
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from host_tools.outdir import RunDir
+    from host_tools.runner import RunConfig
 
 HELP = "run the firmware on the virtual bench, or on serial ports (--motor/--imu): tracking, deadlines, report"
 
@@ -26,6 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
+    parser.add_argument("--no-trace", action="store_true", help="do not write trace.json")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
@@ -77,13 +89,19 @@ def _warn_link_budget(baud: int, control_hz: int, full_values_hz: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched."""
+    """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched.
+
+    Every input is checked before the run (exit 2, one line, nothing written). The outputs are staged
+    beside --out and put in place whole (host_tools/outdir.py). SIGINT or SIGTERM ends a virtual run at
+    the next segment: what it has is written, marked ``"complete": false``, exit 128 + the signal's number.
+    """
     if args.motor or args.imu:
         return _run_serial(args)
     from firmware.config import load_firmware_config
-    from host_tools.report import write_outputs
-    from host_tools.runner import RunConfig, board_profile, run_virtual
+    from host_tools.outdir import OutDirError, RunDir
+    from host_tools.runner import RunConfig, board_profile
 
+    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
         fw_cfg = load_firmware_config(args.profile)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
@@ -92,31 +110,83 @@ def run(args: argparse.Namespace) -> int:
         if args.reference is not None:
             from firmware.control.reference import GaitReference
 
-            GaitReference.from_csv(args.reference)
+            GaitReference.from_csv(args.reference, stride_s=fw_cfg.stride_s)
+        run_dir = RunDir(out)  # --out checked and the staging directory made: before the run
     except OSError as e:
         print(f"pafp run: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
         return 2
-    except ValueError as e:
+    except (ValueError, OutDirError) as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        return _run_virtual(args, cfg, run_dir)
+    except BaseException:
+        run_dir.discard()
+        raise
+
+
+def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> int:
+    """The virtual run proper, streaming into run_dir, which is published at the end."""
+    from dataclasses import replace
+
+    from host_tools.report import write_outputs
+    from host_tools.runner import run_virtual
+
+    fw_cfg = cfg.firmware
+    assert fw_cfg is not None
+    out = run_dir.out
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
+    cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity)
     bar = _Progress(not args.quiet)
-    result = run_virtual(cfg, progress=bar)
-    bar.done()
-    s = write_outputs(result, out)
+    stop: list[signal.Signals] = []
+    with _stop_on_signals(stop):
+        result = run_virtual(cfg, progress=bar, should_stop=lambda: bool(stop))
+        bar.done()
+        s = write_outputs(result, run_dir.path, plot=not args.no_plot, trace=not args.no_trace)
+        run_dir.publish()
     print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']}; "
-          f"{s['build']})")
-    print(f"  tracking: RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg, lag {s['lag_ms']:.1f} ms")
+          f"{s['build']}); whole process {s['process_wall_time_s']:.2f} s (factor {s['process_realtime_factor']})")
+    print(f"  tracking: RMS {_num(s['rms_error_deg'], 3)} deg, max {_num(s['max_error_deg'], 3)} deg, "
+          f"lag {_num(s['lag_ms'], 1)} ms")
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
     print(f"  {'task':<11}{'jobs':>8}{'worst us':>11}{'bound us':>11}{'deadline':>10}{'misses':>8}")
     for name, t in s["tasks"].items():
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
-    print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv")
+    written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
+               *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
+    print(f"  outputs: {out}/{', '.join(written)}")
+    if stop:
+        print(f"pafp run: stopped by {stop[0].name} after {s['sim_time_s']:.2f} s simulated; the outputs hold "
+              "what the run had (\"complete\": false)", file=sys.stderr)
+        return 128 + int(stop[0])
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
+
+
+@contextlib.contextmanager
+def _stop_on_signals(stop: list[signal.Signals]) -> Iterator[None]:
+    """SIGINT and SIGTERM append themselves to stop (the run ends at its next segment); a second one interrupts."""
+    def handle(signum: int, frame: object) -> None:
+        if stop:
+            raise KeyboardInterrupt
+        stop.append(signal.Signals(signum))
+
+    if threading.current_thread() is not threading.main_thread():  # only the main thread can take signals
+        yield
+        return
+    previous = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _num(value: float | None, digits: int) -> str:
+    """A summary figure for the terminal: rounded, or n/a when the run has none (null in summary.json)."""
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
 def _run_serial(args: argparse.Namespace) -> int:
@@ -129,6 +199,14 @@ def _run_serial(args: argparse.Namespace) -> int:
 
     if not (args.motor and args.imu):
         print("pafp run: serial mode needs both --motor PORT and --imu PORT", file=sys.stderr)
+        return 2
+    from host_tools.outdir import OutDirError, check_out_dir
+
+    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        check_out_dir(out)  # before any port is opened (serial mode writes into it, not staged)
+    except OutDirError as e:
+        print(f"pafp run: {e}", file=sys.stderr)
         return 2
     telemetry_pty = None
     try:
@@ -148,7 +226,6 @@ def _run_serial(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     print(f"pafp run: serial mode, motor {cfg.motor}, imu {cfg.imu}, {cfg.duration_s:g} s -> {out}", flush=True)
     if telemetry_pty is not None:
         print(f"telemetry: {telemetry_pty.path}  (watch it: pafp monitor {telemetry_pty.path})", flush=True)
