@@ -180,7 +180,7 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     if trace and r.scheduler.trace is not None:
         r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
     fw = r.firmware
-    if plot and r.gait_start_s is not None and len(tracking.plot.t_s):
+    if plot:  # drawn on every path, also when no stride ran (a run stopped early still shows its currents)
         from host_tools.plots import plot_tracking  # matplotlib: only when a plot is drawn
 
         ref = fw.reference
@@ -190,7 +190,7 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         tmp = out / ".tracking.tmp.png"  # matplotlib picks the format from the name's end
         plot_tracking(tmp, tracking.strides, (pct, band[:, 0], band[:, 1]), p.t_s,
                       p.current_cmd_a, p.current_meas_a, p.error_deg,
-                      f"Gait tracking, {s['strides']} strides, RMS {s['rms_error_deg']:.2f}°")
+                      f"Gait tracking, {s['strides']} strides, RMS {_figure(s['rms_error_deg'], 2, '°')}")
         tmp.replace(out / "tracking.png")
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)
