@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if args.motor or args.imu:
         return _run_serial(args)
     from firmware.config import load_firmware_config
-    from host_tools.report import write_outputs
+    from host_tools.report import tracking_text, write_outputs
     from host_tools.runner import RunConfig, board_profile, run_virtual
 
     try:
@@ -101,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
     s = write_outputs(result, out)
     print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']}; "
           f"{s['build']})")
-    print(f"  tracking: RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg, lag {s['lag_ms']:.1f} ms")
+    for line in tracking_text(s["tracking"]):
+        print(line)
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
     print(f"  {'task':<11}{'jobs':>8}{'worst us':>11}{'bound us':>11}{'deadline':>10}{'misses':>8}")
@@ -138,14 +139,15 @@ def _run_serial(args: argparse.Namespace) -> int:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
     bar.done()
-    from host_tools.report import write_outputs  # matplotlib: imported after the run, not before it
+    from host_tools.report import tracking_text, write_outputs  # matplotlib: imported after the run
     from host_tools.serial_report import serial_extra
 
     extra, md = serial_extra(result)
     s = write_outputs(result, out, extra, md)
     rt, j = s["realtime"], s["realtime"]["release_jitter_us"]
     print(f"  ran {s['sim_time_s']:.2f} s on the wall clock; {s['strides']} whole strides")
-    print(f"  tracking ({s['angle_source']}): RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg")
+    for line in tracking_text(s["tracking"]):
+        print(line)
     print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
           f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}")
