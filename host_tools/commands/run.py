@@ -24,6 +24,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    parser.add_argument("--plant-seed", type=int, default=None, metavar="N",
+                        help="draw the plant's parameters from their tolerances (profiles/plant_tolerances.toml) "
+                             "with seed N; default: the nominal plant. The firmware keeps its nominal model")
+    parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
+                        help="switch one imperfection of the real bench off (profiles/bench_imperfections.toml: "
+                             "imu_bias, imu_drift, imu_noise, encoder_offset, ...), or all; repeatable")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
@@ -80,8 +86,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         fw_cfg = load_firmware_config(args.profile)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
-                        firmware=fw_cfg, reference_csv=args.reference)
+                        firmware=fw_cfg, reference_csv=args.reference, plant_seed=args.plant_seed,
+                        ideal=tuple(args.ideal))
         board_profile(args.board)  # fail early with a clear message, before anything runs
+        cfg.bench_setup()  # the plant draw and the imperfection names, checked before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
 
@@ -93,7 +101,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed} -> {out}")
+    plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
+    ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
+    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
     bar = _Progress(not args.quiet)
     result = run_virtual(cfg, progress=bar)
