@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from host_tools.benchtests import backdrive, fast_response, loading, uncontrolled
+from host_tools.benchtests import backdrive, design_point, fast_response, loading, spring_calibration, uncontrolled
 from host_tools.benchtests.output import Figure
 from host_tools.cli import main
 
@@ -129,3 +129,25 @@ def test_every_bench_row_has_a_basis():
         Figure("x", "s", "", None, 1.0)
     with pytest.raises(ValueError, match="basis"):
         Figure("x", "s", "", None, 1.0, basis="fitted")  # the parameter must be named
+
+
+def test_spring_calibration_tables_imply_far_less_than_215_n_per_m():
+    # Tables B4/B5 (5 oscillations of 680 g in 5.92 s, of 1080 g in 8.36 s) give k = m (2 pi/T)^2 of
+    # 19.2 and 15.3 N/m, 11.4 N/m with the spring's mass cancelled: none is near 215 or 250 N/m.
+    r = spring_calibration.run()
+    p = r.parameters
+    assert p["k_680g_n_per_m"] == pytest.approx(0.68 * (2 * math.pi / (29.6 / 25)) ** 2)
+    assert p["k_two_mass_n_per_m"] < p["k_1080g_n_per_m"] < p["k_680g_n_per_m"] < 0.1 * 215
+    assert all(f.basis == "predicted" for f in r.figures)
+
+
+def test_design_point_within_the_current_limit_above_the_rated_torque():
+    # 14 N*m at 55 rpm needs ~7.5 A (the firmware's 12 A allows ~22 N*m) and ~13 V of the 24 V bus, but
+    # exceeds the maker's rated continuous torque carried through the belt (3 N*m x 4.67 x 0.95 = 13.3).
+    r = design_point.run()
+    rows = {f.name: f.emulated_value for f in r.figures}
+    assert 7.0 < rows["current for 14 N*m at the ankle"] < 12.0
+    assert rows["bus voltage for 14 N*m at 55 rpm"] < 24.0
+    assert rows["ankle torque at the firmware's current limit"] == pytest.approx(22.4, abs=0.1)
+    assert rows["maker's rated (continuous) torque at the ankle"] < 14.0
+    assert r.parameters["safety_case"]["voltage_v"] > 24.0
