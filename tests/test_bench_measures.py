@@ -46,7 +46,7 @@ def test_four_tracking_figures_and_the_imu_shows_degrees(two_strides):
 
 
 def test_a_run_stopped_before_one_stride_gives_no_figure():
-    r = run_virtual(RunConfig(strides=2, trace_capacity=0, setup=_estop_at(1.6)))  # gait starts near 1.0 s
+    r = run_virtual(RunConfig(strides=2, trace_capacity=0, setup=_estop_at(1.2)))  # gait starts near 0.51 s
     s = summarise(r)
     tr = s["tracking"]
     assert s["supervisor_state"] == "SAFE"
