@@ -171,6 +171,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     wall0 = time.perf_counter()
     sched.run_until(int(sim_s * f_cpu), progress=progress)
     wall = time.perf_counter() - wall0
+    bench_record["imperfections"]["backlash_crossings"] = bench.plant.raw.gap_crossings
 
     return RunResult(cfg, fw, bench, sched, bounds, probe, bench.telemetry_bytes(), sched.now / f_cpu, wall,
                      fw.gait_start_s, bench_record)

@@ -2,7 +2,8 @@
 
 The default is the real device: every imperfection on. ``Imperfections.bench_options(seed)`` turns the
 enabled ones into VirtualBench arguments (the IMU's bias, drift and noise; the foot's pose at power-up,
-which is where the incremental encoder's zero falls);
+which is where the incremental encoder's zero falls; the gearbox backlash, a torque dead time at each
+reversal in the plant);
 random ones are drawn from the run's seed, so the same seed gives the same bench. Imperfections the
 single-degree-of-freedom plant cannot carry yet are listed with ``modelled = False``: they are
 documented with their size and change nothing (docs/plant.md, "Imperfections").
@@ -27,7 +28,7 @@ DEFAULT_PROFILE = Path(__file__).resolve().parents[2] / "profiles" / "bench_impe
 NAMES: tuple[str, ...] = ("imu_bias", "imu_drift", "imu_noise", "encoder_offset", "gearbox_backlash",
                           "belt_compliance", "output_pulley_compliance", "torque_ripple")
 #: The ones that act on the virtual bench today.
-MODELLED: frozenset[str] = frozenset({"imu_bias", "imu_drift", "imu_noise", "encoder_offset"})
+MODELLED: frozenset[str] = frozenset({"imu_bias", "imu_drift", "imu_noise", "encoder_offset", "gearbox_backlash"})
 # key -> (lowest, highest) of every number the modelled ones read
 _RANGES: dict[tuple[str, str], tuple[float, float]] = {
     ("imu_bias", "sigma_deg"): (0.0, 10.0),
@@ -35,6 +36,7 @@ _RANGES: dict[tuple[str, str], tuple[float, float]] = {
     ("imu_drift", "tau_s"): (0.01, 3600.0),
     ("imu_noise", "sigma_deg"): (0.0, 5.0),
     ("encoder_offset", "max_deg"): (0.0, 10.0),
+    ("gearbox_backlash", "actuator_output_deg"): (0.0, 10.0),
 }
 
 
@@ -62,7 +64,7 @@ class Imperfections:
         return float(self.tables[name][key]) if self.enabled(name) else 0.0
 
     def bench_options(self, seed: int) -> dict[str, Any]:
-        """VirtualBench arguments for the enabled imperfections: imu_config and initial_angle_rad.
+        """VirtualBench arguments for the enabled imperfections: imu_config, initial_angle_rad, backlash_rad.
 
         The encoder is incremental (the firmware's angle is 0 at its first sample), so its offset is
         the foot's pose at power-up: the bench starts the foot there instead of at the zero mark.
@@ -75,7 +77,8 @@ class Imperfections:
         max_offset = math.radians(self._value("encoder_offset", "max_deg"))
         rng = np.random.default_rng((seed, 0xE0C))  # its own stream: the other draws do not move it
         offset = float(rng.uniform(-max_offset, max_offset)) if max_offset > 0 else 0.0
-        return {"imu_config": imu, "initial_angle_rad": offset}
+        backlash = math.radians(self._value("gearbox_backlash", "actuator_output_deg"))
+        return {"imu_config": imu, "initial_angle_rad": offset, "backlash_rad": backlash}
 
     def as_dict(self) -> dict[str, dict[str, Any]]:
         """{name: {"enabled", "modelled", values...}} for summary.json."""
