@@ -155,13 +155,26 @@ def tracking_text(tr: dict) -> list[str]:
     return out
 
 
+def _bench_lines(s: dict) -> list[str]:
+    """What plant and which imperfections the run had (virtual mode only)."""
+    if "plant" not in s:
+        return []
+    seed = s["plant"]["seed"]
+    plant = "nominal plant" if seed is None else f"plant drawn from its tolerances with seed {seed}"
+    imp = s["imperfections"]
+    on = [k for k, v in imp.items() if isinstance(v, dict) and v["enabled"] and v["modelled"]]
+    off = [k for k, v in imp.items() if isinstance(v, dict) and not v["enabled"] and v["modelled"]]
+    return [f"Bench: {plant}; imperfections on: {', '.join(on) or 'none'}"
+            + (f"; switched off: {', '.join(off)}" if off else "") + ".", ""]
+
+
 def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     lines = [
         "# pafp run report", "",
         f"{s['strides']} strides, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
         f"(realtime factor {s['realtime_factor']}; {s['build']}), motor link {s['baud']} baud, seed {s['seed']}.",
         "",
-        *tracking_lines(s["tracking"]), "",
+        *tracking_lines(s["tracking"]), "", *_bench_lines(s),
         "| metric | value |", "|---|---|",
         f"| deadline misses | {s['deadline_misses']} |",
         f"| faults | {', '.join(s['faults']) or 'none'} |",
