@@ -17,13 +17,16 @@ import numpy as np
 
 from firmware.protocol.telemetry import TelemetryDecoder
 from host_tools.build_info import describe
+from host_tools.metrics import TrackingMetrics
 from host_tools.outdir import write_atomic
 from host_tools.process_clock import process_elapsed_s
 from host_tools.runner import RunResult
 from host_tools.telemetry_csv import TelemetryCsv
-from host_tools.tracking_stream import TrackingResult, TrackingStream
+from host_tools.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 
-__all__ = ["strict_json", "summarise", "tracking_of", "write_outputs"]
+__all__ = ["TRACKING_SIGNALS", "strict_json", "summarise", "tracking_lines", "tracking_of", "tracking_summary",
+           "tracking_text", "write_outputs"]
+
 
 
 def strict_json(value: object) -> object:
@@ -49,11 +52,37 @@ def tracking_of(r: RunResult) -> TrackingResult:
     p = r.probe.arrays()
     t = p["t_s"]
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    stream = TrackingStream(stride_s=r.firmware.config.stride_s, strides=r.config.strides, dt_s=dt,
-                            expected_samples=len(t))
+    stream = probe_stream(stride_s=r.firmware.config.stride_s, strides=r.config.strides, dt_s=dt,
+                          expected_samples=len(t))
     stream.set_start(r.gait_start_s)
-    stream.add(t, p["reference_rad"], p["true_angle_rad"], p["current_cmd_a"], p["current_meas_a"])
+    feed_probe(stream, p)
     return stream.finish()
+
+
+def _has_plant(r: RunResult) -> bool:
+    """Whether the probe's true angle is a plant's (serial mode without one records the fused estimate)."""
+    return getattr(r, "angle_source", "plant") == "plant"
+
+
+def _figures(m: TrackingMetrics, enough: bool) -> dict[str, float | None]:
+    """{"rms_deg", "max_deg", "lag_ms"} rounded; None when the run had too little RUN time or no sample."""
+    if not enough or not m.samples:
+        return {"rms_deg": None, "max_deg": None, "lag_ms": None}
+    return {"rms_deg": round(m.rms_error_deg, 4), "max_deg": round(m.max_error_deg, 4), "lag_ms": round(m.lag_ms, 2)}
+
+
+def tracking_summary(r: RunResult, tracking: TrackingResult) -> dict:
+    """The four tracking figures over the RUN window, measured ones first, with the time they cover."""
+    t = tracking
+    out: dict = {"time_in_run_s": round(t.time_in_run_s, 3), "min_run_s": round(t.min_run_s, 3),
+                 "enough_run": t.enough}
+    if not t.enough:
+        out["note"] = (f"only {t.time_in_run_s:.3f} s of gait with the supervisor in RUN, less than one stride "
+                       f"({t.min_run_s:g} s): no tracking figure")
+    for name, _, _ in TRACKING_SIGNALS:
+        out[name] = _figures(t.metrics[name], t.enough and (name != "truth" or _has_plant(r)))
+    out["truth"]["emulation_only"] = True
+    return out
 
 
 def _us(cycles: int | None, f_cpu: int) -> float | None:
@@ -64,7 +93,9 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
     """The summary of a run as plain JSON-able values (tracking: from tracking_of(r), computed if not given)."""
     fw, sched = r.firmware, r.scheduler
     f_cpu = fw.f_cpu_hz
-    m = (tracking or tracking_of(r)).metrics
+    tracking = tracking or tracking_of(r)
+    # the legacy top-level figures: the probe's angle (the plant's true one in virtual mode) over the window
+    m = _figures(tracking.metrics["truth"], tracking.enough)
     files = getattr(r, "files", None)
     bounds = {b.name: b for b in r.bounds}
     deadlines = {t.name: t.relative_deadline for t in fw.tasks}  # firmware tasks only (no bench probe)
@@ -91,9 +122,11 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
         "wall_time_s": round(r.wall_time_s, 3),
         "realtime_factor": round(r.sim_time_s / r.wall_time_s, 2) if r.wall_time_s > 0 else None,
         "build": describe(),
-        "rms_error_deg": round(m.rms_error_deg, 4),
-        "max_error_deg": round(m.max_error_deg, 4),
-        "lag_ms": round(m.lag_ms, 2),
+        "tracking": tracking_summary(r, tracking),
+        **getattr(r, "bench_record", {}),
+        "rms_error_deg": m["rms_deg"],
+        "max_error_deg": m["max_deg"],
+        "lag_ms": m["lag_ms"],
         "deadline_misses": sum(t["misses"] for t in tasks.values()),
         "faults": faults,
         "cpu_utilisation": round(util.total, 5),
@@ -131,16 +164,59 @@ def _figure(value: float | None, digits: int, unit: str) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}{unit}"
 
 
+def _num(v: float | None, fmt: str, unit: str = "") -> str:
+    return "n/a" if v is None or not math.isfinite(v) else format(v, fmt) + unit
+
+
+def tracking_lines(tr: dict) -> list[str]:
+    """The tracking figures as a Markdown table, measured ones first, truth labelled emulation-only."""
+    lines = ["| tracking error (reference minus ...) | RMS | max | lag |", "|---|---|---|---|"]
+    for name, _, text in TRACKING_SIGNALS:
+        f = tr[name]
+        lines.append(f"| {name}: {text} | {_num(f['rms_deg'], '.3f', '°')} | {_num(f['max_deg'], '.3f', '°')} | "
+                     f"{_num(f['lag_ms'], '.1f', ' ms')} |")
+    lines += ["", f"Over {tr['time_in_run_s']:.3f} s of gait with the supervisor in RUN (at least "
+              f"{tr['min_run_s']:g} s, one stride, is needed for a figure)."
+              + (f" {tr['note']}." if "note" in tr else "")]
+    return lines
+
+
+def tracking_text(tr: dict) -> list[str]:
+    """The tracking figures as lines for the terminal, measured ones first."""
+    out = []
+    for name, _, _ in TRACKING_SIGNALS:
+        f = tr[name]
+        label = "truth (emulation only)" if name == "truth" else name
+        out.append(f"  tracking, {label:<22} RMS {_num(f['rms_deg'], '.3f', ' deg')}, "
+                   f"max {_num(f['max_deg'], '.3f', ' deg')}, lag {_num(f['lag_ms'], '.1f', ' ms')}")
+    note = f" ({tr['note']})" if "note" in tr else ""
+    out.append(f"  time in RUN with the gait running: {tr['time_in_run_s']:.3f} s{note}")
+    return out
+
+
+def _bench_lines(s: dict) -> list[str]:
+    """What plant and which imperfections the run had (virtual mode only)."""
+    if "plant" not in s:
+        return []
+    seed = s["plant"]["seed"]
+    plant = "nominal plant" if seed is None else f"plant drawn from its tolerances with seed {seed}"
+    imp = s["imperfections"]
+    on = [k for k, v in imp.items() if isinstance(v, dict) and v["enabled"] and v["modelled"]]
+    off = [k for k, v in imp.items() if isinstance(v, dict) and not v["enabled"] and v["modelled"]]
+    return [f"Bench: {plant}; imperfections on: {', '.join(on) or 'none'}"
+            + (f"; switched off: {', '.join(off)}" if off else "") + ".", ""]
+
+
+
+
 def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     lines = [
         "# pafp run report", "",
         f"{s['strides']} strides, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
         f"(realtime factor {s['realtime_factor']}; {s['build']}), motor link {s['baud']} baud, seed {s['seed']}.",
         "",
+        *tracking_lines(s["tracking"]), "", *_bench_lines(s),
         "| metric | value |", "|---|---|",
-        f"| RMS tracking error | {_figure(s['rms_error_deg'], 3, '°')} |",
-        f"| max tracking error | {_figure(s['max_error_deg'], 3, '°')} |",
-        f"| lag | {_figure(s['lag_ms'], 1, ' ms')} |",
         f"| deadline misses | {s['deadline_misses']} |",
         f"| faults | {', '.join(s['faults']) or 'none'} |",
         f"| CPU utilisation | {100 * s['cpu_utilisation']:.2f} % |",
@@ -187,10 +263,14 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         pct = np.linspace(0, 100, 101)
         band = np.array([ref.band_deg(x) for x in pct])
         p = tracking.plot
+        shown = [name for name, _, _ in TRACKING_SIGNALS if name != "truth" or _has_plant(r)]
+        label = {"truth": "truth (emulation only)"}
+        strides = {label.get(n, n): st for n, st in tracking.strides.items() if n in shown and n in PLOT_STRIDES}
+        errors = {label.get(n, n): p.errors_deg[n] for n in shown}
         tmp = out / ".tracking.tmp.png"  # matplotlib picks the format from the name's end
-        plot_tracking(tmp, tracking.strides, (pct, band[:, 0], band[:, 1]), p.t_s,
-                      p.current_cmd_a, p.current_meas_a, p.error_deg,
-                      f"Gait tracking, {s['strides']} strides, RMS {_figure(s['rms_error_deg'], 2, '°')}")
+        plot_tracking(tmp, strides, (pct, band[:, 0], band[:, 1]), p.t_s, p.current_cmd_a, p.current_meas_a,
+                      errors, f"Gait tracking, {s['strides']} strides, IMU-measured RMS "
+                      f"{_figure(s['tracking']['imu']['rms_deg'], 2, '°')}")
         tmp.replace(out / "tracking.png")
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)

@@ -20,7 +20,7 @@ from firmware.protocol.telemetry import TelemetryDecoder
 from hal.virtual.bench import VirtualBench
 from host_tools.probe import Probe
 from host_tools.telemetry_csv import TelemetryCsv
-from host_tools.tracking_stream import TrackingResult, TrackingStream
+from host_tools.tracking_stream import TrackingResult, TrackingStream, feed_probe
 
 __all__ = ["RunFiles", "take_samples"]
 
@@ -56,8 +56,7 @@ class RunFiles:
             self.telemetry_bytes += len(data)
             self._csv.write(self.decoder.feed_values(data))
         self.tracking.set_start(fw.gait_start_s)
-        p = take_samples(probe)
-        self.tracking.add(p["t_s"], p["reference_rad"], p["true_angle_rad"], p["current_cmd_a"], p["current_meas_a"])
+        feed_probe(self.tracking, take_samples(probe))
 
     def close(self) -> TrackingResult:
         """Close the files; return the tracking figures (once; later calls return the same)."""

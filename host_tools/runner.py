@@ -23,9 +23,12 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
+from hal.virtual.imperfections import Imperfections, load_imperfections
+from hal.virtual.plant import load_plant_params
+from hal.virtual.plant.draw import draw_plant, drawn_values
 from host_tools.probe import Action, Probe, ProbeBody
 from host_tools.run_files import RunFiles
-from host_tools.tracking_stream import TrackingStream
+from host_tools.tracking_stream import probe_stream
 from host_tools.wire_capture import WireCapture
 from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
@@ -68,6 +71,11 @@ class RunConfig:
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
     actions: list[tuple[float, Action]] = field(default_factory=list)
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
+    # the plant drawn from its tolerances with this seed (hal.virtual.plant.draw); None: the nominal plant
+    plant_seed: int | None = None
+    # the bench's imperfections (None: profiles/bench_imperfections.toml, the real device) and those off
+    imperfections: Imperfections | None = None
+    ideal: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -75,6 +83,25 @@ class RunConfig:
             raise ValueError(f"strides {self.strides!r} out of range: an int in 1..10000")
         if not isinstance(self.baud, int) or not 9600 <= self.baud <= 3_000_000:
             raise ValueError(f"baud {self.baud!r} out of range: an int in 9600..3000000")
+        if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
+                                            or not 0 <= self.plant_seed < 2**32):
+            raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
+
+    def bench_setup(self) -> tuple[dict, dict]:
+        """(VirtualBench arguments of the plant and the imperfections, their record for summary.json).
+
+        Arguments given in bench_options win over both.
+        """
+        imp = (self.imperfections or load_imperfections()).without(self.ideal)
+        nominal = load_plant_params()
+        params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
+        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
+        params = options["plant_params"]
+        record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
+                            "output_inertia_kg_m2": params.output_inertia_kg_m2,
+                            "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
+                  "imperfections": {**imp.as_dict(), "encoder_offset_rad": options.get("initial_angle_rad", 0.0)}}
+        return options, record
 
 
 @dataclass
@@ -93,6 +120,7 @@ class RunResult:
     gait_start_s: float | None
     files: RunFiles | None = None  # the streamed files (then `telemetry` is empty and the probe drained)
     complete: bool = True  # False when should_stop ended the run early
+    bench_record: dict = field(default_factory=dict)  # the plant drawn and the imperfections (summary.json)
 
 
 def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
@@ -124,8 +152,10 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
+    bench_options, bench_record = cfg.bench_setup()
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
-                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **bench_options)
+    bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
     probe = Probe()
@@ -156,8 +186,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     t_end = int(sim_s * f_cpu)
     files = None
     if cfg.stream_to is not None:
-        tracking = TrackingStream(stride_s=fw_cfg.stride_s, strides=cfg.strides, dt_s=1.0 / PROBE_HZ,
-                                  expected_samples=int(sim_s * PROBE_HZ))
+        tracking = probe_stream(stride_s=fw_cfg.stride_s, strides=cfg.strides, dt_s=1.0 / PROBE_HZ,
+                                expected_samples=int(sim_s * PROBE_HZ))
         files = RunFiles(cfg.stream_to, tracking, f_cpu)
     wall = 0.0
     complete = True
@@ -179,6 +209,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
             wire.close()
     if files is not None:
         files.close()
+    bench_record["imperfections"]["backlash_crossings"] = bench.plant.raw.gap_crossings
     telemetry = bench.telemetry_bytes() if files is None else b""
     return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
-                     files, complete)
+                     files, complete, bench_record)

@@ -111,7 +111,8 @@ def evaluate(index: int, base: FirmwareConfig, gains: Candidate, strides: int, s
     rms_i = float(np.sqrt(np.mean(i**2)))
     rms_di = float(np.sqrt(np.mean(np.diff(i) ** 2)))
     sat = float(np.mean(np.abs(i) >= SATURATION_LEVEL * cfg.current_limit_a))
-    rms, mx = float(s["rms_error_deg"]), float(s["max_error_deg"])
+    # None: less than one stride in RUN (host_tools.metrics), scored as not stable below
+    rms, mx = (math.nan if s[k] is None else float(s[k]) for k in ("rms_error_deg", "max_error_deg"))
     reasons = []
     if s["deadline_misses"]:
         reasons.append(f"{s['deadline_misses']} deadline misses")

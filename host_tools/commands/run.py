@@ -7,13 +7,8 @@ ports not bound to ``sim://`` are opened with pyserial and the RTOS runs on the 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import math
-import signal
 import sys
-import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -34,6 +29,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    parser.add_argument("--plant-seed", type=int, default=None, metavar="N",
+                        help="draw the plant's parameters from their tolerances (profiles/plant_tolerances.toml) "
+                             "with seed N; default: the nominal plant. The firmware keeps its nominal model")
+    parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
+                        help="switch one imperfection of the real bench off (profiles/bench_imperfections.toml: "
+                             "imu_bias, imu_drift, imu_noise, encoder_offset, ...), or all; repeatable")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched.
 
     Every input is checked before the run (exit 2, one line, nothing written). The outputs are staged
-    beside --out and put in place whole (host_tools/outdir.py). SIGINT or SIGTERM ends a virtual run at
+    beside --out and put in place whole (host_tools/outdir.py). SIGINT, SIGTERM or SIGHUP ends a virtual run at
     the next segment: what it has is written, marked ``"complete": false``, exit 128 + the signal's number.
     """
     if args.motor or args.imu:
@@ -105,8 +106,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         fw_cfg = load_firmware_config(args.profile)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
-                        firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture)
+                        firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
+                        plant_seed=args.plant_seed, ideal=tuple(args.ideal))
         board_profile(args.board)  # fail early with a clear message, before anything runs
+        cfg.bench_setup()  # the plant draw and the imperfection names, checked before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
 
@@ -129,26 +132,28 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     """The virtual run proper, streaming into run_dir, which is published at the end."""
     from dataclasses import replace
 
-    from host_tools.report import write_outputs
+    from host_tools.report import tracking_text, write_outputs
     from host_tools.runner import run_virtual
+    from host_tools.stop_signals import StopSignals
 
     fw_cfg = cfg.firmware
     assert fw_cfg is not None
     out = run_dir.out
-    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed} -> {out}")
+    plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
+    ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
+    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
     cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity)
     bar = _Progress(not args.quiet)
-    stop: list[signal.Signals] = []
-    with _stop_on_signals(stop):
-        result = run_virtual(cfg, progress=bar, should_stop=lambda: bool(stop))
+    with StopSignals() as stop:  # the run ends at its next segment; a second signal interrupts
+        result = run_virtual(cfg, progress=bar, should_stop=lambda: stop.name is not None)
         bar.done()
         s = write_outputs(result, run_dir.path, plot=not args.no_plot, trace=not args.no_trace)
         run_dir.publish()
     print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']}; "
           f"{s['build']}); whole process {s['process_wall_time_s']:.2f} s (factor {s['process_realtime_factor']})")
-    print(f"  tracking: RMS {_num(s['rms_error_deg'], 3)} deg, max {_num(s['max_error_deg'], 3)} deg, "
-          f"lag {_num(s['lag_ms'], 1)} ms")
+    for line in tracking_text(s["tracking"]):
+        print(line)
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
     print(f"  {'task':<11}{'jobs':>8}{'worst us':>11}{'bound us':>11}{'deadline':>10}{'misses':>8}")
@@ -158,35 +163,11 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
                *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
     print(f"  outputs: {out}/{', '.join(written)}")
-    if stop:
-        print(f"pafp run: stopped by {stop[0].name} after {s['sim_time_s']:.2f} s simulated; the outputs hold "
+    if stop.exit_code is not None:
+        print(f"pafp run: stopped by {stop.name} after {s['sim_time_s']:.2f} s simulated; the outputs hold "
               "what the run had (\"complete\": false)", file=sys.stderr)
-        return 128 + int(stop[0])
+        return stop.exit_code
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
-
-
-@contextlib.contextmanager
-def _stop_on_signals(stop: list[signal.Signals]) -> Iterator[None]:
-    """SIGINT and SIGTERM append themselves to stop (the run ends at its next segment); a second one interrupts."""
-    def handle(signum: int, frame: object) -> None:
-        if stop:
-            raise KeyboardInterrupt
-        stop.append(signal.Signals(signum))
-
-    if threading.current_thread() is not threading.main_thread():  # only the main thread can take signals
-        yield
-        return
-    previous = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-
-
-def _num(value: float | None, digits: int) -> str:
-    """A summary figure for the terminal: rounded, or n/a when the run has none (null in summary.json)."""
-    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
 def _run_serial(args: argparse.Namespace) -> int:
@@ -245,10 +226,13 @@ def _run_serial(args: argparse.Namespace) -> int:
 
         extra, md = serial_extra(result)
         s = write_outputs(result, out, extra, md)
+    from host_tools.report import tracking_text
+
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
     print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it tracking in RUN; "
           f"{s['strides']} whole strides")
-    _print_tracking(s)
+    for line in tracking_text(s["tracking"]):
+        print(line)
     print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
           f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
     w = s["host_warnings"]
@@ -275,11 +259,3 @@ def _run_serial(args: argparse.Namespace) -> int:
               f"({stop['safe_error'] or 'not drained'})", file=sys.stderr)
     return result.exit_code
 
-
-def _print_tracking(s: dict) -> None:
-    """The tracking line: only what was measured while the supervisor was in RUN."""
-    rms = s.get("rms_error_deg")
-    if rms is None or rms != rms:  # null (or NaN from an older metrics module): nothing measured
-        print("  tracking: not measured (too little time in RUN)")
-        return
-    print(f"  tracking ({s['angle_source']}): RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg")
