@@ -173,6 +173,8 @@ def _check_run_value(err: _Where, where: str, name: str, value: Any) -> Any:
             except ValueError as e:
                 raise err(f"{where}: {e}") from None
         return value
+    if typ is int and isinstance(value, float) and value.is_integer():  # from linspace / logspace
+        value = int(value)
     ok = _number(value) and (typ is float or (isinstance(value, int)))
     if not ok or not (lo is None or lo <= value) or not (hi is None or value <= hi):
         kind = "an int" if typ is int else "a number"
