@@ -19,7 +19,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from host_tools.sweep_point import FIGURES, PointTask, error_row, firmware_config_of, plant_seed_run_options, run_point
+from host_tools.sweep_point import (
+    FIGURES,
+    PointTask,
+    error_row,
+    firmware_config_of,
+    plant_seed_run_options,
+    run_point,
+    warm_up,
+)
 from host_tools.sweep_spec import SpecError, SweepSpec
 from host_tools.sweep_table import ResultsTable
 
@@ -151,6 +159,12 @@ def run_sweep(spec: SweepSpec, out: Path, client: Any, *, resume: bool = False,
     """Run every point of `spec` not already finished in `out` on the Dask `client`; write the tables as they go."""
     from dask.distributed import as_completed
 
+    try:  # every worker imports pafp now: a worker without it fails here, not once per point
+        builds = client.run(warm_up)
+    except Exception as e:  # noqa: BLE001 - whatever the worker raised, as one line
+        raise ValueError(f"the Dask workers cannot run pafp points ({type(e).__name__}: {e}): install pafp in "
+                         "every worker's environment (docs/sweeps.md)") from None
+    logging.getLogger(__name__).info("workers: %s", builds)
     t0 = time.perf_counter()
     tasks = tasks_of(spec)
     table = ResultsTable(out, columns_of(spec), spec.digest, len(tasks), resume)

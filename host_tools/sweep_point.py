@@ -8,6 +8,7 @@ plant-parameter draw is `plant_seed_run_options`.
 from __future__ import annotations
 
 import copy
+import functools
 import logging
 import math
 import tempfile
@@ -22,7 +23,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["FIGURES", "SATURATION_LEVEL", "PlantDrawUnavailable", "PointTask", "error_row", "firmware_config_of",
-           "plant_seed_run_options", "run_config_of", "run_point"]
+           "plant_seed_run_options", "run_config_of", "run_point", "warm_up"]
 
 SATURATION_LEVEL = 0.98  # of the control current limit: a tick at or above it counts as saturated
 #: Summary figures of a row, in column order.
@@ -63,6 +64,12 @@ class PointTask:
 
 def firmware_config_of(profile_text: str, overrides: dict[str, Any], profile_name: str = "profile") -> Any:
     """The FirmwareConfig of the profile text with dotted keys overridden (ValueError names the profile)."""
+    return _firmware_config(profile_text, tuple(overrides.items()), profile_name)
+
+
+@functools.lru_cache(maxsize=64)  # the Monte Carlo samples of a grid cell share one (frozen) configuration
+def _firmware_config(profile_text: str, items: tuple[tuple[str, Any], ...], profile_name: str) -> Any:
+    overrides = dict(items)
     from firmware.config import load_firmware_config
     from host_tools.sweep_spec import set_profile_key
 
@@ -132,6 +139,15 @@ def error_row(task: PointTask, status: str, error: str, wall_time_s: float = mat
 
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x**2))) if len(x) else math.nan
+
+
+def warm_up() -> str:
+    """Import what a point needs (run once on every worker before the first point); returns the build."""
+    from host_tools.build_info import describe
+    from host_tools.report import summarise  # noqa: F401
+    from host_tools.runner import run_virtual  # noqa: F401
+
+    return describe()
 
 
 def run_point(task: PointTask, plant_options: Callable[[int], dict[str, Any]] = plant_seed_run_options

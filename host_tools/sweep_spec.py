@@ -203,8 +203,8 @@ def _axis_values(err: _Where, where: str, table: dict[str, Any]) -> tuple[Any, .
     if kind == "logspace":
         if lo <= 0 or hi <= 0:
             raise err(f"{where}.logspace = {v!r} out of range: lo and hi > 0")
-        return tuple(float(x) for x in np.geomspace(lo, hi, n))
-    return tuple(float(x) for x in np.linspace(lo, hi, n))
+        return tuple(float(f"{x:.12g}") for x in np.geomspace(lo, hi, n))  # 8.0, not 7.999999999999999
+    return tuple(float(f"{x:.12g}") for x in np.linspace(lo, hi, n))
 
 
 def _unknown(err: _Where, where: str, table: dict[str, Any], allowed: tuple[str, ...]) -> None:
