@@ -38,13 +38,15 @@ PlantOptions = Callable[[int], dict[str, Any]]
 
 @contextmanager
 def dask_client(workers: int | None = None, scheduler: str | None = None, processes: bool = True) -> Iterator[Any]:
-    """A dask.distributed Client: on `scheduler` if given, else on a LocalCluster of `workers` on 127.0.0.1."""
+    """A dask.distributed Client: on `scheduler` (an address or a scheduler file) if given, else on a LocalCluster
+    of `workers` on 127.0.0.1."""
     from dask.distributed import Client, LocalCluster
 
     for name in ("distributed", "tornado"):  # the cluster's chatter; errors still show
         logging.getLogger(name).setLevel(max(logging.WARNING, logging.getLogger(name).getEffectiveLevel()))
     if scheduler:
-        client = Client(scheduler, timeout="30s")
+        by_file = scheduler.endswith(".json") and Path(scheduler).is_file()  # `dask scheduler --scheduler-file`
+        client = Client(scheduler_file=scheduler, timeout="10s") if by_file else Client(scheduler, timeout="10s")
         try:
             yield client
         finally:

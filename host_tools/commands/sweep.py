@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--workers", type=int, default=None,
                        help="worker processes of a LocalCluster on 127.0.0.1 (default: the number of cores)")
     where.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (docs/sweeps.md)")
+                       help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
     parser.add_argument("--resume", action="store_true", help="keep the finished rows in --out and run the rest")
     parser.add_argument("--point", type=int, default=None, metavar="N",
                         help="run only point N here with the full outputs of `pafp run` (tracking.png, ...)")

@@ -23,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--workers", type=int, default=None,
                        help="worker processes of a LocalCluster on 127.0.0.1 (default: the number of cores)")
     where.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (docs/sweeps.md)")
+                       help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
     parser.add_argument("--profile", type=Path, default=None,
                         help="starting firmware profile (default profiles/firmware.toml)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
