@@ -4,6 +4,7 @@ Clusters here are LocalClusters of 1-2 worker threads (processes=False: no proce
 machine); one CLI test runs the real thing, a LocalCluster of one worker process on 127.0.0.1.
 """
 
+import io
 import json
 import math
 from dataclasses import replace
@@ -16,8 +17,9 @@ import pytest
 
 from hal.virtual.plant.params import load_plant_params
 from host_tools.cli import main
-from host_tools.sweep_engine import check_points, dask_client, run_sweep, tasks_of
+from host_tools.sweep_engine import Progress, check_points, dask_client, run_sweep, tasks_of
 from host_tools.sweep_point import PlantDrawUnavailable, plant_seed_run_options, run_point
+from host_tools.sweep_report import write_report
 from host_tools.sweep_spec import SpecError, load_spec, plant_seed_of
 from host_tools.sweep_table import JOURNAL, TIMING_COLUMNS, read_rows
 
@@ -151,8 +153,25 @@ def test_rows_are_the_same_whatever_the_worker_count(tmp_path):
     csv = pacsv.read_csv(tmp_path / "one" / "results.csv").to_pylist()
     assert [r["rms_error_deg"] for r in csv] == [r["rms_error_deg"] for r in ta]
     assert all(math.isfinite(r[c]) for r in csv for c in TIMING_COLUMNS)
-    report = (tmp_path / "one" / "report.md").exists()
-    assert not report  # run_sweep writes tables; the command writes the report
+    # the report: each axis against each figure, the Monte Carlo distributions, the worst with their commands
+    report = write_report(spec, a.rows, tmp_path / "one").read_text()
+    assert "## control.position.kp" in report and "## Monte Carlo" in report
+    assert (tmp_path / "one" / "plots" / "monte_carlo.png").stat().st_size > 1000
+    worst = max(ta, key=lambda r: r["rms_error_deg"])
+    kp, seed = worst["control.position.kp"], worst["plant_seed"]
+    assert f"| {worst['point']} | control.position.kp = {kp} | {seed} |" in report
+    assert f"pafp sweep {spec.path} --point {worst['point']} " in report
+
+
+def test_progress_line_has_rate_and_eta():
+    stream = io.StringIO()
+    bar = Progress(4, stream=stream)
+    for k in range(4):
+        bar.step(failed=k == 2)
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 4 and lines[-1].endswith("ETA 0m00s")
+    assert "4/4 points, 1 failed" in lines[-1] and "/s, elapsed" in lines[-1]
+    assert "ETA" in lines[0] and "1/4 points, 0 failed" in lines[0]
 
 
 def test_failing_points_are_rows_with_their_error(tmp_path):
