@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "read_rows"]
+__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "read_rows"]
 
 JOURNAL = "rows.jsonl"
 FLUSH_S = 1.0
@@ -50,22 +50,32 @@ def _atomic(path: Path, write: Any) -> None:
     os.replace(tmp, path)
 
 
+def check_out(out: Path, digest: str, resume: bool) -> dict[int, dict[str, Any]]:
+    """The finished rows in `out` by point; ValueError if `out` is no directory, holds another sweep, or holds
+    rows and `resume` is False."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file: a directory is needed")
+    meta = out / "sweep.json"
+    if meta.exists():
+        old = json.loads(meta.read_text(encoding="utf-8"))
+        if old.get("digest") != digest:
+            raise ValueError(f"--out {out} holds the results of another spec or profile (sweep.json digest "
+                             f"{str(old.get('digest'))[:12]}, this spec {digest[:12]}): choose another --out")
+    rows = {int(r["point"]): r for r in read_rows(out)}
+    if rows and not resume:
+        raise ValueError(f"--out {out} already holds {len(rows)} finished points: pass --resume to finish "
+                         "the missing ones, or choose another --out")
+    return rows
+
+
 class ResultsTable:
     """Appends rows as points finish and keeps results.parquet / results.csv in step."""
 
     def __init__(self, out: Path, columns: list[str], digest: str, n_points: int, resume: bool) -> None:
         """Open `out` for a sweep with `digest`; ValueError if it holds another sweep, or any rows without resume."""
         self.out, self.columns = out, columns
+        self.rows = check_out(out, digest, resume)
         meta = out / "sweep.json"
-        if meta.exists():
-            old = json.loads(meta.read_text(encoding="utf-8"))
-            if old.get("digest") != digest:
-                raise ValueError(f"--out {out} holds the results of another spec or profile (sweep.json digest "
-                                 f"{str(old.get('digest'))[:12]}, this spec {digest[:12]}): choose another --out")
-        self.rows = {int(r["point"]): r for r in read_rows(out)}
-        if self.rows and not resume:
-            raise ValueError(f"--out {out} already holds {len(self.rows)} finished points: pass --resume to finish "
-                             "the missing ones, or choose another --out")
         out.mkdir(parents=True, exist_ok=True)
         _atomic(meta, lambda p: p.write_text(json.dumps({"digest": digest, "points": n_points, "columns": columns},
                                                         indent=2) + "\n", encoding="utf-8"))

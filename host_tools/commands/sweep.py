@@ -49,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.sweep_engine import check_points, dask_client, run_sweep
     from host_tools.sweep_report import write_report
     from host_tools.sweep_spec import load_spec
+    from host_tools.sweep_table import check_out
 
     try:
         if args.workers is not None and not 1 <= args.workers <= 1024:
@@ -58,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         if args.point is not None:
             return _one_point(spec, args.point, out)
         check_points(spec)
+        check_out(out, spec.digest, args.resume)  # before a cluster starts
     except ValueError as e:
         print(f"pafp sweep: {e}", file=sys.stderr)
         return 2
@@ -71,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp sweep: {e}", file=sys.stderr)
         return 2
     except OSError as e:
-        print(f"pafp sweep: cannot reach the Dask scheduler {args.scheduler}: {e}", file=sys.stderr)
+        what = f"cannot reach the Dask scheduler {args.scheduler}" if args.scheduler else "cannot write the results"
+        print(f"pafp sweep: {what}: {e}", file=sys.stderr)
         return 2
     report = write_report(spec, outcome.rows, out, wall_time_s=outcome.wall_time_s, where=where)
     bad = sum(r["status"] != "ok" for r in outcome.rows)
