@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "decode": "decode",
     "rta": "rta",
     "tune": "tune",
+    "sweep": "sweep",
 }
 
 
