@@ -61,11 +61,11 @@ COMPILED = [
     "firmware/control/estimation.py",
     "firmware/control/filters.py",
     "firmware/control/curve.py",
-    "firmware/protocol/vesc_frame.py",
-    "firmware/protocol/vesc_codec.py",
-    "firmware/protocol/rvc.py",
-    "firmware/protocol/cobs.py",
-    "firmware/protocol/telemetry_frame.py",
+    "protocol/vesc_frame.py",
+    "protocol/vesc_codec.py",
+    "protocol/rvc.py",
+    "protocol/cobs.py",
+    "protocol/telemetry_frame.py",
     "host_tools/probe.py",
 ]
 

@@ -6,8 +6,8 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
-from firmware.protocol.telemetry import RECORD_FRAMER
-from firmware.protocol.telemetry_frame import RecordFramer
+from protocol.telemetry import RECORD_FRAMER
+from protocol.telemetry_frame import RecordFramer
 from hal.errors import HalError
 from hal.interfaces import Uart
 

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from firmware.protocol.telemetry import FaultReason, SupervisorState
+from protocol.telemetry import FaultReason, SupervisorState
 from firmware.safety_limits import SafetyLimits
 
 log = logging.getLogger(__name__)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware.protocol.telemetry import TelemetryDecoder
+from protocol.telemetry import TelemetryDecoder
 from host_tools.build_info import describe
 from host_tools.metrics import TrackingMetrics
 from host_tools.outdir import write_atomic

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware.app import Firmware
-from firmware.protocol.telemetry import TelemetryDecoder
+from protocol.telemetry import TelemetryDecoder
 from hal.virtual.bench import VirtualBench
 from host_tools.probe import Probe
 from host_tools.telemetry_csv import TelemetryCsv

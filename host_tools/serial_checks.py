@@ -12,9 +12,9 @@ import time
 from collections.abc import Callable
 
 from firmware.drivers.motor import FEEDBACK_MASK
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.telemetry import TelemetryDecoder
-from firmware.protocol.vesc import Decoder, GetValuesSelective, Values, ValuesSelective
+from protocol.rvc import RvcDecoder
+from protocol.telemetry import TelemetryDecoder
+from protocol.vesc import Decoder, GetValuesSelective, Values, ValuesSelective
 from hal.errors import HalError
 from hal.interfaces import Uart
 

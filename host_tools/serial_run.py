@@ -29,7 +29,7 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from firmware.drivers.motor import MotorFeedback, SafeStop
-from firmware.protocol.vesc import Decoder as VescDecoder
+from protocol.vesc import Decoder as VescDecoder
 from hal.binding import open_uart
 from hal.errors import HalError
 from hal.interfaces import Board, Uart

@@ -10,7 +10,7 @@ from doubles import SpyLink
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware.protocol.vesc import (
+from protocol.vesc import (
     Decoder,
     FwVersion,
     RotorPosition,

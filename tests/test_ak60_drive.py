@@ -7,7 +7,7 @@ import math
 import pytest
 from test_ak60 import F, Rig
 
-from firmware.protocol.vesc import (
+from protocol.vesc import (
     FaultCode,
     GetValues,
     GetValuesSelective,

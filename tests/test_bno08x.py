@@ -7,7 +7,7 @@ import math
 import pytest
 from doubles import SpyLink
 
-from firmware.protocol.rvc import RvcDecoder, RvcFrame
+from protocol.rvc import RvcDecoder, RvcFrame
 from hal.virtual.devices.bno08x import BANNER_LINES, Bno08x, Bno08xConfig
 from hal.virtual.devices.world import World
 from hal.virtual.plant import Plant

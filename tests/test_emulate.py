@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 import serial
 
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.vesc import Decoder, GetValues, SetCurrent, Values
+from protocol.rvc import RvcDecoder
+from protocol.vesc import Decoder, GetValues, SetCurrent, Values
 from host_tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

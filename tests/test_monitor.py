@@ -12,7 +12,7 @@ import time
 import tty
 from pathlib import Path
 
-from firmware.protocol.telemetry import RECORD_COLUMNS, TelemetryRecord, encode_record
+from protocol.telemetry import RECORD_COLUMNS, TelemetryRecord, encode_record
 from host_tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

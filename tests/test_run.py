@@ -14,8 +14,8 @@ from dataclasses import replace
 import pytest
 
 from firmware.config import CostModel, load_firmware_config
-from firmware.protocol.telemetry import TelemetryDecoder
-from firmware.protocol.vesc import FaultCode
+from protocol.telemetry import TelemetryDecoder
+from protocol.vesc import FaultCode
 from firmware.safety import FaultReason, SupervisorState
 from host_tools.cli import main
 from host_tools.report import summarise

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from firmware.config import DEFAULT_PROFILE
-from firmware.protocol.telemetry import TelemetryDecoder
+from protocol.telemetry import TelemetryDecoder
 from host_tools.cli import main
 from host_tools.report import summarise, write_outputs
 from host_tools.runner import RunConfig, run_virtual

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified
 
-from firmware.protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
+from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
 from host_tools.cli import main
 from host_tools.runner import board_profile
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from firmware.drivers.motor import MotorDriver
-from firmware.protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
+from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 from hal.interfaces import Uart
 from host_tools.realtime import RealtimeSection, RealtimeSettings
 from host_tools.stop_signals import StopSignals

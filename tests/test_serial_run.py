@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from firmware.protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
-from firmware.protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
+from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
+from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 from host_tools.cli import main
 from host_tools.runner import RunConfig, run_virtual
 

@@ -21,7 +21,7 @@ from test_serial_faults import CLEAN, _relay, _relay_counts
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified, assert_stopped_safely
 
 import host_tools.serial_run as serial_run
-from firmware.protocol.telemetry import TelemetryDecoder
+from protocol.telemetry import TelemetryDecoder
 from host_tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from firmware.drivers.link import LinkState
-from firmware.protocol.rvc import RvcDecoder, RvcFrame
+from protocol.rvc import RvcDecoder, RvcFrame
 from hal.errors import HalError
 from hal.interfaces import Uart
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from firmware.drivers.link import LinkState
-from firmware.protocol.vesc import (
+from protocol.vesc import (
     Decoder,
     GetValues,
     GetValuesSelective,
@@ -28,8 +28,8 @@ from firmware.protocol.vesc import (
     Values,
     ValuesSelective,
 )
-from firmware.protocol.vesc_codec import MessageCodec
-from firmware.protocol.vesc_values import selective_layout
+from protocol.vesc_codec import MessageCodec
+from protocol.vesc_values import selective_layout
 from hal.errors import HalError
 from hal.interfaces import Uart
 

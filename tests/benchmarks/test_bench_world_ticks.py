@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 
 from firmware.drivers.motor import FEEDBACK_MASK
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.vesc import Decoder, GetValuesSelective, SetCurrent
+from protocol.rvc import RvcDecoder
+from protocol.vesc import Decoder, GetValuesSelective, SetCurrent
 from hal.virtual.bench import VirtualBench
 
 F = 168_000_000

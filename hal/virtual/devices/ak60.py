@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Final
 
-from firmware.protocol import vesc
-from firmware.protocol.vesc import DetectMode, OriginMode
+from protocol import vesc
+from protocol.vesc import DetectMode, OriginMode
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode, degrees, radians
 from hal.virtual.devices.ak60_meter import Ak60Meter
