@@ -22,9 +22,9 @@ from firmware.drivers.encoder import EncoderDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor import MotorDriver, SafeStop
 from firmware.logger import TelemetryLogger
-from protocol.rvc import RVC_RATE_HZ
 from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
 from hal.interfaces import Board
+from protocol.rvc import RVC_RATE_HZ
 from rtos import Job, OverrunPolicy, Task
 
 log = logging.getLogger(__name__)

@@ -12,9 +12,9 @@ from typing import Any
 from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
-from protocol.rvc import RVC_RATE_HZ
 from firmware.safety import SafetyLimits
 from profiles import profile_path
+from protocol.rvc import RVC_RATE_HZ
 
 __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareConfig", "load_firmware_config"]
 

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol.telemetry import TelemetryDecoder
 from host_tools.build_info import describe
 from host_tools.metrics import TrackingMetrics
 from host_tools.outdir import write_atomic
@@ -23,6 +22,7 @@ from host_tools.process_clock import process_elapsed_s
 from host_tools.runner import RunResult
 from host_tools.telemetry_csv import TelemetryCsv
 from host_tools.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
+from protocol.telemetry import TelemetryDecoder
 
 __all__ = ["TRACKING_SIGNALS", "strict_json", "summarise", "tracking_lines", "tracking_of", "tracking_summary",
            "tracking_text", "write_outputs"]

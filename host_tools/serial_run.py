@@ -29,7 +29,6 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from firmware.drivers.motor import MotorFeedback, SafeStop
-from protocol.vesc import Decoder as VescDecoder
 from hal.binding import open_uart
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
@@ -45,6 +44,7 @@ from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_mo
 from host_tools.serial_io import CaptureUart
 from host_tools.stop_signals import StopSignals
 from host_tools.wire_capture import WireCapture
+from protocol.vesc import Decoder as VescDecoder
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
 from rtos.scheduler import SchedulerNow
 

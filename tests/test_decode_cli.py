@@ -9,9 +9,9 @@ from types import SimpleNamespace
 
 import pytest
 
+from host_tools.cli import main
 from protocol.rvc import RvcFrame
 from protocol.telemetry import FaultReason, SupervisorState, TelemetryRecord, encode_record
-from host_tools.cli import main
 
 CONSTRUCTED = bytes.fromhex("AA AA 2A D2 04 C9 FD E2 45 0C 00 DE FF EA 03 00 00 00 C3")
 DATASHEET = bytes.fromhex("AA AA DE 01 00 92 FF 25 08 8D FE EC FF D1 03 00 00 00 E7")

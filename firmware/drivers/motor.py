@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from typing import Final
 
 from firmware.drivers.link import LinkState
+from hal.errors import HalError
+from hal.interfaces import Uart
 from protocol.vesc import (
     Decoder,
     GetValues,
@@ -30,8 +32,6 @@ from protocol.vesc import (
 )
 from protocol.vesc_codec import MessageCodec
 from protocol.vesc_values import selective_layout
-from hal.errors import HalError
-from hal.interfaces import Uart
 
 __all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "SafeStop", "selective_reply_bytes"]
 
