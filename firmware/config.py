@@ -13,6 +13,7 @@ from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, is_number
 from firmware.safety import SafetyLimits
+from hal.links import link_entry
 
 __all__ = ["DEFAULT_PROFILE", "CostModel", "FirmwareConfig", "load_firmware_config"]
 
@@ -56,12 +57,16 @@ class FirmwareConfig:
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
+    motor_link: str = "uart"  # [motor] link: a name of hal.links.MOTOR_LINKS
+    motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
 
     def __post_init__(self) -> None:
         """Check the rates divide sensibly into the control rate."""
         for name in RATE_FIELDS:
             check_int_range(name, getattr(self, name), 1, 10_000)
         check_int_range("imu_lowpass_order", self.imu_lowpass_order, *ORDER_RANGE)
+        link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
+        check_int_range("motor_can_id", self.motor_can_id, 0, 127)
         if self.full_values_hz > self.control_hz:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
@@ -121,6 +126,13 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         rates, ctl, saf = doc.get("rates_hz", {}), doc.get("control", {}), doc.get("safety", {})
         ctl = dict(ctl)
         pos, vel = ctl.pop("position", {}), ctl.pop("velocity", {})
+        motor = dict(doc.get("motor", {}))
+        unknown = sorted(set(motor) - {"link", "can_id"})
+        if unknown:
+            raise TypeError(f"[motor] has no key {unknown[0]!r}")
+        links = {"motor_link": motor["link"]} if "link" in motor else {}
+        if "can_id" in motor:
+            links["motor_can_id"] = motor["can_id"]
         return FirmwareConfig(
             **_rates(rates),
             position_gains=_gains(pos, "control.position"),
@@ -128,6 +140,7 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
             feedforward_params=FeedforwardParams(**doc.get("feedforward", {})),
             safety=SafetyLimits(**_safety(saf)),
             task_cycles={k: CostModel(**v) for k, v in doc.get("task_cycles", {}).items()},
+            **links,
             **ctl,
         )
     except TypeError as e:

@@ -17,7 +17,7 @@ from pathlib import Path
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
-from hal.virtual.bench import VirtualBench
+from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from host_tools.probe import Action, Probe, ProbeBody
 from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
@@ -112,8 +112,9 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
+    links = {"motor_link": fw_cfg.motor_link, "can_id": fw_cfg.motor_can_id} if fw_cfg.motor_link != "uart" else {}
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
-                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **links, **cfg.bench_options)
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
     probe = Probe()
@@ -135,6 +136,9 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     # the same interrupt model the scheduler counts (bench.interrupt_sources checked both ISR costs)
     byte_cycles = {name: (10 * f_cpu) // u.baud for name, u in bench.board.uarts().items() if name != "telemetry"}
     sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr["uart_rx_byte"])) for n, c in byte_cycles.items()]
+    if bench.can is not None:  # one RX interrupt per frame, frames at least an empty frame's 47 bits apart
+        sporadic.append(_Sporadic("can_rx", max(1, 47 * f_cpu // bench.can.bitrate),
+                                  int(isr.get("can_rx_frame", CAN_RX_CYCLES))))
     sporadic.append(_Sporadic("systick", bench.mcu.systick.period_cycles, int(isr["systick"])))
     bounds = response_time_bounds(_analysis_tasks(fw, max_bytes), sporadic)
     if cfg.setup:

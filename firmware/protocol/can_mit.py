@@ -9,9 +9,10 @@ saturate at the limits): position 16 bits, velocity 12, kp 12, kd 12, feed-forwa
 
 The motor evaluates ``torque = kp (p_des - p) + kd (v_des - v) + t_ff`` at its own loop rate and
 answers every command with ``[driver_id, p>>8, p&0xFF, v>>4, (v&0xF)<<4 | t>>8, t&0xFF, temperature,
-error]`` (its fourth field: torque, or q current by firmware version, in the t range). Three special
-8-byte frames: ``FF..FF FC`` enter motor mode, ``FF..FF FD`` exit motor mode (torque off), ``FF..FF FE``
-set the present position as zero. Ranges are the AK60-6's as published (:data:`AK60_6`).
+error]`` on the master ID :data:`MASTER_ID` (its fourth field: torque, or q current by firmware
+version, in the t range). Three special 8-byte frames: ``FF..FF FC`` enter motor mode, ``FF..FF FD``
+exit motor mode (torque off), ``FF..FF FE`` set the present position as zero.
+Ranges are the AK60-6's as published (:data:`AK60_6`).
 
 No import from the rest of pafp: the codec stands alone (firmware, device models and host tools use it).
 """
@@ -22,11 +23,13 @@ from dataclasses import dataclass
 from typing import Final
 
 __all__ = [
-    "AK60_6", "ENTER_MOTOR_MODE", "EXIT_MOTOR_MODE", "SET_ZERO", "MitCommand", "MitLimits", "MitReply",
+    "AK60_6", "ENTER_MOTOR_MODE", "EXIT_MOTOR_MODE", "MASTER_ID", "SET_ZERO", "MitCommand", "MitLimits", "MitReply",
     "decode_command", "decode_reply", "encode_command", "encode_reply", "float_to_uint", "special_frame",
     "uint_to_float",
 ]
 
+MASTER_ID: Final = 0
+"""Standard ID of the replies (CAN_MASTER 0 of Ben Katz's mini-cheetah firmware, which MIT mode follows)."""
 ENTER_MOTOR_MODE: Final = b"\xff" * 7 + b"\xfc"
 EXIT_MOTOR_MODE: Final = b"\xff" * 7 + b"\xfd"
 SET_ZERO: Final = b"\xff" * 7 + b"\xfe"
