@@ -4,15 +4,17 @@ The firmware's controllers compute a q current; this driver sends it as MIT mode
 (``t_ff = current x nm_per_a``, kp = kd = 0, so the motor's law is a pure torque command) and the brake
 as a damping-only command (``kd = brake_kd``, t_ff = 0). Before the first command it sends "enter motor
 mode" (PROTOCOLS.md G). Replies come on the master ID (0, as Ben Katz's mini-cheetah firmware the AK
-series follows) with the driver id in byte 0; a reply answers the command before it: ``requests`` and
-``replies`` pair them, ``max_age_s`` is the longest command-to-reply time as the driver took them, a
-command sent while the previous one is unanswered counts a ``missing_replies``. The stop path sends
+series follows) with the driver id in byte 0; the motor answers every frame, the special ones too, in
+order: ``requests`` and ``replies`` count the commands and their answers, ``max_age_s`` is the
+longest command-to-reply time as the driver took them, a command sent while the previous one is
+unanswered counts a ``missing_replies``. The stop path sends
 zero torque then "exit motor mode".
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 
 from firmware.config import FirmwareConfig
 from firmware.drivers.can_servo import _send_stop
@@ -45,7 +47,7 @@ class CanMitDriver(MotorLink):
         self.decoder = RxCounter()
         self.last_command_s: float | None = None
         self.entered = False
-        self._pending_since: float | None = None
+        self._outstanding: deque[tuple[float, bool]] = deque()  # (sent at, is a command) per frame to be answered
         self.other_frames = 0
 
     @classmethod
@@ -59,7 +61,7 @@ class CanMitDriver(MotorLink):
         """Continue on a reopened port: motor mode is entered again with the next command."""
         self.port = port
         self.entered = False
-        self._pending_since = None
+        self._outstanding.clear()
         self._relinked()
 
     def poll(self, now_s: float) -> int:
@@ -88,15 +90,16 @@ class CanMitDriver(MotorLink):
             fb.fault = r.error
             fb.temp_motor_c = float(r.temperature_c)
             taken += 1
-            if self._pending_since is None:
+            if not self._outstanding:
                 st.stale_replies += 1
                 continue
-            st.replies += 1
+            sent_s, command = self._outstanding.popleft()
             fb.received_s = now_s
-            age = now_s - self._pending_since
-            if age > st.max_age_s:
-                st.max_age_s = age
-            self._pending_since = None
+            if command:
+                st.replies += 1
+                age = now_s - sent_s
+                if age > st.max_age_s:
+                    st.max_age_s = age
         return taken
 
     def _put(self, data: bytes, now_s: float) -> bool:
@@ -112,18 +115,21 @@ class CanMitDriver(MotorLink):
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Send the torque (or damping) command, after "enter motor mode" the first time; return data bytes."""
         written = 0
+        outstanding = self._outstanding
+        if outstanding:  # unanswered by now: their replies are lost or late (a late one counts as stale)
+            self.stats.missing_replies += sum(1 for _, command in outstanding if command)
+            outstanding.clear()
         if not self.entered:
             if not self._put(can_mit.ENTER_MOTOR_MODE, now_s):
                 return 0
             self.entered = True
+            self._outstanding.append((now_s, False))  # the motor answers the special frame too
             written += 8
         cmd = can_mit.MitCommand(kd=self.brake_kd) if brake else can_mit.MitCommand(t_ff=current_a * self.nm_per_a)
-        if self._pending_since is not None:
-            self.stats.missing_replies += 1
         if not self._put(can_mit.encode_command(cmd, self.limits), now_s):
             return written
         self.stats.requests += 1
-        self._pending_since = now_s
+        outstanding.append((now_s, True))
         self.last_command_s = now_s
         return written + 8
 

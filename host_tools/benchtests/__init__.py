@@ -10,4 +10,5 @@ TESTS: dict[str, str] = {
     "loading": "loading",
     "tracking": "tracking",
     "baud-study": "baud_study",
+    "link-study": "link_study",
 }
