@@ -70,10 +70,14 @@ class MotorLinkStats:
 
 @dataclass
 class RxStats:
-    """Bytes and frames a frame-based driver took in."""
+    """Bytes and frames a frame-based driver took in (a CAN controller checks CRCs and framing itself:
+    the byte-stream counters of the VESC decoder stay 0)."""
 
     bytes_in: int = 0
     frames: int = 0
+    crc_errors: int = 0
+    dropped_bytes: int = 0
+    bad_end_bytes: int = 0
 
 
 class RxCounter:
