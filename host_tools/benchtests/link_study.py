@@ -6,7 +6,8 @@ fastest first; the achievable rate is the first whose run has no deadline miss, 
 refused command, and no missing or stale reply (the baud study's test). Each row gives the rate, the
 feedback rate, the worst feedback age, the load of the busiest direction of the link (UART: bytes x
 10 bit-times over the run, per direction; CAN: bit-times of every frame, exact stuffing, over the run)
-and the tracking error against the plant's true angle.
+and the tracking error against the plant's true angle. Every link is also run at the profile's
+1 kHz (``SAME_RATE_HZ``): what each link gives at an equal control rate.
 
 Feedback age, per link, as the driver accounts it: UART and MIT mode, request (command) to the reply
 taken by the motor task; servo mode, the longest gap between two status frames taken (no request).
@@ -38,6 +39,7 @@ __all__ = ["CANDIDATE_HZ", "LINKS", "LinkRun", "can_bound_hz", "link_run", "run"
 
 LINKS: tuple[str, ...] = ("uart", "can-servo", "can-mit")
 CANDIDATE_HZ: tuple[int, ...] = (4000, 2000, 1000, 500)
+SAME_RATE_HZ = 1000  # every link is also run at the profile's rate: what a link buys at equal control rate
 CAN_BITRATE = 1_000_000
 UART_BAUD = 921_600
 STATUS_HZ = 500.0  # the virtual AK60-6's servo-mode status rate (Ak60CanConfig.status_period_s)
@@ -141,6 +143,19 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, links: 
             Figure(f"{link}: link load", "%", REPORT_TEXT, None, round(100 * found.link_load, 2), "busiest direction"),
             Figure(f"{link}: RMS tracking error", "deg", REPORT_TEXT, None, found.rms_error_deg,
                    f"max {found.max_error_deg:.3f}°"),
+        ]
+    for link in links:  # the same control rate on every link
+        same = next((r for r in every if r.link == link and r.control_hz == SAME_RATE_HZ), None)
+        if same is None:
+            same = link_run(base, link, SAME_RATE_HZ, strides=n, seed=seed)
+            every.append(same)
+        figures += [
+            Figure(f"{link} at {SAME_RATE_HZ} Hz: worst feedback age", "ms", REPORT_TEXT, None,
+                   same.max_feedback_age_ms, f"feedback {same.feedback_rate_hz:.0f} Hz; passed {same.passed}"),
+            Figure(f"{link} at {SAME_RATE_HZ} Hz: link load", "%", REPORT_TEXT, None, round(100 * same.link_load, 2),
+                   "busiest direction"),
+            Figure(f"{link} at {SAME_RATE_HZ} Hz: RMS tracking error", "deg", REPORT_TEXT, None, same.rms_error_deg,
+                   f"max {same.max_error_deg:.3f}°"),
         ]
     columns = {name: np.array([getattr(r, name) if name != "faults" else "|".join(r.faults) for r in every])
                for name in ("link", "control_hz", "deadline_misses", "faults", "requests", "replies",
