@@ -16,7 +16,7 @@ def test_can_wire_bounds():
 
 def test_link_study_mit_limit_sits_at_its_bound_and_rows_sit_side_by_side():
     r = link_study.run(links=("uart", "can-mit"), candidates=(4000, 2000))
-    assert r.params["achievable"] == {"uart": None, "can-mit": 2000}  # 4 kHz is above MIT's 3.7 kHz bound
+    assert r.parameters["achievable"] == {"uart": None, "can-mit": 2000}  # 4 kHz is above MIT's 3.7 kHz bound
     rows = list(zip(r.columns["link"], r.columns["control_hz"], r.columns["passed"], strict=True))
     assert ("can-mit", 4000, 0) in rows and ("can-mit", 2000, 1) in rows and ("uart", 1000, 1) in rows
     figures = {f.name: f.emulated_value for f in r.figures}
