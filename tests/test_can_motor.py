@@ -120,3 +120,24 @@ def test_a_silent_bus_is_a_lost_link_for_the_supervisor():
     r = run_virtual(RunConfig(strides=1, firmware=fw_cfg, settle_s=0.3, actions=[(0.9, silence)],
                               trace_capacity=0))
     assert r.firmware.supervisor.reason is FaultReason.MOTOR_TIMEOUT
+
+
+def test_the_link_is_chosen_by_name_and_a_bad_name_is_one_line(tmp_path, capsys):
+    from firmware.config import load_firmware_config
+    from host_tools.cli import main
+
+    assert load_firmware_config().motor_link == "uart"
+    from firmware.config import DEFAULT_PROFILE
+
+    profile = DEFAULT_PROFILE.read_text()
+    assert 'link = "uart"' in profile
+    bad = tmp_path / "p.toml"
+    bad.write_text(profile.replace('link = "uart"', 'link = "rs485"'))
+    with pytest.raises(ValueError, match="motor_link 'rs485' unknown: one of \\['can-mit', 'can-servo', 'uart'\\]"):
+        load_firmware_config(bad)
+    bad.write_text(profile.replace('link = "uart"', 'speed = 1'))
+    with pytest.raises(ValueError, match="\\[motor\\] has no key 'speed'"):
+        load_firmware_config(bad)
+    assert main(["run", "--motor-link", "rs485", "--strides", "1", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["pafp run: --motor-link 'rs485' unknown: one of ['can-mit', 'can-servo', 'uart']"]
