@@ -78,8 +78,7 @@ class WallCanMotor:
         fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
         self.world = World(Plant(None, fx), NS_PER_S)
         self.bus = WallCanBus()
-        self.device = Ak60Can(self.world, None, Ak60CanConfig(driver_id=url.driver_id, mode=url.mode))
-        self.device.bus = self.bus  # type: ignore[assignment]
+        self.device = Ak60Can(self.world, self.bus, Ak60CanConfig(driver_id=url.driver_id, mode=url.mode))
         self.frames_in = 0
         self.frames_out = 0
         self.tx_refused = 0

@@ -45,7 +45,7 @@ class CanMitDriver(MotorLink):
         self.feedback = MotorFeedback()
         self.stats = MotorLinkStats()
         self.decoder = RxCounter()
-        self.last_command_s: float | None = None
+        self.last_command_s = None
         self.entered = False
         self._outstanding: deque[tuple[float, bool]] = deque()  # (sent at, is a command) per frame to be answered
         self.other_frames = 0
@@ -137,7 +137,7 @@ class CanMitDriver(MotorLink):
         """The stop path: zero torque, then exit motor mode (torque off); wait until both have left."""
         frames = (CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits)),
                   CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
-        stop = _send_stop(self, frames, now_s, timeout_s)
+        stop = _send_stop(self, self.port, frames, now_s, timeout_s)
         self.entered = False
         return stop
 

@@ -25,45 +25,35 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from typing import Any, Protocol
 
 from firmware.protocol import can_mit, can_servo
 from firmware.protocol.vesc import OriginMode
 from hal.can import CanFrame
-from hal.virtual.can_bus import VirtualCanBus
 from hal.virtual.devices.ak60 import Ak60
+from hal.virtual.devices.ak60_can_config import MODES, Ak60CanConfig
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.world import World
 from hal.virtual.events import NEVER, EventDevice
 
-__all__ = ["MODES", "Ak60Can", "Ak60CanConfig"]
+__all__ = ["MODES", "Ak60Can", "Ak60CanConfig", "CanBusPort"]
 
-MODES = ("servo", "mit")
+class CanBusPort(Protocol):
+    """Where the device's frames go: the virtual bus, or the wall-clock stand-in of `pafp emulate --can`."""
 
+    def attach(self, node: Any) -> None:
+        """Receive the frames of the other nodes."""
+        ...
 
-@dataclass(frozen=True)
-class Ak60CanConfig:
-    """The CAN side: driver id, mode, status rate (servo mode), the model's MIT ranges."""
-
-    driver_id: int = 1
-    mode: str = "servo"
-    status_period_s: float = 0.002  # 500 Hz, the upload rate set in the maker's tool (an assumption)
-    limits: can_mit.MitLimits = can_mit.AK60_6
-
-    def __post_init__(self) -> None:
-        """Check the id, the mode and the status period."""
-        if isinstance(self.driver_id, bool) or not isinstance(self.driver_id, int) or not 0 <= self.driver_id <= 127:
-            raise ValueError(f"driver_id {self.driver_id!r} out of range: an int in 0..127")
-        if self.mode not in MODES:
-            raise ValueError(f"CAN mode {self.mode!r} invalid: one of {MODES}")
-        if not (math.isfinite(self.status_period_s) and 1e-4 <= self.status_period_s <= 1.0):
-            raise ValueError(f"status_period_s {self.status_period_s!r} out of range [0.0001, 1] s")
+    def offer(self, node: Any, frame: CanFrame, ready: int) -> None:
+        """Put frame on the wire from tick ready on."""
+        ...
 
 
 class Ak60Can(EventDevice):
     """The AK60-6 on a virtual CAN bus (see the module docstring)."""
 
-    def __init__(self, world: World, bus: VirtualCanBus | None, can_config: Ak60CanConfig | None = None,
+    def __init__(self, world: World, bus: CanBusPort | None, can_config: Ak60CanConfig | None = None,
                  config: Ak60Config | None = None) -> None:
         """Build the core on world's plant and attach to bus (None: frames come through ``on_frame`` only)."""
         super().__init__()
@@ -87,8 +77,7 @@ class Ak60Can(EventDevice):
         self.frames_in = 0
         self.frames_out = 0
         self.ignored_frames = 0
-        self._sink: list[tuple[int, CanFrame]] | None = None  # frames out when no bus: (start tick, frame)
-        self.bus = bus
+        self.bus: CanBusPort | None = bus
         if bus is not None:
             bus.attach(self)
         world.add(self)
@@ -113,10 +102,8 @@ class Ak60Can(EventDevice):
 
     def _out(self, frame: CanFrame, t: int) -> None:
         self.frames_out += 1
-        if self.bus is not None:
+        if self.bus is not None:  # None: a silent motor (frames built and dropped)
             self.bus.offer(self, frame, t)
-        elif self._sink is not None:
-            self._sink.append((t, frame))
 
     # ------------------------------------------------------------------ events
     def _update_next(self) -> None:
