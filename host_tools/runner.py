@@ -112,9 +112,9 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
-    links = {"motor_link": fw_cfg.motor_link, "can_id": fw_cfg.motor_can_id} if fw_cfg.motor_link != "uart" else {}
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
-                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **links, **cfg.bench_options)
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,
+                         can_id=fw_cfg.motor_can_id, **cfg.bench_options)
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
     probe = Probe()

@@ -166,3 +166,18 @@ def test_emulate_can_serves_the_motor_only(capsys):
     assert capsys.readouterr().err.strip() == "pafp emulate: --can serves the motor only, not 'imu'"
     assert main(["emulate", "motor", "--can", "can://virtual/x?id=1&mode=foc"]) == 2
     assert "mode='foc' not one of ('servo', 'mit')" in capsys.readouterr().err
+
+
+def test_a_new_link_is_one_registry_entry(monkeypatch):
+    """A link registered under a new name drives both sides (firmware driver, bench wiring) with no other edit."""
+    from firmware.config import load_firmware_config
+    from hal.links import MOTOR_LINKS, MotorLinkEntry
+    from host_tools.runner import RunConfig, run_virtual
+
+    monkeypatch.setitem(MOTOR_LINKS, "uart-again", MotorLinkEntry("firmware.drivers.motor:MotorDriver",
+                                                                  "hal.virtual.wiring:wire_uart_motor", "uart"))
+    base = load_firmware_config()
+    runs = [run_virtual(RunConfig(strides=1, firmware=base.with_changes(motor_link=link), trace_capacity=0))
+            for link in ("uart", "uart-again")]
+    assert runs[1].bench.motor_link == "uart-again"
+    assert runs[0].telemetry == runs[1].telemetry
