@@ -9,7 +9,7 @@ from hal.errors import HalError
 __all__ = ["LinkState"]
 
 
-@mypyc_attr(allow_interpreted_subclasses=True)  # the CAN motor drivers subclass MotorLink from Python
+@mypyc_attr(allow_interpreted_subclasses=True)  # as MotorLink (motor_link.py): drivers and doubles in Python
 class LinkState:
     """Mixin: `link_lost` latches the first port failure with its cause and time; a relink clears it."""
 
