@@ -46,7 +46,6 @@ from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_mo
 from host_tools.serial_io import CaptureUart
 from host_tools.stop_signals import StopSignals
 from host_tools.wire_capture import WireCapture
-from protocol.vesc import Decoder as VescDecoder
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
 from rtos.scheduler import SchedulerNow
 
@@ -191,7 +190,7 @@ class StopRecord:
     def as_dict(self) -> dict:
         """For summary.json: the safe frames decoded, whether they left the port, the latency."""
         safe = self.safe
-        frames = [repr(m) for m in VescDecoder("to-motor").feed(safe.frames)] if safe is not None else []
+        frames = list(safe.names) if safe is not None else []
         return {"reason": self.reason, "at_s": round(self.at_s, 6), "signal": self.signal, "task": self.task,
                 "error": self.error, "safe_frames": frames,
                 "safe_bytes": len(safe.frames) if safe is not None else 0,

@@ -137,7 +137,8 @@ class CanMitDriver(MotorLink):
         """The stop path: zero torque, then exit motor mode (torque off); wait until both have left."""
         frames = (CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits)),
                   CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
-        stop = _send_stop(self, self.port, frames, now_s, timeout_s)
+        stop = _send_stop(self, self.port, frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"),
+                          now_s, timeout_s)
         self.entered = False
         return stop
 

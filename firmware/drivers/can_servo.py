@@ -114,7 +114,8 @@ class CanServoDriver(MotorLink):
         frames = (CanFrame(self._current_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT, 0.0), True),
                   CanFrame(self._brake_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE,
                                                                     abs(brake_current_a)), True))
-        return _send_stop(self, self.port, frames, now_s, timeout_s)
+        names = ("SET_CURRENT(0.0 A)", f"SET_CURRENT_BRAKE({abs(brake_current_a)} A)")
+        return _send_stop(self, self.port, frames, names, now_s, timeout_s)
 
     def published(self) -> dict[str, object]:
         """The port's overruns and refusals, frames not from this motor."""
@@ -122,10 +123,10 @@ class CanServoDriver(MotorLink):
                 "tx_refused_frames": self.port.errors.tx_refused, "other_frames": self.other_frames}
 
 
-def _send_stop(drv: MotorLink, port: CanPort, frames: tuple[CanFrame, ...], now_s: float,
-               timeout_s: float) -> SafeStop:
+def _send_stop(drv: MotorLink, port: CanPort, frames: tuple[CanFrame, ...], names: tuple[str, ...],
+               now_s: float, timeout_s: float) -> SafeStop:
     """Queue frames in order, then wait for the mailboxes to empty; a failing port is latched as lost."""
-    stop = SafeStop(b"".join(f.data for f in frames), now_s)
+    stop = SafeStop(b"".join(f.data for f in frames), now_s, names)
     try:
         for f in frames:
             if not port.send(f):

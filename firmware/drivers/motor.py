@@ -169,7 +169,7 @@ class MotorDriver(MotorLink):
         """
         frames = (self._current_codec.frame((0.0,)), self._brake_codec.frame((brake_current_a,)))
         data = frames[0] + frames[1]
-        stop = SafeStop(data, now_s)
+        stop = SafeStop(data, now_s, (repr(SetCurrent(0.0)), repr(SetCurrentBrake(brake_current_a))))
         try:
             stop.written = self.uart.write(data)
             stop.drained = self.uart.flush(timeout_s)

@@ -39,11 +39,13 @@ class MotorFeedback:
 class SafeStop:
     """What the stop path put on the motor's wire: the bytes, how many the port took, whether they left it.
 
-    Over CAN ``frames`` holds the data bytes of the safe frames one after the other.
+    Over CAN ``frames`` holds the data bytes of the safe frames one after the other. ``names`` says what
+    the frames are, in order, as the driver sent them (for the summary and the log).
     """
 
     frames: bytes
     at_s: float
+    names: tuple[str, ...] = ()
     written: int = 0
     drained: bool = False
     error: str = ""
