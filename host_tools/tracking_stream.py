@@ -108,7 +108,7 @@ class TrackingStream:
             if c_m is not None and c_p is not None and np.isfinite(c_m + c_p) and c_m + c_p - 2 * c_0 > 0:
                 lag += 0.5 * (c_m - c_p) / (c_m + c_p - 2 * c_0)  # parabola through the three: sub-sample lag
             metrics = TrackingMetrics(float(np.sqrt(self._sq_sum / self._count)), float(self._max),
-                                      lag * self.dt_s * 1e3, self._count)
+                                      float(lag * self.dt_s * 1e3), self._count)
         else:
             metrics = TrackingMetrics(nan, nan, nan, 0)
         shape = (0, len(self.percent))
@@ -142,9 +142,9 @@ class TrackingStream:
             inner = (idx - n_lag >= 0) & (idx + n_lag < self._received)  # every shift's reference is known
             for b in range(0, int(inner.sum()), _BLOCK):  # in blocks: a (samples x shifts) matrix stays small
                 self._sum_all_shifts(loc[inner][b:b + _BLOCK])
-            for i, k in enumerate(range(-n_lag, n_lag + 1)):  # the run's first and last n_lag samples
-                edge = loc[~inner]
-                ok = (idx[~inner] - k >= 0) & (idx[~inner] - k < self._received)
+            edge, edge_idx = loc[~inner], idx[~inner]  # the run's first and last n_lag samples
+            for i, k in enumerate(range(-n_lag, n_lag + 1) if len(edge) else ()):
+                ok = (edge_idx - k >= 0) & (edge_idx - k < self._received)
                 if ok.any():
                     d = ang[edge[ok]] - ref[edge[ok] - k]
                     self._cost_sum[i] += float(np.sum(d * d))
