@@ -51,6 +51,7 @@ COMPILED = [
     "hal/virtual/devices/bno08x.py",
     "hal/virtual/devices/encoder.py",
     "firmware/app.py",
+    "firmware/tasks.py",
     "firmware/safety.py",
     "firmware/logger.py",
     "firmware/drivers/motor.py",
