@@ -13,6 +13,7 @@ import logging
 from collections.abc import Callable
 
 from firmware.config import CostModel, FirmwareConfig
+from firmware.control.interface import check_controller
 from firmware.control.reference import GaitReference
 from firmware.drivers.motor import SafeStop
 from firmware.safety import FaultReason
@@ -28,9 +29,10 @@ __all__ = ["ControlOutput", "Firmware", "KernelHealth"]
 class Firmware(FirmwareTasks):
     """The prosthesis firmware bound to `board`: build it, then hand `tasks` to the RTOS."""
 
-    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None) -> None:
-        """Bind drivers to the board's peripherals, build the controller and the task table."""
-        super().__init__(board, config, reference)
+    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None,
+                 controller: object = None) -> None:
+        """Bind drivers to the board's peripherals, take the controller (default: the profile's), build the table."""
+        super().__init__(board, config, reference, controller)
         self.tasks = self._task_table()
 
     # The task table ---------------------------------------------------------------------------
@@ -39,6 +41,10 @@ class Firmware(FirmwareTasks):
 
         def task(name: str, prio: int, hz: int, body: Callable[[Job], object]) -> Task:
             cost: int | Callable[[object], int] = c.cost(name)
+            own = getattr(self.controller, "cost_cycles", None) if name == "control" else None
+            if isinstance(own, int):
+                check_controller(self.controller, f // hz)
+                cost = own
             if isinstance(cost, CostModel) and not cost.per_byte:
                 cost = cost.base  # a fixed cost: the kernel need not call the model for every job
             return Task(name, prio, period=f // hz, cost=cost, body=body, overrun=OverrunPolicy.SKIP)

@@ -56,6 +56,8 @@ class FirmwareConfig:
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
+    controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
+    controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
 
     def __post_init__(self) -> None:
         """Check the rates divide sensibly into the control rate."""
@@ -108,6 +110,19 @@ def _safety(table: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _controller(table: dict[str, Any], profile: Path) -> dict[str, Any]:
+    """[controller]: `name` (a shipped one or FILE.py:CLASS, a relative FILE taken from the profile's
+    folder); every other key goes to the controller's constructor as a dict."""
+    params = dict(table)
+    name = params.pop("name", "cascade")
+    if not isinstance(name, str):
+        raise ValueError(f"firmware profile {profile}: [controller] name = {name!r} is not a string")
+    file, sep, cls = name.rpartition(":")
+    if sep and file.endswith(".py") and not Path(file).is_absolute():
+        name = f"{profile.parent / file}:{cls}"
+    return {"controller": name, "controller_params": params}
+
+
 def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
@@ -119,6 +134,7 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         raise ValueError(f"firmware profile {p} is not valid TOML: {e}") from None
     try:
         rates, ctl, saf = doc.get("rates_hz", {}), doc.get("control", {}), doc.get("safety", {})
+        controller = _controller(doc.get("controller", {}), p)
         ctl = dict(ctl)
         pos, vel = ctl.pop("position", {}), ctl.pop("velocity", {})
         return FirmwareConfig(
@@ -128,6 +144,7 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
             feedforward_params=FeedforwardParams(**doc.get("feedforward", {})),
             safety=SafetyLimits(**_safety(saf)),
             task_cycles={k: CostModel(**v) for k, v in doc.get("task_cycles", {}).items()},
+            **controller,
             **ctl,
         )
     except TypeError as e:

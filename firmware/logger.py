@@ -6,7 +6,7 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
-from firmware.protocol.telemetry import RECORD_FRAMER
+from firmware.protocol.telemetry import RECORD_FRAMER, record_framer
 from firmware.protocol.telemetry_frame import RecordFramer
 from hal.errors import HalError
 from hal.interfaces import Uart
@@ -24,6 +24,10 @@ class TelemetryLogger:
         self.seq = 0
         self.sent = 0
         self.dropped = 0
+
+    def extra_fields(self, count: int) -> None:
+        """Records carry `count` float32 fields after the base ones from now on (a controller's published values)."""
+        self._framer = record_framer(count)
 
     def log_values(self, time_cycles: int, *values: float | int) -> int:
         """Frame and queue one record, every field after time_cycles given positionally in RECORD_FIELDS order.

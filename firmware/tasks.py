@@ -9,6 +9,7 @@ backend.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
@@ -16,14 +17,18 @@ from typing import Final
 from firmware.config import FirmwareConfig
 from firmware.control.estimation import AngleEstimator
 from firmware.control.filters import ButterworthLowPass
-from firmware.control.pid import CascadeController, Feedforward
+from firmware.control.gait_events import LoadDetector
+from firmware.control.interface import as_number, check_controller, describe_failure, published_names
+from firmware.control.observation import MotorCommand, Observation
+from firmware.control.pid import Feedforward
 from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
+from firmware.control.registry import build_controller
 from firmware.drivers.encoder import EncoderDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor import MotorDriver
 from firmware.logger import TelemetryLogger
 from firmware.protocol.rvc import RVC_RATE_HZ
-from firmware.safety import SafetyInputs, Supervisor, SupervisorState
+from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
 from hal.interfaces import Board
 from rtos import Job
 
@@ -33,6 +38,7 @@ __all__ = ["ControlOutput", "FirmwareTasks", "KernelHealth"]
 
 # enum members bound once for the per-period checks (Final: compiled, C statics, no module-dict lookup)
 _INIT: Final = SupervisorState.INIT
+_RUN: Final = SupervisorState.RUN
 _SAFE: Final = SupervisorState.SAFE
 
 KernelHealth = Callable[[], tuple[int, int]]
@@ -53,8 +59,9 @@ class ControlOutput:
 class FirmwareTasks:
     """The prosthesis firmware's state bound to `board`, and its task bodies (one method per task)."""
 
-    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None) -> None:
-        """Bind drivers to the board's peripherals and build the controller."""
+    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None,
+                 controller: object = None) -> None:
+        """Bind drivers to the board's peripherals; take the controller (default: the profile's)."""
         self.board = board
         self.config = c = config
         self.f_cpu_hz = board.f_cpu_hz
@@ -69,13 +76,25 @@ class FirmwareTasks:
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
         self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
                            if c.imu_lowpass_hz > 0 else None)
-        self.cascade = CascadeController(c.position_gains, c.velocity_gains, self.ts_s,
-                                         c.current_limit_a, c.velocity_limit_rad_s)
+        if controller is None:
+            controller = build_controller(c.controller, c, c.controller_params)
+        check_controller(controller)
+        self.controller: object = controller
+        self._update: Callable[[Observation], object] = getattr(controller, "update")  # noqa: B009 -- typed object
+        reset = getattr(controller, "reset", None)
+        self._reset: Callable[[], object] | None = reset if callable(reset) else None
+        self._published: dict[str, object] | None = getattr(controller, "published", None)
+        self.published_names: tuple[str, ...] = published_names(controller)
+        self.logger.extra_fields(len(self.published_names))
+        self.controller_error = ""  # what failed, once a controller call raised or returned a bad value
+        self.obs = Observation()
+        self._current_limit_a = c.current_limit_a
+        self._stride_s = c.stride_s
         feedforward = Feedforward(c.feedforward_params)
         self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
-        # what the control task reads of the (frozen, interpreted) configuration every period
-        self._feedforward = feedforward if c.feedforward else None
-        self._com_angle_rad = c.com_angle_rad
+        self.load_detector = LoadDetector(self.ts_s, feedforward.nm_per_a, feedforward.inertia_kg_m2,
+                                          feedforward.gravity_moment_nm, c.com_angle_rad)
+        self._controller_state = _INIT  # the supervisor state the controller last saw (reset on a change)
         # what the kernel says of deadlines; the runner sets it once the scheduler exists
         self.kernel_health: KernelHealth = lambda: (0, 0)
         self.out = ControlOutput()
@@ -136,7 +155,9 @@ class FirmwareTasks:
         if state is _SAFE:
             cmd = self.supervisor.safe_command(now_s)
             out.current_cmd_a, out.brake = cmd.current_a, cmd.brake
-            self.cascade.reset()
+            if self._controller_state is not _SAFE:
+                self._controller_state = _SAFE
+                self._reset_controller(now_s)
             return
         if state is _INIT or not self.estimator.seeded:
             out.current_cmd_a, out.brake, out.reference_rad = 0.0, False, fused
@@ -148,11 +169,77 @@ class FirmwareTasks:
             self.gait_start_s = gait_start_s = now_s + ramp
         gait_t = now_s - gait_start_s
         ref = self._trajectory.sample(now_s) if gait_t < 0 else self._gait_curve.sample(gait_t)
-        feedforward = self._feedforward
-        ff = feedforward.current_a(ref[0] + self._com_angle_rad, ref[2]) if feedforward is not None else 0.0
         out.reference_rad = ref[0]
-        out.current_cmd_a = self.cascade.update(ref[0], ref[1], fused, self.encoder.velocity_rad_s, ff)
-        out.brake = False
+        current_meas_a = self.motor.feedback.current_a
+        detector = self.load_detector
+        obs = self.obs
+        obs.t_s = now_s
+        obs.dt_s = self.ts_s
+        obs.reference_rad = ref[0]
+        obs.reference_velocity_rad_s = ref[1]
+        obs.reference_acceleration_rad_s2 = ref[2]
+        obs.angle_rad = fused
+        obs.velocity_rad_s = self.encoder.velocity_rad_s
+        obs.encoder_angle_rad = self.encoder.angle_rad
+        obs.imu_pitch_rad = self.imu_pitch_rad
+        obs.motor_current_a = current_meas_a
+        obs.gait_phase = (gait_t / self._stride_s) % 1.0 if gait_t >= 0 else 0.0
+        obs.stance = detector.update(now_s, current_meas_a, fused, ref[2])
+        obs.load_torque_nm = detector.load_torque_nm
+        if self._controller_state is not _RUN:
+            self._controller_state = _RUN
+            if not self._reset_controller(now_s):
+                return
+        try:
+            returned: object = self._update(obs)
+        except Exception as e:  # noqa: BLE001 -- any failure of the controller latches the safe state
+            self._controller_failed(now_s, e, None)
+            return
+        brake = False
+        if isinstance(returned, float):
+            current = returned
+        elif isinstance(returned, MotorCommand) and isinstance(returned.current_a, (float, int)):
+            current = float(returned.current_a)
+            brake = returned.brake is True
+        elif isinstance(returned, int) and not isinstance(returned, bool):
+            current = float(returned)
+        else:
+            self._controller_failed(now_s, None, returned)
+            return
+        if not math.isfinite(current) or (brake and current < 0.0):
+            self._controller_failed(now_s, None, returned)
+            return
+        limit = self._current_limit_a
+        if current > limit:
+            current = limit
+        elif current < -limit:
+            current = -limit
+        out.current_cmd_a = current
+        out.brake = brake
+
+    def _reset_controller(self, now_s: float) -> bool:
+        """Call the controller's reset() if it has one; False (and the safe state) if it raised."""
+        reset = self._reset
+        if reset is None:
+            return True
+        try:
+            reset()
+        except Exception as e:  # noqa: BLE001 -- any failure of the controller latches the safe state
+            self._controller_failed(now_s, e, None)
+            return False
+        return True
+
+    def _controller_failed(self, now_s: float, error: Exception | None, returned: object) -> None:
+        """The controller raised or returned a bad value: zero current now, the safe state latched."""
+        if not self.controller_error:
+            self.controller_error = describe_failure(self.controller, error, returned)
+        out = self.out
+        out.current_cmd_a, out.brake = 0.0, False
+        sup = self.supervisor
+        if sup.state is not _SAFE:
+            sup.detail = self.controller_error
+            sup.trip(FaultReason.CONTROLLER_ERROR, now_s)
+        self._controller_state = _SAFE
 
     def motor_task(self, job: Job) -> int:
         now_s = job.start / self.f_cpu_hz
@@ -164,6 +251,13 @@ class FirmwareTasks:
 
     def logger_task(self, job: Job) -> int:
         out, sup, encoder = self.out, self.supervisor, self.encoder
+        published = self._published
+        if published is not None and self.published_names:
+            extras = [as_number(published.get(name)) for name in self.published_names]
+            return self.logger.log_values(
+                job.start, out.reference_rad, encoder.angle_rad, self.imu_pitch_rad, out.fused_angle_rad,
+                encoder.velocity_rad_s, out.current_cmd_a, self.motor.feedback.current_a, out.torque_est_nm,
+                sup.state, sup.reason, self.kernel_health()[0], *extras)
         return self.logger.log_values(  # the fields in RECORD_FIELDS order (telemetry.TelemetryRecord)
             job.start,
             out.reference_rad,  # reference_rad

@@ -75,12 +75,14 @@ def summarise(r: RunResult) -> dict:
         "telemetry": {"records_sent": fw.logger.sent, "records_dropped": fw.logger.dropped,
                       "bytes": len(r.telemetry)},
         "tasks": tasks,
+        "controller": {"name": fw.config.controller, "class": type(fw.controller).__qualname__,
+                       "published": list(fw.published_names), "error": fw.controller_error or None},
     }
 
 
-def _write_telemetry_csv(data: bytes, path: Path) -> dict:
-    dec = TelemetryDecoder()
-    sink = CsvSink(path)
+def _write_telemetry_csv(data: bytes, path: Path, extra_names: tuple[str, ...] = ()) -> dict:
+    dec = TelemetryDecoder(len(extra_names))
+    sink = CsvSink(path, extra_names)
     try:
         sink.write(dec.feed(data))
     finally:
@@ -136,7 +138,8 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     (out / "telemetry.bin").write_bytes(r.telemetry)
     s = summarise(r)
     s.update(extra or {})
-    s["telemetry"]["decoder"] = _write_telemetry_csv(r.telemetry, out / "telemetry.csv")
+    s["telemetry"]["decoder"] = _write_telemetry_csv(r.telemetry, out / "telemetry.csv",
+                                                     getattr(r.firmware, "published_names", ()))
     if r.scheduler.trace is not None:
         r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
     p = r.probe.arrays()

@@ -59,6 +59,7 @@ class RunConfig:
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
     actions: list[tuple[float, Action]] = field(default_factory=list)
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
+    controller: object = None  # a built controller (None: the firmware profile's [controller])
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -115,7 +116,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
-    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
+    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
+                  controller=cfg.controller)
     probe = Probe()
     # bench instrument, not firmware: zero cycles, lowest priority
     probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))

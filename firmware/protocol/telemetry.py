@@ -61,6 +61,7 @@ class FaultReason(IntEnum):
     TASK_OVERRUN = 10
     LINK_LOST = 11
     COMMAND_STALE = 12
+    CONTROLLER_ERROR = 13
 
 
 def _wire(fmt: str, default: Any = MISSING) -> Any:
@@ -85,6 +86,8 @@ class TelemetryRecord:
     supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)
     fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)
     deadline_misses: int = _wire("I", 0)
+    # values a controller publishes, appended as float32 fields after the base ones (not a base field)
+    extra: tuple[float, ...] = field(default=(), compare=False)
 
 
 class FieldSpec(NamedTuple):
@@ -97,7 +100,7 @@ class FieldSpec(NamedTuple):
 
 RECORD_SPECS: tuple[FieldSpec, ...] = tuple(
     FieldSpec(f.name, f.metadata["fmt"], 0 if f.default is MISSING else f.default)
-    for f in fields(TelemetryRecord)
+    for f in fields(TelemetryRecord) if "fmt" in f.metadata
 )
 RECORD_FIELDS: tuple[str, ...] = tuple(s.name for s in RECORD_SPECS)
 BASE_FIELD_COUNT: int = len(RECORD_SPECS)  # every version-1 record carries at least these
@@ -201,6 +204,18 @@ RECORD_FRAMER: RecordFramer = RecordFramer(_RECORD_DATA, TELEMETRY_VERSION, BASE
 """Frames records from their field values (:func:`encode_record_values`; the logger calls it directly)."""
 
 
+def record_framer(extra_floats: int) -> RecordFramer:
+    """The framer of records carrying `extra_floats` float32 fields after the base ones (0: RECORD_FRAMER)."""
+    if extra_floats == 0:
+        return RECORD_FRAMER
+    if not 0 < extra_floats <= (MAX_PAYLOAD_LEN - RECORD_PAYLOAD_LEN) // 4:
+        raise ValueError(f"{extra_floats} extra fields out of range: 0..{(MAX_PAYLOAD_LEN - RECORD_PAYLOAD_LEN) // 4}")
+    specs = RECORD_SPECS + tuple(FieldSpec(f"extra_{k}", "f", math.nan) for k in range(extra_floats))
+    layout = struct.Struct(_RECORD_DATA.format + "f" * extra_floats)
+    return RecordFramer(layout, TELEMETRY_VERSION, len(specs),
+                        lambda every: _explain_pack_error(every, specs))  # type: ignore[arg-type]
+
+
 def decode_payload(payload: bytes, specs: Sequence[FieldSpec] = RECORD_SPECS) -> dict[str, int | float]:
     """Decode an unframed payload into {name: value} for `specs`; FrameError subclasses on bad input."""
     if len(payload) < _HEADER.size + _CRC.size:
@@ -234,27 +249,36 @@ def _enum_or_int(enum: type[IntEnum], value: int) -> IntEnum | int:
         return value
 
 
-def record_from_values(values: dict[str, int | float]) -> TelemetryRecord:
-    """Build a record from decoded field values (unknown enum codes stay plain ints)."""
-    kw = {name: values[name] for name in RECORD_FIELDS}
+def record_from_values(values: dict[str, int | float], extra: tuple[float, ...] = ()) -> TelemetryRecord:
+    """Build a record from decoded field values (unknown enum codes stay plain ints), `extra` appended."""
+    kw: dict[str, Any] = {name: values[name] for name in RECORD_FIELDS}
+    kw["extra"] = extra
     kw["supervisor_state"] = _enum_or_int(SupervisorState, int(kw["supervisor_state"]))
     kw["fault_reason"] = _enum_or_int(FaultReason, int(kw["fault_reason"]))
     return TelemetryRecord(**kw)  # type: ignore[arg-type]
 
 
-def decode_frame(frame: bytes) -> TelemetryRecord:
-    """Decode one frame (COBS bytes, with or without the trailing 0x00); FrameError on bad input."""
+def decode_frame(frame: bytes, extra_fields: int = 0) -> TelemetryRecord:
+    """Decode one frame (COBS bytes, with or without the trailing 0x00); FrameError on bad input.
+
+    With ``extra_fields`` the first that many float32 fields after the base ones (a controller's published
+    values) land in ``record.extra`` (NaN for those the frame lacks).
+    """
     encoded = frame[:-1] if frame.endswith(b"\x00") else frame
     try:
         payload = cobs_decode(encoded)
     except ValueError as exc:
         raise FrameError(str(exc)) from None
-    return record_from_values(decode_payload(payload))
+    if not extra_fields:
+        return record_from_values(decode_payload(payload))
+    specs = RECORD_SPECS + tuple(FieldSpec(f"extra_{k}", "f", math.nan) for k in range(extra_fields))
+    values = decode_payload(payload, specs)
+    return record_from_values(values, tuple(float(values[f"extra_{k}"]) for k in range(extra_fields)))
 
 
-def record_to_row(rec: TelemetryRecord) -> dict[str, int | float | str]:
-    """One CSV row (keys = RECORD_COLUMNS): SI values, plus ``*_deg`` columns and enum names."""
-    row: dict[str, int | float | str] = {}
+def record_to_row(rec: TelemetryRecord, extra_names: Sequence[str] = ()) -> dict[str, int | float | str]:
+    """One CSV row (keys = RECORD_COLUMNS, then extra_names): SI values, ``*_deg`` columns, enum names."""
+    row: dict[str, int | float | str] = dict(zip(extra_names, rec.extra, strict=False))
     for name in RECORD_FIELDS:
         value = getattr(rec, name)
         if name in _ANGLE_FIELDS:
@@ -286,8 +310,9 @@ class TelemetryStats:
 class TelemetryDecoder:
     """Streaming decoder: splits on 0x00, decodes each frame, counts every failure; never raises."""
 
-    def __init__(self) -> None:
-        """Start with empty counters and an empty buffer."""
+    def __init__(self, extra_fields: int = 0) -> None:
+        """Start with empty counters and an empty buffer; keep `extra_fields` appended floats per record."""
+        self.extra_fields = extra_fields
         self.stats = TelemetryStats()
         self._buf = bytearray()
         self._discarding = False  # inside an overlong frame: drop until the next delimiter
@@ -344,7 +369,7 @@ class TelemetryDecoder:
             self.stats.dropped_bytes += 1  # idle delimiter
             return None
         try:
-            rec = decode_frame(encoded)
+            rec = decode_frame(encoded, self.extra_fields)
         except UnknownVersionError:
             self.stats.unknown_versions += 1
         except CrcError:

@@ -26,6 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
+                        help="the control law: cascade or impedance (shipped), or a class in a Python file "
+                             "(README: 'Your own controller'); default: the profile's [controller], else cascade")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
@@ -80,14 +83,14 @@ def run(args: argparse.Namespace) -> int:
     """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched."""
     if args.motor or args.imu:
         return _run_serial(args)
-    from firmware.config import load_firmware_config
     from host_tools.report import write_outputs
     from host_tools.runner import RunConfig, board_profile, run_virtual
 
     try:
-        fw_cfg = load_firmware_config(args.profile)
+        fw_cfg = _firmware_config(args)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
-                        firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture)
+                        firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
+                        controller=_controller(fw_cfg))
         board_profile(args.board)  # fail early with a clear message, before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
@@ -116,13 +119,32 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
     print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv")
+    if result.firmware.controller_error:
+        print(f"pafp run: {result.firmware.controller_error}; the supervisor latched the safe state "
+              f"(CONTROLLER_ERROR) and every file was written", file=sys.stderr)
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
+
+
+def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
+    """The profile, with --controller replacing its controller (the profile's parameters go with its own name)."""
+    from firmware.config import load_firmware_config
+
+    fw_cfg = load_firmware_config(args.profile)
+    if args.controller is not None and args.controller != fw_cfg.controller:
+        fw_cfg = fw_cfg.with_changes(controller=args.controller, controller_params={})
+    return fw_cfg
+
+
+def _controller(fw_cfg) -> object:  # FirmwareConfig -> the built controller
+    """Build the configured controller now, so a bad name, file, class or parameter stops before the run."""
+    from firmware.control.registry import build_controller
+
+    return build_controller(fw_cfg.controller, fw_cfg, fw_cfg.controller_params)
 
 
 def _run_serial(args: argparse.Namespace) -> int:
     """Serial mode: check the ports, run on the wall clock, stop safely, write the same outputs (exit codes:
     docs/hardware.md)."""
-    from firmware.config import load_firmware_config
     from host_tools.realtime import RealtimeSettings
     from host_tools.serial_run import SerialRunConfig, StartupError, run_serial
     from host_tools.stop_signals import StopSignals
@@ -134,7 +156,7 @@ def _run_serial(args: argparse.Namespace) -> int:
     try:
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
                               duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
-                              board=args.board, firmware=load_firmware_config(args.profile),
+                              board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
         if args.capture is not None and (args.capture / "index.csv").exists():
