@@ -55,6 +55,7 @@ COMPILED = [
     "firmware/control/observation.py",
     "firmware/control/cascade.py",
     "firmware/control/gait_events.py",
+    "firmware/control/impedance.py",
     "firmware/safety.py",
     "firmware/logger.py",
     "firmware/drivers/motor.py",

@@ -154,6 +154,11 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         plot_tracking(out / "tracking.png", strides, (pct, band[:, 0], band[:, 1]), p["t_s"],
                       p["current_cmd_a"], p["current_meas_a"], err,
                       f"Gait tracking, {s['strides']} strides, RMS {s['rms_error_deg']:.2f}°")
+    if getattr(r.config, "scenario", "suspended") == "walk":
+        from host_tools.actuator import walk_outputs
+
+        s["actuator"], walk_md = walk_outputs(r, out)
+        md_extra = [*(md_extra or []), *walk_md]
     (out / "summary.json").write_text(json.dumps(_strict(s), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     (out / "report.md").write_text(_report_md(s, md_extra), encoding="utf-8")
     return s

@@ -18,7 +18,9 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
+from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
+from host_tools.walk import SCENARIOS, walking_load
 from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
@@ -60,6 +62,9 @@ class RunConfig:
     actions: list[tuple[float, Action]] = field(default_factory=list)
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
     controller: object = None  # a built controller (None: the firmware profile's [controller])
+    scenario: str = "suspended"  # or "walk": the ground's moment in stance (host_tools/walk.py)
+    body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
+    moment_csv: Path | None = None  # walk: the ankle moment per kg (default: the packaged normative curve)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -67,6 +72,8 @@ class RunConfig:
             raise ValueError(f"strides {self.strides!r} out of range: an int in 1..10000")
         if not isinstance(self.baud, int) or not 9600 <= self.baud <= 3_000_000:
             raise ValueError(f"baud {self.baud!r} out of range: an int in 9600..3000000")
+        if self.scenario not in SCENARIOS:
+            raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
 
 
 @dataclass
@@ -113,11 +120,15 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
+    load = walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv) if cfg.scenario == "walk" else None
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
-                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **cfg.bench_options)
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)),
+                         **({"fixture": walk(load)} if load is not None else {}), **cfg.bench_options)
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
                   controller=cfg.controller)
+    if load is not None:
+        load.bind(lambda: fw.gait_start_s)  # the walker's strides on the firmware's gait clock
     probe = Probe()
     # bench instrument, not firmware: zero cycles, lowest priority
     probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))

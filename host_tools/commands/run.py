@@ -32,6 +32,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
+    walk = parser.add_argument_group("scenario (virtual bench)")
+    walk.add_argument("--scenario", choices=("suspended", "walk"), default="suspended",
+                      help="suspended foot (default) or walk: the ground's moment in stance, scaled to --body-mass "
+                           "(docs/plant.md, 'Walking'); walk adds the actuator design check to summary.json")
+    walk.add_argument("--body-mass", type=float, default=80.0, metavar="KG",
+                      help="walk: body mass in kg, 20..200 (default 80, the report's subject)")
+    walk.add_argument("--moment", type=Path, default=None, metavar="CSV",
+                      help="walk: ankle moment per kg (columns percent_gait, ankle_moment_nm_per_kg_mean; "
+                           "default: the packaged normative curve)")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -90,7 +99,12 @@ def run(args: argparse.Namespace) -> int:
         fw_cfg = _firmware_config(args)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
-                        controller=_controller(fw_cfg))
+                        controller=_controller(fw_cfg, args), scenario=args.scenario,
+                        body_mass_kg=args.body_mass, moment_csv=args.moment)
+        if args.scenario == "walk":
+            from host_tools.walk import walking_load
+
+            walking_load(args.body_mass, fw_cfg.stride_s, args.moment)  # a bad mass or CSV stops here
         board_profile(args.board)  # fail early with a clear message, before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
@@ -103,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed} -> {out}")
+    walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
+    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}{walking} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
     bar = _Progress(not args.quiet)
     result = run_virtual(cfg, progress=bar)
@@ -135,11 +150,15 @@ def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
     return fw_cfg
 
 
-def _controller(fw_cfg) -> object:  # FirmwareConfig -> the built controller
-    """Build the configured controller now, so a bad name, file, class or parameter stops before the run."""
+def _controller(fw_cfg, args: argparse.Namespace) -> object:  # FirmwareConfig -> the built controller
+    """Build the configured controller now, so a bad name, file, class or parameter stops before the run
+    (walking with the shipped impedance controller: tuned for --body-mass unless the profile says otherwise)."""
     from firmware.control.registry import build_controller
 
-    return build_controller(fw_cfg.controller, fw_cfg, fw_cfg.controller_params)
+    params = dict(fw_cfg.controller_params)
+    if fw_cfg.controller == "impedance" and args.scenario == "walk":
+        params.setdefault("body_mass_kg", args.body_mass)
+    return build_controller(fw_cfg.controller, fw_cfg, params)
 
 
 def _run_serial(args: argparse.Namespace) -> int:
