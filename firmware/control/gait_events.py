@@ -3,7 +3,8 @@
 The ankle's foot model (the feed-forward's J, m g d) says what torque the foot alone needs; the motor's
 measured current says what it delivers. The difference is the moment from outside: the ground's in
 stance. Heel strike is that moment rising above ``on_nm``, toe off it falling below ``off_nm``
-(hysteresis), each held at least ``min_dwell_s``. Compiled (setup.py): it runs every control period.
+(hysteresis); a stance lasts at least ``min_stance_s`` and a swing at least ``min_swing_s`` (a push-off
+that unloads the sensed moment early is not yet toe off). Compiled (setup.py): it runs every control period.
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ class LoadDetector:
 
     def __init__(self, ts_s: float, nm_per_a: float, inertia_kg_m2: float, gravity_moment_nm: float,
                  com_angle_rad: float, on_nm: float = 6.0, off_nm: float = 4.0, cutoff_hz: float = 20.0,
-                 min_dwell_s: float = 0.08) -> None:
-        """Bind the foot model and the thresholds (N m), the low-pass cutoff (Hz) and the least dwell (s)."""
+                 min_stance_s: float = 0.3, min_swing_s: float = 0.2) -> None:
+        """Bind the foot model and the thresholds (N m), the low-pass cutoff (Hz) and the least stance and swing (s)."""
         check_range("on_nm", on_nm, 0.0, 1000.0, lo_open=True, unit="N m")
         check_range("off_nm", off_nm, 0.0, on_nm, unit="N m")
         check_range("cutoff_hz", cutoff_hz, 0.0, 0.5 / ts_s, lo_open=True, unit="Hz")
-        check_range("min_dwell_s", min_dwell_s, 0.0, 10.0, unit="s")
+        check_range("min_stance_s", min_stance_s, 0.0, 10.0, unit="s")
+        check_range("min_swing_s", min_swing_s, 0.0, 10.0, unit="s")
         self.nm_per_a = nm_per_a
         self.inertia_kg_m2 = inertia_kg_m2
         self.gravity_moment_nm = gravity_moment_nm
@@ -33,7 +35,8 @@ class LoadDetector:
         self.on_nm = on_nm
         self.off_nm = off_nm
         self.alpha = 1.0 - math.exp(-2.0 * math.pi * cutoff_hz * ts_s)
-        self.min_dwell_s = min_dwell_s
+        self.min_stance_s = min_stance_s
+        self.min_swing_s = min_swing_s
         self.load_torque_nm = 0.0
         self.stance = False
         self.changed_s = -math.inf
@@ -46,13 +49,14 @@ class LoadDetector:
         external_nm = model_nm - self.nm_per_a * current_meas_a
         load = self.load_torque_nm + self.alpha * (external_nm - self.load_torque_nm)
         self.load_torque_nm = load
-        if now_s - self.changed_s >= self.min_dwell_s:
-            if not self.stance and load > self.on_nm:
-                self.stance = True
-                self.changed_s = now_s
-                self.heel_strikes += 1
-            elif self.stance and load < self.off_nm:
+        held_s = now_s - self.changed_s
+        if self.stance:
+            if load < self.off_nm and held_s >= self.min_stance_s:
                 self.stance = False
                 self.changed_s = now_s
                 self.toe_offs += 1
+        elif load > self.on_nm and held_s >= self.min_swing_s:
+            self.stance = True
+            self.changed_s = now_s
+            self.heel_strikes += 1
         return self.stance
