@@ -159,7 +159,7 @@ def walk_outputs(r, out) -> tuple[dict, list[str]]:  # (RunResult, Path) -> summ
 
     cfg, fw = r.config, r.firmware
     params = cfg.bench_options.get("plant_params") or load_plant_params()
-    load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv)
+    load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv, cfg.speed)
     check = design_check(params, fw.config.current_limit_a, load, fw.reference)
     p = r.probe.arrays()
     start = r.gait_start_s if r.gait_start_s is not None else math.inf

@@ -20,7 +20,7 @@ from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
 from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
-from host_tools.walk import SCENARIOS, walking_load
+from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, walking_load
 from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
@@ -65,6 +65,7 @@ class RunConfig:
     scenario: str = "suspended"  # or "walk": the ground's moment in stance (host_tools/walk.py)
     body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
     moment_csv: Path | None = None  # walk: the ankle moment per kg (default: the packaged normative curve)
+    speed: str | None = None  # a speed group of the packaged data (host_tools/walk.py SPEEDS): reference and moment
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -72,6 +73,8 @@ class RunConfig:
             raise ValueError(f"strides {self.strides!r} out of range: an int in 1..10000")
         if not isinstance(self.baud, int) or not 9600 <= self.baud <= 3_000_000:
             raise ValueError(f"baud {self.baud!r} out of range: an int in 9600..3000000")
+        if self.speed is not None and self.speed not in SPEEDS:
+            raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
         if self.scenario not in SCENARIOS:
             raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
 
@@ -117,10 +120,13 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     isr = dict(board_cfg.get("isr_cycles", {}))
     fw_cfg = cfg.firmware or load_firmware_config()
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
+                 else GaitReference.from_csv(all_speeds_path(), stride_s=fw_cfg.stride_s,
+                                             select={"speed_category": SPEEDS[cfg.speed]}) if cfg.speed
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
-    load = walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv) if cfg.scenario == "walk" else None
+    load = (walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv, cfg.speed) if cfg.scenario == "walk"
+            else None)
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)),
                          **({"fixture": walk(load)} if load is not None else {}), **cfg.bench_options)

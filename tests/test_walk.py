@@ -122,3 +122,17 @@ def test_cli_bad_walk_input_is_one_line_and_exit_2(tmp_path, capsys, args, needl
     assert main(["run", "--quiet", *args, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert needle in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_speed_picks_the_speed_groups_moment_and_reference():
+    _, slow_m, source = moment_curve(speed="very-slow")
+    _, free_m, _ = moment_curve()
+    assert source.endswith("ankle_normative_all_speeds.csv") and len(slow_m) == len(free_m) == 51
+    assert max(slow_m) < max(free_m)  # the slowest walkers push off less (Schwartz et al. 2008)
+    _, fast_file, _ = moment_curve(speed="free")
+    assert fast_file == free_m  # the free group of the all-speeds file is the default curve
+    a = run_virtual(RunConfig(strides=1, trace_capacity=0, speed="very-slow"))
+    b = run_virtual(RunConfig(strides=1, trace_capacity=0))
+    assert a.firmware.reference.sample(0.3)[0] != b.firmware.reference.sample(0.3)[0]
+    with pytest.raises(ValueError, match="speed 'warp' unknown"):
+        RunConfig(speed="warp")

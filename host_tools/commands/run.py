@@ -41,6 +41,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     walk.add_argument("--moment", type=Path, default=None, metavar="CSV",
                       help="walk: ankle moment per kg (columns percent_gait, ankle_moment_nm_per_kg_mean; "
                            "default: the packaged normative curve)")
+    walk.add_argument("--speed", choices=("very-slow", "slow", "free", "fast", "very-fast"), default=None,
+                      help="the gait (angle reference and, walking, moment) of that speed group of the packaged "
+                           "normative data (Schwartz et al. 2008; default: free speed); the stride time stays "
+                           "the profile's")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -100,11 +104,11 @@ def run(args: argparse.Namespace) -> int:
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
-                        body_mass_kg=args.body_mass, moment_csv=args.moment)
+                        body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed)
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 
-            walking_load(args.body_mass, fw_cfg.stride_s, args.moment)  # a bad mass or CSV stops here
+            walking_load(args.body_mass, fw_cfg.stride_s, args.moment, args.speed)  # a bad mass or CSV stops here
         board_profile(args.board)  # fail early with a clear message, before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference

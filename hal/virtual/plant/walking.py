@@ -26,7 +26,7 @@ class WalkingLoad:
     """External torque at the ankle [N m, positive = dorsiflexing] as a function of simulated time."""
 
     def __init__(self, percent: Sequence[float], moment_nm_per_kg: Sequence[float], body_mass_kg: float,
-                 stride_s: float, toe_off_pct: float = 62.0) -> None:
+                 stride_s: float, toe_off_pct: float = 59.0) -> None:
         """Check and keep the curve (percent 0..100 increasing), the mass, the stride and toe off."""
         lo, hi = BODY_MASS_RANGE_KG
         if not (isinstance(body_mass_kg, (int, float)) and lo <= body_mass_kg <= hi):
