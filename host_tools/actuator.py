@@ -152,8 +152,9 @@ def plot_design_check(path, check: dict, params: PlantParams, load: WalkingLoad,
     plt.close(fig)
 
 
-def walk_outputs(r, out) -> tuple[dict, list[str]]:  # (RunResult, Path) -> summary["actuator"], report.md lines
-    """The design check of a walking run: summary entry (with the run's measured saturation), plot, report lines."""
+def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray) -> tuple[dict, list[str]]:
+    """The design check of a walking run (RunResult r, directory out, the run's command over time): summary
+    entry (with the run's measured saturation), plot, report lines."""
     from hal.virtual.plant import load_plant_params
     from host_tools.walk import walking_load
 
@@ -161,15 +162,16 @@ def walk_outputs(r, out) -> tuple[dict, list[str]]:  # (RunResult, Path) -> summ
     params = cfg.bench_options.get("plant_params") or load_plant_params()
     load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv, cfg.speed)
     check = design_check(params, fw.config.current_limit_a, load, fw.reference)
-    p = r.probe.arrays()
     start = r.gait_start_s if r.gait_start_s is not None else math.inf
     end = fw.supervisor.tripped_at_s if fw.supervisor.tripped_at_s is not None else math.inf
-    sel = (p["t_s"] >= start) & (p["t_s"] < end)
-    command = np.abs(p["current_cmd_a"][sel])
+    t_s, current_cmd_a = np.asarray(t_s, dtype=float), np.asarray(current_cmd_a, dtype=float)
+    sel = (t_s >= start) & (t_s < end)
+    command = np.abs(current_cmd_a[sel])
     at_limit = command >= fw.config.current_limit_a * (1 - 1e-9)  # clamped by the firmware
     near_limit = command >= 0.95 * fw.config.current_limit_a  # also a controller saturating inside (cascade: its
     # velocity loop at +-1 plus a feed-forward of the other sign stays just below the clamp)
-    check["run"] = {"controller": fw.config.controller, "seconds_walked": round(float(sel.sum()) / 500.0, 3),
+    walked_s = round(float(t_s[sel][-1] - t_s[sel][0]), 3) if sel.any() else 0.0
+    check["run"] = {"controller": fw.config.controller, "seconds_walked": walked_s,
                     "saturated_fraction": round(float(at_limit.mean()), 4) if sel.any() else None,
                     "near_limit_fraction": round(float(near_limit.mean()), 4) if sel.any() else None,
                     "heel_strikes_sensed": fw.load_detector.heel_strikes, "toe_offs_sensed": fw.load_detector.toe_offs}

@@ -1,7 +1,9 @@
 """Which modules run compiled (mypyc, see setup.py) and whether those builds are newer than their source.
 
 A compiled module is an extension file (``app.cpython-311-x86_64-linux-gnu.so``) beside its ``.py``;
-Python imports the extension first, so an extension older than its source runs stale code.
+Python imports the extension first, so an extension older than its source runs stale code. That can only
+happen in a source tree (a checkout with ``setup.py``, installed editable): an installed wheel's files
+carry the times they were unpacked at, so there the check is skipped.
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ import sys
 from importlib.machinery import EXTENSION_SUFFIXES
 from pathlib import Path
 
-__all__ = ["ROOT", "compiled_sources", "copy_pure_source", "describe", "run_pure_python", "stale_sources"]
+__all__ = ["ROOT", "compiled_sources", "copy_pure_source", "describe", "is_source_tree", "run_pure_python",
+           "stale_sources", "version"]
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("firmware", "hal", "rtos", "host_tools")
@@ -31,8 +34,26 @@ def compiled_sources(root: Path = ROOT) -> list[Path]:
     return sorted(p for pkg in PACKAGES for p in (root / pkg).rglob("*.py") if _extension_of(p) is not None)
 
 
+def is_source_tree(root: Path = ROOT) -> bool:
+    """Whether root is a checkout (it has setup.py and pyproject.toml), not an installed package."""
+    return (root / "setup.py").is_file() and (root / "pyproject.toml").is_file()
+
+
+def version() -> str:
+    """The installed distribution's version (pyproject.toml), or "unknown" when pafp is not installed."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("pafp")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def stale_sources(root: Path = ROOT) -> list[Path]:
-    """Compiled sources edited after their extension was built: rebuild with ``make install``."""
+    """Compiled sources edited after their extension was built (source trees only): rebuild with ``make install``."""
+    if not is_source_tree(root):
+        return []
     out = []
     for src in compiled_sources(root):
         ext = _extension_of(src)

@@ -8,7 +8,7 @@ import logging
 import os
 import sys
 
-from host_tools.build_info import ROOT, stale_sources
+from host_tools.build_info import ROOT, describe, stale_sources, version
 
 # name -> module under host_tools.commands; each module defines HELP, add_arguments(parser), run(args) -> int
 COMMANDS: dict[str, str] = {
@@ -19,18 +19,25 @@ COMMANDS: dict[str, str] = {
     "decode": "decode",
     "rta": "rta",
     "tune": "tune",
+    "sweep": "sweep",
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Build the argument parser with every subcommand registered."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """Build the argument parser with every subcommand registered (or only the subcommand `only`).
+
+    Registering a subcommand imports its module: `pafp run` need not import what `pafp bench` does.
+    """
     parser = argparse.ArgumentParser(
         prog="pafp",
         description="Emulator of the firmware of a powered ankle-foot prosthesis.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages to stderr")
+    parser.add_argument("--version", action="version", version=f"pafp {version()} ({describe()})")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module_name in COMMANDS.items():
+        if only is not None and name != only:
+            continue
         module = importlib.import_module(f"host_tools.commands.{module_name}")
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
@@ -40,7 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `pafp` console script; returns the exit code."""
-    parser = build_parser()
+    words = sys.argv[1:] if argv is None else argv
+    command = next((w for w in words if not w.startswith("-")), None)  # the options before it take no value
+    parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING,

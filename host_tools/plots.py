@@ -9,36 +9,47 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
 
 from host_tools.metrics import StrideSet  # noqa: E402
 
 __all__ = ["plot_tracking"]
 
 
-def plot_tracking(path: Path, strides: StrideSet, band: tuple[np.ndarray, np.ndarray, np.ndarray],
+def plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndarray, np.ndarray, np.ndarray],
                   t_s: np.ndarray, current_cmd_a: np.ndarray, current_meas_a: np.ndarray,
-                  error_deg: np.ndarray, title: str) -> None:
-    """Angle vs % gait (each stride, their mean, the normative mean +- 1 SD); current and error vs time."""
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 8), constrained_layout=True)
+                  errors_deg: dict[str, np.ndarray], title: str) -> None:
+    """Angle vs % gait (each stride and their mean per signal, the normative mean +- 1 SD); current and the
+    tracking errors (reference minus each signal, NaN outside RUN) vs time."""
+    fig, (ax1, ax2, ax4) = plt.subplots(3, 1, figsize=(9, 11), constrained_layout=True)
     pct, mean, sd = band
     ax1.fill_between(pct, mean - sd, mean + sd, color="0.85", label="normative mean ± 1 SD")
     ax1.plot(pct, mean, color="0.4", lw=1.2, ls="--", label="normative mean")
-    for k, a in enumerate(strides.angles_deg):
-        ax1.plot(strides.percent, a, color="tab:blue", lw=0.6, alpha=0.5, label="each stride" if k == 0 else None)
-    if len(strides.angles_deg):
-        ax1.plot(strides.percent, strides.angles_deg.mean(axis=0), color="tab:blue", lw=2.2, label="mean of strides")
-        ax1.plot(strides.percent, strides.reference_deg[0], color="tab:red", lw=1.2, label="reference")
+    colours = ("tab:blue", "tab:orange", "tab:purple", "tab:green")
+    reference_drawn = False
+    for (label, st), colour in zip(strides.items(), colours, strict=False):
+        if not len(st.angles_deg):
+            continue
+        # one collection, not one line per stride: 1000 strides draw as fast as 10
+        lines = [np.column_stack((st.percent, a)) for a in st.angles_deg]
+        ax1.add_collection(LineCollection(lines, colors=colour, linewidths=0.5, alpha=0.4,
+                                          label=f"{label}: each stride"))
+        ax1.plot(st.percent, st.angles_deg.mean(axis=0), color=colour, lw=2.0, label=f"{label}: mean of strides")
+        if not reference_drawn:
+            ax1.plot(st.percent, st.reference_deg[0], color="tab:red", lw=1.2, label="reference")
+            reference_drawn = True
     ax1.set(xlabel="gait cycle (%)", ylabel="ankle angle (deg, dorsiflexion +)", title=title, xlim=(0, 100))
     ax1.grid(alpha=0.3)
-    ax1.legend(loc="lower left", fontsize=8)
+    ax1.legend(loc="lower left", fontsize=7)
     ax2.plot(t_s, current_cmd_a, lw=0.8, label="commanded current (A)")
     ax2.plot(t_s, current_meas_a, lw=0.8, label="measured current (A)")
     ax2.set(xlabel="time (s)", ylabel="motor current (A)")
     ax2.grid(alpha=0.3)
-    ax3 = ax2.twinx()
-    ax3.plot(t_s, error_deg, color="tab:green", lw=0.8, label="tracking error (deg)")
-    ax3.set_ylabel("tracking error (deg)")
-    lines = ax2.get_lines() + ax3.get_lines()
-    ax2.legend(lines, [ln.get_label() for ln in lines], loc="upper right", fontsize=8)
+    ax2.legend(loc="upper right", fontsize=8)
+    for (label, err), colour in zip(errors_deg.items(), (*colours, "k"), strict=False):
+        ax4.plot(t_s, err, lw=0.7, color=colour, label=f"reference − {label}")
+    ax4.set(xlabel="time (s)", ylabel="tracking error (deg), supervisor in RUN")
+    ax4.grid(alpha=0.3)
+    ax4.legend(loc="upper right", fontsize=8)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -7,6 +7,7 @@ so it is compiled with the hot path (the serial run fills a :class:`Probe` as we
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
@@ -24,14 +25,23 @@ Action = Callable[[VirtualBench, Firmware], None]
 
 @dataclass
 class Probe:
-    """Samples of the run at PROBE_HZ: time, reference, true and estimated angles, currents."""
+    """Samples of the run at PROBE_HZ: time, reference, the angles (true and as the firmware has them),
+    currents and the supervisor's state.
+
+    ``encoder_angle_rad`` is the encoder driver's angle (zero where the pulley was at power-up),
+    ``imu_pitch_rad`` the newest IMU frame's pitch as the driver decoded it (NaN before the first
+    frame; before the firmware's own low-pass, if any), ``supervisor_state`` the SupervisorState value.
+    """
 
     t_s: list[float] = field(default_factory=list)
     reference_rad: list[float] = field(default_factory=list)
     true_angle_rad: list[float] = field(default_factory=list)
     fused_angle_rad: list[float] = field(default_factory=list)
+    encoder_angle_rad: list[float] = field(default_factory=list)
+    imu_pitch_rad: list[float] = field(default_factory=list)
     current_cmd_a: list[float] = field(default_factory=list)
     current_meas_a: list[float] = field(default_factory=list)
+    supervisor_state: list[int] = field(default_factory=list)
 
     def sample(self, t_s: float, fw: Firmware, true_angle_rad: float) -> None:
         """Record one sample of the firmware's outputs and the true (or best known) angle at t_s."""
@@ -40,8 +50,12 @@ class Probe:
         self.reference_rad.append(out.reference_rad)
         self.true_angle_rad.append(true_angle_rad)
         self.fused_angle_rad.append(out.fused_angle_rad)
+        self.encoder_angle_rad.append(fw.encoder.angle_rad)
+        pitch = fw.imu.pitch_rad
+        self.imu_pitch_rad.append(math.nan if pitch is None else pitch)
         self.current_cmd_a.append(out.current_cmd_a)
         self.current_meas_a.append(fw.motor.feedback.current_a)
+        self.supervisor_state.append(int(fw.supervisor.state))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The samples as numpy arrays, by field name."""

@@ -1,4 +1,10 @@
-"""Writes the outputs of a virtual run: telemetry, trace, plot, summary.json and report.md."""
+"""Writes the outputs of a run: telemetry, trace, plot, summary.json and report.md.
+
+Each file is written to a temporary name and renamed (host_tools/outdir.py); summary.json is strict JSON
+(a NaN or an infinity, e.g. the tracking error of a run stopped before its gait began, is written as
+null). A virtual run that streamed its telemetry (``RunResult.files``) has telemetry.bin/.csv in place
+already.
+"""
 
 from __future__ import annotations
 
@@ -11,26 +17,86 @@ import numpy as np
 
 from firmware.protocol.telemetry import TelemetryDecoder
 from host_tools.build_info import describe
-from host_tools.metrics import cut_strides, tracking_metrics
-from host_tools.monitor import CsvSink
-from host_tools.plots import plot_tracking
+from host_tools.metrics import TrackingMetrics
+from host_tools.outdir import write_atomic
+from host_tools.process_clock import process_elapsed_s
 from host_tools.runner import RunResult
+from host_tools.telemetry_csv import TelemetryCsv
+from host_tools.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 
-__all__ = ["summarise", "write_outputs"]
+__all__ = ["TRACKING_SIGNALS", "strict_json", "summarise", "tracking_lines", "tracking_of", "tracking_summary",
+           "tracking_text", "write_outputs"]
+
+
+
+def strict_json(value: object) -> object:
+    """value with every non-finite float replaced by None (JSON has no NaN or Infinity).
+
+    >>> strict_json({"a": [1.0, float("nan")], "b": float("inf")})
+    {'a': [1.0, None], 'b': None}
+    """
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(v) for v in value]
+    return value
+
+
+def tracking_of(r: RunResult) -> TrackingResult:
+    """The tracking figures of a run: streamed during it, or computed now from its probe's samples."""
+    files = getattr(r, "files", None)
+    if files is not None:
+        return files.close()
+    p = r.probe.arrays()
+    t = p["t_s"]
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    stream = probe_stream(stride_s=r.firmware.config.stride_s, strides=r.config.strides, dt_s=dt,
+                          expected_samples=len(t))
+    stream.set_start(r.gait_start_s)
+    feed_probe(stream, p)
+    return stream.finish()
+
+
+def _has_plant(r: RunResult) -> bool:
+    """Whether the probe's true angle is a plant's (serial mode without one records the fused estimate)."""
+    return getattr(r, "angle_source", "plant") == "plant"
+
+
+def _figures(m: TrackingMetrics, enough: bool) -> dict[str, float | None]:
+    """{"rms_deg", "max_deg", "lag_ms"} rounded; None when the run had too little RUN time or no sample."""
+    if not enough or not m.samples:
+        return {"rms_deg": None, "max_deg": None, "lag_ms": None}
+    return {"rms_deg": round(m.rms_error_deg, 4), "max_deg": round(m.max_error_deg, 4), "lag_ms": round(m.lag_ms, 2)}
+
+
+def tracking_summary(r: RunResult, tracking: TrackingResult) -> dict:
+    """The four tracking figures over the RUN window, measured ones first, with the time they cover."""
+    t = tracking
+    out: dict = {"time_in_run_s": round(t.time_in_run_s, 3), "min_run_s": round(t.min_run_s, 3),
+                 "enough_run": t.enough}
+    if not t.enough:
+        out["note"] = (f"only {t.time_in_run_s:.3f} s of gait with the supervisor in RUN, less than one stride "
+                       f"({t.min_run_s:g} s): no tracking figure")
+    for name, _, _ in TRACKING_SIGNALS:
+        out[name] = _figures(t.metrics[name], t.enough and (name != "truth" or _has_plant(r)))
+    out["truth"]["emulation_only"] = True
+    return out
 
 
 def _us(cycles: int | None, f_cpu: int) -> float | None:
     return None if cycles is None else round(cycles * 1e6 / f_cpu, 3)
 
 
-def summarise(r: RunResult) -> dict:
-    """The summary of a run as plain JSON-able values."""
+def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
+    """The summary of a run as plain JSON-able values (tracking: from tracking_of(r), computed if not given)."""
     fw, sched = r.firmware, r.scheduler
     f_cpu = fw.f_cpu_hz
-    p = r.probe.arrays()
-    start = r.gait_start_s if r.gait_start_s is not None else math.inf
-    m = tracking_metrics(p["t_s"], p["reference_rad"], p["true_angle_rad"], start_s=start,
-                         stride_s=fw.config.stride_s, strides=r.config.strides)
+    tracking = tracking or tracking_of(r)
+    # the legacy top-level figures: the probe's angle (the plant's true one in virtual mode) over the window
+    m = _figures(tracking.metrics["truth"], tracking.enough)
+    files = getattr(r, "files", None)
     bounds = {b.name: b for b in r.bounds}
     deadlines = {t.name: t.relative_deadline for t in fw.tasks}  # firmware tasks only (no bench probe)
     tasks = {}
@@ -51,13 +117,16 @@ def summarise(r: RunResult) -> dict:
     link = fw.motor.stats
     return {
         "strides": r.config.strides,
+        "complete": bool(getattr(r, "complete", not getattr(r, "interrupted", False))),
         "sim_time_s": round(r.sim_time_s, 6),
         "wall_time_s": round(r.wall_time_s, 3),
         "realtime_factor": round(r.sim_time_s / r.wall_time_s, 2) if r.wall_time_s > 0 else None,
         "build": describe(),
-        "rms_error_deg": round(m.rms_error_deg, 4),
-        "max_error_deg": round(m.max_error_deg, 4),
-        "lag_ms": round(m.lag_ms, 2),
+        "tracking": tracking_summary(r, tracking),
+        **getattr(r, "bench_record", {}),
+        "rms_error_deg": m["rms_deg"],
+        "max_error_deg": m["max_deg"],
+        "lag_ms": m["lag_ms"],
         "deadline_misses": sum(t["misses"] for t in tasks.values()),
         "faults": faults,
         "cpu_utilisation": round(util.total, 5),
@@ -73,21 +142,74 @@ def summarise(r: RunResult) -> dict:
             "feedback_rate_hz": round(link.replies / r.sim_time_s, 1) if r.sim_time_s else 0.0,
         },
         "telemetry": {"records_sent": fw.logger.sent, "records_dropped": fw.logger.dropped,
-                      "bytes": len(r.telemetry)},
+                      "bytes": files.telemetry_bytes if files is not None else len(r.telemetry)},
         "tasks": tasks,
         "controller": {"name": fw.config.controller, "class": type(fw.controller).__qualname__,
                        "published": list(fw.published_names), "error": fw.controller_error or None},
     }
 
 
-def _write_telemetry_csv(data: bytes, path: Path, extra_names: tuple[str, ...] = ()) -> dict:
+def _write_telemetry_csv(data: bytes, path: Path, f_cpu_hz: int, chunk_bytes: int = 1 << 16,
+                         extra_names: tuple[str, ...] = ()) -> dict:
+    """Decode data into path (a temporary name, renamed when complete), a chunk at a time."""
     dec = TelemetryDecoder(len(extra_names))
-    sink = CsvSink(path, extra_names)
-    try:
-        sink.write(dec.feed(data))
-    finally:
-        sink.close()
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", encoding="utf-8", newline="") as f:
+        csv = TelemetryCsv(f, f_cpu_hz, extra_names)
+        for k in range(0, len(data), chunk_bytes):
+            csv.write(dec.feed_values(data[k:k + chunk_bytes]))
+    tmp.replace(path)
     return asdict(dec.stats)
+
+
+def _figure(value: float | None, digits: int, unit: str) -> str:
+    """A figure for report.md, rounded; n/a when the run has none (NaN here, null in summary.json)."""
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}{unit}"
+
+
+def _num(v: float | None, fmt: str, unit: str = "") -> str:
+    return "n/a" if v is None or not math.isfinite(v) else format(v, fmt) + unit
+
+
+def tracking_lines(tr: dict) -> list[str]:
+    """The tracking figures as a Markdown table, measured ones first, truth labelled emulation-only."""
+    lines = ["| tracking error (reference minus ...) | RMS | max | lag |", "|---|---|---|---|"]
+    for name, _, text in TRACKING_SIGNALS:
+        f = tr[name]
+        lines.append(f"| {name}: {text} | {_num(f['rms_deg'], '.3f', '°')} | {_num(f['max_deg'], '.3f', '°')} | "
+                     f"{_num(f['lag_ms'], '.1f', ' ms')} |")
+    lines += ["", f"Over {tr['time_in_run_s']:.3f} s of gait with the supervisor in RUN (at least "
+              f"{tr['min_run_s']:g} s, one stride, is needed for a figure)."
+              + (f" {tr['note']}." if "note" in tr else "")]
+    return lines
+
+
+def tracking_text(tr: dict) -> list[str]:
+    """The tracking figures as lines for the terminal, measured ones first."""
+    out = []
+    for name, _, _ in TRACKING_SIGNALS:
+        f = tr[name]
+        label = "truth (emulation only)" if name == "truth" else name
+        out.append(f"  tracking, {label:<22} RMS {_num(f['rms_deg'], '.3f', ' deg')}, "
+                   f"max {_num(f['max_deg'], '.3f', ' deg')}, lag {_num(f['lag_ms'], '.1f', ' ms')}")
+    note = f" ({tr['note']})" if "note" in tr else ""
+    out.append(f"  time in RUN with the gait running: {tr['time_in_run_s']:.3f} s{note}")
+    return out
+
+
+def _bench_lines(s: dict) -> list[str]:
+    """What plant and which imperfections the run had (virtual mode only)."""
+    if "plant" not in s:
+        return []
+    seed = s["plant"]["seed"]
+    plant = "nominal plant" if seed is None else f"plant drawn from its tolerances with seed {seed}"
+    imp = s["imperfections"]
+    on = [k for k, v in imp.items() if isinstance(v, dict) and v["enabled"] and v["modelled"]]
+    off = [k for k, v in imp.items() if isinstance(v, dict) and not v["enabled"] and v["modelled"]]
+    return [f"Bench: {plant}; imperfections on: {', '.join(on) or 'none'}"
+            + (f"; switched off: {', '.join(off)}" if off else "") + ".", ""]
+
+
 
 
 def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
@@ -96,10 +218,8 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
         f"{s['strides']} strides, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
         f"(realtime factor {s['realtime_factor']}; {s['build']}), motor link {s['baud']} baud, seed {s['seed']}.",
         "",
+        *tracking_lines(s["tracking"]), "", *_bench_lines(s),
         "| metric | value |", "|---|---|",
-        f"| RMS tracking error | {s['rms_error_deg']:.3f}° |",
-        f"| max tracking error | {s['max_error_deg']:.3f}° |",
-        f"| lag | {s['lag_ms']:.1f} ms |",
         f"| deadline misses | {s['deadline_misses']} |",
         f"| faults | {', '.join(s['faults']) or 'none'} |",
         f"| CPU utilisation | {100 * s['cpu_utilisation']:.2f} % |",
@@ -121,44 +241,49 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
-def _strict(value: object) -> object:
-    """`value` with every NaN or infinity replaced by None (null): summary.json is strict JSON."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _strict(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_strict(v) for v in value]
-    return value
+def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: list[str] | None = None, *,
+                  plot: bool = True, trace: bool = True) -> dict:
+    """Write every output file into `out`; return the summary (`extra` merged in; `md_extra` ends report.md).
 
-
-def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: list[str] | None = None) -> dict:
-    """Write every output file into `out`; return the summary (`extra` merged in; `md_extra` ends report.md)."""
+    ``plot=False`` and ``trace=False`` leave out tracking.png and trace.json.
+    """
     out.mkdir(parents=True, exist_ok=True)
-    (out / "telemetry.bin").write_bytes(r.telemetry)
-    s = summarise(r)
+    tracking = tracking_of(r)
+    files = getattr(r, "files", None)
+    if files is None:
+        write_atomic(out / "telemetry.bin", r.telemetry)
+    s = summarise(r, tracking)
     s.update(extra or {})
-    s["telemetry"]["decoder"] = _write_telemetry_csv(r.telemetry, out / "telemetry.csv",
-                                                     getattr(r.firmware, "published_names", ()))
-    if r.scheduler.trace is not None:
+    s["telemetry"]["decoder"] = (files.decoder_stats() if files is not None
+                                 else _write_telemetry_csv(r.telemetry, out / "telemetry.csv", r.firmware.f_cpu_hz,
+                                                          extra_names=r.firmware.published_names))
+    if trace and r.scheduler.trace is not None:
         r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
-    p = r.probe.arrays()
     fw = r.firmware
-    if r.gait_start_s is not None and len(p["t_s"]):
-        strides = cut_strides(p["t_s"], p["reference_rad"], p["true_angle_rad"], start_s=r.gait_start_s,
-                              stride_s=fw.config.stride_s, strides=r.config.strides)
+    if plot:  # drawn on every path, also when no stride ran (a run stopped early still shows its currents)
+        from host_tools.plots import plot_tracking  # matplotlib: only when a plot is drawn
+
         ref = fw.reference
         pct = np.linspace(0, 100, 101)
         band = np.array([ref.band_deg(x) for x in pct])
-        err = np.degrees(p["true_angle_rad"] - p["reference_rad"])
-        plot_tracking(out / "tracking.png", strides, (pct, band[:, 0], band[:, 1]), p["t_s"],
-                      p["current_cmd_a"], p["current_meas_a"], err,
-                      f"Gait tracking, {s['strides']} strides, RMS {s['rms_error_deg']:.2f}°")
+        p = tracking.plot
+        shown = [name for name, _, _ in TRACKING_SIGNALS if name != "truth" or _has_plant(r)]
+        label = {"truth": "truth (emulation only)"}
+        strides = {label.get(n, n): st for n, st in tracking.strides.items() if n in shown and n in PLOT_STRIDES}
+        errors = {label.get(n, n): p.errors_deg[n] for n in shown}
+        tmp = out / ".tracking.tmp.png"  # matplotlib picks the format from the name's end
+        plot_tracking(tmp, strides, (pct, band[:, 0], band[:, 1]), p.t_s, p.current_cmd_a, p.current_meas_a,
+                      errors, f"Gait tracking, {s['strides']} strides, IMU-measured RMS "
+                      f"{_figure(s['tracking']['imu']['rms_deg'], 2, '°')}")
+        tmp.replace(out / "tracking.png")
     if getattr(r.config, "scenario", "suspended") == "walk":
         from host_tools.actuator import walk_outputs
 
-        s["actuator"], walk_md = walk_outputs(r, out)
+        s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a)
         md_extra = [*(md_extra or []), *walk_md]
-    (out / "summary.json").write_text(json.dumps(_strict(s), indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    (out / "report.md").write_text(_report_md(s, md_extra), encoding="utf-8")
+    elapsed = process_elapsed_s()  # all but the two writes below and the exit
+    s["process_wall_time_s"] = round(elapsed, 3)
+    s["process_realtime_factor"] = round(r.sim_time_s / elapsed, 2) if elapsed > 0 else None
+    write_atomic(out / "summary.json", json.dumps(strict_json(s), indent=2, allow_nan=False) + "\n")
+    write_atomic(out / "report.md", _report_md(s, md_extra))
     return s

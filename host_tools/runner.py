@@ -4,6 +4,11 @@ This is the composition root of virtual mode: the only place that knows the firm
 bench and the kernel together. The firmware gets a `Board`; the kernel gets the firmware's tasks and
 the bench's interrupt sources; a zero-cost bench probe (lowest priority, not part of the firmware)
 samples the plant's true angle for the tracking metrics.
+
+The scheduler runs in segments of SEGMENT_S simulated seconds (the outputs are the same byte for byte
+as in one go); with ``RunConfig.stream_to`` set, what each segment produced goes to the files at once
+(host_tools/run_files.py), so a run's memory does not grow with its length, and ``should_stop`` is asked
+between segments (a stop signal: the run ends there, marked incomplete).
 """
 
 from __future__ import annotations
@@ -18,10 +23,16 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import VirtualBench
+from hal.virtual.imperfections import Imperfections, load_imperfections
+from hal.virtual.plant import load_plant_params
+from hal.virtual.plant.draw import draw_plant, drawn_values
 from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
+from host_tools.run_files import RunFiles
+from host_tools.tracking_stream import probe_stream
 from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, walking_load
 from host_tools.wire_capture import WireCapture
+from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.analysis import TaskBound, response_time_bounds
 from rtos.scheduler import SchedulerNow
@@ -29,16 +40,16 @@ from rtos.stats import DeadlineHealth
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
 
-PROFILES = Path(__file__).resolve().parents[1] / "profiles"
 PROBE_HZ = 500
+SEGMENT_S = 1  # simulated seconds between two hand-overs to the files (and two checks of should_stop)
 WATCHDOG_TIMEOUT_S = 0.050
 
 
 def board_profile(name: str = "stm32f4") -> dict:
     """Load profiles/board_<name>.toml (clock and interrupt costs)."""
-    path = PROFILES / f"board_{name}.toml"
-    if not path.exists():
-        choices = sorted(p.stem.removeprefix("board_") for p in PROFILES.glob("board_*.toml"))
+    path = profile_path(f"board_{name}.toml")
+    if not path.is_file():
+        choices = [p.stem.removeprefix("board_") for p in profile_paths("board_*.toml")]
         raise ValueError(f"board profile {name!r} not found: choose one of {choices}")
     return tomllib.loads(path.read_text(encoding="utf-8"))
 
@@ -54,13 +65,19 @@ class RunConfig:
     firmware: FirmwareConfig | None = None
     reference_csv: Path | None = None
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
-    trace_capacity: int = 200_000
+    trace_capacity: int = 100_000  # the trace keeps the last this many jobs (0: no trace)
+    stream_to: Path | None = None  # write telemetry.bin/.csv there as the run goes (see RunFiles)
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
     # (time_s, action(bench, firmware)) run by the bench probe at the first probe tick >= time_s: faults
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
     actions: list[tuple[float, Action]] = field(default_factory=list)
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
+    # the plant drawn from its tolerances with this seed (hal.virtual.plant.draw); None: the nominal plant
+    plant_seed: int | None = None
+    # the bench's imperfections (None: profiles/bench_imperfections.toml, the real device) and those off
+    imperfections: Imperfections | None = None
+    ideal: tuple[str, ...] = ()
     controller: object = None  # a built controller (None: the firmware profile's [controller])
     scenario: str = "suspended"  # or "walk": the ground's moment in stance (host_tools/walk.py)
     body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
@@ -77,6 +94,25 @@ class RunConfig:
             raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
         if self.scenario not in SCENARIOS:
             raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
+        if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
+                                            or not 0 <= self.plant_seed < 2**32):
+            raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
+
+    def bench_setup(self) -> tuple[dict, dict]:
+        """(VirtualBench arguments of the plant and the imperfections, their record for summary.json).
+
+        Arguments given in bench_options win over both.
+        """
+        imp = (self.imperfections or load_imperfections()).without(self.ideal)
+        nominal = load_plant_params()
+        params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
+        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
+        params = options["plant_params"]
+        record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
+                            "output_inertia_kg_m2": params.output_inertia_kg_m2,
+                            "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
+                  "imperfections": {**imp.as_dict(), "encoder_offset_rad": options.get("initial_angle_rad", 0.0)}}
+        return options, record
 
 
 @dataclass
@@ -93,6 +129,9 @@ class RunResult:
     sim_time_s: float
     wall_time_s: float
     gait_start_s: float | None
+    files: RunFiles | None = None  # the streamed files (then `telemetry` is empty and the probe drained)
+    complete: bool = True  # False when should_stop ended the run early
+    bench_record: dict = field(default_factory=dict)  # the plant drawn and the imperfections (summary.json)
 
 
 def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
@@ -113,8 +152,9 @@ class _Sporadic:
     cost_cycles: int
 
 
-def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None) -> RunResult:
-    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides."""
+def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
+                should_stop: Callable[[], bool] | None = None) -> RunResult:
+    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides (or until should_stop())."""
     board_cfg = board_profile(cfg.board)
     f_cpu = int(board_cfg["f_cpu_hz"])
     isr = dict(board_cfg.get("isr_cycles", {}))
@@ -127,9 +167,12 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
     load = (walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv, cfg.speed) if cfg.scenario == "walk"
             else None)
+    bench_options, bench_record = cfg.bench_setup()
+    if load is not None:
+        bench_options["fixture"] = walk(load)
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
-                         systick_hz=int(board_cfg.get("systick_hz", 1000)),
-                         **({"fixture": walk(load)} if load is not None else {}), **cfg.bench_options)
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **bench_options)
+    bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
                   controller=cfg.controller)
@@ -160,13 +203,33 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None)
         cfg.setup(bench, fw)
 
     sim_s = cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05
-    wall0 = time.perf_counter()
+    t_end = int(sim_s * f_cpu)
+    files = None
+    if cfg.stream_to is not None:
+        tracking = probe_stream(stride_s=fw_cfg.stride_s, strides=cfg.strides, dt_s=1.0 / PROBE_HZ,
+                                expected_samples=int(sim_s * PROBE_HZ))
+        files = RunFiles(cfg.stream_to, tracking, f_cpu, fw.published_names)
+    wall = 0.0
+    complete = True
+    segment = SEGMENT_S * f_cpu
     try:
-        sched.run_until(int(sim_s * f_cpu), progress=progress)
+        for t in [*range(segment, t_end, segment), t_end]:
+            wall0 = time.perf_counter()
+            sched.run_until(t)
+            wall += time.perf_counter() - wall0
+            if files is not None:
+                files.drain(bench, probe, fw)
+            if progress is not None:
+                progress(t / t_end)
+            if should_stop is not None and should_stop() and t < t_end:
+                complete = False
+                break
     finally:
         if wire is not None:
             wire.close()
-    wall = time.perf_counter() - wall0
-
-    return RunResult(cfg, fw, bench, sched, bounds, probe, bench.telemetry_bytes(), sched.now / f_cpu, wall,
-                     fw.gait_start_s)
+    if files is not None:
+        files.close()
+    bench_record["imperfections"]["backlash_crossings"] = bench.plant.raw.gap_crossings
+    telemetry = bench.telemetry_bytes() if files is None else b""
+    return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
+                     files, complete, bench_record)

@@ -1,28 +1,28 @@
-"""Automatic gain search on the emulator (`pafp tune`): a seeded, parallel, constrained evolutionary search.
+"""Automatic gain search on the emulator (`pafp tune`): seeded, constrained differential evolution on Dask.
 
 Each candidate (position kp, ki, kd; velocity kp, ki) runs the full firmware on the virtual bench.
 Score = RMS tracking error [deg] + EFFORT_WEIGHT x (RMS current command + RMS change of the current command
 per control tick) [A]: the second term penalises effort and chatter (encoder noise amplified by kd).
 A candidate is infeasible (score +inf) if its run misses a deadline, latches a fault, sits at the current
 limit for more than SATURATION_MAX_FRACTION of the gait (a saturation storm), or leaves the reference by
-more than STABLE_MAX_ERROR_DEG (not stable). Search: generation 0 is the starting gains plus
-POPULATION - 1 log-normal perturbations (step SIGMA0 in log space); each later generation perturbs the best
-feasible candidate so far with a step shrunk by SIGMA_DECAY. Candidates come from
-numpy.random.default_rng(seed), are evaluated in a process pool, and are ranked by (score, index), so the
-result is the same for a seed whatever the number of workers or their completion order.
+more than STABLE_MAX_ERROR_DEG (not stable). Search: scipy.optimize.differential_evolution in log space
+over BOUNDS, population POPULATION, seeded with numpy.random.default_rng(seed); its initial population is
+the starting gains plus POPULATION - 1 log-normal perturbations (SIGMA0 in log space); each generation's
+candidates are evaluated through its map-like `workers` on Dask (`_DaskMap`) and ranked by (score, index),
+so the result is the same for a seed whatever the number of workers or their completion order.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import re
-from collections.abc import Callable
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from scipy.optimize import differential_evolution
 
 from firmware.config import FirmwareConfig
 from firmware.control.pid import PidGains
@@ -31,8 +31,8 @@ from host_tools.runner import RunConfig, run_virtual
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BOUNDS", "Candidate", "Evaluation", "TuneResult", "evaluate", "gains_of", "search", "with_gains",
-           "write_profile"]
+__all__ = ["BOUNDS", "Candidate", "Evaluation", "TuneResult", "check_budget", "evaluate", "gains_of", "search",
+           "with_gains", "write_profile"]
 
 #: Searched gains and their bounds (log-uniform space): name -> (low, high).
 BOUNDS: dict[str, tuple[float, float]] = {
@@ -43,9 +43,12 @@ EFFORT_WEIGHT = 0.02  # deg per A
 SATURATION_MAX_FRACTION = 0.02
 SATURATION_LEVEL = 0.98  # of the current limit
 STABLE_MAX_ERROR_DEG = 5.0
-POPULATION = 8
-SIGMA0 = 0.6
-SIGMA_DECAY = 0.7
+POPULATION = 8  # differential evolution's population: the budget is spent in generations of this many runs
+SIGMA0 = 0.6  # log-normal spread of the initial population around the starting gains
+MUTATION = (0.5, 1.0)  # differential_evolution's dithered differential weight
+RECOMBINATION = 0.7
+MIN_POPULATION = 5  # scipy's differential_evolution refuses fewer
+INFEASIBLE_ENERGY = 1e3  # what the optimiser sees for an infeasible candidate (its score is +inf)
 
 Candidate = dict[str, float]
 
@@ -111,7 +114,8 @@ def evaluate(index: int, base: FirmwareConfig, gains: Candidate, strides: int, s
     rms_i = float(np.sqrt(np.mean(i**2)))
     rms_di = float(np.sqrt(np.mean(np.diff(i) ** 2)))
     sat = float(np.mean(np.abs(i) >= SATURATION_LEVEL * cfg.current_limit_a))
-    rms, mx = float(s["rms_error_deg"]), float(s["max_error_deg"])
+    # None: less than one stride in RUN (host_tools.metrics), scored as not stable below
+    rms, mx = (math.nan if s[k] is None else float(s[k]) for k in ("rms_error_deg", "max_error_deg"))
     reasons = []
     if s["deadline_misses"]:
         reasons.append(f"{s['deadline_misses']} deadline misses")
@@ -140,80 +144,112 @@ def _rank(e: Evaluation) -> tuple[float, int]:
     return (e.score, e.index)
 
 
-def search(base: FirmwareConfig, *, budget: int, strides: int = 2, seed: int = 0, jobs: int = 1,
+def _to_x(gains: Candidate) -> np.ndarray:
+    return np.log([max(gains[k], BOUNDS[k][0]) for k in BOUNDS])
+
+
+def _to_gains(x: np.ndarray) -> Candidate:
+    """Gains from log space, to 12 significant digits (exp(log(8.0)) is 8.0 again, not 7.999999999999998)."""
+    return _clip({k: float(f"{math.exp(float(v)):.12g}") for k, v in zip(BOUNDS, x, strict=True)})
+
+
+def _energy(x: np.ndarray) -> float:
+    """Placeholder objective handed to differential_evolution: _DaskMap evaluates the candidates itself."""
+    raise RuntimeError("evaluated by _DaskMap")  # pragma: no cover
+
+
+class _DaskMap:
+    """The map-like `workers` of differential_evolution: each candidate is an `evaluate` run on Dask (or here).
+
+    differential_evolution calls it with its objective wrapper and one generation of points; the points go to
+    `evaluate` (the record of every run is kept, not only its score) in submission order, so the result does
+    not depend on which worker finished first.
+    """
+
+    def __init__(self, client: Any, base: FirmwareConfig, strides: int, seed: int, budget: int,
+                 progress: Callable[[int, int], None] | None) -> None:
+        self.client, self.base, self.strides, self.seed, self.budget = client, base, strides, seed, budget
+        self.progress = progress
+        self.evaluations: list[Evaluation] = []
+        self.done = 0
+
+    def __call__(self, _func: Callable[[np.ndarray], float], xs: Iterable[np.ndarray]) -> list[float]:
+        cands = [_to_gains(np.asarray(x)) for x in xs]
+        idx0 = len(self.evaluations)
+        if self.client is None:
+            results = []
+            for k, c in enumerate(cands):
+                results.append(evaluate(idx0 + k, self.base, c, self.strides, self.seed))
+                self._step()
+        else:
+            futures = [self.client.submit(evaluate, idx0 + k, self.base, c, self.strides, self.seed, pure=False)
+                       for k, c in enumerate(cands)]
+            results = []
+            for fut in futures:  # in index order; progress counts them as they come
+                results.append(fut.result())
+                self._step()
+        self.evaluations += results
+        best = min(self.evaluations, key=_rank)
+        logger.info("%d evaluations: best score %.4f (candidate %d)", len(self.evaluations), best.score, best.index)
+        return [e.score if math.isfinite(e.score) else INFEASIBLE_ENERGY for e in results]
+
+    def _step(self) -> None:
+        self.done += 1
+        if self.progress:
+            self.progress(self.done, self.budget)
+
+
+def check_budget(budget: int) -> None:
+    """ValueError unless `budget` is a number of runs the search can spend."""
+    if not isinstance(budget, int) or isinstance(budget, bool) or not MIN_POPULATION <= budget <= 100_000:
+        raise ValueError(f"budget {budget!r} out of range: an int in {MIN_POPULATION}..100000 runs "
+                         f"(differential evolution's smallest population is {MIN_POPULATION})")
+
+
+def search(base: FirmwareConfig, *, budget: int, strides: int = 2, seed: int = 0, client: Any = None,
            start: Candidate | None = None, progress: Callable[[int, int], None] | None = None) -> TuneResult:
-    """Search the gains within `budget` runs (>= 2) using `jobs` worker processes; deterministic for a seed."""
-    if not isinstance(budget, int) or not 2 <= budget <= 100_000:
-        raise ValueError(f"budget {budget!r} out of range: an int in 2..100000 runs")
-    if not isinstance(jobs, int) or not 1 <= jobs <= 1024:
-        raise ValueError(f"jobs {jobs!r} out of range: an int in 1..1024 worker processes")
+    """Search the gains with differential evolution within `budget` runs (>= 5); deterministic for a seed.
+
+    `client`: a dask.distributed Client whose workers run each generation's candidates (None: in-process).
+    """
+    check_budget(budget)
     rng = np.random.default_rng(seed)
     first = dict(start) if start is not None else gains_of(base)
-    evaluations: list[Evaluation] = []
-    done = 0
-    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else None
-    try:
-        generation = 0
-        while len(evaluations) < budget:
-            size = min(POPULATION, budget - len(evaluations))
-            feasible = [e for e in evaluations if e.feasible]
-            centre = min(feasible, key=_rank).gains if feasible else first
-            sigma = SIGMA0 * SIGMA_DECAY ** generation
-            cands = [_perturb(rng, centre, sigma) for _ in range(size)]
-            if generation == 0:
-                cands[0] = first
-            idx0 = len(evaluations)
-            results: list[Evaluation | None] = [None] * size
-            if pool is None:
-                for k, c in enumerate(cands):
-                    results[k] = evaluate(idx0 + k, base, c, strides, seed)
-                    done += 1
-                    if progress:
-                        progress(done, budget)
-            else:
-                futures: list[Future[Evaluation]] = [pool.submit(evaluate, idx0 + k, base, c, strides, seed)
-                                                     for k, c in enumerate(cands)]
-                for k, fut in enumerate(futures):  # collect in index order; progress counts completions
-                    results[k] = fut.result()
-                    done += 1
-                    if progress:
-                        progress(done, budget)
-            evaluations += [e for e in results if e is not None]
-            best = min(evaluations, key=_rank)
-            logger.info("generation %d (sigma %.3f): best score %.4f (candidate %d)", generation, sigma,
-                        best.score, best.index)
-            generation += 1
-    finally:
-        if pool is not None:
-            pool.shutdown()
+    size = min(POPULATION, budget)
+    generations = budget // size  # the initial population and generations - 1 evolved ones
+    init = np.array([_to_x(first)] + [_to_x(_perturb(rng, first, SIGMA0)) for _ in range(size - 1)])
+    mapper = _DaskMap(client, base, strides, seed, size * generations, progress)
+    lo, hi = _to_x({k: b[0] for k, b in BOUNDS.items()}), _to_x({k: b[1] for k, b in BOUNDS.items()})
+    differential_evolution(_energy, list(zip(lo, hi, strict=True)), maxiter=generations - 1, popsize=size,
+                           init=init, mutation=MUTATION, recombination=RECOMBINATION, rng=rng, polish=False,
+                           tol=0.0, atol=0.0, updating="deferred", workers=mapper)
+    evaluations = mapper.evaluations
     best = min(evaluations, key=_rank)
     return TuneResult(evaluations, evaluations[0], best if best.feasible else evaluations[0])
 
 
-_TABLES = {"control.position": "position", "control.velocity": "velocity"}
-_LINE = re.compile(r"^(\s*)(kp|ki|kd)(\s*=\s*)([^#\n]*?)(\s*(#.*)?)$")
+_TABLES = {"position": ("control", "position"), "velocity": ("control", "velocity")}
 
 
 def write_profile(source: Path, gains: Candidate, out: Path) -> Path:
-    """Copy the TOML profile `source` to `out` with the searched gains replaced (comments kept)."""
-    lines = source.read_text(encoding="utf-8").splitlines(keepends=True)
-    table = ""
-    seen: set[str] = set()
-    out_lines = []
-    for line in lines:
-        head = re.match(r"^\s*\[([^\]]+)\]", line)
-        if head:
-            table = head.group(1).strip()
-        m = _LINE.match(line.rstrip("\n"))
-        if m and table in _TABLES:
-            key = f"{_TABLES[table]}_{m.group(2)}"
-            if key in gains:
-                line = f"{m.group(1)}{m.group(2)}{m.group(3)}{gains[key]!r}{m.group(5)}\n"
-                seen.add(key)
-        out_lines.append(line)
-    missing = sorted(set(gains) - seen)
+    """Copy the TOML profile `source` to `out` with the searched gains replaced (comments and layout kept, tomlkit)."""
+    import tomlkit
+
+    doc = tomlkit.parse(source.read_text(encoding="utf-8"))
+    missing = []
+    for key, value in gains.items():
+        loop, gain = key.split("_", 1)
+        table: Any = doc
+        for name in _TABLES[loop]:
+            table = table.get(name) if hasattr(table, "get") else None
+        if table is None or gain not in table:
+            missing.append(key)
+            continue
+        table[gain] = float(value)
     if missing:
-        raise ValueError(f"profile {source} has no line for {missing}: cannot write the tuned gains")
+        raise ValueError(f"profile {source} has no line for {sorted(missing)}: cannot write the tuned gains")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("".join(out_lines), encoding="utf-8")
+    tmp = out.with_name(f".{out.name}.tmp")
+    tmp.write_text(tomlkit.dumps(doc), encoding="utf-8")
+    tmp.replace(out)
     return out

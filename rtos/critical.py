@@ -105,7 +105,7 @@ def emulation_horizon(
     horizon = 2 + hyper + max(max(t.relative_deadline + t.jitter for t in tasks), busy) + sum(
         constant_cost(t) for t in tasks)
     rate = sum(1 / t.period for t in tasks)
-    if horizon * rate <= max_jobs:
+    if horizon <= max_jobs / rate:  # not horizon * rate: the hyperperiod of coprime periods overflows a float
         return horizon, hyper, False
     return max(1, int(max_jobs / rate)), hyper, True
 

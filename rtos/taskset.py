@@ -32,7 +32,9 @@ class TaskSet:
     def to_unit(self, ticks: int) -> int | float:
         """Convert ticks back to the task set's unit (an int when exact).
 
-        >>> parse_taskset({"unit": "ms", "f_cpu_hz": 1000000, "task": []}).to_unit(2500)
+        >>> ts = parse_taskset({"unit": "ms", "f_cpu_hz": 1000000,
+        ...                     "task": [{"name": "a", "priority": 1, "period": 10, "cost": 1}]})
+        >>> ts.to_unit(2500)
         2.5
         """
         value = Fraction(ticks) / self.ticks_per_unit
@@ -104,6 +106,8 @@ def parse_taskset(data: dict[str, Any]) -> TaskSet:
             jitter=_ticks(raw.get("jitter", 0), f"{where}: jitter", per_unit, unit, 0),
             overrun=OverrunPolicy(policy),
         ))
+    if not tasks:
+        raise ValueError("no [[task]] table: a task set needs at least one task")
     by_priority(tasks)  # duplicate priorities or names -> ValueError
     irqs = []
     for n, raw in enumerate(_table_list(data, "interrupt")):

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import json
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
@@ -89,38 +90,71 @@ class Trace:
 
     def to_chrome(self, f_cpu_hz: int) -> dict[str, list[dict[str, object]]]:
         """Return a Chrome trace-event document: one "X" event per job (ts/dur in µs), one tid per task."""
+        return {"traceEvents": list(self.chrome_events(f_cpu_hz))}
+
+    def chrome_events(self, f_cpu_hz: int) -> Iterator[dict[str, object]]:
+        """The events of :meth:`to_chrome` one at a time (metadata, jobs, then instants)."""
         if f_cpu_hz <= 0:
             raise ValueError(f"f_cpu_hz must be > 0 Hz, got {f_cpu_hz!r}")
         us = 1e6 / f_cpu_hz
-        names = list(self.task_names)
-        for r in self._jobs:
-            if r[0] not in names:
-                names.append(r[0])
+        names = self._names()
         tid = {n: k + 1 for k, n in enumerate(names)}
-        out: list[dict[str, object]] = [
-            {"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": "rtos"}},
-        ]
+        yield {"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": "rtos"}}
         for n in names:
-            out.append({"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}})
-            out.append({"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n],
-                        "args": {"sort_index": tid[n]}})
+            yield {"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}}
+            yield {"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n], "args": {"sort_index": tid[n]}}
         for task, job, release, ready, start, finish in self._jobs:
-            out.append({
+            yield {
                 "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
                 "ts": start * us, "dur": (finish - start) * us,
                 "args": {"job": job, "release_cycles": release, "ready_cycles": ready,
                          "response_cycles": finish - release},
-            })
+            }
         for kind, time, source, job in self._events:
-            out.append({
+            yield {
                 "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
                 "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": job},
-            })
-        return {"traceEvents": out}
+            }
 
     def write_chrome(self, path: str | Path, f_cpu_hz: int) -> None:
-        """Write the Chrome trace-event JSON to ``path`` (open it in Perfetto or chrome://tracing)."""
-        Path(path).write_text(json.dumps(self.to_chrome(f_cpu_hz)), encoding="utf-8")
+        """Write the Chrome trace-event JSON to ``path`` (open it in Perfetto or chrome://tracing).
+
+        The same bytes as ``json.dumps(self.to_chrome(f_cpu_hz))``, written a batch of events at a time (no
+        document in memory; the job events from a template, which is several times faster than encoding
+        dicts) to a temporary name that is renamed when done.
+        """
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.tmp")
+        encode = json.JSONEncoder().encode
+        events = self.chrome_events(f_cpu_hz)
+        head = [encode(e) for e in itertools.islice(events, 1 + 2 * len(self._names()))]  # the metadata
+        us = 1e6 / f_cpu_hz
+        tid = {n: k + 1 for k, n in enumerate(self._names())}
+        name = {n: encode(n) for n in tid}
+        job = ('{"name": %s, "cat": "job", "ph": "X", "pid": 1, "tid": %d, "ts": %r, "dur": %r, "args": '
+               '{"job": %d, "release_cycles": %d, "ready_cycles": %d, "response_cycles": %d}}')
+        with tmp.open("w", encoding="utf-8") as f:
+            f.write('{"traceEvents": [' + ", ".join(head))
+            jobs = iter(self._jobs)
+            while batch := list(itertools.islice(jobs, 10_000)):
+                f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
+                                               ready, finish - release)
+                                 for t, j, release, ready, start, finish in batch]))
+            for kind, time, source, j in self._events:
+                f.write(", " + encode({
+                    "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
+                    "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": j},
+                }))
+            f.write("]}")
+        tmp.replace(path)
+
+    def _names(self) -> list[str]:
+        """Task names in tid order: the declared ones, then any other seen in the jobs."""
+        names = list(self.task_names)
+        for r in self._jobs:
+            if r[0] not in names:
+                names.append(r[0])
+        return names
 
     def __len__(self) -> int:
         """Number of recorded jobs."""

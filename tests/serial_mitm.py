@@ -5,7 +5,8 @@ timing does not share the GIL with the firmware under test. For each ``--link RO
 raw pty, prints ``ROLE: PATH`` (the path the firmware opens) and relays both directions. On the way from
 the device to the firmware it injects seeded bursts of random bytes, drops single bytes, and now and then
 holds everything back for ``--delay-s`` (a device replying late), from ``--start-s`` to ``--until-s``
-after its start. With ``--capture DIR`` it writes every byte it relays, as it came in, to
+after the first byte from the host (the firmware's start-up check: the fault window is tied to the run, not
+to when this relay happened to start). With ``--capture DIR`` it writes every byte it relays, as it came in, to
 ``DIR/<role>.to_device.bin`` and ``DIR/<role>.to_host.bin`` (before spoiling: what each side sent). On SIGTERM
 it relays what is still waiting, prints one JSON line with what it did per role and exits 0.
 """
@@ -92,8 +93,8 @@ def _spoil(link: Link, data: bytes, now_s: float, rng: random.Random, args: argp
     # the bursts come from link.garbage_rng alone, so a seed gives the same bursts whatever the chunking
     """Device -> host bytes after the faults: a late hold, a garbage burst in front, single bytes dropped."""
     c = link.counts
-    if now_s >= args.t0_s + args.until_s:
-        return data
+    if args.t0_s is None or now_s >= args.t0_s + args.until_s:
+        return data  # clean before the host's first byte and after the window
     lossy = args.lossy is None or link.role in args.lossy.split(",")
     if lossy and args.delay_every_s > 0 and now_s >= link.next_delay_s:
         link.next_delay_s = now_s + args.delay_every_s
@@ -113,6 +114,13 @@ def _spoil(link: Link, data: bytes, now_s: float, rng: random.Random, args: argp
         else:
             out.append(b)
     return bytes(out)
+
+
+def _anchor(links: list[Link], args: argparse.Namespace) -> None:
+    """Start the fault clock: the first garbage burst and hold come ``start_s`` from now."""
+    args.t0_s, args.t0_unix_s = time.monotonic(), time.time()
+    for link in links:
+        link.next_garbage_s = link.next_delay_s = args.t0_s + args.start_s
 
 
 def serve(links: list[Link], rng: random.Random, args: argparse.Namespace, stop: list[int]) -> None:
@@ -143,6 +151,8 @@ def serve(links: list[Link], rng: random.Random, args: argparse.Namespace, stop:
                 continue
             if link.capture:
                 link.capture[from_host].write(data)  # type: ignore[attr-defined]
+            if from_host and args.t0_s is None:  # the host's first byte: the fault window starts now
+                _anchor(links, args)
             if from_host:
                 link.counts.to_device += len(data)
                 _write_all(link.device_fd, data, link.counts)
@@ -168,8 +178,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--capture", default=None, metavar="DIR", help="write the relayed bytes per role and direction")
     args = p.parse_args(argv)
     rng = random.Random(args.seed)  # which bytes are dropped
-    now_s = args.t0_s = time.monotonic()
-    t0_unix_s = time.time()
+    now_s = time.monotonic()
+    args.t0_s = args.t0_unix_s = None  # set by the host's first byte (_anchor)
     links = [_open_link(*spec.split("=", 1), now_s, args) for spec in args.link]
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(signum))
@@ -178,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
         for f in link.capture.values():
             f.close()  # type: ignore[attr-defined]
     report: dict[str, object] = {link.role: asdict(link.counts) for link in links}
-    report["faults_unix_s"] = [t0_unix_s + args.start_s, t0_unix_s + min(args.until_s, 1e6)]
+    t0 = args.t0_unix_s
+    report["faults_unix_s"] = None if t0 is None else [t0 + args.start_s, t0 + min(args.until_s, 1e6)]
     print(json.dumps(report), flush=True)
     return 0
 

@@ -21,38 +21,46 @@ def _case(result, name):
 
 def test_tuning_improves_tracking(tracking_result):
     # The report shows tracking before and after tuning as plots (Figs 4.8-4.11), with no number: its
-    # claim is that tuning visibly improves tracking. Checked: the tuned profile halves the RMS error of
-    # the first-guess gains at least, and neither run misses a deadline or latches a fault.
+    # claim is that the untuned run shows "delays and oscillation" and tuning visibly improves it.
+    # Checked on what the report measured (the IMU pitch) and on the truth: the tuned profile (gains +
+    # feed-forward) at least halves the truth RMS of the untuned run (no feed-forward, P-only), cuts the
+    # IMU RMS by a quarter and the lag, and neither run misses a deadline or latches a fault.
     untuned, tuned = _case(tracking_result, "untuned"), _case(tracking_result, "tuned")
     assert tuned["rms_error_deg"] < 0.5 * untuned["rms_error_deg"]
-    assert tuned["max_error_deg"] < untuned["max_error_deg"]
+    assert tuned["imu"]["rms_deg"] < 0.75 * untuned["imu"]["rms_deg"]
+    assert tuned["imu"]["lag_ms"] < untuned["imu"]["lag_ms"]
     for c in (untuned, tuned):
         assert c["deadline_misses"] == 0 and c["faults"] == []
-    assert tuned["rms_error_deg"] < 1.0  # tuned gait tracking within a degree RMS
+    # measured by the IMU, even the tuned run shows degrees: the sensor's own 19.5 ms lag at gait speeds
+    assert tuned["imu"]["rms_deg"] > 1.0 and tuned["imu"]["lag_ms"] > 15.0
 
 
-def test_butterworth_on_imu_does_not_help_in_this_architecture(tracking_result):
-    # The report adds a Butterworth low-pass on the IMU to smooth its angle. Here the IMU only fixes
-    # the encoder's offset through a 2 s complementary filter, which already averages its noise away;
-    # the Butterworth adds lag the estimator does not model. What the emulator shows instead: at 20 Hz
-    # the run stays fault-free but the estimate error grows (not shrinks) and the tracking RMS does not
-    # improve beyond 10 %; at 10 Hz the filter's lag trips the 6 deg sensor-disagreement check.
+def test_butterworth_on_imu_cannot_remove_the_imus_lag(tracking_result):
+    # The report's Fig 4.11 applies a Butterworth low-pass to the IMU data and calls the result better.
+    # Offline (zero phase) it can only take noise out; the IMU's error here is its lag, which stays: the
+    # RMS changes by under 5 % and the lag by under 2 ms. In the loop, at 10 Hz the filter's own lag
+    # trips the 6 deg sensor-disagreement check (before one stride: no tracking figure at all).
     tuned = _case(tracking_result, "tuned")
+    offline = tracking_result.parameters["offline_butterworth"]
+    assert offline["rms_deg"] == pytest.approx(tuned["imu"]["rms_deg"], rel=0.05)
+    assert abs(offline["lag_ms"] - tuned["imu"]["lag_ms"]) < 2.0
     bw = _case(tracking_result, f"tuned + Butterworth {tracking.BUTTERWORTH_HZ:g} Hz")
     low = _case(tracking_result, f"tuned + Butterworth {tracking.BUTTERWORTH_LOW_HZ:g} Hz")
     assert bw["faults"] == [] and bw["deadline_misses"] == 0
-    assert bw["estimate_rms_deg"] > tuned["estimate_rms_deg"]
-    assert bw["rms_error_deg"] > 0.9 * tuned["rms_error_deg"]
-    assert low["faults"] == ["SENSOR_DISAGREEMENT"]
+    assert low["faults"] == ["SENSOR_DISAGREEMENT"] and low["rms_error_deg"] is None
 
 
 def test_tracking_rows_cover_each_case(tracking_result):
     names = [f.name for f in tracking_result.figures]
     for case in tracking.tracking_cases(load_firmware_config()):
-        for metric in ("RMS error", "max error", "lag"):
+        for metric in ("IMU RMS error", "IMU max error", "IMU lag", "RMS error", "max error", "lag"):
             assert f"{case}: {metric}" in names
-    lags = [f.emulated_value for f in tracking_result.figures if f.name.endswith(": lag")]
+        assert names.index(f"{case}: IMU RMS error") < names.index(f"{case}: RMS error")  # measured first
+    assert f"{tracking.OFFLINE}: IMU RMS error" in names
+    lags = [f.emulated_value for f in tracking_result.figures
+            if f.name.endswith("lag") and f.emulated_value is not None]
     assert all(-200.0 <= x <= 200.0 for x in lags)  # the lag search spans +-200 ms (negative: the foot leads)
+    assert all(f.basis for f in tracking_result.figures)
 
 
 @pytest.mark.parametrize(("baud", "mode", "expected"), [(921600, "full", (1961, 980)),
@@ -109,5 +117,6 @@ def test_pafp_bench_tracking_writes_outputs(tmp_path, capsys):
         assert (tmp_path / f"tracking.{ext}").stat().st_size > 0
     doc = json.loads((tmp_path / "tracking.json").read_text())
     assert doc["parameters"]["strides"] == 2
-    assert all(math.isfinite(f["emulated"]) for f in doc["figures"])
-    assert "| tracking | tuned: RMS error |" in capsys.readouterr().out
+    assert all(f["emulated"] is None or math.isfinite(f["emulated"]) for f in doc["figures"])
+    assert all(f["basis"] for f in doc["figures"])
+    assert "| tracking | tuned: IMU RMS error |" in capsys.readouterr().out

@@ -20,3 +20,13 @@ def test_python_m_host_tools_runs():
     r = subprocess.run([sys.executable, "-m", "host_tools", "--help"], capture_output=True, text=True)
     assert r.returncode == 0
     assert "decode" in r.stdout
+
+
+def test_version_names_the_distribution_and_the_build(capsys):
+    from host_tools.build_info import describe, version
+
+    try:
+        main(["--version"])
+    except SystemExit as e:
+        assert e.code == 0
+    assert capsys.readouterr().out == f"pafp {version()} ({describe()})\n"

@@ -155,3 +155,63 @@ def test_vesc_unknown_ids_and_bytes_fields_become_hex(tmp_path, capsys):
     assert lines[0] == {"type": "Unknown", "command_id": 0x63, "data": "0102"}
     assert lines[1]["type"] == "FwVersion" and lines[1]["hw_name"] == "AK60" and lines[1]["uuid"] == "00" * 12
     assert lines[-1]["summary"]["unknown_ids"] == 1
+
+
+def test_vesc_frame_behind_a_false_header_at_end_of_input_is_recovered(tmp_path, capsys):
+    vesc = pytest.importorskip("firmware.protocol.vesc")
+    frame = vesc.SetCurrent(2.5).encode()
+    path = write(tmp_path, "tx.bin", bytes.fromhex("03 01 ff") + frame)  # a long-frame header holds it pending
+    code, lines, _ = run_cli(capsys, "--protocol", "vesc", "--direction", "to-motor", path)
+    assert code == 0 and [m["type"] for m in lines[:-1]] == ["SetCurrent"]
+    s = lines[-1]["summary"]
+    assert s["frames"] == 1 and s["pending_skipped"] >= 1
+    assert s["end_of_input"]["held_bytes"] == 3 + len(frame) and s["end_of_input"]["messages_recovered"] == 1
+    assert s["bytes_in"] == len(frame) + s["dropped_bytes"]  # every byte in a frame or counted as dropped
+
+
+def test_leftover_bytes_of_a_truncated_frame_are_counted(tmp_path, capsys):
+    vesc = pytest.importorskip("firmware.protocol.vesc")
+    frame = vesc.SetCurrent(2.5).encode()
+    path = write(tmp_path, "tx.bin", frame + frame[:-3])
+    code, lines, _ = run_cli(capsys, "--protocol", "vesc", "--direction", "to-motor", path)
+    end = lines[-1]["summary"]["end_of_input"]
+    assert code == 0 and len(lines) == 2
+    assert end["held_bytes"] == len(frame) - 3 and end["leftover_bytes"] == len(frame) - 3
+    assert end["messages_recovered"] == 0 and end["candidates_given_up"] >= 1
+    rec = encode_record(TelemetryRecord(seq=1, time_cycles=5))
+    path = write(tmp_path, "log.bin", rec + rec[:10])
+    code, lines, _ = run_cli(capsys, "--protocol", "telemetry", path)
+    end = lines[-1]["summary"]["end_of_input"]
+    assert code == 0 and end == {"held_bytes": 10, "candidates_given_up": 1, "messages_recovered": 0,
+                                 "leftover_bytes": 10}
+
+
+def test_csv_dash_writes_the_table_to_stdout_and_the_summary_to_stderr(tmp_path, capsys):
+    path = write(tmp_path, "imu.bin", CONSTRUCTED + DATASHEET)
+    code = main(["decode", "--protocol", "rvc", "--csv", "-", path])
+    out, err = capsys.readouterr()
+    assert code == 0 and not (tmp_path / "-").exists()
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert [float(r["pitch_deg"]) for r in rows] == pytest.approx([-5.67, -1.10])
+    assert json.loads(err)["summary"]["frames"] == 2
+
+
+def test_csv_goes_to_a_temporary_name_first(tmp_path, capsys):
+    out = tmp_path / "imu.csv"
+    out.write_text("old table\n")
+    path = write(tmp_path, "imu.bin", CONSTRUCTED)
+    code, _, _ = run_cli(capsys, "--protocol", "rvc", "--csv", str(out), path)
+    assert code == 0 and out.read_text().startswith("type,")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["imu.bin", "imu.csv"]  # no temporary file left
+    code, _, err = run_cli(capsys, "--protocol", "rvc", "--csv", str(out), str(tmp_path / "missing.bin"))
+    assert code == 2 and out.read_text().startswith("type,")  # a failed decode leaves the old table whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["imu.bin", "imu.csv"]
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    import subprocess
+
+    path = write(tmp_path, "big.bin", b"".join(encode_record(TelemetryRecord(i, i)) for i in range(20000)))
+    cmd = f"{sys.executable} -m host_tools decode --protocol telemetry {path} | head -1"
+    r = subprocess.run(["bash", "-o", "pipefail", "-c", cmd], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stderr == "" and json.loads(r.stdout)["seq"] == 0

@@ -202,3 +202,22 @@ def test_minimum_jerk_validation() -> None:
         MinimumJerk(0.0, 1.0, duration_s=0.0)
     with pytest.raises(ValueError, match="end_angle_rad"):
         MinimumJerk(0.0, math.nan, duration_s=1.0)
+
+
+def test_the_numpy_spline_is_scipys_periodic_cubic_spline() -> None:
+    """The run does without scipy: its spline must be the one scipy fits (to rounding)."""
+    import numpy as np
+    from scipy.interpolate import CubicSpline
+
+    from firmware.control.spline import evaluate, periodic_cubic_coefficients
+
+    rng = np.random.default_rng(5)
+    x = np.cumsum(rng.uniform(0.01, 0.1, 40))
+    x -= x[0]
+    y = rng.normal(size=40)
+    y[-1] = y[0]
+    c = periodic_cubic_coefficients(x, y)
+    expected = CubicSpline(x, y, bc_type="periodic")
+    assert np.allclose(c, expected.c, rtol=1e-12, atol=1e-12 * np.abs(expected.c).max())
+    t = np.linspace(0.0, x[-1], 997)
+    assert np.allclose(evaluate(x, c, t), expected(t), rtol=0, atol=1e-12)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -70,6 +71,7 @@ def test_units_are_converted_back_and_capping_is_said(tmp_path, capsys):
      '[[task]]\nname="y"\npriority=1\nperiod=5\ncost=1\n', "priority 1"),
     ('unit="furlongs"\nf_cpu_hz=1000000\n', "furlongs"),
     ('unit="us"\nf_cpu_hz=1000000\n[[task]]\nname="x"\npriority=1\nperiod=5\ncost=1\nprio=3\n', "prio"),
+    ('unit="us"\nf_cpu_hz=1000000\n', "no [[task]] table"),
 ])
 def test_bad_input_is_one_line_on_stderr_and_exit_2(tmp_path, capsys, content, needle):
     path = tmp_path / "nope.toml"
@@ -81,3 +83,27 @@ def test_bad_input_is_one_line_on_stderr_and_exit_2(tmp_path, capsys, content, n
     assert needle in err
     if needle == "period":
         assert "-5" in err
+
+
+def _primes(count: int) -> list[int]:
+    out: list[int] = []
+    n = 1000
+    while len(out) < count:
+        n += 1
+        if all(n % p for p in range(2, int(n**0.5) + 1)):
+            out.append(n)
+    return out
+
+
+def test_simulate_on_200_coprime_periods_is_capped_not_an_overflow(tmp_path, capsys):
+    """The hyperperiod has ~650 digits: too large for a float, the cap applies and the note prints it short."""
+    lines = ['unit = "us"', "f_cpu_hz = 1000000"]
+    for k, p in enumerate(_primes(200)):
+        lines += ["[[task]]", f'name = "t{k}"', f"priority = {k + 1}", f"period = {p * 100}", "cost = 1"]
+    path = tmp_path / "coprime.toml"
+    path.write_text("\n".join(lines) + "\n")
+    code, out, err = _rta(capsys, str(path), "--simulate", "--max-jobs", "500")
+    assert code == 0 and err == ""
+    note = out.strip().splitlines()[-1]
+    assert "CAPPED at --max-jobs=500" in note and re.search(r"hyperperiod is \d\.\d{3}e\d{3} us", note)
+    assert len(note) < 200

@@ -67,3 +67,20 @@ def test_fault_events_are_traced(tmp_path):
     doc = json.loads(path.read_text())
     x = [e for e in doc["traceEvents"] if e["ph"] == "X"]
     assert x[0]["dur"] == pytest.approx(15 / 168)
+
+
+def test_write_chrome_writes_the_bytes_of_to_chrome(tmp_path):
+    import json
+
+    from rtos.trace import Trace
+
+    tr = Trace(maxlen=50)
+    tr.task_names = ["ctl", "log"]
+    for k in range(80):  # more than maxlen: the window of the last 50
+        tr.add_job("ctl" if k % 3 else "other", k, 1000 * k, 1000 * k + 7, 1000 * k + 9, 1000 * k + 420)
+    tr.add_event("fault", 12345, "ctl", 4)
+    tr.add_event("watchdog_reset", 99999, "board")
+    path = tmp_path / "trace.json"
+    tr.write_chrome(path, 168_000_000)
+    assert path.read_text(encoding="utf-8") == json.dumps(tr.to_chrome(168_000_000))
+    assert [p.name for p in tmp_path.iterdir()] == ["trace.json"]

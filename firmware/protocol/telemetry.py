@@ -13,11 +13,11 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from enum import IntEnum
-from operator import attrgetter
-from typing import Any, NamedTuple
+from operator import attrgetter, itemgetter
+from typing import Any, NamedTuple, TypeVar
 
 from firmware.protocol.cobs import cobs_decode
 from firmware.protocol.telemetry_frame import RecordFramer, crc16
@@ -86,8 +86,13 @@ class TelemetryRecord:
     supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)
     fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)
     deadline_misses: int = _wire("I", 0)
-    # values a controller publishes, appended as float32 fields after the base ones (not a base field)
-    extra: tuple[float, ...] = field(default=(), compare=False)
+
+
+@dataclass(frozen=True)
+class PublishedRecord(TelemetryRecord):
+    """A record with the values a controller published: float32 fields after the base ones (``extra``)."""
+
+    extra: tuple[float, ...] = ()
 
 
 class FieldSpec(NamedTuple):
@@ -100,7 +105,7 @@ class FieldSpec(NamedTuple):
 
 RECORD_SPECS: tuple[FieldSpec, ...] = tuple(
     FieldSpec(f.name, f.metadata["fmt"], 0 if f.default is MISSING else f.default)
-    for f in fields(TelemetryRecord) if "fmt" in f.metadata
+    for f in fields(TelemetryRecord)
 )
 RECORD_FIELDS: tuple[str, ...] = tuple(s.name for s in RECORD_SPECS)
 BASE_FIELD_COUNT: int = len(RECORD_SPECS)  # every version-1 record carries at least these
@@ -252,10 +257,9 @@ def _enum_or_int(enum: type[IntEnum], value: int) -> IntEnum | int:
 def record_from_values(values: dict[str, int | float], extra: tuple[float, ...] = ()) -> TelemetryRecord:
     """Build a record from decoded field values (unknown enum codes stay plain ints), `extra` appended."""
     kw: dict[str, Any] = {name: values[name] for name in RECORD_FIELDS}
-    kw["extra"] = extra
     kw["supervisor_state"] = _enum_or_int(SupervisorState, int(kw["supervisor_state"]))
     kw["fault_reason"] = _enum_or_int(FaultReason, int(kw["fault_reason"]))
-    return TelemetryRecord(**kw)  # type: ignore[arg-type]
+    return PublishedRecord(**kw, extra=extra) if extra else TelemetryRecord(**kw)  # type: ignore[arg-type]
 
 
 def decode_frame(frame: bytes, extra_fields: int = 0) -> TelemetryRecord:
@@ -265,20 +269,64 @@ def decode_frame(frame: bytes, extra_fields: int = 0) -> TelemetryRecord:
     values) land in ``record.extra`` (NaN for those the frame lacks).
     """
     encoded = frame[:-1] if frame.endswith(b"\x00") else frame
+    if extra_fields:
+        return _record_extra(_unstuff(encoded), extra_fields)[1]
+    return record_from_values(decode_payload(_unstuff(encoded)))
+
+
+def _unstuff(encoded: bytes) -> bytes:
+    """The payload of a COBS-encoded frame (no delimiter); FrameError if the encoding is broken."""
     try:
-        payload = cobs_decode(encoded)
+        return cobs_decode(encoded)
     except ValueError as exc:
         raise FrameError(str(exc)) from None
-    if not extra_fields:
-        return record_from_values(decode_payload(payload))
-    specs = RECORD_SPECS + tuple(FieldSpec(f"extra_{k}", "f", math.nan) for k in range(extra_fields))
-    values = decode_payload(payload, specs)
-    return record_from_values(values, tuple(float(values[f"extra_{k}"]) for k in range(extra_fields)))
+
+
+_values_tuple: Callable[[dict[str, int | float]], tuple[int | float, ...]] = itemgetter(*RECORD_FIELDS)
+
+
+def decode_values(payload: bytes) -> tuple[int, tuple[int | float, ...]]:
+    """(seq, field values in RECORD_FIELDS order) of an unframed payload; FrameError subclasses on bad input.
+
+    A version-1 record of exactly the known fields is unpacked in one go; anything else (a newer writer's
+    extra fields) goes through :func:`decode_payload`.
+    """
+    if len(payload) == RECORD_PAYLOAD_LEN:
+        data = payload[:-2]
+        version, count, *values = _RECORD_DATA.unpack(data)
+        if version in SUPPORTED_VERSIONS and count == BASE_FIELD_COUNT:
+            if crc16(data) != _CRC.unpack(payload[-2:])[0]:
+                decode_payload(payload)  # raises the CrcError with its message
+            return int(values[0]), tuple(values)
+    values_tuple = _values_tuple(decode_payload(payload))
+    return int(values_tuple[0]), values_tuple
+
+
+def _record(payload: bytes) -> tuple[int, TelemetryRecord]:
+    rec = record_from_values(decode_payload(payload))
+    return rec.seq, rec
+
+
+def _extra_specs(extra_fields: int) -> tuple[FieldSpec, ...]:
+    return RECORD_SPECS + tuple(FieldSpec(f"extra_{k}", "f", math.nan) for k in range(extra_fields))
+
+
+def decode_values_extra(payload: bytes, extra_fields: int) -> tuple[int, tuple[int | float, ...]]:
+    """As :func:`decode_values`, the first extra_fields float32 fields after the base ones appended (NaN if absent)."""
+    values = decode_payload(payload, _extra_specs(extra_fields))
+    out = tuple(values[s.name] for s in RECORD_SPECS) + tuple(float(values[f"extra_{k}"]) for k in range(extra_fields))
+    return int(out[0]), out
+
+
+def _record_extra(payload: bytes, extra_fields: int) -> tuple[int, TelemetryRecord]:
+    values = decode_payload(payload, _extra_specs(extra_fields))
+    rec = record_from_values(values, tuple(float(values[f"extra_{k}"]) for k in range(extra_fields)))
+    return rec.seq, rec
 
 
 def record_to_row(rec: TelemetryRecord, extra_names: Sequence[str] = ()) -> dict[str, int | float | str]:
     """One CSV row (keys = RECORD_COLUMNS, then extra_names): SI values, ``*_deg`` columns, enum names."""
-    row: dict[str, int | float | str] = dict(zip(extra_names, rec.extra, strict=False))
+    row: dict[str, int | float | str] = dict(zip(extra_names, getattr(rec, "extra", ()), strict=False))
     for name in RECORD_FIELDS:
         value = getattr(rec, name)
         if name in _ANGLE_FIELDS:
@@ -307,6 +355,9 @@ class TelemetryStats:
     sequence_resets: int = 0
 
 
+T = TypeVar("T")
+
+
 class TelemetryDecoder:
     """Streaming decoder: splits on 0x00, decodes each frame, counts every failure; never raises."""
 
@@ -325,10 +376,22 @@ class TelemetryDecoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[TelemetryRecord]:
         """Consume bytes and return the records whose frames they complete."""
+        n = self.extra_fields
+        return self._feed(data, (lambda payload: _record_extra(payload, n)) if n else _record)
+
+    def feed_values(self, data: bytes | bytearray | memoryview) -> list[tuple[int | float, ...]]:
+        """As :meth:`feed`, but each record as the tuple of its field values (RECORD_FIELDS order, enums as ints).
+
+        The same counters; no record objects (a long run's CSV is written from these).
+        """
+        n = self.extra_fields
+        return self._feed(data, (lambda payload: decode_values_extra(payload, n)) if n else decode_values)
+
+    def _feed(self, data: bytes | bytearray | memoryview, build: Callable[[bytes], tuple[int, T]]) -> list[T]:
         if not isinstance(data, bytes):
             data = bytes(data)
         self.stats.bytes_in += len(data)
-        records: list[TelemetryRecord] = []
+        records: list[T] = []
         start, n = 0, len(data)
         while start <= n:
             end = data.find(b"\x00", start)
@@ -349,7 +412,7 @@ class TelemetryDecoder:
                 self.stats.dropped_bytes += 1
                 self._discarding = False
             else:
-                rec = self._decode(bytes(self._buf))
+                rec = self._decode(bytes(self._buf), build)
                 self._buf.clear()
                 if rec is not None:
                     records.append(rec)
@@ -363,13 +426,13 @@ class TelemetryDecoder:
         self._discarding = False
         self._last_seq = None
 
-    def _decode(self, encoded: bytes) -> TelemetryRecord | None:
+    def _decode(self, encoded: bytes, build: Callable[[bytes], tuple[int, T]]) -> T | None:
         """Decode one delimited frame (its delimiter included in the byte counts) or count why not."""
         if not encoded:
             self.stats.dropped_bytes += 1  # idle delimiter
             return None
         try:
-            rec = decode_frame(encoded, self.extra_fields)
+            seq, result = build(_unstuff(encoded))
         except UnknownVersionError:
             self.stats.unknown_versions += 1
         except CrcError:
@@ -378,9 +441,9 @@ class TelemetryDecoder:
             logger.debug("bad telemetry frame: %s", exc)
             self.stats.bad_frames += 1
         else:
-            self._count_sequence(rec.seq)
+            self._count_sequence(seq)
             self.stats.records += 1
-            return rec
+            return result
         self.stats.dropped_bytes += len(encoded) + 1
         return None
 

@@ -71,6 +71,7 @@ class VirtualBench:
         seed: int = 0,
         plant_params: PlantParams | None = None,
         initial_angle_rad: float = 0.0,
+        backlash_rad: float = 0.0,
         motor_config: Ak60Config | None = None,
         imu_config: Bno08xConfig | None = None,
         encoder_offset_rad: float = 0.0,
@@ -88,7 +89,7 @@ class VirtualBench:
         self.seed = seed
         self.mcu = mcu = VirtualMcu(clock_now, f_cpu_hz, systick_hz)
         fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
-        raw_plant = Plant(plant_params, fx, initial_angle_rad=initial_angle_rad)
+        raw_plant = Plant(plant_params, fx, initial_angle_rad=initial_angle_rad, backlash_rad=backlash_rad)
         self.world = world = World(raw_plant, f_cpu_hz)
         self.plant = PlantView(world)
         """The shared plant; queries and inputs through it first run the device events before their time."""

@@ -10,4 +10,6 @@ TESTS: dict[str, str] = {
     "loading": "loading",
     "tracking": "tracking",
     "baud-study": "baud_study",
+    "spring-calibration": "spring_calibration",
+    "design-point": "design_point",
 }

@@ -39,6 +39,8 @@ MODES: tuple[str, ...] = ("selective", "full")
 FULL_REPLY_BYTES = 78  # CubeMars GET_VALUES reply on the wire (PROTOCOLS.md F)
 VELOCITY_CUTOFF_FRACTION = 0.4  # of the control rate: the encoder's velocity filter must stay below Nyquist
 REPORT_TEXT = "limitation named, no figure"
+#: Nothing here is fitted to the report (it names the UART delay as a limitation, 4.3, without a figure).
+BASIS = "predicted"
 
 
 def _wire_bytes() -> dict[str, int]:
@@ -114,7 +116,8 @@ def study_run(base: FirmwareConfig, baud: int, mode: str, control_hz: int, *, st
     link = s["motor_link"]
     out = StudyRun(baud, mode, control_hz, s["deadline_misses"], tuple(s["faults"]), link["requests"],
                    link["replies"], link["missing_replies"], link["stale_replies"], r.firmware.motor.stats.tx_refused,
-                   link["feedback_rate_hz"], link["max_feedback_age_ms"], s["rms_error_deg"], s["max_error_deg"])
+                   link["feedback_rate_hz"], link["max_feedback_age_ms"],
+                   *(math.nan if s[k] is None else s[k] for k in ("rms_error_deg", "max_error_deg")))
     logger.info("baud study %s", out)
     return out
 
@@ -152,23 +155,26 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, bauds: 
             tag = f"{baud} {mode}"
             if found is None:
                 figures.append(Figure(f"{tag}: achievable control rate", "Hz", REPORT_TEXT, None, math.nan,
-                                      f"none of {sorted(candidates)} Hz passes; wire bound {_fmt_hz(bound_hz)} Hz"))
+                                      f"none of {sorted(candidates)} Hz passes; wire bound {_fmt_hz(bound_hz)} Hz",
+                                      basis=BASIS))
                 continue
             figures += [
                 Figure(f"{tag}: achievable control rate", "Hz", REPORT_TEXT, None, float(found.control_hz),
-                       f"wire bound {_fmt_hz(bound_hz)} Hz; {found.deadline_misses} deadline misses"),
+                       f"wire bound {_fmt_hz(bound_hz)} Hz; {found.deadline_misses} deadline misses", basis=BASIS),
                 Figure(f"{tag}: feedback rate", "Hz", REPORT_TEXT, None, found.feedback_rate_hz,
-                       f"wire bound {_fmt_hz(bound_fb)} Hz"),
-                Figure(f"{tag}: worst feedback age", "ms", REPORT_TEXT, None, found.max_feedback_age_ms, ""),
+                       f"wire bound {_fmt_hz(bound_fb)} Hz", basis=BASIS),
+                Figure(f"{tag}: worst feedback age", "ms", REPORT_TEXT, None, found.max_feedback_age_ms, "",
+                       basis=BASIS),
                 Figure(f"{tag}: RMS tracking error", "deg", REPORT_TEXT, None, found.rms_error_deg,
-                       f"max {found.max_error_deg:.3f}°"),
+                       f"max {found.max_error_deg:.3f}°; plant's true angle (emulation only)", basis=BASIS),
             ]
     ok = [r for r in best.values() if r is not None]
     rec = min(ok, key=lambda r: (-r.control_hz, -r.feedback_rate_hz, r.rms_error_deg, r.baud)) if ok else None
     if rec is not None:
         figures.append(Figure("recommended configuration: RMS tracking error", "deg", REPORT_TEXT, None,
                               rec.rms_error_deg, f"{rec.baud} baud, {rec.mode} feedback, {rec.control_hz} Hz control, "
-                              f"{rec.feedback_rate_hz:.0f} Hz feedback"))
+                              f"{rec.feedback_rate_hz:.0f} Hz feedback; plant's true angle (emulation only)",
+                              basis=BASIS))
     columns = {name: np.array([getattr(r, name) if name != "faults" else "|".join(r.faults) for r in every])
                for name in ("baud", "mode", "control_hz", "deadline_misses", "faults", "requests", "replies",
                             "missing_replies", "stale_replies", "tx_refused", "feedback_rate_hz",

@@ -11,12 +11,21 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BenchResult", "Figure", "markdown_table", "write_outputs"]
+__all__ = ["BASES", "BenchResult", "Figure", "markdown_table", "write_outputs"]
+
+
+#: The kinds of basis a compared figure can have (the first word of Figure.basis).
+BASES = ("fitted", "predicted", "assumed")
 
 
 @dataclass(frozen=True)
 class Figure:
-    """One compared figure: the report's value (text and number), the emulated value, and a note."""
+    """One compared figure: the report's value (text and number), the emulated value, a note, and its basis.
+
+    ``basis`` says how far the emulated figure can be trusted as a prediction: "fitted: <parameter>" (a
+    parameter was chosen so that this row matches the report), "predicted" (nothing was fitted to it),
+    or "assumed: <what>" (the report gives no setup for it; the assumption is named).
+    """
 
     name: str
     unit: str
@@ -24,6 +33,14 @@ class Figure:
     report_value: float | None
     emulated_value: float | None
     note: str = ""
+    basis: str = ""
+
+    def __post_init__(self) -> None:
+        """Refuse a row without a basis."""
+        kind = self.basis.split(":", 1)[0].strip()
+        if kind not in BASES or (kind != "predicted" and ":" not in self.basis):
+            raise ValueError(f"figure {self.name!r}: basis {self.basis!r} must be 'predicted', 'fitted: <parameter>' "
+                             "or 'assumed: <what>'")
 
     @property
     def difference(self) -> float | None:
@@ -36,7 +53,7 @@ class Figure:
         """The row as a JSON-ready mapping."""
         return {"name": self.name, "unit": self.unit, "report": self.report_text,
                 "report_value": self.report_value, "emulated": self.emulated_value,
-                "difference": self.difference, "note": self.note}
+                "difference": self.difference, "note": self.note, "basis": self.basis}
 
 
 #: Draws the test's plot onto a fresh matplotlib figure.
@@ -63,12 +80,12 @@ def _fmt(value: float | None) -> str:
 
 def markdown_table(results: list[BenchResult]) -> str:
     """A Markdown table with one row per figure of every result: report, emulated, difference, note."""
-    lines = ["| test | figure | unit | report | emulated | difference | note |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| test | figure | unit | report | emulated | difference | basis | note |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in results:
         for f in r.figures:
             lines.append(f"| {r.test} | {f.name} | {f.unit} | {f.report_text} | {_fmt(f.emulated_value)} | "
-                         f"{_fmt(f.difference)} | {f.note} |")
+                         f"{_fmt(f.difference)} | {f.basis} | {f.note} |")
     return "\n".join(lines) + "\n"
 
 

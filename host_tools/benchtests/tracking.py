@@ -1,16 +1,22 @@
 """Gait tracking on the full firmware run: untuned gains, tuned gains, tuned gains + Butterworth on the IMU.
 
 Protocol (docs/bench.md): the firmware runs on the virtual suspended-foot bench (`pafp run`: RTOS,
-encoder, IMU and motor over UART at 921600 baud) and follows the normative ankle angle. Per case the
-figures are the RMS and max error of the plant's true angle against the reference over whole strides,
-and the lag that best aligns them (host_tools.metrics). Cases:
+encoder, IMU and motor over UART at 921600 baud, the real bench's imperfections) and follows the
+normative ankle angle. Per case the figures are measured as the report measured them -- the IMU pitch
+the firmware received against the reference (its Figs 4.8-4.10) -- then the plant's true angle
+(emulation only), over whole strides in RUN (host_tools.metrics), with the lag that best aligns them.
+Cases:
 
-- untuned: a first hand-set guess (the report's initial gains are not given): P-only position loop
-  kp = 1 /rad (1 rad of error asks for the full velocity limit) and P-only velocity loop kp = 0.2 s/rad
-  (1 rad/s of error asks for 0.2 x the current limit); everything else as the profile.
-- tuned: the gains of the firmware profile (profiles/firmware.toml, read at run time, or a given path).
-- tuned + Butterworth: the same with the order-2 low-pass on the IMU pitch at BUTTERWORTH_HZ, and once
-  more at BUTTERWORTH_LOW_HZ to show where the filter's lag trips the sensor-disagreement check.
+- untuned: the report's first run had no feed-forward (its controller is a PID cascade, 3.6.3-3.6.4) and
+  gains it does not give: feed-forward off, P-only position loop kp = 1 /rad (1 rad of error asks for
+  the full velocity limit), P-only velocity loop kp = 0.2 s/rad; everything else as the profile.
+- tuned: the firmware profile (profiles/firmware.toml, read at run time, or a given path): its gains
+  and its gravity + inertia feed-forward.
+- tuned, IMU Butterworth (offline): the report's Fig 4.11 -- a Butterworth low-pass "applied" to the
+  raw IMU data to "better capture the true response" -- as a zero-phase order-2 filter at
+  BUTTERWORTH_HZ on the logged IMU pitch of the tuned run (no new run: a plotting step, not control).
+- tuned + Butterworth in the firmware: the order-2 low-pass inside the loop on the IMU pitch at
+  BUTTERWORTH_HZ, and at BUTTERWORTH_LOW_HZ to show where its lag trips the sensor-disagreement check.
 """
 
 from __future__ import annotations
@@ -21,10 +27,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.signal import butter, filtfilt
 
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.pid import PidGains
 from host_tools.benchtests.output import BenchResult, Figure
+from host_tools.metrics import run_window, signal_figures
 from host_tools.report import summarise
 from host_tools.runner import RunConfig, RunResult, run_virtual
 
@@ -38,6 +46,14 @@ BUTTERWORTH_HZ = 20.0
 BUTTERWORTH_LOW_HZ = 10.0
 BUTTERWORTH_ORDER = 2
 REPORT_TEXT = "plot only (Figs 4.8–4.11)"
+OFFLINE = f"tuned, IMU Butterworth {BUTTERWORTH_HZ:g} Hz offline"
+BASES = {
+    "untuned": "assumed: no feed-forward, P-only gains kp = 1 /rad and 0.2 s/rad (the report gives none)",
+    "tuned": "assumed: the firmware profile's gains and feed-forward, tuned on this emulator (the report's "
+             "tuned gains are not given)",
+    OFFLINE: f"assumed: order {BUTTERWORTH_ORDER}, {BUTTERWORTH_HZ:g} Hz, zero-phase, on the logged IMU pitch "
+             "(the report gives neither order nor cut-off)",
+}
 
 
 @dataclass(frozen=True)
@@ -51,6 +67,8 @@ class CaseResult:
     angle_deg: np.ndarray
     estimate_error_deg: np.ndarray
     gait_start_s: float | None
+    imu_deg: np.ndarray
+    run_mask: np.ndarray
 
     @property
     def estimate_rms_deg(self) -> float:
@@ -69,14 +87,31 @@ def run_case(name: str, firmware: FirmwareConfig, *, strides: int, seed: int, ba
     p = result.probe.arrays()
     logger.info("%s: RMS %.3f deg, max %.3f deg, lag %.1f ms, misses %d, faults %s", name, s["rms_error_deg"],
                 s["max_error_deg"], s["lag_ms"], s["deadline_misses"], s["faults"])
+    w = run_window(p["t_s"], p["supervisor_state"], gait_start_s=result.gait_start_s,
+                   stride_s=firmware.stride_s, strides=strides)
     return CaseResult(name, s, p["t_s"], np.degrees(p["reference_rad"]), np.degrees(p["true_angle_rad"]),
-                      np.degrees(p["fused_angle_rad"] - p["true_angle_rad"]), result.gait_start_s)
+                      np.degrees(p["fused_angle_rad"] - p["true_angle_rad"]), result.gait_start_s,
+                      np.degrees(p["imu_pitch_rad"]), w.mask)
+
+
+def offline_butterworth(c: CaseResult, cutoff_hz: float = BUTTERWORTH_HZ, order: int = BUTTERWORTH_ORDER) -> dict:
+    """The report's Fig 4.11: the logged IMU pitch low-passed (zero phase) against the reference."""
+    ok = np.isfinite(c.imu_deg)
+    fs = 1.0 / float(np.median(np.diff(c.t_s)))
+    b, a = butter(order, cutoff_hz, fs=fs)
+    filtered = np.full_like(c.imu_deg, np.nan)
+    filtered[ok] = filtfilt(b, a, c.imu_deg[ok])
+    stride_s = float(c.summary["tracking"]["min_run_s"])
+    w = run_window(c.t_s, np.where(c.run_mask, 1, 0), gait_start_s=c.gait_start_s, stride_s=stride_s,
+                   strides=c.summary["strides"])
+    return signal_figures(c.t_s, np.radians(c.reference_deg), np.radians(filtered), w)
 
 
 def tracking_cases(tuned: FirmwareConfig) -> dict[str, FirmwareConfig]:
-    """The four firmware configurations compared, keyed by case name."""
+    """The four firmware configurations run, keyed by case name (the offline filter needs no run)."""
     return {
-        "untuned": tuned.with_changes(position_gains=UNTUNED_POSITION, velocity_gains=UNTUNED_VELOCITY),
+        "untuned": tuned.with_changes(position_gains=UNTUNED_POSITION, velocity_gains=UNTUNED_VELOCITY,
+                                      feedforward=False),
         "tuned": tuned,
         f"tuned + Butterworth {BUTTERWORTH_HZ:g} Hz": tuned.with_changes(
             imu_lowpass_hz=BUTTERWORTH_HZ, imu_lowpass_order=BUTTERWORTH_ORDER),
@@ -97,34 +132,55 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, strides
     tuned = load_firmware_config(profile)
     cases = [run_case(name, fw, strides=n, seed=seed) for name, fw in tracking_cases(tuned).items()]
     figures: list[Figure] = []
-    for c in cases:
-        s = c.summary
-        figures += [
-            Figure(f"{c.name}: RMS error", "deg", REPORT_TEXT, None, s["rms_error_deg"], _note(c)),
-            Figure(f"{c.name}: max error", "deg", REPORT_TEXT, None, s["max_error_deg"], ""),
-            Figure(f"{c.name}: lag", "ms", REPORT_TEXT, None, s["lag_ms"], ""),
+    offline = offline_butterworth(cases[1])
+
+    def rows(name: str, imu: dict, truth: dict | None, note: str, basis: str) -> list[Figure]:
+        out = [
+            Figure(f"{name}: IMU RMS error", "deg", REPORT_TEXT, None, imu["rms_deg"], note, basis=basis),
+            Figure(f"{name}: IMU max error", "deg", REPORT_TEXT, None, imu["max_deg"], "", basis=basis),
+            Figure(f"{name}: IMU lag", "ms", REPORT_TEXT, None, imu["lag_ms"], "", basis=basis),
         ]
+        if truth is not None:
+            out += [
+                Figure(f"{name}: RMS error", "deg", REPORT_TEXT, None, truth["rms_deg"],
+                       "plant's true angle: emulation only", basis=basis),
+                Figure(f"{name}: max error", "deg", REPORT_TEXT, None, truth["max_deg"], "emulation only", basis=basis),
+                Figure(f"{name}: lag", "ms", REPORT_TEXT, None, truth["lag_ms"], "emulation only", basis=basis),
+            ]
+        return out
+
+    for c in cases:
+        tr = c.summary["tracking"]
+        basis = BASES.get(c.name, f"assumed: {BUTTERWORTH_ORDER}nd-order Butterworth in the loop on the IMU pitch "
+                                  "(the report filtered its data, not its loop)")
+        figures += rows(c.name, tr["imu"], tr["truth"], _note(c), basis)
+        if c.name == "tuned":
+            figures += rows(OFFLINE, offline, None, "the logged IMU pitch of the tuned run, filtered", BASES[OFFLINE])
     base = cases[0]
     columns: dict[str, np.ndarray] = {"t_s": base.t_s, "reference_deg": base.reference_deg}
     for c in cases:
         key = c.name.replace(" + ", "_").replace(" ", "_").lower()
         columns[f"angle_deg_{key}"] = c.angle_deg
+        columns[f"imu_deg_{key}"] = c.imu_deg
         columns[f"estimate_error_deg_{key}"] = c.estimate_error_deg
 
     def plot(fig: object) -> None:
         ax_a, ax_e = fig.subplots(2, 1, sharex=True)  # type: ignore[attr-defined]
         ax_a.plot(base.t_s, base.reference_deg, color="k", lw=1.5, label="reference")
         for c in cases:
-            ax_a.plot(c.t_s, c.angle_deg, lw=0.9, label=f"{c.name} (RMS {c.summary['rms_error_deg']:.2f}°)")
-            ax_e.plot(c.t_s, c.angle_deg - np.interp(c.t_s, base.t_s, base.reference_deg), lw=0.8, label=c.name)
+            rms = c.summary["tracking"]["imu"]["rms_deg"]
+            label = f"{c.name}, IMU (RMS " + ("n/a)" if rms is None else f"{rms:.2f}°)")
+            ax_a.plot(c.t_s, c.imu_deg, lw=0.9, label=label)
+            ax_e.plot(c.t_s, c.imu_deg - np.interp(c.t_s, base.t_s, base.reference_deg), lw=0.8, label=f"{c.name}, IMU")
         ax_a.set_ylabel("ankle angle [deg]")
         ax_a.set_title(f"Gait tracking, {n} strides at 921600 baud (seed {seed})")
         ax_a.legend(fontsize=7)
-        ok = [c.angle_deg - np.interp(c.t_s, base.t_s, base.reference_deg) for c in cases if not c.summary["faults"]]
+        ok = [np.nan_to_num(c.imu_deg - np.interp(c.t_s, base.t_s, base.reference_deg))[c.run_mask] for c in cases
+              if not c.summary["faults"]]
         if ok:  # scale the error axis to the runs that kept walking (a tripped run falls onto the stop)
             lim = 1.5 * max(float(np.max(np.abs(e))) for e in ok)
             ax_e.set_ylim(-lim, lim)
-        ax_e.set_ylabel("error [deg] (axis scaled to fault-free runs)")
+        ax_e.set_ylabel("IMU minus reference [deg] (axis: fault-free runs)")
         ax_e.set_xlabel("time [s]")
         ax_e.axhline(0.0, color="0.5", lw=0.6)
 
@@ -132,8 +188,10 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, strides
               "untuned_position": asdict(UNTUNED_POSITION), "untuned_velocity": asdict(UNTUNED_VELOCITY),
               "tuned_position": asdict(tuned.position_gains), "tuned_velocity": asdict(tuned.velocity_gains),
               "butterworth_order": BUTTERWORTH_ORDER,
+              "offline_butterworth": {"hz": BUTTERWORTH_HZ, **offline},
               "cases": {c.name: {"rms_error_deg": c.summary["rms_error_deg"],
                                  "max_error_deg": c.summary["max_error_deg"], "lag_ms": c.summary["lag_ms"],
+                                 "imu": c.summary["tracking"]["imu"],
                                  "deadline_misses": c.summary["deadline_misses"], "faults": c.summary["faults"],
                                  "estimate_rms_deg": c.estimate_rms_deg} for c in cases}}
     return BenchResult("tracking", figures, columns, plot, params)

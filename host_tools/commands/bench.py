@@ -28,7 +28,8 @@ def _run_one(name: str, seed: int, quick: bool) -> BenchResult:
     try:
         module = importlib.import_module(f"host_tools.benchtests.{TESTS[name]}")
     except ImportError as exc:
-        return BenchResult(name, [Figure("(not available)", "", "", None, None, f"not available: {exc}")])
+        return BenchResult(name, [Figure("(not available)", "", "", None, None, f"not available: {exc}",
+                                         basis="assumed: nothing (the test did not run)")])
     return module.run(seed=seed, quick=quick)
 
 

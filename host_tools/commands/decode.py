@@ -2,8 +2,18 @@
 
 One JSON object per decoded message (``{"type": ..., <SI fields>}``), then one summary line
 ``{"summary": {...}}`` with the decoder's counters. With ``--csv OUT`` the messages go to a CSV table
-(columns: the union of all fields, angles also in ``*_deg`` columns) and only the summary is printed.
-Non-finite floats are written as JSON null; bytes as hex strings.
+(columns: the union of all fields, angles also in ``*_deg`` columns) and only the summary is printed
+(``--csv -``: the table on stdout, the summary on stderr). Non-finite floats are written as JSON null;
+bytes as hex strings.
+
+At the end of the input the decoder gives up what it holds: a VESC candidate frame still pending (a false
+header near the end would otherwise hide the frames after it) is skipped one start byte at a time, as the
+firmware's rx timeout does, and the frames behind it are decoded. The summary's ``end_of_input`` says how
+many bytes were held, how many candidates were given up, how many messages that recovered and how many
+bytes were left over in no message (also counted in ``dropped_bytes``).
+
+Memory does not grow with the capture: JSON lines are written as they are decoded; CSV rows go to a
+temporary file first (the header needs every column), then to the table.
 """
 
 from __future__ import annotations
@@ -14,10 +24,13 @@ import csv
 import dataclasses
 import json
 import math
+import os
 import sys
+import tempfile
 from collections.abc import Callable, Iterator
 from enum import IntEnum
-from typing import Any, BinaryIO
+from pathlib import Path
+from typing import Any, BinaryIO, TextIO
 
 from firmware.protocol.rvc import RvcDecoder
 from firmware.protocol.telemetry import TelemetryDecoder, TelemetryRecord, record_to_row
@@ -40,7 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="vesc only: which side sent the bytes (default from-motor)",
     )
     parser.add_argument(
-        "--csv", metavar="OUT", default=None, help="write a CSV table to OUT instead of JSON lines"
+        "--csv", metavar="OUT", default=None,
+        help="write a CSV table to OUT ('-' for stdout, the summary then on stderr) instead of JSON lines"
     )
     parser.add_argument("file", metavar="FILE", help="raw byte capture, or '-' for stdin")
 
@@ -133,55 +147,121 @@ def _open_input(path: str) -> Iterator[BinaryIO]:
         yield handle
 
 
-def _decode(path: str, decoder: Any, emit: Callable[[Any], None]) -> None:
-    """Feed the whole capture through the decoder, calling emit for each message."""
+def _decode(path: str, decoder: Any, emit: Callable[[Any], None]) -> dict[str, int]:
+    """Feed the whole capture through the decoder, calling emit for each message; flush at the end.
+
+    A failure to read names the file (DecodeError); a failure to write (a closed stdout) is not caught here.
+    """
     with _open_input(path) as stream:
-        try:
-            for chunk in _read_chunks(stream):
-                for msg in decoder.feed(chunk):
-                    emit(msg)
-        except OSError as exc:
-            raise DecodeError(f"cannot read {path}: {exc.strerror or exc}") from None
+        chunks = _read_chunks(stream)
+        while True:
+            try:
+                chunk = next(chunks, None)
+            except OSError as exc:
+                raise DecodeError(f"cannot read {path}: {exc.strerror or exc}") from None
+            if chunk is None:
+                break
+            for msg in decoder.feed(chunk):
+                emit(msg)
+    return _flush(decoder, emit)
 
 
-def _write_csv(out_path: str, rows: list[dict[str, Any]]) -> None:
-    """Write rows to a CSV file whose columns are the union of all keys, in order of first use."""
-    columns: dict[str, None] = {}
-    for row in rows:
-        columns.update(dict.fromkeys(row))
+def _flush(decoder: Any, emit: Callable[[Any], None]) -> dict[str, int]:
+    """End of input: give up what the decoder holds, emit the messages that recovers, count the rest."""
+    held = decoder.buffered if hasattr(decoder, "buffered") else decoder.pending_bytes
+    dropped_before = decoder.stats.dropped_bytes
+    given_up = recovered = 0
+    if hasattr(decoder, "skip_pending"):  # VESC: a pending candidate may hide whole frames behind it
+        while decoder.buffered:
+            given_up += 1
+            for msg in decoder.skip_pending():
+                recovered += 1
+                emit(msg)
+    else:  # RVC and telemetry frames cannot hide behind a shorter remainder: what is held is left over
+        given_up = int(held > 0)
+        decoder.reset()
+    return {"held_bytes": held, "candidates_given_up": given_up, "messages_recovered": recovered,
+            "leftover_bytes": decoder.stats.dropped_bytes - dropped_before}
+
+
+class _CsvSpool:
+    """CSV rows kept in a temporary file (JSON lines) with their columns, until the table can be written."""
+
+    def __init__(self, directory: str | None) -> None:
+        """Create the spool file in directory (the output's, so a full disk shows before decoding)."""
+        self._f = tempfile.TemporaryFile("w+", encoding="utf-8", dir=directory)
+        self.columns: dict[str, None] = {}
+
+    def add(self, row: dict[str, Any]) -> None:
+        """Keep one row."""
+        self.columns.update(dict.fromkeys(row))
+        self._f.write(json.dumps(row) + "\n")
+
+    def write_to(self, out: TextIO) -> None:
+        """Write the table: the header (every column, in order of first use), then the rows."""
+        writer = csv.DictWriter(out, fieldnames=list(self.columns), restval="")
+        writer.writeheader()
+        self._f.seek(0)
+        for line in self._f:
+            writer.writerow(json.loads(line))
+        self._f.close()
+
+
+def _csv_target(out_path: str) -> tuple[str | None, str | None]:
+    """(directory, temporary file name) for --csv OUT, checked writable now; (None, None) for stdout."""
+    if out_path == "-":
+        return None, None
+    directory = os.path.dirname(os.path.abspath(out_path))
     try:
-        with open(out_path, "w", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(columns), restval="")
-            writer.writeheader()
-            writer.writerows(rows)
+        if os.path.isdir(out_path):
+            raise IsADirectoryError(21, "Is a directory")
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(out_path)}.", suffix=".tmp", dir=directory)
+        os.close(fd)
     except OSError as exc:
         raise DecodeError(f"cannot write {out_path}: {exc.strerror or exc}") from None
+    return directory, tmp
 
 
-def _summary(protocol: str, decoder: Any) -> dict[str, Any]:
-    """The final summary object: protocol and every counter of the decoder."""
-    return {"summary": {"protocol": protocol, **dataclasses.asdict(decoder.stats)}}
+def _summary(protocol: str, decoder: Any, end: dict[str, int]) -> dict[str, Any]:
+    """The final summary object: protocol, every counter of the decoder, what the end of input left."""
+    return {"summary": {"protocol": protocol, **dataclasses.asdict(decoder.stats), "end_of_input": end}}
 
 
 def run(args: argparse.Namespace) -> int:
     """Decode the capture and print JSON lines (or write CSV); 2 on a bad file or option."""
+    tmp: str | None = None
     try:
         if args.direction is not None and args.protocol != "vesc":
             raise DecodeError(f"--direction {args.direction} applies only to --protocol vesc")
         decoder = _make_decoder(args.protocol, args.direction or "from-motor")
         out = sys.stdout
+        summary_to = out
         if args.csv is None:
             def emit(msg: Any) -> None:
                 out.write(json.dumps(_jsonable(message_fields(msg))) + "\n")
 
-            _decode(args.file, decoder, emit)
+            end = _decode(args.file, decoder, emit)
         else:
-            rows: list[dict[str, Any]] = []
-            _decode(args.file, decoder, lambda msg: rows.append(message_row(msg)))
-            _write_csv(args.csv, rows)
-        out.write(json.dumps(_jsonable(_summary(args.protocol, decoder))) + "\n")
-        out.flush()
+            directory, tmp = _csv_target(args.csv)
+            spool = _CsvSpool(directory)
+            end = _decode(args.file, decoder, lambda msg: spool.add(message_row(msg)))
+            if tmp is None:  # --csv -: the table is the output, the summary goes aside
+                spool.write_to(out)
+                summary_to = sys.stderr
+            else:
+                try:
+                    with open(tmp, "w", newline="", encoding="utf-8") as handle:
+                        spool.write_to(handle)
+                    os.replace(tmp, args.csv)
+                except OSError as exc:
+                    raise DecodeError(f"cannot write {args.csv}: {exc.strerror or exc}") from None
+                tmp = None
+        summary_to.write(json.dumps(_jsonable(_summary(args.protocol, decoder, end))) + "\n")
+        summary_to.flush()
     except DecodeError as exc:
         print(f"pafp decode: {exc}", file=sys.stderr)
         return 2
+    finally:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
     return 0

@@ -27,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="cap on jobs emulated per release pattern (default 200000)")
 
 
+def _count(value: int) -> str:
+    """An integer as digits, or as a power of ten when it has more than 15 digits."""
+    digits = str(value)
+    return digits if len(digits) <= 15 else f"{digits[0]}.{digits[1:4]}e{len(digits) - 1}"
+
+
 def _fmt(value: object) -> str:
     """Format one table cell."""
     if value is None:
@@ -83,6 +89,6 @@ def run(args: argparse.Namespace) -> int:
                 f"{ts.to_unit(observation.horizon_cycles)} {ts.unit} each")
         if observation.capped:
             note += (f" (CAPPED at --max-jobs={args.max_jobs}; the hyperperiod is "
-                     f"{ts.to_unit(observation.hyperperiod_cycles)} {ts.unit})")
+                     f"{_count(observation.hyperperiod_cycles // ts.ticks_per_unit)} {ts.unit})")
         print(note)
     return verdict

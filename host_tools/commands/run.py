@@ -10,6 +10,11 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from host_tools.outdir import RunDir
+    from host_tools.runner import RunConfig
 
 HELP = "run the firmware on the virtual bench, or on serial ports (--motor/--imu): tracking, deadlines, report"
 
@@ -24,11 +29,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    parser.add_argument("--plant-seed", type=int, default=None, metavar="N",
+                        help="draw the plant's parameters from their tolerances (profiles/plant_tolerances.toml) "
+                             "with seed N; default: the nominal plant. The firmware keeps its nominal model")
+    parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
+                        help="switch one imperfection of the real bench off (profiles/bench_imperfections.toml: "
+                             "imu_bias, imu_drift, imu_noise, encoder_offset, ...), or all; repeatable")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
                         help="the control law: cascade or impedance (shipped), or a class in a Python file "
                              "(README: 'Your own controller'); default: the profile's [controller], else cascade")
+    parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
+    parser.add_argument("--no-trace", action="store_true", help="do not write trace.json")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
@@ -93,16 +106,23 @@ def _warn_link_budget(baud: int, control_hz: int, full_values_hz: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched."""
+    """Run, write the outputs, print the summary table; exit 1 if a deadline was missed or a fault latched.
+
+    Every input is checked before the run (exit 2, one line, nothing written). The outputs are staged
+    beside --out and put in place whole (host_tools/outdir.py). SIGINT, SIGTERM or SIGHUP ends a virtual run at
+    the next segment: what it has is written, marked ``"complete": false``, exit 128 + the signal's number.
+    """
     if args.motor or args.imu:
         return _run_serial(args)
-    from host_tools.report import write_outputs
-    from host_tools.runner import RunConfig, board_profile, run_virtual
+    from host_tools.outdir import OutDirError, RunDir
+    from host_tools.runner import RunConfig, board_profile
 
+    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
         fw_cfg = _firmware_config(args)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
+                        plant_seed=args.plant_seed, ideal=tuple(args.ideal),
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
                         body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed)
         if args.scenario == "walk":
@@ -110,37 +130,68 @@ def run(args: argparse.Namespace) -> int:
 
             walking_load(args.body_mass, fw_cfg.stride_s, args.moment, args.speed)  # a bad mass or CSV stops here
         board_profile(args.board)  # fail early with a clear message, before anything runs
+        cfg.bench_setup()  # the plant draw and the imperfection names, checked before anything runs
         if args.reference is not None:
             from firmware.control.reference import GaitReference
 
-            GaitReference.from_csv(args.reference)
+            GaitReference.from_csv(args.reference, stride_s=fw_cfg.stride_s)
+        run_dir = RunDir(out)  # --out checked and the staging directory made: before the run
     except OSError as e:
         print(f"pafp run: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
         return 2
-    except ValueError as e:
+    except (ValueError, OutDirError) as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        return _run_virtual(args, cfg, run_dir)
+    except BaseException:
+        run_dir.discard()
+        raise
+
+
+def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> int:
+    """The virtual run proper, streaming into run_dir, which is published at the end."""
+    from dataclasses import replace
+
+    from host_tools.report import tracking_text, write_outputs
+    from host_tools.runner import run_virtual
+    from host_tools.stop_signals import StopSignals
+
+    fw_cfg = cfg.firmware
+    assert fw_cfg is not None
+    out = run_dir.out
+    plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
+    ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
     walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
-    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}{walking} -> {out}")
+    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
+    cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity)
     bar = _Progress(not args.quiet)
-    result = run_virtual(cfg, progress=bar)
-    bar.done()
-    s = write_outputs(result, out)
+    with StopSignals() as stop:  # the run ends at its next segment; a second signal interrupts
+        result = run_virtual(cfg, progress=bar, should_stop=lambda: stop.name is not None)
+        bar.done()
+        s = write_outputs(result, run_dir.path, plot=not args.no_plot, trace=not args.no_trace)
+        run_dir.publish()
     print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']}; "
-          f"{s['build']})")
-    print(f"  tracking: RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg, lag {s['lag_ms']:.1f} ms")
+          f"{s['build']}); whole process {s['process_wall_time_s']:.2f} s (factor {s['process_realtime_factor']})")
+    for line in tracking_text(s["tracking"]):
+        print(line)
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
     print(f"  {'task':<11}{'jobs':>8}{'worst us':>11}{'bound us':>11}{'deadline':>10}{'misses':>8}")
     for name, t in s["tasks"].items():
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
-    print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv")
+    written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
+               *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
+    print(f"  outputs: {out}/{', '.join(written)}")
     if result.firmware.controller_error:
         print(f"pafp run: {result.firmware.controller_error}; the supervisor latched the safe state "
               f"(CONTROLLER_ERROR) and every file was written", file=sys.stderr)
+    if stop.exit_code is not None:
+        print(f"pafp run: stopped by {stop.name} after {s['sim_time_s']:.2f} s simulated; the outputs hold "
+              "what the run had (\"complete\": false)", file=sys.stderr)
+        return stop.exit_code
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
 
 
@@ -175,6 +226,14 @@ def _run_serial(args: argparse.Namespace) -> int:
     if not (args.motor and args.imu):
         print("pafp run: serial mode needs both --motor PORT and --imu PORT", file=sys.stderr)
         return 2
+    from host_tools.outdir import OutDirError, check_out_dir
+
+    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        check_out_dir(out)  # before any port is opened (serial mode writes into it, not staged)
+    except OutDirError as e:
+        print(f"pafp run: {e}", file=sys.stderr)
+        return 2
     telemetry_pty = None
     try:
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
@@ -193,7 +252,6 @@ def _run_serial(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     print(f"pafp run: serial mode, motor {cfg.motor}, imu {cfg.imu}, {cfg.duration_s:g} s -> {out}", flush=True)
     if telemetry_pty is not None:
         print(f"telemetry: {telemetry_pty.path}  (watch it: pafp monitor {telemetry_pty.path})", flush=True)
@@ -213,10 +271,13 @@ def _run_serial(args: argparse.Namespace) -> int:
 
         extra, md = serial_extra(result)
         s = write_outputs(result, out, extra, md)
+    from host_tools.report import tracking_text
+
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
     print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it tracking in RUN; "
           f"{s['strides']} whole strides")
-    _print_tracking(s)
+    for line in tracking_text(s["tracking"]):
+        print(line)
     print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
           f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
     w = s["host_warnings"]
@@ -243,11 +304,3 @@ def _run_serial(args: argparse.Namespace) -> int:
               f"({stop['safe_error'] or 'not drained'})", file=sys.stderr)
     return result.exit_code
 
-
-def _print_tracking(s: dict) -> None:
-    """The tracking line: only what was measured while the supervisor was in RUN."""
-    rms = s.get("rms_error_deg")
-    if rms is None or rms != rms:  # null (or NaN from an older metrics module): nothing measured
-        print("  tracking: not measured (too little time in RUN)")
-        return
-    print(f"  tracking ({s['angle_source']}): RMS {s['rms_error_deg']:.3f} deg, max {s['max_error_deg']:.3f} deg")

@@ -6,42 +6,27 @@ import argparse
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
-HELP = "automatic PID gain search on the emulator (parallel, seeded): writes a tuned firmware profile"
+HELP = "automatic PID gain search on the emulator (differential evolution on Dask, seeded): writes a tuned profile"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp tune`."""
     parser.add_argument("--strides", type=int, default=2, help="gait strides per candidate run (default 2)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the candidate generator and the runs")
-    parser.add_argument("--budget", type=int, default=48, help="candidate runs in all, >= 2 (default 48)")
+    parser.add_argument("--budget", type=int, default=48,
+                        help="candidate runs in all, >= 5, spent in generations of 8 (default 48)")
     parser.add_argument("--out", type=Path, default=Path("runs") / "tune",
                         help="output directory (default runs/tune)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                        help="worker processes (default: the number of cores)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None,
+                       help="worker processes of a LocalCluster on 127.0.0.1 (default: the number of cores)")
+    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
     parser.add_argument("--profile", type=Path, default=None,
                         help="starting firmware profile (default profiles/firmware.toml)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
-class _Bar:
-    """A one-line progress bar on stderr: candidates evaluated out of the budget."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.t0 = time.perf_counter()
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        frac = done / total
-        bar = "#" * int(frac * 25)
-        sys.stderr.write(f"\r[{bar:<25}] {done}/{total} candidates, {time.perf_counter() - self.t0:.0f} s")
-        sys.stderr.flush()
-        if done == total:
-            sys.stderr.write("\n")
 
 
 def _plot(path: Path, before: object, after: object, title: str) -> None:
@@ -74,16 +59,24 @@ def run(args: argparse.Namespace) -> int:
     from firmware.config import DEFAULT_PROFILE, load_firmware_config
     from host_tools import tuning
     from host_tools.benchtests.tracking import run_case
+    from host_tools.sweep_engine import Progress, dask_client
 
     source = args.profile or DEFAULT_PROFILE
     try:
         base = load_firmware_config(source)
         if not 1 <= args.strides <= 100:
             raise ValueError(f"strides {args.strides!r} out of range: an int in 1..100")
-        print(f"pafp tune: budget {args.budget} runs of {args.strides} strides, {args.jobs} workers, "
-              f"seed {args.seed} -> {args.out}")
-        result = tuning.search(base, budget=args.budget, strides=args.strides, seed=args.seed, jobs=args.jobs,
-                               progress=_Bar(not args.quiet))
+        if args.workers is not None and not 1 <= args.workers <= 1024:
+            raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+        tuning.check_budget(args.budget)
+        workers = args.workers or os.cpu_count() or 1
+        where = f"scheduler {args.scheduler}" if args.scheduler else f"{workers} workers"
+        print(f"pafp tune: budget {args.budget} runs of {args.strides} strides on {where}, seed {args.seed} "
+              f"-> {args.out}")
+        bar = Progress(args.budget, not args.quiet, label="candidates")
+        with dask_client(workers=workers, scheduler=args.scheduler) as client:
+            result = tuning.search(base, budget=args.budget, strides=args.strides, seed=args.seed, client=client,
+                                   progress=lambda done, total: bar.step())
     except ValueError as e:
         print(f"pafp tune: {e}", file=sys.stderr)
         return 2
@@ -98,13 +91,15 @@ def run(args: argparse.Namespace) -> int:
     _plot(out / "tune.png", before, after,
           f"pafp tune: {args.budget} candidates, {args.strides} strides, seed {args.seed}")
     doc = {
-        "seed": args.seed, "budget": args.budget, "strides": args.strides, "jobs": args.jobs,
+        "seed": args.seed, "budget": args.budget, "strides": args.strides, "workers": where,
         "source_profile": str(source), "tuned_profile": str(profile_path),
         "objective": {"score": "rms_error_deg + effort_weight * (rms_current_a + rms_current_step_a)",
                       "effort_weight_deg_per_a": tuning.EFFORT_WEIGHT,
                       "saturation_max_fraction": tuning.SATURATION_MAX_FRACTION,
                       "stable_max_error_deg": tuning.STABLE_MAX_ERROR_DEG, "bounds": tuning.BOUNDS,
-                      "population": tuning.POPULATION, "sigma0": tuning.SIGMA0, "sigma_decay": tuning.SIGMA_DECAY},
+                      "search": "scipy.optimize.differential_evolution (log space, deferred updating)",
+                      "population": tuning.POPULATION, "sigma0": tuning.SIGMA0, "mutation": tuning.MUTATION,
+                      "recombination": tuning.RECOMBINATION},
         "before": result.start.as_dict(), "best": result.best.as_dict(),
         "evaluations": [e.as_dict() for e in result.evaluations],
     }

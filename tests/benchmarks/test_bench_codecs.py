@@ -1,11 +1,15 @@
 """VESC codec throughput: streaming decode of a ~1 MB capture against a bare baseline, SET_CURRENT encode.
 
 Run with ``.venv/bin/python -m pytest tests/benchmarks/test_bench_codecs.py --benchmark-only``. Rates are in
-messages per second (``extra_info["msgs_per_s"]``, from the median round). The bare baseline gets the frames
-already split and only checks each CRC and unpacks the integers with ``struct`` (no scanning, no SI units, no
-objects); ``test_bench_vesc_stream_decode`` records ``ratio_to_baseline`` = our rate / baseline rate (goal
->= 0.5). Multi-field messages (GET_VALUES) convert their fields to SI on first access, so a second
-benchmark also reads every field of every decoded message and records that ratio too.
+messages per second (``extra_info["msgs_per_s"]``, from the median round).
+
+The headline compares like with like: ``test_bench_vesc_stream_decode_reading_every_field`` decodes the
+streams and reads every field of every message (multi-field messages such as GET_VALUES convert a field to
+SI on first access, so reading them all is the full work), against the SI baseline, which gets the frames
+already split, checks each CRC, unpacks the integers with ``struct`` and converts every one of them to SI
+(no scanning, no objects): ``ratio_to_si_baseline``, goal >= 0.5. The lazy figure stays as a second line:
+``test_bench_vesc_stream_decode`` only counts the messages (no field read), against the bare baseline that
+only unpacks the integers (``ratio_to_baseline``).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from firmware.protocol.vesc import (
     SetPos,
     Values,
 )
+from firmware.protocol.vesc_values import VALUES_FIELDS
 
 SEED = 20240611
 CAPTURE_BYTES = 1_000_000
@@ -119,6 +124,34 @@ def bare_baseline(capture: Capture) -> int:
     return count
 
 
+def _divisors(wire: Any) -> tuple[float, ...]:
+    """Raw -> SI divisor of each wire field (1 for plain integers: they stay ints, as in the messages)."""
+    return tuple(f.scale * (180.0 / math.pi if f.angle else 1.0) for f in wire)
+
+
+_SI_DIVISORS = {
+    "to-motor": {cls.COMMAND_ID: _divisors(cls._WIRE) for cls in (SetCurrent, GetValues, SetPos, Alive)},
+    "from-motor": {4: _divisors(VALUES_FIELDS), 22: (1e4 * 180.0 / math.pi,)},
+}
+
+
+def si_baseline(capture: Capture) -> int:
+    """The bare baseline plus every field converted to SI (raw / scale, degrees to rad): the same fields."""
+    crc = binascii.crc_hqx
+    count = 0
+    for direction, frames in (("to-motor", capture.to_motor_frames), ("from-motor", capture.from_motor_frames)):
+        unpackers = {cid: s.unpack_from for cid, s in _BASE_STRUCTS[direction].items()}
+        divisors = _SI_DIVISORS[direction]
+        for frame in frames:
+            payload = frame[2:-3]
+            if crc(payload, 0) == (frame[-3] << 8) | frame[-2]:
+                cid = payload[0]
+                _ = [raw if d == 1 else raw / d for raw, d in zip(unpackers[cid](payload, 1), divisors[cid],
+                                                                  strict=True)]
+                count += 1
+    return count
+
+
 class Counter:
     """Streaming consumer that counts messages."""
 
@@ -184,6 +217,11 @@ def test_bench_vesc_bare_baseline(benchmark: Any, capture: Capture) -> None:
     _record_rate(benchmark, "baseline", capture.messages)
 
 
+def test_bench_vesc_si_baseline(benchmark: Any, capture: Capture) -> None:
+    assert benchmark(si_baseline, capture) == capture.messages
+    _record_rate(benchmark, "si_baseline", capture.messages)
+
+
 def test_bench_vesc_stream_decode(benchmark: Any, capture: Capture) -> None:
     def run() -> Counter:
         counter = Counter()
@@ -196,10 +234,6 @@ def test_bench_vesc_stream_decode(benchmark: Any, capture: Capture) -> None:
     ratio = rate / baseline
     benchmark.extra_info["baseline_msgs_per_s"] = round(baseline)
     benchmark.extra_info["ratio_to_baseline"] = round(ratio, 3)
-    benchmark.extra_info["goal_met"] = ratio >= GOAL_RATIO
-    if ratio < GOAL_RATIO:  # a timing on a shared machine: reported, not a correctness failure
-        warnings.warn(f"streaming decode is {ratio:.2f} of the bare baseline rate (goal >= {GOAL_RATIO})",
-                      stacklevel=1)
 
 
 def test_bench_vesc_stream_decode_reading_every_field(benchmark: Any, capture: Capture) -> None:
@@ -215,6 +249,14 @@ def test_bench_vesc_stream_decode_reading_every_field(benchmark: Any, capture: C
     assert reader.count == capture.messages and reader.fields == expected_fields
     rate = _record_rate(benchmark, "decode_read", capture.messages)
     benchmark.extra_info["ratio_to_baseline"] = round(rate / _baseline_rate(capture), 3)
+    si = (capture.messages / _MEDIANS["si_baseline"] if "si_baseline" in _MEDIANS
+          else median_rate(lambda: si_baseline(capture), capture.messages))
+    ratio = rate / si
+    benchmark.extra_info["si_baseline_msgs_per_s"] = round(si)
+    benchmark.extra_info["ratio_to_si_baseline"] = round(ratio, 3)
+    benchmark.extra_info["goal_met"] = ratio >= GOAL_RATIO
+    if ratio < GOAL_RATIO:  # a timing on a shared machine: reported, not a correctness failure
+        warnings.warn(f"full decode is {ratio:.2f} of the SI baseline rate (goal >= {GOAL_RATIO})", stacklevel=1)
 
 
 def test_bench_vesc_encode_set_current(benchmark: Any) -> None:

@@ -12,7 +12,9 @@ The sensor's first-order lag (report eq 3.42, tau = 19.5 ms) is applied to pitch
 sampled every ``substep_s`` and at every frame time, and the lag is integrated exactly for an input
 that is linear between samples (``y1 = u1 - m tau + (y0 - u0 + m tau) e^(-h/tau)``, m the slope).
 Accelerations are not lagged. Noise and biases are Gaussian from ``random.Random(seed)``: the same seed
-gives byte-identical output. The frame period is ``1/rate_hz`` plus a uniform jitter in
+gives byte-identical output. With ``bias_drift_sigma_rad`` the pitch bias also drifts, a first-order
+Gauss-Markov process updated at every frame (``d = d a + sigma sqrt(1 - a^2) n``, ``a = e^(-T/tau)``),
+starting from a stationary draw. The frame period is ``1/rate_hz`` plus a uniform jitter in
 ``+-period_jitter_s``; ``silence`` keeps the line quiet while the sensor goes on counting its index.
 """
 
@@ -49,6 +51,10 @@ class Bno08x(EventDevice):
         gauss = self._rng.gauss
         self.pitch_bias_rad = cfg.pitch_bias_rad + gauss(0.0, cfg.bias_sigma_rad)
         self.accel_bias_mps2 = tuple(gauss(0.0, cfg.accel_bias_sigma_mps2) for _ in range(3))
+        self._drift_sigma = cfg.bias_drift_sigma_rad
+        self.pitch_drift_rad = gauss(0.0, self._drift_sigma) if self._drift_sigma > 0.0 else 0.0
+        self._drift_a = math.exp(-1.0 / (cfg.rate_hz * cfg.bias_drift_tau_s))  # per nominal frame period
+        self._drift_b = self._drift_sigma * math.sqrt(1.0 - self._drift_a * self._drift_a)
         self._g = plant.params.gravity_m_s2
         t0_s = plant.latest_time_s
         t0 = world.ticks(t0_s)
@@ -143,7 +149,9 @@ class Bno08x(EventDevice):
         ay = _clip(by + gauss(0.0, sa))
         az = _clip(-fx * s + fz * c + bz + gauss(0.0, sa))
         yaw = cfg.yaw_rad + gauss(0.0, sp)
-        pitch = self.lagged_pitch_rad + self.pitch_bias_rad + gauss(0.0, sp)
+        if self._drift_sigma > 0.0:
+            self.pitch_drift_rad = self.pitch_drift_rad * self._drift_a + self._drift_b * gauss(0.0, 1.0)
+        pitch = self.lagged_pitch_rad + self.pitch_bias_rad + self.pitch_drift_rad + gauss(0.0, sp)
         roll = cfg.roll_rad + gauss(0.0, sp)
         frame = RvcFrame(self.index, yaw, pitch, roll, ax, ay, az).encode()
         self.index = (self.index + 1) & 0xFF

@@ -28,6 +28,8 @@ _RANGES: dict[str, tuple[float, float]] = {
     "pitch_noise_rad": (0.0, 1.0),
     "pitch_bias_rad": (-1.0, 1.0),
     "bias_sigma_rad": (0.0, 1.0),
+    "bias_drift_sigma_rad": (0.0, 1.0),
+    "bias_drift_tau_s": (0.01, 3600.0),
     "accel_noise_mps2": (0.0, 50.0),
     "accel_bias_sigma_mps2": (0.0, 50.0),
     "yaw_rad": (-math.pi, math.pi),
@@ -61,6 +63,10 @@ class Bno08xConfig:
     """Fixed pitch bias."""
     bias_sigma_rad: float = 0.0
     """[I] standard deviation of a random pitch bias drawn once at power-up."""
+    bias_drift_sigma_rad: float = 0.0
+    """Stationary standard deviation of a first-order Gauss-Markov drift of the pitch bias; 0 = none."""
+    bias_drift_tau_s: float = 10.0
+    """Correlation time of that drift."""
     accel_noise_mps2: float = 0.02
     """[I] standard deviation of the white noise on each acceleration (about 2 mg)."""
     accel_bias_sigma_mps2: float = 0.0

@@ -44,3 +44,13 @@ class ByteSink(Horizon):
     def received(self) -> bytes:
         """Everything recorded so far."""
         return bytes(self.data)
+
+    def take(self) -> bytes:
+        """The bytes recorded since the last take, forgotten here (a recorder streaming them to a file).
+
+        >>> sink = ByteSink(); sink.on_bytes(b"ab", [10, 20]); sink.take(), sink.take(), sink.data
+        (b'ab', b'', bytearray(b''))
+        """
+        data = bytes(self.data)
+        self.data.clear()
+        return data

@@ -81,8 +81,11 @@ class Plant:
     def __init__(self, params: PlantParams | None = None, fixture: Fixture | None = None, *,
                  initial_angle_rad: float = 0.0, initial_velocity_rad_s: float = 0.0,
                  start_time_s: float = 0.0, step_s: float = MAX_STEP_S,
-                 motor_angle_offset_rad: float = 0.0) -> None:
-        """Build the plant at rest-state values given; the fixture defaults to SUSPENDED."""
+                 motor_angle_offset_rad: float = 0.0, backlash_rad: float = 0.0) -> None:
+        """Build the plant at rest-state values given; the fixture defaults to SUSPENDED.
+
+        backlash_rad is the gearbox's free play at its (6:1) output; 0 = none (see set_current_command).
+        """
         self.params = params if params is not None else load_plant_params()
         self.fixture = fixture if fixture is not None else suspended()
         p = self.params
@@ -92,11 +95,24 @@ class Plant:
             raise ValueError(f"initial_angle_rad = {initial_angle_rad!r} outside the range of motion "
                              f"[{p.stop_min_rad}, {p.stop_max_rad}]")
         finite_args = {"initial_velocity_rad_s": initial_velocity_rad_s, "start_time_s": start_time_s,
-                       "motor_angle_offset_rad": motor_angle_offset_rad}
+                       "motor_angle_offset_rad": motor_angle_offset_rad, "backlash_rad": backlash_rad}
         for name, value in finite_args.items():
             _check_finite(name, value)
+        if backlash_rad < 0.0:
+            raise ValueError(f"backlash_rad = {backlash_rad!r} outside the allowed range [0, inf)")
         self.step_s = step_s
         self.motor_angle_offset_rad = motor_angle_offset_rad
+        # backlash: half the free play at the rotor; the rotor's angle in it relative to N x the output
+        # angle, its relative velocity, the time and drive of the last update (see _cross_gap)
+        self._gap_half = 0.5 * backlash_rad * p.gearbox_ratio
+        self._kt_over_jm = p.kt_nm_per_a / p.rotor_inertia_kg_m2
+        self._gap_phi = 0.0
+        self._gap_w = 0.0
+        self._gap_t = start_time_s
+        self._gap_a = 0.0  # relative acceleration while free over the last interval
+        self._gap_free = False
+        self._contact = 0  # +1/-1: the side of the gap the teeth rest on; 0: free or not yet known
+        self.gap_crossings = 0
         self._ratio = p.total_ratio  # read per query: kept here, not looked up on the interpreted params
         self._peak_a = p.peak_current_a
         fx = self.fixture
@@ -147,6 +163,8 @@ class Plant:
         if not self._powered:
             logger.debug("current command %.3f A at %.6f s ignored: driver unpowered", current_a, t_s)
             self._command_a = 0.0
+        if self._gap_half > 0.0:
+            self._cross_gap(t_s)
         self._drive = self._make_drive()
 
     def set_brake_current(self, current_a: float, t_s: float) -> None:
@@ -172,6 +190,44 @@ class Plant:
         """From t_s on, replace the external ankle torque: None, a constant, a TorqueProfile or f(t)."""
         self._commit_event(t_s)
         self._set_load(load)
+
+    def _cross_gap(self, t_s: float) -> None:
+        """Backlash: while the rotor is inside the gearbox's free play, no torque reaches the output.
+
+        The rotor angle in the gap, relative to N x the output angle, moves with the relative acceleration
+        Kt i_cmd / J_m - N alpha_out (both held from the last command: commands come every control period),
+        and stops at either end (contact; the impact's momentum is not passed on). The teeth stay engaged
+        while the command pushes towards the side in contact; a command of the other sign frees the rotor,
+        and its torque reaches the output only once the rotor has crossed. Called after the plant is
+        committed to t_s; sets the command the output sees (0 while free).
+        """
+        cmd = self._command_a
+        side = (cmd > 0.0) - (cmd < 0.0)
+        half = self._gap_half
+        if self._gap_free:  # move the rotor through the gap over the interval since the last command
+            dt = t_s - self._gap_t
+            a = self._gap_a
+            phi = self._gap_phi + self._gap_w * dt + 0.5 * a * dt * dt
+            w = self._gap_w + a * dt
+            if phi >= half or phi <= -half:
+                self._contact = 1 if phi > 0.0 else -1
+                phi = half * self._contact
+                w = 0.0
+                self._gap_free = False
+            self._gap_phi, self._gap_w = phi, w
+        elif self._contact == 0 and side != 0:  # the first command: the teeth rest on its side
+            self._contact = side
+            self._gap_phi = half * side
+        if not self._gap_free and side != 0 and side != self._contact and self._contact != 0:
+            self._gap_free = True  # a reversal: the rotor leaves contact
+            self._contact = 0
+            self.gap_crossings += 1
+        self._gap_t = t_s
+        if self._gap_free:
+            th, w_out, i, s = self._x
+            alpha = accel(self._c, th, w_out, i, self._ext_value(t_s), s)
+            self._gap_a = self._kt_over_jm * cmd - self._ratio * alpha
+            self._command_a = 0.0
 
     # ---------------------------------------------------------------- queries
     def advance_to(self, t_s: float) -> None:

@@ -198,8 +198,10 @@ def validate_plant_params(p: PlantParams) -> None:
 
 
 def default_profile_path() -> Path:
-    """Path of the packaged profile: ``<repo>/profiles/plant_ak60_6.toml``."""
-    return Path(__file__).resolve().parents[3] / "profiles" / DEFAULT_PROFILE_NAME
+    """Path of the packaged profile ``plant_ak60_6.toml`` (package ``profiles``)."""
+    from profiles import profile_path
+
+    return profile_path(DEFAULT_PROFILE_NAME)
 
 
 def plant_params_from_mapping(data: dict[str, Any], where: str = "") -> PlantParams:
