@@ -20,7 +20,7 @@ class LoadDetector:
     """Heel strike / toe off from the estimated external moment at the ankle (positive = dorsiflexing)."""
 
     def __init__(self, ts_s: float, nm_per_a: float, inertia_kg_m2: float, gravity_moment_nm: float,
-                 com_angle_rad: float, on_nm: float = 6.0, off_nm: float = 4.0, cutoff_hz: float = 20.0,
+                 com_angle_rad: float, on_nm: float = 9.0, off_nm: float = 6.0, cutoff_hz: float = 20.0,
                  min_stance_s: float = 0.3, min_swing_s: float = 0.2) -> None:
         """Bind the foot model and the thresholds (N m), the low-pass cutoff (Hz) and the least stance and swing (s)."""
         check_range("on_nm", on_nm, 0.0, 1000.0, lo_open=True, unit="N m")

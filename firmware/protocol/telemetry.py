@@ -86,8 +86,13 @@ class TelemetryRecord:
     supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)
     fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)
     deadline_misses: int = _wire("I", 0)
-    # values a controller publishes, appended as float32 fields after the base ones (not a base field)
-    extra: tuple[float, ...] = field(default=(), compare=False)
+
+
+@dataclass(frozen=True)
+class PublishedRecord(TelemetryRecord):
+    """A record with the values a controller published: float32 fields after the base ones (``extra``)."""
+
+    extra: tuple[float, ...] = ()
 
 
 class FieldSpec(NamedTuple):
@@ -100,7 +105,7 @@ class FieldSpec(NamedTuple):
 
 RECORD_SPECS: tuple[FieldSpec, ...] = tuple(
     FieldSpec(f.name, f.metadata["fmt"], 0 if f.default is MISSING else f.default)
-    for f in fields(TelemetryRecord) if "fmt" in f.metadata
+    for f in fields(TelemetryRecord)
 )
 RECORD_FIELDS: tuple[str, ...] = tuple(s.name for s in RECORD_SPECS)
 BASE_FIELD_COUNT: int = len(RECORD_SPECS)  # every version-1 record carries at least these
@@ -252,10 +257,9 @@ def _enum_or_int(enum: type[IntEnum], value: int) -> IntEnum | int:
 def record_from_values(values: dict[str, int | float], extra: tuple[float, ...] = ()) -> TelemetryRecord:
     """Build a record from decoded field values (unknown enum codes stay plain ints), `extra` appended."""
     kw: dict[str, Any] = {name: values[name] for name in RECORD_FIELDS}
-    kw["extra"] = extra
     kw["supervisor_state"] = _enum_or_int(SupervisorState, int(kw["supervisor_state"]))
     kw["fault_reason"] = _enum_or_int(FaultReason, int(kw["fault_reason"]))
-    return TelemetryRecord(**kw)  # type: ignore[arg-type]
+    return PublishedRecord(**kw, extra=extra) if extra else TelemetryRecord(**kw)  # type: ignore[arg-type]
 
 
 def decode_frame(frame: bytes, extra_fields: int = 0) -> TelemetryRecord:
@@ -278,7 +282,7 @@ def decode_frame(frame: bytes, extra_fields: int = 0) -> TelemetryRecord:
 
 def record_to_row(rec: TelemetryRecord, extra_names: Sequence[str] = ()) -> dict[str, int | float | str]:
     """One CSV row (keys = RECORD_COLUMNS, then extra_names): SI values, ``*_deg`` columns, enum names."""
-    row: dict[str, int | float | str] = dict(zip(extra_names, rec.extra, strict=False))
+    row: dict[str, int | float | str] = dict(zip(extra_names, getattr(rec, "extra", ()), strict=False))
     for name in RECORD_FIELDS:
         value = getattr(rec, name)
         if name in _ANGLE_FIELDS:
