@@ -14,7 +14,7 @@ ARGS ?=
 # The hot path is compiled with mypyc: an edit of any module listed in setup.py's COMPILED rebuilds it.
 # PAFP_PURE_PYTHON=1 make install gives the pure-Python package instead.
 SOURCES := $(shell sed -n 's/^ *"\([a-z0-9_/]*\.py\)",$$/\1/p' setup.py)
-EXTENSIONS = find firmware hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
+EXTENSIONS = find firmware protocol hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
 
 $(STAMP): pyproject.toml setup.py $(SOURCES)
 	@test -x $(PY) || { $(PYTHON) -m venv $(VENV) && $(PY) -m pip install -q --upgrade pip; }

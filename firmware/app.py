@@ -15,7 +15,7 @@ from collections.abc import Callable
 from firmware.config import CostModel, FirmwareConfig
 from firmware.control.interface import check_controller
 from firmware.control.reference import GaitReference
-from firmware.drivers.motor import SafeStop
+from firmware.drivers.motor_link import SafeStop
 from firmware.safety import FaultReason
 from firmware.tasks import ControlOutput, FirmwareTasks, KernelHealth
 from hal.interfaces import Board

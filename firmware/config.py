@@ -12,15 +12,16 @@ from typing import Any
 from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
-from firmware.protocol.rvc import RVC_RATE_HZ
 from firmware.safety import SafetyLimits
+from hal.links import link_entry
 from profiles import profile_path
+from protocol.rvc import RVC_RATE_HZ
 
 __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareConfig", "load_firmware_config"]
 
 DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
-SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "controller")
+SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller")
 """The tables of a firmware profile ([control] holds the sub-tables position and velocity)."""
 TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "watchdog")
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
@@ -85,6 +86,8 @@ class FirmwareConfig:
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
+    motor_link: str = "uart"  # [motor] link: a name of hal.links.MOTOR_LINKS
+    motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
     controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
     controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
 
@@ -92,6 +95,8 @@ class FirmwareConfig:
         """Check every rate, control scalar and task name (profile keys: firmware/config.py's tables)."""
         for name in RATE_FIELDS:
             check_int_range(name, getattr(self, name), 1, 10_000)
+        link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
+        check_int_range("motor_can_id", self.motor_can_id, 0, 127)
         if self.full_values_hz > self.control_hz:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
@@ -244,12 +249,20 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
             raise ValueError(f"has no such key ({e})") from None
         section = "task_cycles"
         task_cycles = _task_cycles(_section(doc, "task_cycles"))
+        section = "motor"
+        motor = _section(doc, "motor")
+        unknown = sorted(set(motor) - {"link", "can_id"})
+        if unknown:
+            raise ValueError(f"has no key {unknown[0]!r}: its keys are link, can_id")
+        links = {"motor_link": motor["link"]} if "link" in motor else {}
+        if "can_id" in motor:
+            links["motor_can_id"] = motor["can_id"]
         section = "controller"
         controller = _controller(_section(doc, "controller"), p)
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
                               feedforward_params=feedforward_params, safety=safety, task_cycles=task_cycles,
-                              **controller, **ctl)
+                              **links, **controller, **ctl)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

@@ -6,10 +6,10 @@ number is still consumed, so the host sees the loss as a sequence gap.
 
 from __future__ import annotations
 
-from firmware.protocol.telemetry import RECORD_FRAMER, record_framer
-from firmware.protocol.telemetry_frame import RecordFramer
 from hal.errors import HalError
 from hal.interfaces import Uart
+from protocol.telemetry import RECORD_FRAMER, record_framer
+from protocol.telemetry_frame import RecordFramer
 
 __all__ = ["TelemetryLogger"]
 

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from firmware.protocol.telemetry import FaultReason, SupervisorState
 from firmware.safety_limits import SafetyLimits
+from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
 

@@ -25,11 +25,11 @@ from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
 from firmware.control.registry import build_controller
 from firmware.drivers.encoder import EncoderDriver
 from firmware.drivers.imu import ImuDriver
-from firmware.drivers.motor import MotorDriver
+from firmware.drivers.motor_links import make_motor_driver
 from firmware.logger import TelemetryLogger
-from firmware.protocol.rvc import RVC_RATE_HZ
 from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
 from hal.interfaces import Board
+from protocol.rvc import RVC_RATE_HZ
 from rtos import Job
 
 log = logging.getLogger(__name__)
@@ -70,7 +70,7 @@ class FirmwareTasks:
         self._gait_curve = self.reference.curve  # sampled directly: compiled, not through the interpreted class
         self.encoder = EncoderDriver(board.encoder, self.ts_s, velocity_cutoff_hz=c.velocity_cutoff_hz)
         self.imu = ImuDriver(board.imu_uart)
-        self.motor = MotorDriver(board.motor_uart, full_every=max(1, c.control_hz // c.full_values_hz))
+        self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (hal.links)
         self.logger = TelemetryLogger(board.telemetry_uart)
         self.supervisor = Supervisor(c.safety)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)

@@ -16,6 +16,7 @@ from typing import Final
 
 from mypy_extensions import mypyc_attr
 
+from hal.can import CanPort
 from hal.errors import HalError
 
 __all__ = [
@@ -290,6 +291,7 @@ class Board:
     watchdog: Watchdog
     now_cycles: Callable[[], int]
     f_cpu_hz: int
+    can: CanPort | None = None  # the CAN controller, on boards whose motor link is CAN (hal.links)
 
     def __post_init__(self) -> None:
         """Check the clock frequency."""

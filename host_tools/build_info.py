@@ -18,7 +18,7 @@ __all__ = ["ROOT", "compiled_sources", "copy_pure_source", "describe", "is_sourc
            "stale_sources", "version"]
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("firmware", "hal", "rtos", "host_tools")
+PACKAGES = ("firmware", "protocol", "hal", "rtos", "host_tools")
 
 
 def _extension_of(source: Path) -> Path | None:

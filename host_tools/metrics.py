@@ -14,7 +14,7 @@ import numpy as np
 __all__ = ["MIN_RUN_STRIDES", "RUN_STATE", "RunWindow", "StrideSet", "TrackingMetrics", "cut_strides",
            "run_window", "signal_figures", "tracking_metrics"]
 
-#: Value of SupervisorState.RUN as the probe records it (firmware.protocol.telemetry).
+#: Value of SupervisorState.RUN as the probe records it (protocol.telemetry).
 RUN_STATE = 1
 #: Least time in RUN with the gait running, in strides, for a tracking figure: one whole stride, so that
 #: every phase of the gait (swing and stance) is in the figure at least once.

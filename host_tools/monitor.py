@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-from firmware.protocol.telemetry import (
+from protocol.telemetry import (
     RECORD_COLUMNS,
     FaultReason,
     SupervisorState,

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware.protocol.telemetry import TelemetryDecoder
 from host_tools.build_info import describe
 from host_tools.metrics import TrackingMetrics
 from host_tools.outdir import write_atomic
@@ -23,6 +22,7 @@ from host_tools.process_clock import process_elapsed_s
 from host_tools.runner import RunResult
 from host_tools.telemetry_csv import TelemetryCsv
 from host_tools.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
+from protocol.telemetry import TelemetryDecoder
 
 __all__ = ["TRACKING_SIGNALS", "strict_json", "summarise", "tracking_lines", "tracking_of", "tracking_summary",
            "tracking_text", "write_outputs"]
@@ -89,6 +89,14 @@ def _us(cycles: int | None, f_cpu: int) -> float | None:
     return None if cycles is None else round(cycles * 1e6 / f_cpu, 3)
 
 
+def _bus_load(r: RunResult) -> dict[str, float]:
+    """The CAN bus's load over the run (frames' bit-times, exact stuffing), when the motor is on CAN."""
+    bus = getattr(getattr(r, "bench", None), "can_bus", None)  # serial mode has no bench
+    if bus is None or not r.sim_time_s:
+        return {}
+    return {"bus_load": round(bus.busy_ticks / r.bench.f_cpu_hz / r.sim_time_s, 4)}
+
+
 def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
     """The summary of a run as plain JSON-able values (tracking: from tracking_of(r), computed if not given)."""
     fw, sched = r.firmware, r.scheduler
@@ -140,6 +148,8 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
             "crc_errors": fw.motor.crc_errors, "rx_timeouts": link.rx_timeouts,
             "max_feedback_age_ms": round(link.max_age_s * 1e3, 3),
             "feedback_rate_hz": round(link.replies / r.sim_time_s, 1) if r.sim_time_s else 0.0,
+            **fw.motor.published(),  # link-specific counters (none on the UART)
+            **_bus_load(r),
         },
         "telemetry": {"records_sent": fw.logger.sent, "records_dropped": fw.logger.dropped,
                       "bytes": files.telemetry_bytes if files is not None else len(r.telemetry)},

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from firmware.app import Firmware
-from firmware.protocol.telemetry import TelemetryDecoder
 from hal.virtual.bench import VirtualBench
 from host_tools.probe import Probe
 from host_tools.telemetry_csv import TelemetryCsv
 from host_tools.tracking_stream import TrackingResult, TrackingStream, feed_probe
+from protocol.telemetry import TelemetryDecoder
 
 __all__ = ["RunFiles", "take_samples"]
 

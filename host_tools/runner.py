@@ -22,7 +22,7 @@ from pathlib import Path
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
-from hal.virtual.bench import VirtualBench
+from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.draw import draw_plant, drawn_values
@@ -171,7 +171,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     if load is not None:
         bench_options["fixture"] = walk(load)
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
-                         systick_hz=int(board_cfg.get("systick_hz", 1000)), **bench_options)
+                         systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,
+                         can_id=fw_cfg.motor_can_id, **bench_options)
     bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
@@ -197,6 +198,9 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     # the same interrupt model the scheduler counts (bench.interrupt_sources checked both ISR costs)
     byte_cycles = {name: (10 * f_cpu) // u.baud for name, u in bench.board.uarts().items() if name != "telemetry"}
     sporadic = [_Sporadic(f"{n}_rx", max(1, c), int(isr["uart_rx_byte"])) for n, c in byte_cycles.items()]
+    if bench.can is not None:  # one RX interrupt per frame, frames at least an empty frame's 47 bits apart
+        sporadic.append(_Sporadic("can_rx", max(1, 47 * f_cpu // bench.can.bitrate),
+                                  int(isr.get("can_rx_frame", CAN_RX_CYCLES))))
     sporadic.append(_Sporadic("systick", bench.mcu.systick.period_cycles, int(isr["systick"])))
     bounds = response_time_bounds(_analysis_tasks(fw, max_bytes), sporadic)
     if cfg.setup:

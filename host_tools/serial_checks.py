@@ -12,11 +12,11 @@ import time
 from collections.abc import Callable
 
 from firmware.drivers.motor import FEEDBACK_MASK
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.telemetry import TelemetryDecoder
-from firmware.protocol.vesc import Decoder, GetValuesSelective, Values, ValuesSelective
 from hal.errors import HalError
 from hal.interfaces import Uart
+from protocol.rvc import RvcDecoder
+from protocol.telemetry import TelemetryDecoder
+from protocol.vesc import Decoder, GetValuesSelective, Values, ValuesSelective
 
 __all__ = ["EXPECTED", "StartupError", "check_imu", "check_motor", "identify"]
 

@@ -42,7 +42,8 @@ def _errors(r: SerialRunResult) -> dict:
     return {
         "motor": {"crc_errors": m.crc_errors, "junk_bytes": m.dropped_bytes, "bad_end_bytes": m.bad_end_bytes,
                   "missing_replies": fw.motor.stats.missing_replies, "stale_replies": fw.motor.stats.stale_replies,
-                  "uart": asdict(fw.motor.uart.errors) if not fw.motor.link_lost else None},
+                  "uart": asdict(fw.motor.uart.errors) if hasattr(fw.motor, "uart") and not fw.motor.link_lost
+                  else None},
         "imu": {"frames": fw.imu.frames, "checksum_errors": i.checksum_errors, "junk_bytes": i.dropped_bytes,
                 "lost_frames": i.lost_frames},
     }

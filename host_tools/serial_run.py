@@ -29,14 +29,15 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from firmware.drivers.motor import MotorFeedback, SafeStop
-from firmware.protocol.vesc import Decoder as VescDecoder
 from hal.binding import open_uart
+from hal.can import CanPort
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
 from hal.interfaces import Watchdog as HalWatchdog
+from hal.pycan import is_can_url, open_can, parse_can_url
 from hal.serial.sim_port import WallDevices, parse_sim_url
 from hal.virtual.devices.encoder import EncoderMount
-from hal.virtual.null import NullDigitalIn, NullDigitalOut
+from hal.virtual.null import NullDigitalIn, NullDigitalOut, NullUart
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.jitter import TaskTimings, instrument
 from host_tools.realtime import RealtimeSection, RealtimeSettings
@@ -95,6 +96,8 @@ class SerialRunConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or not 1200 <= v <= 20_000_000:
                 raise ValueError(f"{name} {v!r} out of range: an int in 1200..20000000")
+        if is_can_url(self.motor):
+            parse_can_url(self.motor, "--motor")  # ValueError naming the bad part
         if self.encoder == "sim" and not any(_is_sim(u) for u in (self.motor, self.imu)):
             raise ValueError("--encoder sim reads the plant, which exists here only when --motor or --imu is "
                              "sim://...; with both devices on real ports use --encoder motor")
@@ -187,7 +190,7 @@ class StopRecord:
     def as_dict(self) -> dict:
         """For summary.json: the safe frames decoded, whether they left the port, the latency."""
         safe = self.safe
-        frames = [repr(m) for m in VescDecoder("to-motor").feed(safe.frames)] if safe is not None else []
+        frames = list(safe.names) if safe is not None else []
         return {"reason": self.reason, "at_s": round(self.at_s, 6), "signal": self.signal, "task": self.task,
                 "error": self.error, "safe_frames": frames,
                 "safe_bytes": len(safe.frames) if safe is not None else 0,
@@ -249,9 +252,10 @@ class _Ports:
     imu: Uart
     telemetry: Uart | None
     devices: WallDevices | None
+    can: CanPort | None = None  # the motor's CAN bus (--motor can://...; then motor is a NullUart)
 
     def close(self) -> None:
-        for u in (self.motor, self.imu, self.telemetry):
+        for u in (self.motor, self.imu, self.telemetry, self.can):
             if u is not None:
                 u.close()
         if self.devices is not None:
@@ -272,6 +276,7 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
         devices = WallDevices(list(sim_roles), bauds={"motor": cfg.baud, "imu": cfg.imu_baud},
                               fixture=cfg.fixture, seed=cfg.seed)
     opened: dict[str, Uart] = {}
+    can_port: CanPort | None = None
     try:
         for role, url, baud in (("motor", cfg.motor, cfg.baud), ("imu", cfg.imu, cfg.imu_baud),
                                 ("telemetry", cfg.telemetry, cfg.telemetry_baud)):
@@ -279,6 +284,13 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
                 opened[role] = telemetry_uart
                 continue
             if url is None:
+                continue
+            if role == "motor" and is_can_url(url):  # the motor on a CAN bus: the firmware's driver is chosen by it
+                try:
+                    can_port = open_can(parse_can_url(url, "--motor"))
+                except (HalError, ValueError) as exc:
+                    raise StartupError(f"motor port {url!r}: {exc}") from exc
+                opened[role] = NullUart(baud, "motor (on CAN)")
                 continue
             if role in sim_roles:
                 opened[role] = devices.uarts[role]  # type: ignore[union-attr]
@@ -290,10 +302,12 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
     except BaseException:
         for u in opened.values():
             u.close()
+        if can_port is not None:
+            can_port.close()
         if devices is not None:
             devices.close()
         raise
-    return _Ports(opened["motor"], opened["imu"], opened.get("telemetry"), devices)
+    return _Ports(opened["motor"], opened["imu"], opened.get("telemetry"), devices, can_port)
 
 
 def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None] | None = None,
@@ -310,6 +324,9 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     board_cfg = board_profile(cfg.board)
     f_cpu = int(board_cfg["f_cpu_hz"])
     fw_cfg = cfg.firmware or load_firmware_config()
+    if is_can_url(cfg.motor):  # the driver of the URL's mode (hal.links)
+        url = parse_can_url(cfg.motor, "--motor")
+        fw_cfg = fw_cfg.with_changes(motor_link=f"can-{url.mode}", motor_can_id=url.driver_id)
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     ports = _open_ports(cfg, telemetry_uart)
@@ -318,7 +335,9 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     if wire is not None:
         ports.motor, ports.imu = wire.tap("motor", ports.motor), wire.tap("imu", ports.imu)
     try:
-        seen = {"motor": check_motor(ports.motor, cfg.motor, timeout_s=cfg.startup_timeout_s),
+        # over CAN no start-up check: a silent bus is caught by the supervisor (MOTOR_TIMEOUT)
+        seen = {"motor": 0 if ports.can is not None else check_motor(ports.motor, cfg.motor,
+                                                                     timeout_s=cfg.startup_timeout_s),
                 "imu": check_imu(ports.imu, cfg.imu, timeout_s=cfg.startup_timeout_s)}
     except BaseException:
         ports.close()
@@ -359,7 +378,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     telemetry: Uart = capture if wire is None else wire.tap("telemetry", capture)  # the others are tapped already
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
                   encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
-                  now_cycles=now, f_cpu_hz=f_cpu)
+                  now_cycles=now, f_cpu_hz=f_cpu, can=ports.can)
     fw = Firmware(board, fw_cfg, reference=reference)
     fw.supervisor.latch_deadline_misses = False  # on the wall clock a late job is the host's (see module doc)
     warnings = HostWarnings()
@@ -408,7 +427,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         done_ns = time.perf_counter_ns()
         wall = (done_ns - wall0_ns) / 1e9
     period_s = fw.ts_s
-    wire_s = len(stop.safe.frames) * 10 / fw.motor.uart.baud
+    wire_s = (len(stop.safe.frames) * 10 / ports.motor.baud if ports.can is None
+              else 2 * 160 / ports.can.bitrate)  # CAN: two frames, worst-case stuffing
     start_ns = signals.at_ns if signals.at_ns is not None else wall0_ns + round(stop.at_s * 1e9)
     stop.latency_ms = round(max(0, done_ns - start_ns) / 1e6, 3)
     stop.goal_ms = round((period_s + wire_s) * 1e3, 3)

@@ -1,11 +1,11 @@
 """telemetry.csv of a run: one row per record, a time column in seconds, floats at the precision they carry.
 
-The columns are those of :data:`~firmware.protocol.telemetry.RECORD_COLUMNS` with ``time_s`` after
+The columns are those of :data:`~protocol.telemetry.RECORD_COLUMNS` with ``time_s`` after
 ``time_cycles`` (the cycle count over the board's clock, to the nanosecond). The record's floats travel as
 float32, so each is written as the shortest decimal that reads back as the same float32 (``-0.09``, not
 ``-0.09000000197086964``); the ``*_deg`` columns, computed from them, get the same treatment. Rows are
 written a batch at a time from the decoder's value tuples
-(:meth:`~firmware.protocol.telemetry.TelemetryDecoder.feed_values`), no record objects.
+(:meth:`~protocol.telemetry.TelemetryDecoder.feed_values`), no record objects.
 
 >>> import io
 >>> buf = io.StringIO()
@@ -22,7 +22,7 @@ from typing import TextIO
 
 import numpy as np
 
-from firmware.protocol.telemetry import RECORD_COLUMNS, RECORD_SPECS, FaultReason, FieldSpec, SupervisorState
+from protocol.telemetry import RECORD_COLUMNS, RECORD_SPECS, FaultReason, FieldSpec, SupervisorState
 
 __all__ = ["TelemetryCsv", "float32_digits"]
 

@@ -45,7 +45,7 @@ TRACKING_SIGNALS: tuple[tuple[str, str, str], ...] = (
 )
 #: Whose strides tracking.png draws: what the report plotted (the IMU) and the truth.
 PLOT_STRIDES = ("imu", "truth")
-#: Value of SupervisorState.RUN as the probe records it (firmware.protocol.telemetry).
+#: Value of SupervisorState.RUN as the probe records it (protocol.telemetry).
 _RUN_STATE = 1
 
 _BLOCK = 4096  # samples per block of the lag sums (4096 x 201 shifts x 8 bytes = 6.6 MB)

@@ -10,7 +10,13 @@ from doubles import SpyLink
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware.protocol.vesc import (
+from hal.virtual.devices.ak60 import Ak60, DriveMode
+from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.devices.world import World
+from hal.virtual.line import ceil_div
+from hal.virtual.plant import Plant
+from hal.virtual.uart import VirtualUart
+from protocol.vesc import (
     Decoder,
     FwVersion,
     RotorPosition,
@@ -20,12 +26,6 @@ from firmware.protocol.vesc import (
     ValuesSelective,
     encode_frame,
 )
-from hal.virtual.devices.ak60 import Ak60, DriveMode
-from hal.virtual.devices.ak60_config import Ak60Config
-from hal.virtual.devices.world import World
-from hal.virtual.line import ceil_div
-from hal.virtual.plant import Plant
-from hal.virtual.uart import VirtualUart
 
 F = 168_000_000
 BAUD = 921_600

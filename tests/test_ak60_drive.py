@@ -7,7 +7,9 @@ import math
 import pytest
 from test_ak60 import F, Rig
 
-from firmware.protocol.vesc import (
+from hal.virtual.devices.ak60 import DriveMode
+from hal.virtual.devices.ak60_config import Ak60Config
+from protocol.vesc import (
     FaultCode,
     GetValues,
     GetValuesSelective,
@@ -22,8 +24,6 @@ from firmware.protocol.vesc import (
     SetRpm,
     Values,
 )
-from hal.virtual.devices.ak60 import DriveMode
-from hal.virtual.devices.ak60_config import Ak60Config
 
 POS_ERPM = GetValuesSelective((1 << 7) | (1 << 15) | (1 << 16)).encode()
 

@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 
 from firmware.drivers.motor import FEEDBACK_MASK
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.vesc import Decoder, GetValuesSelective, SetCurrent, ValuesSelective
 from hal.binding import VIRTUAL_BENCH, bind_board
 from hal.virtual.bench import FIXTURES, VirtualBench, fixture_by_name
 from hal.virtual.plant import FixtureKind, Plant
+from protocol.rvc import RvcDecoder
+from protocol.vesc import Decoder, GetValuesSelective, SetCurrent, ValuesSelective
 from rtos import Scheduler, Task, VirtualClock
 
 F = 168_000_000

@@ -7,11 +7,11 @@ import math
 import pytest
 from doubles import SpyLink
 
-from firmware.protocol.rvc import RvcDecoder, RvcFrame
 from hal.virtual.devices.bno08x import BANNER_LINES, Bno08x, Bno08xConfig
 from hal.virtual.devices.world import World
 from hal.virtual.plant import Plant
 from hal.virtual.uart import VirtualUart
+from protocol.rvc import RvcDecoder, RvcFrame
 
 F = 168_000_000
 TAU = 0.0195

@@ -9,9 +9,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from firmware.protocol.rvc import RvcFrame
-from firmware.protocol.telemetry import FaultReason, SupervisorState, TelemetryRecord, encode_record
 from host_tools.cli import main
+from protocol.rvc import RvcFrame
+from protocol.telemetry import FaultReason, SupervisorState, TelemetryRecord, encode_record
 
 CONSTRUCTED = bytes.fromhex("AA AA 2A D2 04 C9 FD E2 45 0C 00 DE FF EA 03 00 00 00 C3")
 DATASHEET = bytes.fromhex("AA AA DE 01 00 92 FF 25 08 8D FE EC FF D1 03 00 00 00 E7")
@@ -125,7 +125,7 @@ def test_garbage_file_decodes_to_summary_only(tmp_path, capsys):
 
 
 def test_vesc_both_directions(tmp_path, capsys):
-    vesc = pytest.importorskip("firmware.protocol.vesc")
+    vesc = pytest.importorskip("protocol.vesc")
     frames = vesc.SetCurrent(2.5).encode() + vesc.GetValues().encode()
     to_motor = write(tmp_path, "tx.bin", b"\x00\x02" + frames)
     code, lines, _ = run_cli(capsys, "--protocol", "vesc", "--direction", "to-motor", to_motor)
@@ -147,7 +147,7 @@ def test_vesc_both_directions(tmp_path, capsys):
 
 
 def test_vesc_unknown_ids_and_bytes_fields_become_hex(tmp_path, capsys):
-    vesc = pytest.importorskip("firmware.protocol.vesc")
+    vesc = pytest.importorskip("protocol.vesc")
     data = vesc.encode_frame(b"\x63\x01\x02") + vesc.FwVersion(1, 2, "AK60").encode()
     path = write(tmp_path, "rx.bin", data)
     code, lines, _ = run_cli(capsys, "--protocol", "vesc", path)
@@ -158,7 +158,7 @@ def test_vesc_unknown_ids_and_bytes_fields_become_hex(tmp_path, capsys):
 
 
 def test_vesc_frame_behind_a_false_header_at_end_of_input_is_recovered(tmp_path, capsys):
-    vesc = pytest.importorskip("firmware.protocol.vesc")
+    vesc = pytest.importorskip("protocol.vesc")
     frame = vesc.SetCurrent(2.5).encode()
     path = write(tmp_path, "tx.bin", bytes.fromhex("03 01 ff") + frame)  # a long-frame header holds it pending
     code, lines, _ = run_cli(capsys, "--protocol", "vesc", "--direction", "to-motor", path)
@@ -170,7 +170,7 @@ def test_vesc_frame_behind_a_false_header_at_end_of_input_is_recovered(tmp_path,
 
 
 def test_leftover_bytes_of_a_truncated_frame_are_counted(tmp_path, capsys):
-    vesc = pytest.importorskip("firmware.protocol.vesc")
+    vesc = pytest.importorskip("protocol.vesc")
     frame = vesc.SetCurrent(2.5).encode()
     path = write(tmp_path, "tx.bin", frame + frame[:-3])
     code, lines, _ = run_cli(capsys, "--protocol", "vesc", "--direction", "to-motor", path)

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 import serial
 
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.vesc import Decoder, GetValues, SetCurrent, Values
 from host_tools.cli import main
+from protocol.rvc import RvcDecoder
+from protocol.vesc import Decoder, GetValues, SetCurrent, Values
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,8 +12,8 @@ import time
 import tty
 from pathlib import Path
 
-from firmware.protocol.telemetry import RECORD_COLUMNS, TelemetryRecord, encode_record
 from host_tools.cli import main
+from protocol.telemetry import RECORD_COLUMNS, TelemetryRecord, encode_record
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -14,12 +14,12 @@ from dataclasses import replace
 import pytest
 
 from firmware.config import CostModel, load_firmware_config
-from firmware.protocol.telemetry import TelemetryDecoder
-from firmware.protocol.vesc import FaultCode
 from firmware.safety import FaultReason, SupervisorState
 from host_tools.cli import main
 from host_tools.report import summarise
 from host_tools.runner import RunConfig, run_virtual
+from protocol.telemetry import TelemetryDecoder
+from protocol.vesc import FaultCode
 
 T_FAULT = 1.5  # s, after start-up (gait begins about 0.6 s)
 TS = 1e-3  # control period

@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 
 from firmware.config import DEFAULT_PROFILE
-from firmware.protocol.telemetry import TelemetryDecoder
 from host_tools.cli import main
 from host_tools.report import summarise, write_outputs
 from host_tools.runner import RunConfig, run_virtual
+from protocol.telemetry import TelemetryDecoder
 
 
 def _run(capsys, *args: str) -> tuple[int, str, str]:

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware.protocol import rvc
-from firmware.protocol.rvc import RvcDecoder, RvcFrame, RvcRaw, pack_raw, unpack_raw
+from protocol import rvc
+from protocol.rvc import RvcDecoder, RvcFrame, RvcRaw, pack_raw, unpack_raw
 
 DATASHEET = bytes.fromhex("AA AA DE 01 00 92 FF 25 08 8D FE EC FF D1 03 00 00 00 E7")
 CONSTRUCTED = bytes.fromhex("AA AA 2A D2 04 C9 FD E2 45 0C 00 DE FF EA 03 00 00 00 C3")

@@ -5,7 +5,7 @@ import random
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware.protocol.rvc import MAX_BANNER_LINE, RvcDecoder, RvcFrame, RvcRaw, pack_raw
+from protocol.rvc import MAX_BANNER_LINE, RvcDecoder, RvcFrame, RvcRaw, pack_raw
 
 BANNER = b"%Hillcrest Labs 10003608\r\n%SW Ver 3.2.x\r\n%(c) 2017 Hillcrest Laboratories, Inc.\r\n"
 DATASHEET = bytes.fromhex("AA AA DE 01 00 92 FF 25 08 8D FE EC FF D1 03 00 00 00 E7")

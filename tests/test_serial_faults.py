@@ -20,9 +20,9 @@ from pathlib import Path
 import pytest
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified
 
-from firmware.protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
 from host_tools.cli import main
 from host_tools.runner import board_profile
+from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
 
 ROOT = Path(__file__).resolve().parents[1]
 MITM = Path(__file__).resolve().parent / "serial_mitm.py"

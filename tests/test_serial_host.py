@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 
 from firmware.drivers.motor import MotorDriver
-from firmware.protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 from hal.interfaces import Uart
 from host_tools.realtime import RealtimeSection, RealtimeSettings
 from host_tools.stop_signals import StopSignals
 from host_tools.telemetry_pty import TelemetryPty
 from host_tools.wire_capture import WireCapture
+from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 
 
 class SinkUart(Uart):

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from firmware.protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
-from firmware.protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 from host_tools.cli import main
 from host_tools.runner import RunConfig, run_virtual
+from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
+from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")

@@ -21,8 +21,8 @@ from test_serial_faults import CLEAN, _relay, _relay_counts
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified, assert_stopped_safely
 
 import host_tools.serial_run as serial_run
-from firmware.protocol.telemetry import TelemetryDecoder
 from host_tools.cli import main
+from protocol.telemetry import TelemetryDecoder
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys, POSIX signals")

@@ -8,12 +8,12 @@ import pytest
 import serial
 from serial.serialutil import PortNotOpenError, SerialException
 
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.vesc import Decoder, GetValues, SetCurrent, Values
 from hal.serial.backend import SerialUart
 from hal.serial.protocol_sim import Serial, register_sim_handler
 from hal.serial.sim_port import arrival_end_times, parse_sim_url
 from hal.virtual.plant import FixtureKind
+from protocol.rvc import RvcDecoder
+from protocol.vesc import Decoder, GetValues, SetCurrent, Values
 
 
 @pytest.fixture(autouse=True)

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware.protocol.cobs import cobs_decode
-from firmware.protocol.telemetry import (
+from protocol.cobs import cobs_decode
+from protocol.telemetry import (
     BASE_FIELD_COUNT,
     RECORD_COLUMNS,
     RECORD_FIELDS,

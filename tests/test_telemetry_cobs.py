@@ -4,7 +4,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware.protocol.cobs import cobs_decode, cobs_encode
+from protocol.cobs import cobs_decode, cobs_encode
 
 VECTORS = [  # (data, encoded), worked by hand from the COBS rules
     (b"", b"\x01"),

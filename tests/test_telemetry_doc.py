@@ -3,8 +3,8 @@
 import re
 from pathlib import Path
 
-from firmware.protocol.cobs import cobs_decode
-from firmware.protocol.telemetry import (
+from protocol.cobs import cobs_decode
+from protocol.telemetry import (
     RECORD_FRAME_LEN,
     FaultReason,
     SupervisorState,

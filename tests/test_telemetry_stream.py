@@ -7,7 +7,7 @@ import random
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware.protocol.telemetry import (
+from protocol.telemetry import (
     MAX_ENCODED_LEN,
     RECORD_FRAME_LEN,
     TelemetryDecoder,
@@ -165,7 +165,7 @@ def test_overlong_frame_counts_once_whatever_the_chunking():
 def test_unknown_version_is_counted_and_skipped():
     import struct
 
-    from firmware.protocol.telemetry import crc16
+    from protocol.telemetry import crc16
 
     body = b"\x02\x01\x05"
     future = frame_payload(body + struct.pack("<H", crc16(body)))
@@ -196,7 +196,7 @@ def test_feed_values_counts_and_decodes_as_feed_does():
     import random
     from dataclasses import astuple
 
-    from firmware.protocol.telemetry import RECORD_FIELDS, TelemetryDecoder, TelemetryRecord, encode_record
+    from protocol.telemetry import RECORD_FIELDS, TelemetryDecoder, TelemetryRecord, encode_record
 
     rng = random.Random(11)
     frames = [encode_record(TelemetryRecord(seq=k, time_cycles=1000 * k, reference_rad=rng.uniform(-1, 1),

@@ -16,7 +16,7 @@ import types
 import pytest
 from crc_oracle import crc16_reference
 
-from firmware.protocol.vesc import (
+from protocol.vesc import (
     FIELDS,
     MAX_FRAME_LEN,
     MESSAGES_FROM_MOTOR,
@@ -53,7 +53,7 @@ from firmware.protocol.vesc import (
     crc16,
     encode_frame,
 )
-from firmware.protocol.vesc_frame import FrameDecoder
+from protocol.vesc_frame import FrameDecoder
 
 H = bytes.fromhex
 

@@ -25,7 +25,7 @@ from crc_oracle import crc16_reference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware.protocol.vesc import (
+from protocol.vesc import (
     MAX_FRAME_LEN,
     MESSAGES_TO_MOTOR,
     VALUES_FIELDS,
@@ -43,8 +43,8 @@ from firmware.protocol.vesc import (
     crc16,
     encode_frame,
 )
-from firmware.protocol.vesc_frame import FrameDecoder
-from firmware.protocol.vesc_values import FIELDS
+from protocol.vesc_frame import FrameDecoder
+from protocol.vesc_values import FIELDS
 
 RANGES = {"B": (0, 255), "h": (-(2**15), 2**15 - 1), "i": (-(2**31), 2**31 - 1), "I": (0, 2**32 - 1)}
 GENERIC = [cls for cls in MESSAGES_TO_MOTOR.values()] + [Values]

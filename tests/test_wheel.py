@@ -19,7 +19,7 @@ import pytest
 from host_tools.build_info import ROOT
 
 SOURCE_FILES = ("setup.py", "pyproject.toml", "README.md", "LICENSE")
-PACKAGES = ("firmware", "hal", "rtos", "host_tools", "profiles")
+PACKAGES = ("firmware", "protocol", "hal", "rtos", "host_tools", "profiles")
 
 
 def _clean_env() -> dict[str, str]:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from firmware.drivers.link import LinkState
-from firmware.protocol.rvc import RvcDecoder, RvcFrame
 from hal.errors import HalError
 from hal.interfaces import Uart
+from protocol.rvc import RvcDecoder, RvcFrame
 
 __all__ = ["ImuDriver"]
 

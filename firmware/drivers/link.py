@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from mypy_extensions import mypyc_attr
+
 from hal.errors import HalError
 
 __all__ = ["LinkState"]
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # as MotorLink (motor_link.py): drivers and doubles in Python
 class LinkState:
     """Mixin: `link_lost` latches the first port failure with its cause and time; a relink clears it."""
 

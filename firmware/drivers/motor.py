@@ -14,12 +14,13 @@ one period (1.8 ms at 921600 baud) is given up (`Decoder.skip_pending`, counted 
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from typing import Final
 
-from firmware.drivers.link import LinkState
-from firmware.protocol.vesc import (
+from firmware.config import FirmwareConfig
+from firmware.drivers.motor_link import MotorFeedback, MotorLink, MotorLinkStats, SafeStop
+from hal.errors import HalError
+from hal.interfaces import Board, Uart
+from protocol.vesc import (
     Decoder,
     GetValues,
     GetValuesSelective,
@@ -28,10 +29,8 @@ from firmware.protocol.vesc import (
     Values,
     ValuesSelective,
 )
-from firmware.protocol.vesc_codec import MessageCodec
-from firmware.protocol.vesc_values import selective_layout
-from hal.errors import HalError
-from hal.interfaces import Uart
+from protocol.vesc_codec import MessageCodec
+from protocol.vesc_values import selective_layout
 
 __all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "SafeStop", "selective_reply_bytes"]
 
@@ -46,54 +45,10 @@ def selective_reply_bytes(mask: int, mask_echo: bool = True) -> int:
     return 1 + (4 if mask_echo else 0) + selective_layout(mask & 0x3FFFFF)[0].size + 5
 
 
-@dataclass
-class MotorFeedback:
-    """The latest feedback from the motor (SI units); `received_s` None until the first reply."""
-
-    current_a: float = 0.0
-    erpm: int = 0
-    position_rad: float = 0.0
-    fault: int = 0
-    temp_motor_c: float = math.nan
-    temp_fet_c: float = math.nan
-    v_in_v: float = math.nan
-    received_s: float | None = None
-
-
 _COMMAND_BYTES: Final = len(SetCurrent(0.0).encode())  # SET_CURRENT and SET_CURRENT_BRAKE: 10 bytes
 
 
-@dataclass
-class SafeStop:
-    """What the stop path put on the motor's wire: the bytes, how many the port took, whether they left it."""
-
-    frames: bytes
-    at_s: float
-    written: int = 0
-    drained: bool = False
-    error: str = ""
-
-    @property
-    def on_wire(self) -> bool:
-        """True when every byte was accepted and the port reported its transmitter empty."""
-        return self.written == len(self.frames) and self.drained and not self.error
-
-
-@dataclass
-class MotorLinkStats:
-    """Accounting of the motor link: requests, replies, and what went wrong."""
-
-    requests: int = 0
-    replies: int = 0
-    full_replies: int = 0
-    missing_replies: int = 0
-    stale_replies: int = 0
-    tx_refused: int = 0
-    max_age_s: float = 0.0
-    rx_timeouts: int = 0
-
-
-class MotorDriver(LinkState):
+class MotorDriver(MotorLink):
     """Talks to the AK60-6 over `uart`; owns no timing: callers pass the time in seconds."""
 
     def __init__(self, uart: Uart, *, full_every: int = 100, feedback_mask: int = FEEDBACK_MASK) -> None:
@@ -118,6 +73,11 @@ class MotorDriver(LinkState):
         # when the last command frame was accepted whole by the port (None: never): its age is how long
         # the motor has been applying an old command, which the supervisor bounds
         self.last_command_s: float | None = None
+
+    @classmethod
+    def from_board(cls, board: Board, config: FirmwareConfig) -> MotorDriver:
+        """The driver on the board's motor UART, a full GET_VALUES at the profile's full_values_hz."""
+        return cls(board.motor_uart, full_every=max(1, config.control_hz // config.full_values_hz))
 
     def relink(self, uart: Uart) -> None:
         """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
@@ -209,7 +169,7 @@ class MotorDriver(LinkState):
         """
         frames = (self._current_codec.frame((0.0,)), self._brake_codec.frame((brake_current_a,)))
         data = frames[0] + frames[1]
-        stop = SafeStop(data, now_s)
+        stop = SafeStop(data, now_s, (repr(SetCurrent(0.0)), repr(SetCurrentBrake(brake_current_a))))
         try:
             stop.written = self.uart.write(data)
             stop.drained = self.uart.flush(timeout_s)

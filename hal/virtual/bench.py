@@ -17,6 +17,9 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart
+from hal.links import link_entry, resolve
+from hal.virtual.can import VirtualBxCan
+from hal.virtual.can_bus import VirtualCanBus
 from hal.virtual.devices.ak60 import Ak60
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.bno08x import Bno08x, Bno08xConfig
@@ -42,6 +45,8 @@ FIXTURES: Mapping[str, Callable[[], Fixture]] = {
 """Fixtures that need no arguments, by name (``--fixture`` on the command line)."""
 
 _MODELS = {"motor": "ak60-6", "imu": "bno08x", "telemetry": ""}
+CAN_RX_CYCLES = 150
+"""Cycles of the CAN RX interrupt (HAL_CAN_IRQHandler + FIFO read) when the board profile names none."""
 
 
 def fixture_by_name(name: str) -> Fixture:
@@ -83,6 +88,10 @@ class VirtualBench:
         rx_buffer_size: int = 256,
         tx_queue_size: int = 256,
         estop_initial: bool = False,
+        motor_link: str = "uart",
+        can_bitrate: int = 1_000_000,
+        can_id: int = 1,
+        can_options: Mapping[str, Any] | None = None,
     ) -> None:
         """Build the bench at cycle 0 (see the class docstring); the plant starts at rest at initial_angle_rad."""
         self.f_cpu_hz = f_cpu_hz
@@ -96,10 +105,17 @@ class VirtualBench:
         self.motor_uart = mcu.uart("motor", motor_baud, rx_buffer_size, tx_queue_size)
         self.imu_uart = mcu.uart("imu", imu_baud, rx_buffer_size, tx_queue_size)
         self.telemetry_uart = mcu.uart("telemetry", telemetry_baud, rx_buffer_size, tx_queue_size)
-        self.motor = Ak60(world, motor_config, link=self.motor_uart)
+        self.motor_link = motor_link
+        self.can_bitrate, self.can_id, self.can_options = can_bitrate, can_id, dict(can_options or {})
+        self.can: VirtualBxCan | None = None  # the MCU's bxCAN and its bus, on a CAN motor link
+        self.can_bus: VirtualCanBus | None = None
+        self.motor_device: Any = None  # the device on the motor link (for UART: self.motor)
+        entry = link_entry(motor_link, "motor_link")
+        wire: Any = resolve(entry.bench)
+        self.motor: Ak60 = wire(self, entry, motor_config)
+        """The AK60-6 model (plant, meter, faults); on a CAN link the core of ``motor_device``."""
         self.imu = Bno08x(world, imu_config, seed=seed, link=self.imu_uart)
         self.telemetry = ByteSink()
-        self.motor_uart.connect(self.motor)
         self.imu_uart.connect(self.imu)
         self.telemetry_uart.connect(self.telemetry)
         self.encoder_mount = EncoderMount(world, encoder_offset_rad)
@@ -110,7 +126,7 @@ class VirtualBench:
         self._watchdog_target: Any = None
         self.watchdog = mcu.watchdog(self._forward_kick)
         self.board: Board = mcu.board(self.motor_uart, self.imu_uart, self.telemetry_uart, self.encoder,
-                                      self.estop, self.led, self.watchdog)
+                                      self.estop, self.led, self.watchdog, self.can)
         """The peripherals handed to the firmware."""
 
     # ------------------------------------------------------------------ wiring
@@ -141,7 +157,10 @@ class VirtualBench:
             raise ValueError(f"isr_cycles lacks {missing}: need uart_rx_byte and systick (cycles per ISR), "
                              "and timer_update with encoder_wraps")
         timer = int(isr_cycles["timer_update"]) if encoder_wraps else None
-        return self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
+        sources = self.mcu.interrupt_sources(int(isr_cycles["uart_rx_byte"]), int(isr_cycles["systick"]), timer)
+        if self.can is not None:  # one CAN RX interrupt per frame received (before the SysTick, as the UARTs)
+            sources.insert(len(sources) - 1, self.can.rx_interrupt(int(isr_cycles.get("can_rx_frame", CAN_RX_CYCLES))))
+        return sources
 
     # -------------------------------------------------------------------- time
     def advance_to(self, t_cycles: int) -> None:

@@ -12,4 +12,5 @@ TESTS: dict[str, str] = {
     "baud-study": "baud_study",
     "spring-calibration": "spring_calibration",
     "design-point": "design_point",
+    "link-study": "link_study",
 }

@@ -24,10 +24,10 @@ import numpy as np
 
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.drivers.motor import FEEDBACK_MASK, selective_reply_bytes
-from firmware.protocol.vesc import GetValues, GetValuesSelective, SetCurrent
 from host_tools.benchtests.output import BenchResult, Figure
 from host_tools.report import summarise
 from host_tools.runner import RunConfig, run_virtual
+from protocol.vesc import GetValues, GetValuesSelective, SetCurrent
 
 logger = logging.getLogger(__name__)
 

@@ -32,8 +32,8 @@ from enum import IntEnum
 from pathlib import Path
 from typing import Any, BinaryIO, TextIO
 
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.telemetry import TelemetryDecoder, TelemetryRecord, record_to_row
+from protocol.rvc import RvcDecoder
+from protocol.telemetry import TelemetryDecoder, TelemetryRecord, record_to_row
 
 HELP = "decode a raw byte capture (vesc, rvc or telemetry) to JSON lines or CSV"
 CHUNK_BYTES = 65536
@@ -66,7 +66,7 @@ def _make_decoder(protocol: str, direction: str) -> Any:
     if protocol == "telemetry":
         return TelemetryDecoder()
     try:
-        from firmware.protocol import vesc
+        from protocol import vesc
     except ImportError as exc:
         raise DecodeError(f"the VESC decoder is not available: {exc}") from None
     return vesc.Decoder(direction=direction)

@@ -62,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--pty", action="store_true", help="create a new pty per device and print its path")
     where.add_argument("--port", metavar="DEVICE", help="serve on this serial port (bench: the motor's)")
+    where.add_argument("--can", metavar="URL",
+                       help="motor only: serve the AK60-6 on a CAN bus, can://INTERFACE/CHANNEL?id=N&mode=servo|mit "
+                            "(any python-can interface, e.g. socketcan/can0 or udp_multicast/239.74.163.2)")
     parser.add_argument("--imu-port", metavar="DEVICE", help="bench with --port: the IMU's serial port")
     parser.add_argument("--baud", type=int, default=None,
                         help="link baud: the motor's (default 921600), or the IMU's for `imu` (default 115200)")
@@ -136,8 +139,37 @@ def _check(args: argparse.Namespace) -> None:
         raise EmulateError(f"--duration {args.duration} out of range: > 0 seconds")
 
 
+def _run_can(args: argparse.Namespace) -> int:
+    """`emulate motor --can URL` (host_tools/can_emulate.py)."""
+    from hal.errors import HalError
+    from host_tools.can_emulate import open_and_serve
+
+    stop: list[str] = []
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        """Ask the serving loop to stop."""
+        stop.append(signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
+    try:
+        if args.device != "motor":
+            raise EmulateError(f"--can serves the motor only, not {args.device!r}")
+        _check(args)
+        line = open_and_serve(args.can, args.fixture, args.duration, stop, lambda t: print(t, flush=True))
+    except (EmulateError, ValueError, HalError) as exc:
+        print(f"pafp emulate: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    print(line, flush=True)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve until stopped; print the paths first and a summary line last; 2 on bad options or ports."""
+    if getattr(args, "can", None):
+        return _run_can(args)
     capture = None
     try:
         _check(args)

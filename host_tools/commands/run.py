@@ -23,6 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp run`."""
     parser.add_argument("--strides", type=int, default=10, help="gait strides to run (default 10)")
     parser.add_argument("--baud", type=int, default=921600, help="motor UART baud rate (default 921600)")
+    parser.add_argument("--motor-link", default=None, metavar="NAME",
+                        help="motor link on the virtual bench: uart, can-servo or can-mit (CAN at 1 Mbit/s; "
+                             "default: the firmware profile's [motor] link, uart)")
     parser.add_argument("--profile", type=Path, default=None,
                         help="firmware profile TOML (default profiles/firmware.toml)")
     parser.add_argument("--board", default="stm32f4", help="board profile name (profiles/board_<name>.toml)")
@@ -200,6 +203,11 @@ def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
     from firmware.config import load_firmware_config
 
     fw_cfg = load_firmware_config(args.profile)
+    if getattr(args, "motor_link", None) is not None:
+        from hal.links import link_entry
+
+        link_entry(args.motor_link, "--motor-link")
+        fw_cfg = fw_cfg.with_changes(motor_link=args.motor_link)
     if args.controller is not None and args.controller != fw_cfg.controller:
         fw_cfg = fw_cfg.with_changes(controller=args.controller, controller_params={})
     return fw_cfg

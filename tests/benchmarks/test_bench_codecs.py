@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 
-from firmware.protocol.vesc import (
+from protocol.vesc import (
     Alive,
     Decoder,
     GetValues,
@@ -37,7 +37,7 @@ from firmware.protocol.vesc import (
     SetPos,
     Values,
 )
-from firmware.protocol.vesc_values import VALUES_FIELDS
+from protocol.vesc_values import VALUES_FIELDS
 
 SEED = 20240611
 CAPTURE_BYTES = 1_000_000

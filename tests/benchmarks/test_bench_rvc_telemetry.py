@@ -1,7 +1,7 @@
 """Throughput of the RVC and telemetry codecs (run with --benchmark-only)."""
 
-from firmware.protocol.rvc import RvcDecoder, RvcFrame
-from firmware.protocol.telemetry import TelemetryDecoder, TelemetryRecord, encode_record
+from protocol.rvc import RvcDecoder, RvcFrame
+from protocol.telemetry import TelemetryDecoder, TelemetryRecord, encode_record
 
 CONSTRUCTED = bytes.fromhex("AA AA 2A D2 04 C9 FD E2 45 0C 00 DE FF EA 03 00 00 00 C3")
 RECORD = TelemetryRecord(seq=1000, time_cycles=168_000_000, reference_rad=0.25, velocity_rad_s=-1.5,

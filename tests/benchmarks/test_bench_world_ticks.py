@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 
 from firmware.drivers.motor import FEEDBACK_MASK
-from firmware.protocol.rvc import RvcDecoder
-from firmware.protocol.vesc import Decoder, GetValuesSelective, SetCurrent
 from hal.virtual.bench import VirtualBench
+from protocol.rvc import RvcDecoder
+from protocol.vesc import Decoder, GetValuesSelective, SetCurrent
 
 F = 168_000_000
 TICKS = 1000

@@ -26,8 +26,6 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Final
 
-from firmware.protocol import vesc
-from firmware.protocol.vesc import DetectMode, OriginMode
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode, degrees, radians
 from hal.virtual.devices.ak60_meter import Ak60Meter
@@ -35,6 +33,8 @@ from hal.virtual.devices.ak60_values import ValueSource
 from hal.virtual.devices.vesc_rx import TimedBytes
 from hal.virtual.devices.world import NEVER, Link, World
 from hal.virtual.events import EventDevice
+from protocol import vesc
+from protocol.vesc import DetectMode, OriginMode
 
 __all__ = ["Ak60", "Ak60Stats", "DriveMode"]
 

@@ -15,9 +15,9 @@ import struct
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Final
 
-from firmware.protocol.vesc_message import CommandId, WireField
-from firmware.protocol.vesc_values import selective_layout
 from hal.virtual.devices.ak60_loops import radians
+from protocol.vesc_message import CommandId, WireField
+from protocol.vesc_values import selective_layout
 
 if TYPE_CHECKING:
     from hal.virtual.devices.ak60 import Ak60

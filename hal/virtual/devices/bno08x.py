@@ -25,10 +25,10 @@ import random
 from collections.abc import Sequence
 from typing import Final
 
-from firmware.protocol.rvc import RvcFrame
 from hal.virtual.devices.bno08x_config import BANNER_LINES, Bno08xConfig
 from hal.virtual.devices.world import NEVER, Link, World
 from hal.virtual.events import EventDevice
+from protocol.rvc import RvcFrame
 
 __all__ = ["BANNER_LINES", "Bno08x", "Bno08xConfig"]
 

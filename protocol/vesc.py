@@ -4,7 +4,7 @@ Every message is a frozen dataclass with ``COMMAND_ID``, ``payload()``, ``encode
 ``from_payload(payload)``. Units: currents A (``current_a``), duty and relative current as fractions,
 speeds as electrical RPM (``erpm``, an int on the wire), angles in **radians** in the API and degrees on the
 wire (``position_rad``; ``from_degrees`` constructors are offered), temperatures degC, voltages V.
-Encoding truncates toward zero like the firmware's C cast (see :mod:`firmware.protocol.vesc_message`);
+Encoding truncates toward zero like the firmware's C cast (see :mod:`protocol.vesc_message`);
 a value the wire cannot carry raises ValueError naming the value and the range.
 
 >>> SetCurrent(2.5).encode().hex(" ")
@@ -12,8 +12,8 @@ a value the wire cannot carry raises ValueError naming the value and the range.
 >>> Decoder("to-motor").feed(bytes.fromhex("02 05 06 00 00 09 C4 EE D5 03"))
 [SetCurrent(current_a=2.5)]
 
-Framing, CRC and the streaming machinery live in :mod:`firmware.protocol.vesc_frame`, the GET_VALUES
-layout in :mod:`firmware.protocol.vesc_values`; everything public is re-exported here.
+Framing, CRC and the streaming machinery live in :mod:`protocol.vesc_frame`, the GET_VALUES
+layout in :mod:`protocol.vesc_values`; everything public is re-exported here.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, ClassVar, Literal, Self
 
-from firmware.protocol.vesc_frame import (
+from protocol.vesc_frame import (
     MAX_FRAME_LEN,
     PACKET_MAX_PL_LEN,
     DecoderStats,
@@ -34,8 +34,8 @@ from firmware.protocol.vesc_frame import (
     crc16,
     encode_frame,
 )
-from firmware.protocol.vesc_message import CommandId, Message, Unknown, WireField, field_setter, to_raw
-from firmware.protocol.vesc_values import FIELDS, VALUES_FIELDS, FaultCode, Values, ValuesSelective
+from protocol.vesc_message import CommandId, Message, Unknown, WireField, field_setter, to_raw
+from protocol.vesc_values import FIELDS, VALUES_FIELDS, FaultCode, Values, ValuesSelective
 
 __all__ = [
     "FIELDS", "Direction", "MAX_FRAME_LEN", "MESSAGES_FROM_MOTOR", "MESSAGES_TO_MOTOR", "PACKET_MAX_PL_LEN",
@@ -348,7 +348,7 @@ class Decoder(FrameDecoder[Message]):
     ``rotor_position_scale`` is the wire scale of ROTOR_POSITION; with ``selective_mask_echo`` False the
     selective reply carries no mask, so set ``selective_mask`` to the mask last requested (until then such
     a reply is returned as :class:`Unknown` and counted in ``stats.unknown_ids``). See
-    :class:`~firmware.protocol.vesc_frame.FrameDecoder` for resynchronisation and statistics.
+    :class:`~protocol.vesc_frame.FrameDecoder` for resynchronisation and statistics.
     """
 
     def __init__(

@@ -19,9 +19,9 @@ from enum import IntEnum
 from operator import attrgetter, itemgetter
 from typing import Any, NamedTuple, TypeVar
 
-from firmware.protocol.cobs import cobs_decode
-from firmware.protocol.telemetry_frame import RecordFramer, crc16
-from firmware.protocol.telemetry_frame import frame_payload as frame_payload  # re-exported
+from protocol.cobs import cobs_decode
+from protocol.telemetry_frame import RecordFramer, crc16
+from protocol.telemetry_frame import frame_payload as frame_payload  # re-exported
 
 logger = logging.getLogger(__name__)
 

@@ -23,8 +23,8 @@ from operator import attrgetter, truediv
 from types import MemberDescriptorType
 from typing import Any, ClassVar, Self
 
-from firmware.protocol.vesc_codec import MessageCodec, WireField, to_raw
-from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
+from protocol.vesc_codec import MessageCodec, WireField, to_raw
+from protocol.vesc_frame import ShortPayloadError, encode_frame
 
 __all__ = ["CommandId", "Message", "Unknown", "WireField", "field_setter", "to_raw"]
 

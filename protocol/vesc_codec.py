@@ -1,7 +1,7 @@
 """The per-message hot path of the VESC codec, compiled (setup.py): wire scaling, packing and unpacking.
 
-The message classes (:mod:`firmware.protocol.vesc_message`, :mod:`~firmware.protocol.vesc`,
-:mod:`~firmware.protocol.vesc_values`) are built by ``__init_subclass__`` metaprogramming and stay
+The message classes (:mod:`protocol.vesc_message`, :mod:`~protocol.vesc`,
+:mod:`~protocol.vesc_values`) are built by ``__init_subclass__`` metaprogramming and stay
 interpreted; what they do per message lives here: :func:`to_raw` (scaling, see the vesc_message module
 doc), :class:`MessageCodec` (one generic message class's payload both ways) and :class:`SelectiveCodec`
 (the GET_VALUES_SELECTIVE reply). Instances are created without the dataclass ``__init__`` (values from
@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from firmware.protocol.vesc_frame import ShortPayloadError, encode_frame
+from protocol.vesc_frame import ShortPayloadError, encode_frame
 
 __all__ = ["MessageCodec", "SelectiveCodec", "WireField", "to_raw"]
 

@@ -1,7 +1,7 @@
 """Telemetry framing, compiled (setup.py): CRC-16/CCITT-FALSE, COBS + delimiter, and the record framer.
 
 The record layout itself (fields, versions, error explanations, decoding) is in
-:mod:`firmware.protocol.telemetry`, which stays interpreted (its records carry enum members); this
+:mod:`protocol.telemetry`, which stays interpreted (its records carry enum members); this
 module is what the logger runs for every record.
 """
 
@@ -12,7 +12,7 @@ import struct
 from collections.abc import Callable
 from typing import Final
 
-from firmware.protocol.cobs import cobs_encode
+from protocol.cobs import cobs_encode
 
 __all__ = ["RecordFramer", "crc16", "frame_payload"]
 

@@ -7,7 +7,7 @@ Frame layout (PROTOCOLS.md A.1, vedderb/bldc ``comm/packet.c``)::
 
 The CRC is CRC-16/XMODEM (poly 0x1021, init 0, no reflection) over the payload only, high byte first.
 This module knows nothing about message meanings: :class:`FrameDecoder` hands each CRC-valid payload to a
-per-command-id decode function given by the caller (see :mod:`firmware.protocol.vesc`).
+per-command-id decode function given by the caller (see :mod:`protocol.vesc`).
 """
 
 from __future__ import annotations
@@ -170,7 +170,7 @@ class FrameDecoder(Generic[M]):
         would otherwise hold every good frame behind it until 511 more bytes have arrived. Dropping only
         the start byte, as for a bad CRC, keeps the frames that follow. Returns the messages they hold.
 
-        >>> from firmware.protocol.vesc import Decoder, SetCurrent
+        >>> from protocol.vesc import Decoder, SetCurrent
         >>> d = Decoder("to-motor")
         >>> d.feed(bytes.fromhex("03 01 ff") + SetCurrent(2.5).encode())
         []

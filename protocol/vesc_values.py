@@ -15,8 +15,8 @@ from enum import IntEnum
 from functools import lru_cache
 from typing import ClassVar, Self
 
-from firmware.protocol.vesc_codec import SelectiveCodec
-from firmware.protocol.vesc_message import CommandId, Message, WireField, field_setter
+from protocol.vesc_codec import SelectiveCodec
+from protocol.vesc_message import CommandId, Message, WireField, field_setter
 
 __all__ = ["FIELDS", "VALUES_FIELDS", "FaultCode", "Values", "ValuesSelective", "selective_layout"]
 

@@ -1,0 +1,143 @@
+"""AK60-6 driver over CAN in servo mode: SET_CURRENT / SET_CURRENT_BRAKE out, the periodic status frames in.
+
+Servo mode has no request: the motor sends a status frame (``0x29xx``) at its own rate whether or not a
+command came (PROTOCOLS.md G). Each control tick the motor task calls ``poll`` (every status frame
+waiting in the FIFOs updates ``feedback``) and ``send`` (one command frame into a mailbox). Accounting
+(:class:`~firmware.drivers.motor_link.MotorLinkStats`): ``replies`` counts status frames, ``requests``
+commands sent; ``max_age_s`` is the longest time between two status frames as the driver took them
+(the oldest feedback the firmware held); ``stale_replies`` counts status frames from a motor in fault.
+A silent bus leaves ``feedback.received_s`` behind, which the supervisor bounds (MOTOR_TIMEOUT); a
+failing port latches ``link_lost``. The stop path sends zero current then the brake.
+"""
+
+from __future__ import annotations
+
+import math
+
+from firmware.config import FirmwareConfig
+from firmware.drivers.motor_link import MotorFeedback, MotorLink, MotorLinkStats, RxCounter, SafeStop
+from hal.can import CanFrame, CanPort
+from hal.errors import HalError
+from hal.interfaces import Board
+from protocol import can_servo
+
+__all__ = ["CanServoDriver"]
+
+_ERPM_PER_POLE_PAIR = 14  # AK60-6: ERPM = 14 x rotor rpm
+
+
+class CanServoDriver(MotorLink):
+    """Talks to the AK60-6 in servo mode over ``port`` (driver id ``driver_id``); callers pass the time."""
+
+    def __init__(self, port: CanPort, driver_id: int = 1) -> None:
+        """Prepare the IDs; nothing is sent until ``send``."""
+        self.port = port
+        self.driver_id = driver_id
+        self.feedback = MotorFeedback()
+        self.stats = MotorLinkStats()
+        self.decoder = RxCounter()
+        self.last_command_s = None
+        self._status_id = can_servo.status_id(driver_id)
+        self._current_id = can_servo.command_id(can_servo.PacketId.SET_CURRENT, driver_id)
+        self._brake_id = can_servo.command_id(can_servo.PacketId.SET_CURRENT_BRAKE, driver_id)
+        self._last_status_s: float | None = None
+        self.other_frames = 0
+
+    @classmethod
+    def from_board(cls, board: Board, config: FirmwareConfig) -> CanServoDriver:
+        """The driver on the board's CAN port (HalError naming the board if it has none)."""
+        if board.can is None:
+            raise HalError("motor link can-servo needs a CAN port on the board (Board.can is None)")
+        return cls(board.can, config.motor_can_id)
+
+    def relink(self, port: CanPort) -> None:
+        """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
+        self.port = port
+        self._relinked()
+
+    def poll(self, now_s: float) -> int:
+        """Take every status frame waiting; return how many."""
+        taken = 0
+        fb, st = self.feedback, self.stats
+        while True:
+            try:
+                frame = self.port.receive()
+            except HalError as exc:
+                self._lose(exc, now_s)
+                return taken
+            if frame is None:
+                break
+            self.decoder.stats.frames += 1
+            self.decoder.stats.bytes_in += len(frame.data)
+            if not (frame.extended and frame.arbitration_id == self._status_id and len(frame.data) == 8):
+                self.other_frames += 1
+                continue
+            s = can_servo.decode_status(frame.data)
+            fb.position_rad = math.radians(s.position_deg)
+            fb.erpm = int(s.speed_erpm)
+            fb.current_a = s.current_a
+            fb.fault = s.error
+            fb.temp_motor_c = float(s.temperature_c)
+            fb.received_s = now_s
+            if s.error:
+                st.stale_replies += 1
+            st.replies += 1
+            last = self._last_status_s
+            if last is not None and now_s - last > st.max_age_s:
+                st.max_age_s = now_s - last
+            self._last_status_s = now_s
+            taken += 1
+        return taken
+
+    def _put(self, frame: CanFrame, now_s: float) -> bool:
+        try:
+            ok = self.port.send(frame)
+        except HalError as exc:
+            self._lose(exc, now_s)
+            return False
+        if not ok:
+            self.stats.tx_refused += 1
+        return ok
+
+    def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
+        """Send SET_CURRENT (or SET_CURRENT_BRAKE); return the data bytes queued (0 if refused)."""
+        packet = can_servo.PacketId.SET_CURRENT_BRAKE if brake else can_servo.PacketId.SET_CURRENT
+        data = can_servo.encode_command(packet, abs(current_a) if brake else current_a)
+        self.stats.requests += 1
+        if not self._put(CanFrame(self._brake_id if brake else self._current_id, data, True), now_s):
+            return 0
+        self.last_command_s = now_s
+        return len(data)
+
+    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: zero current, then the brake; wait until both have left the mailboxes."""
+        frames = (CanFrame(self._current_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT, 0.0), True),
+                  CanFrame(self._brake_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE,
+                                                                    abs(brake_current_a)), True))
+        names = ("SET_CURRENT(0.0 A)", f"SET_CURRENT_BRAKE({abs(brake_current_a)} A)")
+        return _send_stop(self, self.port, frames, names, now_s, timeout_s)
+
+    def published(self) -> dict[str, object]:
+        """The port's overruns and refusals, frames not from this motor."""
+        return {"link": "can-servo", "rx_overruns": self.port.errors.overruns,
+                "tx_refused_frames": self.port.errors.tx_refused, "other_frames": self.other_frames}
+
+
+def _send_stop(drv: MotorLink, port: CanPort, frames: tuple[CanFrame, ...], names: tuple[str, ...],
+               now_s: float, timeout_s: float) -> SafeStop:
+    """Queue frames in order, then wait for the mailboxes to empty; a failing port is latched as lost."""
+    stop = SafeStop(b"".join(f.data for f in frames), now_s, names)
+    try:
+        for f in frames:
+            if not port.send(f):
+                break
+            stop.written += len(f.data)
+        stop.drained = port.flush(timeout_s)
+    except HalError as exc:
+        drv._lose(exc, now_s)
+        stop.error = str(exc)
+    if stop.written < len(stop.frames):
+        drv.stats.tx_refused += 1
+    elif stop.written:
+        drv.last_command_s = now_s
+    return stop

@@ -1,0 +1,213 @@
+"""CubeMars AK60-6 over CAN (servo mode or MIT mode): the UART model's plant, meter and protections behind a CAN node.
+
+The device owns an :class:`~hal.virtual.devices.ak60.Ak60` without a UART (``core``): the same shared
+plant, current target, meter (temperatures, supply), command timeout and faults as the UART device. It
+is a node of a :class:`~hal.virtual.can_bus.VirtualCanBus` that takes frames addressed to its
+``driver_id`` (PROTOCOLS.md G; codecs in :mod:`protocol.can_servo` and ``can_mit``):
+
+* servo mode: commands on 29-bit IDs ``(packet << 8) | driver_id`` (SET_CURRENT, SET_CURRENT_BRAKE,
+  SET_DUTY, SET_RPM, SET_POS, SET_POS_SPD, SET_ORIGIN_HERE) act as their UART counterparts; a status
+  frame (ID ``0x29xx``: output angle x 0.1 deg wrapped to +-3200 deg, ERPM, q current, motor
+  temperature, fault) goes out every ``status_period_s`` whether or not a command came. SET_POS_SPD's
+  speed and acceleration are taken as x 10 ERPM and x 10 ERPM/s (unverified against the manual);
+* MIT mode: the special frames enter motor mode, exit it (torque off) and zero the position; a command
+  (accepted in motor mode only) sets p_des, v_des, kp, kd, t_ff, and the law
+  ``torque = kp (p_des - p) + kd (v_des - v) + t_ff`` (p, v: output angle from the zero, output
+  velocity) is evaluated every ``inner_loop_period_s`` of the UART model's configuration (the driver's own
+  loop rate), the torque becoming a q current through ``kt x gearbox ratio``. Every frame addressed to
+  it is answered after ``reply_latency_s`` on the master ID 0 with ``[id, p, v, torque, temperature, error]``.
+
+A command resets the command timeout (``timeout_s``): when it expires the core releases the motor and
+MIT mode's law stops until the next command.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any, Protocol
+
+from hal.can import CanFrame
+from hal.virtual.devices.ak60 import Ak60
+from hal.virtual.devices.ak60_can_config import MODES, Ak60CanConfig
+from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.devices.world import World
+from hal.virtual.events import NEVER, EventDevice
+from protocol import can_mit, can_servo
+from protocol.vesc import OriginMode
+
+__all__ = ["MODES", "Ak60Can", "Ak60CanConfig", "CanBusPort"]
+
+class CanBusPort(Protocol):
+    """Where the device's frames go: the virtual bus, or the wall-clock stand-in of `pafp emulate --can`."""
+
+    def attach(self, node: Any) -> None:
+        """Receive the frames of the other nodes."""
+        ...
+
+    def offer(self, node: Any, frame: CanFrame, ready: int) -> None:
+        """Put frame on the wire from tick ready on."""
+        ...
+
+
+class Ak60Can(EventDevice):
+    """The AK60-6 on a virtual CAN bus (see the module docstring)."""
+
+    def __init__(self, world: World, bus: CanBusPort | None, can_config: Ak60CanConfig | None = None,
+                 config: Ak60Config | None = None) -> None:
+        """Build the core on world's plant and attach to bus (None: frames come through ``on_frame`` only)."""
+        super().__init__()
+        self.world = world
+        self.can_config = cc = can_config if can_config is not None else Ak60CanConfig()
+        self.core = core = Ak60(world, config, link=None)
+        self.driver_id = cc.driver_id
+        self.mode = cc.mode
+        self.limits = cc.limits
+        p = core.params
+        self._nm_per_a = p.kt_nm_per_a * p.gearbox_ratio  # output torque per q amp
+        self._gear = p.gearbox_ratio
+        self._pole_pairs = p.pole_pairs
+        self._rx: deque[tuple[int, CanFrame]] = deque()
+        self._status_period = max(1, world.ticks(cc.status_period_s))
+        self._status_at = self._status_period if cc.mode == "servo" else NEVER
+        self._loop_period = max(1, world.ticks(core.config.inner_loop_period_s))
+        self._mit_at = NEVER
+        self.motor_mode = False
+        self.mit_command: can_mit.MitCommand | None = None
+        self.frames_in = 0
+        self.frames_out = 0
+        self.ignored_frames = 0
+        self.bus: CanBusPort | None = bus
+        if bus is not None:
+            bus.attach(self)
+        world.add(self)
+        self._update_next()
+
+    # ------------------------------------------------------------------ bus node
+    def on_frame(self, frame: CanFrame, t: int) -> None:
+        """A frame ended at t: keep it if it is addressed to this driver."""
+        if self.mode == "mit":
+            mine = not frame.extended and frame.arbitration_id == self.driver_id
+        else:
+            mine = frame.extended and (frame.arbitration_id & 0xFF) == self.driver_id and \
+                frame.arbitration_id >> 8 != can_servo.STATUS_PACKET
+        if not mine:
+            return
+        self._rx.append((t, frame))
+        if t < self.next_event:
+            self.next_event = t
+
+    def tx_done(self, frame: CanFrame, t: int) -> None:
+        """Our frame left (nothing to do: the driver has no mailbox limit in this model)."""
+
+    def _out(self, frame: CanFrame, t: int) -> None:
+        self.frames_out += 1
+        if self.bus is not None:  # None: a silent motor (frames built and dropped)
+            self.bus.offer(self, frame, t)
+
+    # ------------------------------------------------------------------ events
+    def _update_next(self) -> None:
+        nxt = min(self._status_at, self._mit_at)
+        if self._rx and self._rx[0][0] < nxt:
+            nxt = self._rx[0][0]
+        self.next_event = nxt
+
+    def run_event(self) -> None:
+        """Frames due, the MIT law's tick, the status frame."""
+        t = self.next_event
+        rx = self._rx
+        while rx and rx[0][0] <= t:
+            self._handle(rx.popleft()[1], t)
+        if self._mit_at <= t:
+            self._mit_tick(t)
+        if self._status_at <= t:
+            self._status(t)
+            self._status_at = t + self._status_period
+        self._update_next()
+
+    def _commanded(self, t: int) -> None:
+        core = self.core
+        core.stats.commands += 1
+        core._timeout_at = t + core._timeout if core._timeout else NEVER
+        core.timed_out = False
+        core._update_next()
+
+    def _handle(self, frame: CanFrame, t: int) -> None:
+        self.frames_in += 1
+        core = self.core
+        core._sample(t)
+        if self.mode == "mit":
+            self._handle_mit(frame.data, t)
+            return
+        try:
+            cmd = can_servo.decode_command(frame.arbitration_id, frame.data)
+        except ValueError:
+            self.ignored_frames += 1
+            return
+        P = can_servo.PacketId
+        self._commanded(t)
+        if cmd.packet == P.SET_CURRENT:
+            core._drive_current(cmd.value, t)
+        elif cmd.packet == P.SET_CURRENT_BRAKE:
+            core._drive_brake(cmd.value, t)
+        elif cmd.packet == P.SET_DUTY:
+            core._drive_duty(cmd.value, t)
+        elif cmd.packet == P.SET_RPM:
+            core._drive_speed(cmd.value, t)
+        elif cmd.packet == P.SET_POS:
+            core._drive_position(math.radians(cmd.value), 0.0, 0.0, t)
+        elif cmd.packet == P.SET_POS_SPD:
+            core._drive_position(math.radians(cmd.value), cmd.speed * 10.0, cmd.accel * 10.0, t)
+        elif cmd.packet == P.SET_ORIGIN_HERE:
+            core._on_set_origin(OriginMode.TEMPORARY if cmd.value == 0 else OriginMode.PERMANENT, t)
+
+    def _handle_mit(self, data: bytes, t: int) -> None:
+        core = self.core
+        special = can_mit.special_frame(data)
+        if special == "enter":
+            self.motor_mode = True
+        elif special == "exit":
+            self.motor_mode, self.mit_command, self._mit_at = False, None, NEVER
+            core._release(t)
+        elif special == "zero":
+            core._on_set_origin(OriginMode.TEMPORARY, t)
+        elif len(data) != 8 or not self.motor_mode:
+            self.ignored_frames += 1
+        else:
+            self.mit_command = can_mit.decode_command(data, self.limits)
+            self._commanded(t)
+            self._mit_tick(t)
+        self._reply(t + core._latency)
+
+    def _output(self) -> tuple[float, float]:
+        """Output angle from the zero (rad) and output velocity (rad/s) at the core's last sample."""
+        core = self.core
+        return math.radians(core.pid_pos_deg()), core._velocity / self._gear
+
+    def _mit_tick(self, t: int) -> None:
+        core = self.core
+        cmd = self.mit_command
+        if cmd is None or not self.motor_mode or core.timed_out or core.fault:
+            self._mit_at = NEVER
+            return
+        core._sample(t)
+        p, v = self._output()
+        torque = cmd.kp * (cmd.p_des - p) + cmd.kd * (cmd.v_des - v) + cmd.t_ff
+        core._drive_current(torque / self._nm_per_a, t)
+        self._mit_at = t + self._loop_period
+
+    def _reply(self, t: int) -> None:
+        core = self.core
+        p, v = self._output()
+        reply = can_mit.MitReply(self.driver_id, p, v, core.meter.current_a * self._nm_per_a,
+                                 int(round(core.meter.temp_motor_c)), core.fault)
+        self._out(CanFrame(can_mit.MASTER_ID, can_mit.encode_reply(reply, self.limits)), t)
+
+    def _status(self, t: int) -> None:
+        core = self.core
+        core._sample(t)
+        deg = (core.pid_pos_deg() + 3200.0) % 6400.0 - 3200.0
+        erpm = core._velocity * 60.0 / (2.0 * math.pi) * self._pole_pairs
+        status = can_servo.ServoStatus(deg, erpm, core.meter.current_a, int(round(core.meter.temp_motor_c)),
+                                       core.fault)
+        self._out(CanFrame(can_servo.status_id(self.driver_id), can_servo.encode_status(status), True), t)

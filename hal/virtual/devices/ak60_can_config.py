@@ -1,0 +1,31 @@
+"""The CAN side of the AK60-6 over CAN: driver id, mode, status rate, MIT ranges (interpreted: its checks see bools)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from protocol import can_mit
+
+__all__ = ["MODES", "Ak60CanConfig"]
+
+MODES = ("servo", "mit")
+
+
+@dataclass(frozen=True)
+class Ak60CanConfig:
+    """The CAN side: driver id, mode, status rate (servo mode), the model's MIT ranges."""
+
+    driver_id: int = 1
+    mode: str = "servo"
+    status_period_s: float = 0.002  # 500 Hz, the upload rate set in the maker's tool (an assumption)
+    limits: can_mit.MitLimits = can_mit.AK60_6
+
+    def __post_init__(self) -> None:
+        """Check the id, the mode and the status period."""
+        if isinstance(self.driver_id, bool) or not isinstance(self.driver_id, int) or not 0 <= self.driver_id <= 127:
+            raise ValueError(f"driver_id {self.driver_id!r} out of range: an int in 0..127")
+        if self.mode not in MODES:
+            raise ValueError(f"CAN mode {self.mode!r} invalid: one of {MODES}")
+        if not (math.isfinite(self.status_period_s) and 1e-4 <= self.status_period_s <= 1.0):
+            raise ValueError(f"status_period_s {self.status_period_s!r} out of range [0.0001, 1] s")

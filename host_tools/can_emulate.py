@@ -1,0 +1,143 @@
+"""`pafp emulate motor --can URL`: the virtual AK60-6 (servo or MIT mode) on a real CAN bus, in wall-clock time.
+
+The device model (:class:`~hal.virtual.devices.ak60_can.Ak60Can`, the UART model's plant, meter and
+protections) lives in a world clocked in nanoseconds of the wall clock. Frames read from the python-can
+bus are handed to it stamped with their arrival; the frames it sends are written when their time comes
+(the reply latency after the command, the status period). The real bus adds its own wire time. The
+loop waits in ``recv`` until the next device event, at most 1 ms.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from hal.can import CanFrame, CanPort
+from hal.errors import HalError
+from hal.pycan import CanUrl
+from hal.virtual.bench import fixture_by_name
+from hal.virtual.devices.ak60_can import Ak60Can, Ak60CanConfig
+from hal.virtual.devices.world import World
+from hal.virtual.events import NEVER
+from hal.virtual.plant import Fixture, Plant
+
+__all__ = ["WallCanBus", "WallCanMotor"]
+
+NS_PER_S = 1_000_000_000
+MAX_SLEEP_S = 0.001
+
+
+class WallCanBus:
+    """Stands in for the virtual bus: the device's frames wait here until their wall-clock time."""
+
+    def __init__(self) -> None:
+        """Nothing queued."""
+        self._queue: list[tuple[int, int, CanFrame]] = []
+        self._seq = 0
+
+    def attach(self, node: object) -> None:
+        """The device registers itself (frames from the real bus are handed to it by the loop)."""
+
+    def offer(self, node: object, frame: CanFrame, ready: int) -> None:
+        """Queue frame for tick ready."""
+        self._seq += 1
+        self._queue.append((ready, self._seq, frame))
+        self._queue.sort()
+
+    def withdraw(self, node: object) -> int:
+        """Drop everything queued."""
+        n = len(self._queue)
+        self._queue.clear()
+        return n
+
+    def due(self, now: int) -> list[CanFrame]:
+        """The frames whose time has come, in order."""
+        k = 0
+        while k < len(self._queue) and self._queue[k][0] <= now:
+            k += 1
+        out = [f for _, _, f in self._queue[:k]]
+        del self._queue[:k]
+        return out
+
+    def next_at(self) -> int:
+        """Tick of the next queued frame (NEVER if none)."""
+        return self._queue[0][0] if self._queue else NEVER
+
+
+class WallCanMotor:
+    """The AK60-6 over CAN on ``port`` (a :class:`~hal.can.CanPort`), one plant, wall-clock ns."""
+
+    def __init__(self, port: CanPort, url: CanUrl, fixture: Fixture | str | None = "suspended",
+                 clock_ns: Callable[[], int] | None = None) -> None:
+        """Start the plant and the device now."""
+        if clock_ns is None:
+            t0 = time.perf_counter_ns()
+            clock_ns = lambda: time.perf_counter_ns() - t0  # noqa: E731
+        self.now = clock_ns
+        self.port = port
+        fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
+        self.world = World(Plant(None, fx), NS_PER_S)
+        self.bus = WallCanBus()
+        self.device = Ak60Can(self.world, self.bus, Ak60CanConfig(driver_id=url.driver_id, mode=url.mode))
+        self.frames_in = 0
+        self.frames_out = 0
+        self.tx_refused = 0
+
+    def step(self) -> None:
+        """Take the frames that arrived, run the device up to now, send what is due."""
+        now = self.now()
+        while True:
+            frame = self.port.receive()
+            if frame is None:
+                break
+            self.frames_in += 1
+            self.device.on_frame(frame, max(now, self.world.now + 1))
+        self.world.advance_to(now)
+        for frame in self.bus.due(now):
+            if self.port.send(frame):
+                self.frames_out += 1
+            else:
+                self.tx_refused += 1
+
+    def serve(self, stop: list[str], duration_s: float | None) -> None:
+        """Step until stop is non-empty or duration_s has passed; sleep in between (at most 1 ms)."""
+        end = None if duration_s is None else self.now() + int(duration_s * NS_PER_S)
+        while not stop:
+            self.step()
+            now = self.now()
+            if end is not None and now >= end:
+                return
+            wake = min(self.world_next(), self.bus.next_at())
+            pause = min(MAX_SLEEP_S, max(0.0, (wake - now) / NS_PER_S))
+            if pause > 0:
+                time.sleep(pause)
+
+    def world_next(self) -> int:
+        """The earliest device event."""
+        return min(self.device.next_event, self.device.core.next_event)
+
+    def summary(self, why: str) -> str:
+        """One line: what was served and counted."""
+        d = self.device
+        return (f"pafp emulate: stopped ({why}); motor over CAN ({d.mode} mode, id {d.driver_id}): "
+                f"{self.frames_in} frames in, {self.frames_out} out, {d.ignored_frames} ignored, "
+                f"{d.core.stats.timeouts} command timeouts, {self.tx_refused} refused by the bus")
+
+
+def open_and_serve(url_text: str, fixture: str, duration_s: float | None, stop: list[str],
+                   announce: Callable[[str], None]) -> str:
+    """Open the bus a can:// URL names, announce it, serve; return the summary (HalError, ValueError: bad input)."""
+    from hal.pycan import open_can, parse_can_url
+
+    url = parse_can_url(url_text, "--can")
+    port = open_can(url)
+    try:
+        motor = WallCanMotor(port, url, fixture)
+        announce(f"motor: {url_text}")
+        try:
+            motor.serve(stop, duration_s)
+        except HalError as exc:
+            return f"pafp emulate: the bus failed ({exc})"
+        return motor.summary(stop[0] if stop else "duration")
+    finally:
+        port.close()
