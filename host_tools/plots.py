@@ -20,7 +20,19 @@ def plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndar
                   t_s: np.ndarray, current_cmd_a: np.ndarray, current_meas_a: np.ndarray,
                   errors_deg: dict[str, np.ndarray], title: str) -> None:
     """Angle vs % gait (each stride and their mean per signal, the normative mean +- 1 SD); current and the
-    tracking errors (reference minus each signal, NaN outside RUN) vs time."""
+    tracking errors (reference minus each signal, NaN outside RUN) vs time.
+
+    The time series of a long run come as each group's minimum and maximum (host_tools/tracking_stream.py):
+    a line zigzagging over the whole height, which Agg rasterises with a cell per pixel crossed unless the
+    path is drawn in chunks (1000 vertices: 40,000 points took 140 MB and 2.8 s in one piece, 16 MB and 0.7 s).
+    """
+    with matplotlib.rc_context({"agg.path.chunksize": 1000}):
+        _plot_tracking(path, strides, band, t_s, current_cmd_a, current_meas_a, errors_deg, title)
+
+
+def _plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndarray, np.ndarray, np.ndarray],
+                   t_s: np.ndarray, current_cmd_a: np.ndarray, current_meas_a: np.ndarray,
+                   errors_deg: dict[str, np.ndarray], title: str) -> None:
     fig, (ax1, ax2, ax4) = plt.subplots(3, 1, figsize=(9, 11), constrained_layout=True)
     pct, mean, sd = band
     ax1.fill_between(pct, mean - sd, mean + sd, color="0.85", label="normative mean ± 1 SD")

@@ -64,6 +64,7 @@ class TelemetryCsv:
         self._specs = RECORD_SPECS + tuple(FieldSpec(name, "f", 0.0) for name in extra_names)
         self.f_cpu_hz = f_cpu_hz
         self.rows = 0
+        self._float_specs = [spec for spec in self._specs if spec.fmt == "f"]
         columns = [*RECORD_COLUMNS, *extra_names]
         if f_cpu_hz is not None:
             columns.insert(columns.index("time_cycles") + 1, "time_s")
@@ -87,6 +88,13 @@ class TelemetryCsv:
         if not rows:
             return
         columns = list(zip(*rows, strict=True))
+        floats = [np.array(c, dtype=np.float64) for spec, c in zip(self._specs, columns, strict=True)
+                  if spec.fmt == "f"]
+        series = np.array([v for spec, v in zip(self._float_specs, floats, strict=True)
+                           for v in ((v, np.degrees(v)) if spec.name in _ANGLES else (v,))], dtype=np.float32)
+        digits = float32_digits(series).tolist()  # every float column in one go
+        values = series.astype(np.float64).tolist()
+        pairs = iter(zip(digits, values, strict=True))
         cells: list[Sequence[object]] = []
         for spec, column in zip(self._specs, columns, strict=True):
             if spec.name == "time_cycles":
@@ -94,12 +102,9 @@ class TelemetryCsv:
                 if self.f_cpu_hz is not None:
                     cells.append([c / self.f_cpu_hz for c in column])
             elif spec.fmt == "f":
-                values = np.array(column, dtype=np.float64)
-                series = [values, np.degrees(values)] if spec.name in _ANGLES else [values]
-                for v in series:
-                    v32 = v.astype(np.float32)
-                    cells.append(float32_digits(v32).tolist())
-                    cells.append(v32.astype(np.float64).tolist())
+                for _ in range(2 if spec.name in _ANGLES else 1):
+                    d, v = next(pairs)
+                    cells += [d, v]
             elif spec.name in _ENUMS:
                 enum = _ENUMS[spec.name]
                 names = {m.value: m.name for m in enum}

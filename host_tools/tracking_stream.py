@@ -204,7 +204,7 @@ class TrackingStream:
             for b in range(0, int(inner.sum()), _BLOCK):  # in blocks: a (samples x shifts) matrix stays small
                 self._sum_all_shifts(sums, ang, loc[inner][b:b + _BLOCK])
             edge_idx, edge = idx[~inner], loc[~inner]  # the run's first and last n_lag samples
-            for i, k in enumerate(range(-n_lag, n_lag + 1)):
+            for i, k in enumerate(range(-n_lag, n_lag + 1) if len(edge) else ()):
                 ok = (edge_idx - k >= 0) & (edge_idx - k < self._received)
                 if ok.any():
                     d = ang[edge[ok]] - ref[edge[ok] - k]

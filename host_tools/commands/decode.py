@@ -13,7 +13,7 @@ many bytes were held, how many candidates were given up, how many messages that 
 bytes were left over in no message (also counted in ``dropped_bytes``).
 
 Memory does not grow with the capture: JSON lines are written as they are decoded; CSV rows go to a
-temporary file first (the header needs every column), then to the table.
+temporary file first (pickled batches: the header needs every column), then to the table.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import dataclasses
 import json
 import math
 import os
+import pickle
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
@@ -185,25 +186,35 @@ def _flush(decoder: Any, emit: Callable[[Any], None]) -> dict[str, int]:
 
 
 class _CsvSpool:
-    """CSV rows kept in a temporary file (JSON lines) with their columns, until the table can be written."""
+    """CSV rows kept in a temporary file (pickled batches) with their columns, until the table can be written."""
+
+    BATCH = 4096
 
     def __init__(self, directory: str | None) -> None:
         """Create the spool file in directory (the output's, so a full disk shows before decoding)."""
-        self._f = tempfile.TemporaryFile("w+", encoding="utf-8", dir=directory)
+        self._f = tempfile.TemporaryFile("w+b", dir=directory)
+        self._batch: list[dict[str, Any]] = []
         self.columns: dict[str, None] = {}
 
     def add(self, row: dict[str, Any]) -> None:
         """Keep one row."""
         self.columns.update(dict.fromkeys(row))
-        self._f.write(json.dumps(row) + "\n")
+        self._batch.append(row)
+        if len(self._batch) >= self.BATCH:
+            pickle.dump(self._batch, self._f, protocol=pickle.HIGHEST_PROTOCOL)
+            self._batch = []
 
     def write_to(self, out: TextIO) -> None:
         """Write the table: the header (every column, in order of first use), then the rows."""
         writer = csv.DictWriter(out, fieldnames=list(self.columns), restval="")
         writer.writeheader()
         self._f.seek(0)
-        for line in self._f:
-            writer.writerow(json.loads(line))
+        while True:
+            try:
+                writer.writerows(pickle.load(self._f))
+            except EOFError:
+                break
+        writer.writerows(self._batch)
         self._f.close()
 
 

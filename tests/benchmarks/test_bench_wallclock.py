@@ -41,3 +41,45 @@ def test_wallclock_vs_naive(benchmark, tmp_path: Path) -> None:  # type: ignore[
     benchmark.extra_info.update({"rtos": {k: v for k, v in rt.items() if k != "tasks"}, "naive": naive})
     assert abs(rt["control_releases"] - 10_000) <= 1
     assert naive["ticks"] < rt["control_releases"]  # sleeping after the work drifts
+
+
+def test_serial_against_emulator_tracks_like_virtual(benchmark, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The firmware on the ptys of `pafp emulate bench` (another process) against the ideal virtual bench.
+
+    The emulated devices have no IMU bias, drift or encoder offset, so the virtual run is `--ideal all`. The
+    figure is the fused estimate's RMS (what the firmware tracks; no plant in this process) over the RUN
+    time, serial against virtual: how much the wall clock and the emulator process cost the tracking.
+    """
+    import json
+    import signal
+    import subprocess
+    import sys
+
+    from host_tools.cli import main
+    from host_tools.report import summarise
+    from host_tools.runner import RunConfig, run_virtual
+
+    root = Path(__file__).resolve().parents[2]
+
+    def run() -> dict:
+        emu = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "bench", "--pty", "--duration", "20"],
+                               cwd=root, stdout=subprocess.PIPE, text=True)
+        paths = dict(emu.stdout.readline().strip().split(": ") for _ in range(2))  # type: ignore[union-attr]
+        time.sleep(0.5)  # the foot comes to rest on its stop
+        try:
+            main(["run", "--motor", paths["motor"], "--imu", paths["imu"], "--duration", "5", "--out",
+                  str(tmp_path / "serial"), "--quiet"])
+        finally:
+            emu.send_signal(signal.SIGTERM)
+            emu.communicate(timeout=10)
+        s = json.loads((tmp_path / "serial" / "summary.json").read_text())
+        v = summarise(run_virtual(RunConfig(strides=max(1, s["strides"]), trace_capacity=0, ideal=("all",))))
+        return {"serial_fused_rms_deg": s["tracking"]["fused"]["rms_deg"], "faults": s["faults"],
+                "virtual_fused_rms_deg": v["tracking"]["fused"]["rms_deg"], "strides": s["strides"]}
+
+    out = benchmark.pedantic(run, rounds=1, iterations=1)
+    ratio = (out["serial_fused_rms_deg"] / out["virtual_fused_rms_deg"]
+             if out["serial_fused_rms_deg"] is not None else None)
+    out["ratio"] = None if ratio is None else round(ratio, 2)
+    print(f"\nserial (emulator process) vs virtual, fused RMS over RUN: {out}")
+    benchmark.extra_info.update(out)
