@@ -2,7 +2,8 @@
 
 The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop (with the job record
 its task bodies read and its watchdog), the interrupt interference solve, the virtual peripherals and
-device models with their event base classes, the plant, the firmware's tasks, drivers and codecs, and
+device models with their event base classes, the plant, the firmware's tasks, drivers and codecs, the
+shipped controllers (cascade, impedance) with the observation they read and the load detector, and
 the bench probe of a virtual run.
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
@@ -15,7 +16,8 @@ store as plain ints; their framing, ``telemetry_frame``, is compiled), the confi
 parameters (their checks must see the values as given: compiled code turns a bool into an int at the
 boundary), the gait reference (tests replace its constructors; the curve it samples,
 ``firmware.control.curve``, is compiled), the RTOS task declarations (``rtos.task``: their checks must
-see bools), the analysis and the host tools other than the probe.
+see bools), the controller interface and registry and a user's controller class (the compiled control
+task calls it through a Python call), the analysis and the host tools other than the probe.
 """
 
 from __future__ import annotations
@@ -56,6 +58,11 @@ COMPILED = [
     "hal/virtual/devices/bno08x.py",
     "hal/virtual/devices/encoder.py",
     "firmware/app.py",
+    "firmware/tasks.py",
+    "firmware/control/observation.py",
+    "firmware/control/cascade.py",
+    "firmware/control/gait_events.py",
+    "firmware/control/impedance.py",
     "firmware/safety.py",
     "firmware/logger.py",
     "firmware/drivers/motor.py",

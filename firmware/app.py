@@ -1,94 +1,38 @@
-"""The application that would be flashed: the task table and the task bodies.
+"""The application that would be flashed: the task table and the events from outside it.
 
 Tasks (smaller priority number = higher priority), all released together each control period so
 that, cooperatively, one period runs: encoder -> supervisor -> control -> motor; the IMU, logger and
 watchdog tasks run at lower rates. Costs are cycle estimates from the firmware profile (to calibrate
-with DWT->CYCCNT on a real board). The firmware is handed a `Board`; it never imports a backend.
+with DWT->CYCCNT on a real board). The task bodies are in :mod:`firmware.tasks`. The firmware is handed
+a `Board`; it never imports a backend.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Final
 
 from firmware.config import CostModel, FirmwareConfig
-from firmware.control.estimation import AngleEstimator
-from firmware.control.filters import ButterworthLowPass
-from firmware.control.pid import CascadeController, Feedforward
-from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
-from firmware.drivers.encoder import EncoderDriver
-from firmware.drivers.imu import ImuDriver
+from firmware.control.interface import check_controller
+from firmware.control.reference import GaitReference
 from firmware.drivers.motor_link import SafeStop
-from firmware.drivers.motor_links import make_motor_driver
-from firmware.logger import TelemetryLogger
-from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
+from firmware.safety import FaultReason
+from firmware.tasks import ControlOutput, FirmwareTasks, KernelHealth
 from hal.interfaces import Board
-from protocol.rvc import RVC_RATE_HZ
 from rtos import Job, OverrunPolicy, Task
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Firmware", "KernelHealth"]
-
-# enum members bound once for the per-period checks (Final: compiled, C statics, no module-dict lookup)
-_INIT: Final = SupervisorState.INIT
-_SAFE: Final = SupervisorState.SAFE
-
-KernelHealth = Callable[[], tuple[int, int]]
-"""Returns (total deadline misses, longest current miss streak) as the RTOS sees them."""
+__all__ = ["ControlOutput", "Firmware", "KernelHealth"]
 
 
-@dataclass
-class ControlOutput:
-    """What the control task decided this period (read by the motor, logger and report)."""
-
-    reference_rad: float = 0.0
-    current_cmd_a: float = 0.0
-    brake: bool = False
-    fused_angle_rad: float = 0.0
-    torque_est_nm: float = 0.0
-
-
-class Firmware:
+class Firmware(FirmwareTasks):
     """The prosthesis firmware bound to `board`: build it, then hand `tasks` to the RTOS."""
 
-    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None) -> None:
-        """Bind drivers to the board's peripherals and build the controller."""
-        self.board = board
-        self.config = c = config
-        self.f_cpu_hz = board.f_cpu_hz
-        self.ts_s = 1.0 / c.control_hz
-        self.reference = reference or GaitReference.normative(stride_s=c.stride_s)
-        self._gait_curve = self.reference.curve  # sampled directly: compiled, not through the interpreted class
-        self.encoder = EncoderDriver(board.encoder, self.ts_s, velocity_cutoff_hz=c.velocity_cutoff_hz)
-        self.imu = ImuDriver(board.imu_uart)
-        self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (hal.links)
-        self.logger = TelemetryLogger(board.telemetry_uart)
-        self.supervisor = Supervisor(c.safety)
-        self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
-        self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
-                           if c.imu_lowpass_hz > 0 else None)
-        self.cascade = CascadeController(c.position_gains, c.velocity_gains, self.ts_s,
-                                         c.current_limit_a, c.velocity_limit_rad_s)
-        feedforward = Feedforward(c.feedforward_params)
-        self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
-        # what the control task reads of the (frozen, interpreted) configuration every period
-        self._feedforward = feedforward if c.feedforward else None
-        self._com_angle_rad = c.com_angle_rad
-        # what the kernel says of deadlines; the runner sets it once the scheduler exists
-        self.kernel_health: KernelHealth = lambda: (0, 0)
-        self.out = ControlOutput()
-        self._safety_inputs = SafetyInputs(now_s=0.0, angle_rad=0.0)
-        self.imu_pitch_rad = 0.0
-        self.gait_start_s: float | None = None
-        self._trajectory: Trajectory | None = None
-        self._new_imu = False
-        self._heartbeat = 0
-        self._kicked_heartbeat = -1
-        self.watchdog_resets = 0
-        self.link_lost_seen_s: float | None = None
+    def __init__(self, board: Board, config: FirmwareConfig, reference: GaitReference | None = None,
+                 controller: object = None) -> None:
+        """Bind drivers to the board's peripherals, take the controller (default: the profile's), build the table."""
+        super().__init__(board, config, reference, controller)
         self.tasks = self._task_table()
 
     # The task table ---------------------------------------------------------------------------
@@ -97,119 +41,23 @@ class Firmware:
 
         def task(name: str, prio: int, hz: int, body: Callable[[Job], object]) -> Task:
             cost: int | Callable[[object], int] = c.cost(name)
+            own = getattr(self.controller, "cost_cycles", None) if name == "control" else None
+            if isinstance(own, int):
+                check_controller(self.controller, f // hz)
+                cost = own
             if isinstance(cost, CostModel) and not cost.per_byte:
                 cost = cost.base  # a fixed cost: the kernel need not call the model for every job
             return Task(name, prio, period=f // hz, cost=cost, body=body, overrun=OverrunPolicy.SKIP)
 
         return [
-            task("encoder", 1, c.control_hz, self._encoder_task),
-            task("supervisor", 2, c.control_hz, self._supervisor_task),
-            task("control", 3, c.control_hz, self._control_task),
-            task("motor", 4, c.control_hz, self._motor_task),
-            task("imu", 5, c.imu_poll_hz, self._imu_task),
-            task("logger", 6, c.logger_hz, self._logger_task),
-            task("watchdog", 7, c.watchdog_kick_hz, self._watchdog_task),
+            task("encoder", 1, c.control_hz, self.encoder_task),
+            task("supervisor", 2, c.control_hz, self.supervisor_task),
+            task("control", 3, c.control_hz, self.control_task),
+            task("motor", 4, c.control_hz, self.motor_task),
+            task("imu", 5, c.imu_poll_hz, self.imu_task),
+            task("logger", 6, c.logger_hz, self.logger_task),
+            task("watchdog", 7, c.watchdog_kick_hz, self.watchdog_task),
         ]
-
-    def seconds(self, cycles: int) -> float:
-        """Convert a cycle count of the board's clock to seconds."""
-        return cycles / self.f_cpu_hz
-
-    # Task bodies -------------------------------------------------------------------------------
-    def _encoder_task(self, job: Job) -> None:
-        self.encoder.sample()
-
-    def _imu_task(self, job: Job) -> int:
-        before = self.imu.decoder.stats.bytes_in
-        if self.imu.poll(self.seconds(job.start)):
-            pitch = self.imu.pitch_rad
-            assert pitch is not None  # poll() returned frames
-            self.imu_pitch_rad = self.imu_filter.step(pitch) if self.imu_filter else pitch
-            self._new_imu = True
-        return self.imu.decoder.stats.bytes_in - before
-
-    def _supervisor_task(self, job: Job) -> None:
-        x = self._safety_inputs  # one object refilled each period (the supervisor keeps no reference)
-        x.now_s = job.start / self.f_cpu_hz
-        x.deadline_miss_streak = self.kernel_health()[1]
-        feedback, estimator = self.motor.feedback, self.estimator
-        x.angle_rad = self.out.fused_angle_rad
-        x.current_meas_a = feedback.current_a
-        x.last_motor_reply_s = feedback.received_s
-        x.last_command_s = self.motor.last_command_s
-        x.last_imu_frame_s = self.imu.last_frame_s
-        x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
-        x.motor_fault_code = feedback.fault
-        x.estop_pressed = self.board.estop.read()
-        x.link_lost = link_lost = self.motor.link_lost or self.imu.link_lost
-        if link_lost and self.link_lost_seen_s is None:
-            self.link_lost_seen_s = x.now_s  # whatever the state: the latency of seeing it is never negative
-        self.supervisor.check(x)
-
-    def _control_task(self, job: Job) -> None:
-        now_s = job.start / self.f_cpu_hz
-        self._heartbeat += 1
-        imu = self.imu_pitch_rad if self._new_imu else None
-        self._new_imu = False
-        fused = self.estimator.update(self.encoder.angle_rad, imu)
-        out = self.out
-        out.fused_angle_rad = fused
-        state = self.supervisor.state
-        if state is _SAFE:
-            cmd = self.supervisor.safe_command(now_s)
-            out.current_cmd_a, out.brake = cmd.current_a, cmd.brake
-            self.cascade.reset()
-            return
-        if state is _INIT or not self.estimator.seeded:
-            out.current_cmd_a, out.brake, out.reference_rad = 0.0, False, fused
-            return
-        gait_start_s = self.gait_start_s
-        if self._trajectory is None or gait_start_s is None:  # first RUN period: glide to the gait's start
-            ramp = self.config.startup_ramp_s
-            self._trajectory = MinimumJerk(fused, self.reference.angle_rad(0.0), ramp, now_s)
-            self.gait_start_s = gait_start_s = now_s + ramp
-        gait_t = now_s - gait_start_s
-        ref = self._trajectory.sample(now_s) if gait_t < 0 else self._gait_curve.sample(gait_t)
-        feedforward = self._feedforward
-        ff = feedforward.current_a(ref[0] + self._com_angle_rad, ref[2]) if feedforward is not None else 0.0
-        out.reference_rad = ref[0]
-        out.current_cmd_a = self.cascade.update(ref[0], ref[1], fused, self.encoder.velocity_rad_s, ff)
-        out.brake = False
-
-    def _motor_task(self, job: Job) -> int:
-        now_s = job.start / self.f_cpu_hz
-        before = self.motor.decoder.stats.bytes_in
-        self.motor.poll(now_s)
-        written = self.motor.send(self.out.current_cmd_a, now_s, brake=self.out.brake)
-        self.out.torque_est_nm = self.motor.feedback.current_a * self._nm_per_a
-        return written + self.motor.decoder.stats.bytes_in - before
-
-    def _logger_task(self, job: Job) -> int:
-        out, sup, encoder = self.out, self.supervisor, self.encoder
-        return self.logger.log_values(  # the fields in RECORD_FIELDS order (telemetry.TelemetryRecord)
-            job.start,
-            out.reference_rad,  # reference_rad
-            encoder.angle_rad,  # encoder_angle_rad
-            self.imu_pitch_rad,  # imu_pitch_rad
-            out.fused_angle_rad,  # fused_angle_rad
-            encoder.velocity_rad_s,  # velocity_rad_s
-            out.current_cmd_a,  # current_cmd_a
-            self.motor.feedback.current_a,  # current_meas_a
-            out.torque_est_nm,  # torque_est_nm
-            sup.state,  # supervisor_state
-            sup.reason,  # fault_reason
-            self.kernel_health()[0],  # deadline_misses
-        )
-
-    def _watchdog_task(self, job: Job) -> None:
-        if self._heartbeat != self._kicked_heartbeat:  # the control loop ran since the last kick
-            self._kicked_heartbeat = self._heartbeat
-            self.board.watchdog.kick()
-        led = self.board.led
-        if self.supervisor.state is _SAFE:
-            led.write(True)
-        elif job.index % 50 == 0:
-            led.toggle()
 
     # Events from outside the task table ----------------------------------------------------------
     def stop(self, now_s: float, timeout_s: float = 0.5) -> SafeStop:

@@ -21,7 +21,7 @@ __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareCo
 
 DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
-SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor")
+SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller")
 """The tables of a firmware profile ([control] holds the sub-tables position and velocity)."""
 TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "watchdog")
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
@@ -88,6 +88,8 @@ class FirmwareConfig:
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
     motor_link: str = "uart"  # [motor] link: a name of hal.links.MOTOR_LINKS
     motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
+    controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
+    controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
 
     def __post_init__(self) -> None:
         """Check every rate, control scalar and task name (profile keys: firmware/config.py's tables)."""
@@ -195,6 +197,19 @@ def _section(doc: dict[str, Any], name: str) -> dict[str, Any]:
     return table
 
 
+def _controller(table: dict[str, Any], profile: Path) -> dict[str, Any]:
+    """[controller]: `name` (a shipped one or FILE.py:CLASS, a relative FILE taken from the profile's
+    folder); every other key goes to the controller's constructor as a dict."""
+    params = dict(table)
+    name = params.pop("name", "cascade")
+    if not isinstance(name, str):
+        raise ValueError(f"name = {name!r} is not a string")
+    file, sep, cls = name.rpartition(":")
+    if sep and file.endswith(".py") and not Path(file).is_absolute():
+        name = f"{profile.parent / file}:{cls}"
+    return {"controller": name, "controller_params": params}
+
+
 def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file, the section and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
@@ -242,10 +257,12 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         links = {"motor_link": motor["link"]} if "link" in motor else {}
         if "can_id" in motor:
             links["motor_can_id"] = motor["can_id"]
+        section = "controller"
+        controller = _controller(_section(doc, "controller"), p)
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
                               feedforward_params=feedforward_params, safety=safety, task_cycles=task_cycles,
-                              **links, **ctl)
+                              **links, **controller, **ctl)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from hal.errors import HalError
 from hal.interfaces import Uart
-from protocol.telemetry import RECORD_FRAMER
+from protocol.telemetry import RECORD_FRAMER, record_framer
 from protocol.telemetry_frame import RecordFramer
 
 __all__ = ["TelemetryLogger"]
@@ -24,6 +24,10 @@ class TelemetryLogger:
         self.seq = 0
         self.sent = 0
         self.dropped = 0
+
+    def extra_fields(self, count: int) -> None:
+        """Records carry `count` float32 fields after the base ones from now on (a controller's published values)."""
+        self._framer = record_framer(count)
 
     def log_values(self, time_cycles: int, *values: float | int) -> int:
         """Frame and queue one record, every field after time_cycles given positionally in RECORD_FIELDS order.

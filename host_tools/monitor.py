@@ -30,12 +30,13 @@ __all__ = ["CsvSink", "MonitorState", "render"]
 class CsvSink:
     """Appends records as CSV rows; every batch is written whole and flushed."""
 
-    def __init__(self, path: Path) -> None:
-        """Create (truncate) path and write the header line."""
+    def __init__(self, path: Path, extra_names: tuple[str, ...] = ()) -> None:
+        """Create (truncate) path and write the header line (base columns, then `extra_names`)."""
         self.path = path
+        self.extra_names = extra_names
         self._f: TextIO = path.open("w", newline="", encoding="utf-8")
         self._buf = io.StringIO()
-        self._w = csv.DictWriter(self._buf, fieldnames=list(RECORD_COLUMNS), extrasaction="ignore")
+        self._w = csv.DictWriter(self._buf, fieldnames=[*RECORD_COLUMNS, *extra_names], extrasaction="ignore")
         self._w.writeheader()
         self.rows = 0
         self._flush()
@@ -51,7 +52,7 @@ class CsvSink:
         if not records:
             return
         for rec in records:
-            self._w.writerow(record_to_row(rec))
+            self._w.writerow(record_to_row(rec, self.extra_names))
         self.rows += len(records)
         self._flush()
 

@@ -154,15 +154,18 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
         "telemetry": {"records_sent": fw.logger.sent, "records_dropped": fw.logger.dropped,
                       "bytes": files.telemetry_bytes if files is not None else len(r.telemetry)},
         "tasks": tasks,
+        "controller": {"name": fw.config.controller, "class": type(fw.controller).__qualname__,
+                       "published": list(fw.published_names), "error": fw.controller_error or None},
     }
 
 
-def _write_telemetry_csv(data: bytes, path: Path, f_cpu_hz: int, chunk_bytes: int = 1 << 16) -> dict:
+def _write_telemetry_csv(data: bytes, path: Path, f_cpu_hz: int, chunk_bytes: int = 1 << 16,
+                         extra_names: tuple[str, ...] = ()) -> dict:
     """Decode data into path (a temporary name, renamed when complete), a chunk at a time."""
-    dec = TelemetryDecoder()
+    dec = TelemetryDecoder(len(extra_names))
     tmp = path.with_name(f".{path.name}.tmp")
     with tmp.open("w", encoding="utf-8", newline="") as f:
-        csv = TelemetryCsv(f, f_cpu_hz)
+        csv = TelemetryCsv(f, f_cpu_hz, extra_names)
         for k in range(0, len(data), chunk_bytes):
             csv.write(dec.feed_values(data[k:k + chunk_bytes]))
     tmp.replace(path)
@@ -262,7 +265,8 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     s = summarise(r, tracking)
     s.update(extra or {})
     s["telemetry"]["decoder"] = (files.decoder_stats() if files is not None
-                                 else _write_telemetry_csv(r.telemetry, out / "telemetry.csv", r.firmware.f_cpu_hz))
+                                 else _write_telemetry_csv(r.telemetry, out / "telemetry.csv", r.firmware.f_cpu_hz,
+                                                          extra_names=r.firmware.published_names))
     if trace and r.scheduler.trace is not None:
         r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
     fw = r.firmware
@@ -282,6 +286,11 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
                       errors, f"Gait tracking, {s['strides']} strides, IMU-measured RMS "
                       f"{_figure(s['tracking']['imu']['rms_deg'], 2, '°')}")
         tmp.replace(out / "tracking.png")
+    if getattr(r.config, "scenario", "suspended") == "walk":
+        from host_tools.actuator import walk_outputs
+
+        s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a)
+        md_extra = [*(md_extra or []), *walk_md]
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)
     s["process_realtime_factor"] = round(r.sim_time_s / elapsed, 2) if elapsed > 0 else None

@@ -37,15 +37,17 @@ def take_samples(probe: Probe) -> dict[str, np.ndarray]:
 class RunFiles:
     """telemetry.bin and telemetry.csv in ``directory``, and the tracking figures, fed segment by segment."""
 
-    def __init__(self, directory: Path, tracking: TrackingStream, f_cpu_hz: int) -> None:
-        """Create (truncate) the two telemetry files in directory (times in cycles of f_cpu_hz)."""
+    def __init__(self, directory: Path, tracking: TrackingStream, f_cpu_hz: int,
+                 extra_names: tuple[str, ...] = ()) -> None:
+        """Create (truncate) the two telemetry files in directory (times in cycles of f_cpu_hz; extra_names: the
+        controller's published values, last columns of the CSV)."""
         self.directory = directory
         self.tracking = tracking
-        self.decoder = TelemetryDecoder()
+        self.decoder = TelemetryDecoder(len(extra_names))
         self.telemetry_bytes = 0
         self._bin = (directory / "telemetry.bin").open("wb")
         self._csv_file = (directory / "telemetry.csv").open("w", encoding="utf-8", newline="")
-        self._csv = TelemetryCsv(self._csv_file, f_cpu_hz)
+        self._csv = TelemetryCsv(self._csv_file, f_cpu_hz, extra_names)
         self._result: TrackingResult | None = None
 
     def drain(self, bench: VirtualBench, probe: Probe, fw: Firmware) -> None:

@@ -26,9 +26,11 @@ from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.draw import draw_plant, drawn_values
+from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
 from host_tools.run_files import RunFiles
 from host_tools.tracking_stream import probe_stream
+from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, walking_load
 from host_tools.wire_capture import WireCapture
 from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
@@ -76,6 +78,11 @@ class RunConfig:
     # the bench's imperfections (None: profiles/bench_imperfections.toml, the real device) and those off
     imperfections: Imperfections | None = None
     ideal: tuple[str, ...] = ()
+    controller: object = None  # a built controller (None: the firmware profile's [controller])
+    scenario: str = "suspended"  # or "walk": the ground's moment in stance (host_tools/walk.py)
+    body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
+    moment_csv: Path | None = None  # walk: the ankle moment per kg (default: the packaged normative curve)
+    speed: str | None = None  # a speed group of the packaged data (host_tools/walk.py SPEEDS): reference and moment
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -83,6 +90,10 @@ class RunConfig:
             raise ValueError(f"strides {self.strides!r} out of range: an int in 1..10000")
         if not isinstance(self.baud, int) or not 9600 <= self.baud <= 3_000_000:
             raise ValueError(f"baud {self.baud!r} out of range: an int in 9600..3000000")
+        if self.speed is not None and self.speed not in SPEEDS:
+            raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
+        if self.scenario not in SCENARIOS:
+            raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
@@ -149,16 +160,25 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     isr = dict(board_cfg.get("isr_cycles", {}))
     fw_cfg = cfg.firmware or load_firmware_config()
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
+                 else GaitReference.from_csv(all_speeds_path(), stride_s=fw_cfg.stride_s,
+                                             select={"speed_category": SPEEDS[cfg.speed]}) if cfg.speed
                  else GaitReference.normative(stride_s=fw_cfg.stride_s))
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
+    load = (walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv, cfg.speed) if cfg.scenario == "walk"
+            else None)
     bench_options, bench_record = cfg.bench_setup()
+    if load is not None:
+        bench_options["fixture"] = walk(load)
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,
                          can_id=fw_cfg.motor_can_id, **bench_options)
     bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
-    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference)
+    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
+                  controller=cfg.controller)
+    if load is not None:
+        load.bind(lambda: fw.gait_start_s)  # the walker's strides on the firmware's gait clock
     probe = Probe()
     # bench instrument, not firmware: zero cycles, lowest priority
     probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))
@@ -192,7 +212,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     if cfg.stream_to is not None:
         tracking = probe_stream(stride_s=fw_cfg.stride_s, strides=cfg.strides, dt_s=1.0 / PROBE_HZ,
                                 expected_samples=int(sim_s * PROBE_HZ))
-        files = RunFiles(cfg.stream_to, tracking, f_cpu)
+        files = RunFiles(cfg.stream_to, tracking, f_cpu, fw.published_names)
     wall = 0.0
     complete = True
     segment = SEGMENT_S * f_cpu

@@ -22,7 +22,7 @@ from typing import TextIO
 
 import numpy as np
 
-from protocol.telemetry import RECORD_COLUMNS, RECORD_SPECS, FaultReason, SupervisorState
+from protocol.telemetry import RECORD_COLUMNS, RECORD_SPECS, FaultReason, FieldSpec, SupervisorState
 
 __all__ = ["TelemetryCsv", "float32_digits"]
 
@@ -57,18 +57,20 @@ def float32_digits(values: np.ndarray) -> np.ndarray:
 class TelemetryCsv:
     """Writes the header at once, then rows a batch at a time (each batch one write, flushed)."""
 
-    def __init__(self, out: TextIO, f_cpu_hz: int | None) -> None:
-        """Write to out; with f_cpu_hz, a ``time_s`` column follows ``time_cycles``."""
+    def __init__(self, out: TextIO, f_cpu_hz: int | None, extra_names: Sequence[str] = ()) -> None:
+        """Write to out; with f_cpu_hz, a ``time_s`` column follows ``time_cycles``; ``extra_names`` (a
+        controller's published values, float32 fields after the base ones) are the last columns."""
         self._out = out
+        self._specs = RECORD_SPECS + tuple(FieldSpec(name, "f", 0.0) for name in extra_names)
         self.f_cpu_hz = f_cpu_hz
         self.rows = 0
-        self._float_specs = [spec for spec in RECORD_SPECS if spec.fmt == "f"]
-        columns = list(RECORD_COLUMNS)
+        self._float_specs = [spec for spec in self._specs if spec.fmt == "f"]
+        columns = [*RECORD_COLUMNS, *extra_names]
         if f_cpu_hz is not None:
             columns.insert(columns.index("time_cycles") + 1, "time_s")
         self.columns = tuple(columns)
         cells = []
-        for spec in RECORD_SPECS:
+        for spec in self._specs:
             if spec.name == "time_cycles":
                 cells += ["%d"] + (["%.9f"] if f_cpu_hz is not None else [])
             elif spec.fmt == "f":
@@ -82,11 +84,11 @@ class TelemetryCsv:
         out.flush()
 
     def write(self, rows: Sequence[tuple[int | float, ...]]) -> None:
-        """Write records given as value tuples in RECORD_FIELDS order."""
+        """Write records given as value tuples in RECORD_FIELDS order (then the extra values)."""
         if not rows:
             return
         columns = list(zip(*rows, strict=True))
-        floats = [np.array(c, dtype=np.float64) for spec, c in zip(RECORD_SPECS, columns, strict=True)
+        floats = [np.array(c, dtype=np.float64) for spec, c in zip(self._specs, columns, strict=True)
                   if spec.fmt == "f"]
         series = np.array([v for spec, v in zip(self._float_specs, floats, strict=True)
                            for v in ((v, np.degrees(v)) if spec.name in _ANGLES else (v,))], dtype=np.float32)
@@ -94,7 +96,7 @@ class TelemetryCsv:
         values = series.astype(np.float64).tolist()
         pairs = iter(zip(digits, values, strict=True))
         cells: list[Sequence[object]] = []
-        for spec, column in zip(RECORD_SPECS, columns, strict=True):
+        for spec, column in zip(self._specs, columns, strict=True):
             if spec.name == "time_cycles":
                 cells.append(column)
                 if self.f_cpu_hz is not None:

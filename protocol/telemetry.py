@@ -61,6 +61,7 @@ class FaultReason(IntEnum):
     TASK_OVERRUN = 10
     LINK_LOST = 11
     COMMAND_STALE = 12
+    CONTROLLER_ERROR = 13
 
 
 def _wire(fmt: str, default: Any = MISSING) -> Any:
@@ -85,6 +86,13 @@ class TelemetryRecord:
     supervisor_state: SupervisorState | int = _wire("B", SupervisorState.INIT)
     fault_reason: FaultReason | int = _wire("B", FaultReason.NONE)
     deadline_misses: int = _wire("I", 0)
+
+
+@dataclass(frozen=True)
+class PublishedRecord(TelemetryRecord):
+    """A record with the values a controller published: float32 fields after the base ones (``extra``)."""
+
+    extra: tuple[float, ...] = ()
 
 
 class FieldSpec(NamedTuple):
@@ -201,6 +209,18 @@ RECORD_FRAMER: RecordFramer = RecordFramer(_RECORD_DATA, TELEMETRY_VERSION, BASE
 """Frames records from their field values (:func:`encode_record_values`; the logger calls it directly)."""
 
 
+def record_framer(extra_floats: int) -> RecordFramer:
+    """The framer of records carrying `extra_floats` float32 fields after the base ones (0: RECORD_FRAMER)."""
+    if extra_floats == 0:
+        return RECORD_FRAMER
+    if not 0 < extra_floats <= (MAX_PAYLOAD_LEN - RECORD_PAYLOAD_LEN) // 4:
+        raise ValueError(f"{extra_floats} extra fields out of range: 0..{(MAX_PAYLOAD_LEN - RECORD_PAYLOAD_LEN) // 4}")
+    specs = RECORD_SPECS + tuple(FieldSpec(f"extra_{k}", "f", math.nan) for k in range(extra_floats))
+    layout = struct.Struct(_RECORD_DATA.format + "f" * extra_floats)
+    return RecordFramer(layout, TELEMETRY_VERSION, len(specs),
+                        lambda every: _explain_pack_error(every, specs))  # type: ignore[arg-type]
+
+
 def decode_payload(payload: bytes, specs: Sequence[FieldSpec] = RECORD_SPECS) -> dict[str, int | float]:
     """Decode an unframed payload into {name: value} for `specs`; FrameError subclasses on bad input."""
     if len(payload) < _HEADER.size + _CRC.size:
@@ -234,17 +254,23 @@ def _enum_or_int(enum: type[IntEnum], value: int) -> IntEnum | int:
         return value
 
 
-def record_from_values(values: dict[str, int | float]) -> TelemetryRecord:
-    """Build a record from decoded field values (unknown enum codes stay plain ints)."""
-    kw = {name: values[name] for name in RECORD_FIELDS}
+def record_from_values(values: dict[str, int | float], extra: tuple[float, ...] = ()) -> TelemetryRecord:
+    """Build a record from decoded field values (unknown enum codes stay plain ints), `extra` appended."""
+    kw: dict[str, Any] = {name: values[name] for name in RECORD_FIELDS}
     kw["supervisor_state"] = _enum_or_int(SupervisorState, int(kw["supervisor_state"]))
     kw["fault_reason"] = _enum_or_int(FaultReason, int(kw["fault_reason"]))
-    return TelemetryRecord(**kw)  # type: ignore[arg-type]
+    return PublishedRecord(**kw, extra=extra) if extra else TelemetryRecord(**kw)  # type: ignore[arg-type]
 
 
-def decode_frame(frame: bytes) -> TelemetryRecord:
-    """Decode one frame (COBS bytes, with or without the trailing 0x00); FrameError on bad input."""
+def decode_frame(frame: bytes, extra_fields: int = 0) -> TelemetryRecord:
+    """Decode one frame (COBS bytes, with or without the trailing 0x00); FrameError on bad input.
+
+    With ``extra_fields`` the first that many float32 fields after the base ones (a controller's published
+    values) land in ``record.extra`` (NaN for those the frame lacks).
+    """
     encoded = frame[:-1] if frame.endswith(b"\x00") else frame
+    if extra_fields:
+        return _record_extra(_unstuff(encoded), extra_fields)[1]
     return record_from_values(decode_payload(_unstuff(encoded)))
 
 
@@ -281,9 +307,26 @@ def _record(payload: bytes) -> tuple[int, TelemetryRecord]:
     return rec.seq, rec
 
 
-def record_to_row(rec: TelemetryRecord) -> dict[str, int | float | str]:
-    """One CSV row (keys = RECORD_COLUMNS): SI values, plus ``*_deg`` columns and enum names."""
-    row: dict[str, int | float | str] = {}
+def _extra_specs(extra_fields: int) -> tuple[FieldSpec, ...]:
+    return RECORD_SPECS + tuple(FieldSpec(f"extra_{k}", "f", math.nan) for k in range(extra_fields))
+
+
+def decode_values_extra(payload: bytes, extra_fields: int) -> tuple[int, tuple[int | float, ...]]:
+    """As :func:`decode_values`, the first extra_fields float32 fields after the base ones appended (NaN if absent)."""
+    values = decode_payload(payload, _extra_specs(extra_fields))
+    out = tuple(values[s.name] for s in RECORD_SPECS) + tuple(float(values[f"extra_{k}"]) for k in range(extra_fields))
+    return int(out[0]), out
+
+
+def _record_extra(payload: bytes, extra_fields: int) -> tuple[int, TelemetryRecord]:
+    values = decode_payload(payload, _extra_specs(extra_fields))
+    rec = record_from_values(values, tuple(float(values[f"extra_{k}"]) for k in range(extra_fields)))
+    return rec.seq, rec
+
+
+def record_to_row(rec: TelemetryRecord, extra_names: Sequence[str] = ()) -> dict[str, int | float | str]:
+    """One CSV row (keys = RECORD_COLUMNS, then extra_names): SI values, ``*_deg`` columns, enum names."""
+    row: dict[str, int | float | str] = dict(zip(extra_names, getattr(rec, "extra", ()), strict=False))
     for name in RECORD_FIELDS:
         value = getattr(rec, name)
         if name in _ANGLE_FIELDS:
@@ -318,8 +361,9 @@ T = TypeVar("T")
 class TelemetryDecoder:
     """Streaming decoder: splits on 0x00, decodes each frame, counts every failure; never raises."""
 
-    def __init__(self) -> None:
-        """Start with empty counters and an empty buffer."""
+    def __init__(self, extra_fields: int = 0) -> None:
+        """Start with empty counters and an empty buffer; keep `extra_fields` appended floats per record."""
+        self.extra_fields = extra_fields
         self.stats = TelemetryStats()
         self._buf = bytearray()
         self._discarding = False  # inside an overlong frame: drop until the next delimiter
@@ -332,14 +376,16 @@ class TelemetryDecoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[TelemetryRecord]:
         """Consume bytes and return the records whose frames they complete."""
-        return self._feed(data, _record)
+        n = self.extra_fields
+        return self._feed(data, (lambda payload: _record_extra(payload, n)) if n else _record)
 
     def feed_values(self, data: bytes | bytearray | memoryview) -> list[tuple[int | float, ...]]:
         """As :meth:`feed`, but each record as the tuple of its field values (RECORD_FIELDS order, enums as ints).
 
         The same counters; no record objects (a long run's CSV is written from these).
         """
-        return self._feed(data, decode_values)
+        n = self.extra_fields
+        return self._feed(data, (lambda payload: decode_values_extra(payload, n)) if n else decode_values)
 
     def _feed(self, data: bytes | bytearray | memoryview, build: Callable[[bytes], tuple[int, T]]) -> list[T]:
         if not isinstance(data, bytes):

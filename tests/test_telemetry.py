@@ -66,8 +66,9 @@ def test_enum_codes_are_fixed():
     assert [m.name for m in FaultReason] == [
         "NONE", "ANGLE_LIMIT", "CURRENT_LIMIT", "MOTOR_TIMEOUT", "IMU_TIMEOUT", "SENSOR_DISAGREEMENT",
         "MOTOR_FAULT", "DEADLINE_MISSES", "ESTOP", "WATCHDOG", "TASK_OVERRUN", "LINK_LOST", "COMMAND_STALE",
+        "CONTROLLER_ERROR",
     ]
-    assert [m.value for m in FaultReason] == list(range(13))
+    assert [m.value for m in FaultReason] == list(range(14))
 
 
 def test_crc16_is_ccitt_false():

@@ -40,11 +40,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "imu_bias, imu_drift, imu_noise, encoder_offset, ...), or all; repeatable")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
+                        help="the control law: cascade or impedance (shipped), or a class in a Python file "
+                             "(README: 'Your own controller'); default: the profile's [controller], else cascade")
     parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
     parser.add_argument("--no-trace", action="store_true", help="do not write trace.json")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
+    walk = parser.add_argument_group("scenario (virtual bench)")
+    walk.add_argument("--scenario", choices=("suspended", "walk"), default="suspended",
+                      help="suspended foot (default) or walk: the ground's moment in stance, scaled to --body-mass "
+                           "(docs/plant.md, 'Walking'); walk adds the actuator design check to summary.json")
+    walk.add_argument("--body-mass", type=float, default=80.0, metavar="KG",
+                      help="walk: body mass in kg, 20..200 (default 80, the report's subject)")
+    walk.add_argument("--moment", type=Path, default=None, metavar="CSV",
+                      help="walk: ankle moment per kg (columns percent_gait, ankle_moment_nm_per_kg_mean; "
+                           "default: the packaged normative curve)")
+    walk.add_argument("--speed", choices=("very-slow", "slow", "free", "fast", "very-fast"), default=None,
+                      help="the gait (angle reference and, walking, moment) of that speed group of the packaged "
+                           "normative data (Schwartz et al. 2008; default: free speed); the stride time stays "
+                           "the profile's")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -101,21 +117,21 @@ def run(args: argparse.Namespace) -> int:
     """
     if args.motor or args.imu:
         return _run_serial(args)
-    from firmware.config import load_firmware_config
     from host_tools.outdir import OutDirError, RunDir
     from host_tools.runner import RunConfig, board_profile
 
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
-        fw_cfg = load_firmware_config(args.profile)
-        if args.motor_link is not None:
-            from hal.links import link_entry
-
-            link_entry(args.motor_link, "--motor-link")
-            fw_cfg = fw_cfg.with_changes(motor_link=args.motor_link)
+        fw_cfg = _firmware_config(args)
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
-                        plant_seed=args.plant_seed, ideal=tuple(args.ideal))
+                        plant_seed=args.plant_seed, ideal=tuple(args.ideal),
+                        controller=_controller(fw_cfg, args), scenario=args.scenario,
+                        body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed)
+        if args.scenario == "walk":
+            from host_tools.walk import walking_load
+
+            walking_load(args.body_mass, fw_cfg.stride_s, args.moment, args.speed)  # a bad mass or CSV stops here
         board_profile(args.board)  # fail early with a clear message, before anything runs
         cfg.bench_setup()  # the plant draw and the imperfection names, checked before anything runs
         if args.reference is not None:
@@ -149,7 +165,8 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     out = run_dir.out
     plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
     ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
-    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal} -> {out}")
+    walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
+    print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
     cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity)
     bar = _Progress(not args.quiet)
@@ -171,6 +188,9 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
                *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
     print(f"  outputs: {out}/{', '.join(written)}")
+    if result.firmware.controller_error:
+        print(f"pafp run: {result.firmware.controller_error}; the supervisor latched the safe state "
+              f"(CONTROLLER_ERROR) and every file was written", file=sys.stderr)
     if stop.exit_code is not None:
         print(f"pafp run: stopped by {stop.name} after {s['sim_time_s']:.2f} s simulated; the outputs hold "
               "what the run had (\"complete\": false)", file=sys.stderr)
@@ -178,10 +198,35 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
 
 
+def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
+    """The profile, with --controller replacing its controller (the profile's parameters go with its own name)."""
+    from firmware.config import load_firmware_config
+
+    fw_cfg = load_firmware_config(args.profile)
+    if getattr(args, "motor_link", None) is not None:
+        from hal.links import link_entry
+
+        link_entry(args.motor_link, "--motor-link")
+        fw_cfg = fw_cfg.with_changes(motor_link=args.motor_link)
+    if args.controller is not None and args.controller != fw_cfg.controller:
+        fw_cfg = fw_cfg.with_changes(controller=args.controller, controller_params={})
+    return fw_cfg
+
+
+def _controller(fw_cfg, args: argparse.Namespace) -> object:  # FirmwareConfig -> the built controller
+    """Build the configured controller now, so a bad name, file, class or parameter stops before the run
+    (walking with the shipped impedance controller: tuned for --body-mass unless the profile says otherwise)."""
+    from firmware.control.registry import build_controller
+
+    params = dict(fw_cfg.controller_params)
+    if fw_cfg.controller == "impedance" and args.scenario == "walk":
+        params.setdefault("body_mass_kg", args.body_mass)
+    return build_controller(fw_cfg.controller, fw_cfg, params)
+
+
 def _run_serial(args: argparse.Namespace) -> int:
     """Serial mode: check the ports, run on the wall clock, stop safely, write the same outputs (exit codes:
     docs/hardware.md)."""
-    from firmware.config import load_firmware_config
     from host_tools.realtime import RealtimeSettings
     from host_tools.serial_run import SerialRunConfig, StartupError, run_serial
     from host_tools.stop_signals import StopSignals
@@ -201,7 +246,7 @@ def _run_serial(args: argparse.Namespace) -> int:
     try:
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
                               duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
-                              board=args.board, firmware=load_firmware_config(args.profile),
+                              board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
         if args.capture is not None and (args.capture / "index.csv").exists():

@@ -19,6 +19,7 @@ class FixtureKind(Enum):
     SPRING_BENCH = "spring_bench"  # foot loaded by the report's spring (and a hanging mass)
     BACKDRIVE = "backdrive"  # motor unpowered, a force pushes at the toe
     IMPULSE = "impulse"  # suspended foot hit by a short torque pulse (pneumatic push)
+    WALK = "walk"  # the ground's moment in stance (hal/virtual/plant/walking.py)
 
 
 @dataclass(frozen=True)

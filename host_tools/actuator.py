@@ -1,0 +1,200 @@
+"""The actuator design check of the walking scenario: what walking demands at the ankle against what the
+AK60-6 + 6:1 gearbox + belt can deliver (continuous and peak), and the body mass where it stops keeping up.
+
+Demand over one stride: torque = body mass x the normative ankle moment per kg (zero in swing, as the
+walking load, hal/virtual/plant/walking.py); speed = the gait reference's angular velocity. Deliverable
+torque at an ankle speed w: ``min(I x Kt N eta, (V - Ke w N) / R x Kt N eta)`` for I = the peak
+(22.7 A) or rated (6.5 A, maker) current, or the firmware's control limit -- the current limit or the
+back-EMF limit of the 24 V supply, whichever is lower. Power: mechanical ``|torque w|``, electrical
+``I^2 R + Ke w N I`` for the motor current the torque needs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware.control.reference import GaitReference
+from hal.virtual.plant import PlantParams
+from hal.virtual.plant.walking import WalkingLoad
+
+__all__ = ["DESIGN_POINT", "RATED_CURRENT_A", "Drive", "design_check", "plot_design_check"]
+
+RATED_CURRENT_A = 6.5  # maker's rated current of the AK60-6 (shared/PROTOCOLS.md, section C)
+DESIGN_POINT = (14.0, 55.0)  # N m and rpm at the ankle: the report's transmission design point
+_RPM = 60.0 / (2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Drive:
+    """The motor + gearbox + belt as seen from the ankle."""
+
+    nm_per_a: float  # ankle torque per motor ampere, Kt N eta
+    ratio: float
+    supply_v: float
+    ke_v_s_per_rad: float
+    resistance_ohm: float
+    peak_current_a: float
+    rated_current_a: float
+    control_limit_a: float
+
+    @classmethod
+    def from_params(cls, p: PlantParams, control_limit_a: float) -> Drive:
+        """From the plant profile and the firmware's current limit."""
+        return cls(p.output_torque_per_amp_nm, p.total_ratio, p.supply_voltage_v, p.ke_v_s_per_rad,
+                   p.phase_resistance_ohm, p.peak_current_a, RATED_CURRENT_A, control_limit_a)
+
+    def torque_nm(self, speed_rad_s: np.ndarray | float, current_a: float) -> np.ndarray:
+        """Deliverable ankle torque at the ankle speed with at most current_a in the motor."""
+        w_motor = np.abs(np.asarray(speed_rad_s, dtype=float)) * self.ratio
+        i_voltage = np.maximum((self.supply_v - self.ke_v_s_per_rad * w_motor) / self.resistance_ohm, 0.0)
+        return np.minimum(current_a, i_voltage) * self.nm_per_a
+
+    @property
+    def no_load_speed_rad_s(self) -> float:
+        """Ankle speed at which the back-EMF equals the supply."""
+        return self.supply_v / self.ke_v_s_per_rad / self.ratio
+
+
+def _demand(load: WalkingLoad, reference: GaitReference, mass_kg: float, points: int = 1000):
+    pct = np.linspace(0.0, 100.0, points, endpoint=False)
+    torque = np.array([load.moment_nm(x) for x in pct]) * (mass_kg / load.body_mass_kg)
+    speed = np.array([reference.sample(x / 100.0 * load.stride_s)[1] for x in pct])
+    return pct, torque, speed
+
+
+def _one_mass(drive: Drive, load: WalkingLoad, reference: GaitReference, mass_kg: float) -> dict:
+    _, torque, speed = _demand(load, reference, mass_kg)
+    need_a = np.abs(torque) / drive.nm_per_a
+    w_motor = np.abs(speed) * drive.ratio
+    p_mech = np.abs(torque * speed)
+    p_elec = need_a ** 2 * drive.resistance_ohm + drive.ke_v_s_per_rad * w_motor * need_a
+    mag = np.abs(torque)
+    return {
+        "body_mass_kg": mass_kg,
+        "peak_torque_nm": round(float(mag.max()), 2),
+        "peak_speed_rpm": round(float(np.abs(speed).max() * _RPM), 1),
+        "peak_mechanical_power_w": round(float(p_mech.max()), 1),
+        "peak_electrical_power_w": round(float(p_elec.max()), 1),
+        "peak_current_needed_a": round(float(need_a.max()), 2),
+        "saturated_fraction_peak": round(float(np.mean(mag > drive.torque_nm(speed, drive.peak_current_a))), 4),
+        "saturated_fraction_control_limit": round(
+            float(np.mean(mag > drive.torque_nm(speed, drive.control_limit_a))), 4),
+        "above_continuous_fraction": round(float(np.mean(mag > drive.torque_nm(speed, drive.rated_current_a))), 4),
+    }
+
+
+def _keeps_up_to_kg(drive: Drive, load: WalkingLoad, reference: GaitReference, current_a: float) -> float:
+    """The largest body mass whose demand stays within the envelope at current_a (demand scales with mass)."""
+    _, torque, speed = _demand(load, reference, 1.0)
+    per_kg = np.abs(torque)
+    ok = per_kg > 0
+    return round(float(np.min(drive.torque_nm(speed[ok], current_a) / per_kg[ok])), 1)
+
+
+def design_check(params: PlantParams, control_limit_a: float, load: WalkingLoad, reference: GaitReference,
+                 masses_kg: tuple[float, ...] = (20.0, 40.0, 60.0, 80.0, 100.0)) -> dict:
+    """The check for the load's body mass and a table over masses_kg (JSON-able)."""
+    drive = Drive.from_params(params, control_limit_a)
+    zero = np.zeros(1)
+    return {
+        "drive": {"ankle_nm_per_motor_a": round(drive.nm_per_a, 4), "ratio": round(drive.ratio, 3),
+                  "peak_torque_nm": round(float(drive.torque_nm(zero, drive.peak_current_a)[0]), 2),
+                  "continuous_torque_nm": round(float(drive.torque_nm(zero, drive.rated_current_a)[0]), 2),
+                  "control_limit_torque_nm": round(float(drive.torque_nm(zero, control_limit_a)[0]), 2),
+                  "no_load_speed_rpm": round(drive.no_load_speed_rad_s * _RPM, 1),
+                  "peak_current_a": drive.peak_current_a, "rated_current_a": drive.rated_current_a,
+                  "control_limit_a": control_limit_a},
+        "design_point": {"torque_nm": DESIGN_POINT[0], "speed_rpm": DESIGN_POINT[1]},
+        "demand": _one_mass(drive, load, reference, load.body_mass_kg),
+        "keeps_up_to_body_mass_kg": {
+            "peak": _keeps_up_to_kg(drive, load, reference, drive.peak_current_a),
+            "continuous": _keeps_up_to_kg(drive, load, reference, drive.rated_current_a),
+            "control_limit": _keeps_up_to_kg(drive, load, reference, control_limit_a)},
+        "by_body_mass": [_one_mass(drive, load, reference, m) for m in masses_kg],
+    }
+
+
+def plot_design_check(path, check: dict, params: PlantParams, load: WalkingLoad, reference: GaitReference) -> None:
+    """Demand (|torque| against |speed| over the stride) on the deliverable envelope, with the design point."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = check["drive"]
+    drive = Drive.from_params(params, d["control_limit_a"])
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    w = np.linspace(0.0, drive.no_load_speed_rad_s, 300)
+    for current, label, style in ((drive.peak_current_a, f"peak ({drive.peak_current_a:g} A)", "-"),
+                                  (drive.control_limit_a, f"firmware limit ({drive.control_limit_a:g} A)", "-."),
+                                  (drive.rated_current_a, f"continuous ({drive.rated_current_a:g} A)", "--")):
+        ax.plot(w * _RPM, drive.torque_nm(w, current), "k" + style, label=label)
+    for row in check["by_body_mass"]:
+        m = row["body_mass_kg"]
+        _, torque, speed = _demand(load, reference, m)
+        strong = m == load.body_mass_kg
+        ax.plot(np.abs(speed) * _RPM, np.abs(torque), ".", ms=2 if strong else 1, alpha=1.0 if strong else 0.35,
+                label=f"walking demand, {m:g} kg")
+    if all(row["body_mass_kg"] != load.body_mass_kg for row in check["by_body_mass"]):
+        _, torque, speed = _demand(load, reference, load.body_mass_kg)
+        ax.plot(np.abs(speed) * _RPM, np.abs(torque), ".", ms=2, label=f"walking demand, {load.body_mass_kg:g} kg")
+    ax.plot([DESIGN_POINT[1]], [DESIGN_POINT[0]], "r*", ms=14, label="report's design point (14 N·m, 55 rpm)")
+    ax.set_xlabel("ankle speed |ω| (rpm)")
+    ax.set_ylabel("ankle torque |τ| (N·m)")
+    ax.set_title("Actuator envelope (AK60-6, 6:1, belt 4.67:1, 24 V) and walking demand")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray) -> tuple[dict, list[str]]:
+    """The design check of a walking run (RunResult r, directory out, the run's command over time): summary
+    entry (with the run's measured saturation), plot, report lines."""
+    from hal.virtual.plant import load_plant_params
+    from host_tools.walk import walking_load
+
+    cfg, fw = r.config, r.firmware
+    params = cfg.bench_options.get("plant_params") or load_plant_params()
+    load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv, cfg.speed)
+    check = design_check(params, fw.config.current_limit_a, load, fw.reference)
+    start = r.gait_start_s if r.gait_start_s is not None else math.inf
+    end = fw.supervisor.tripped_at_s if fw.supervisor.tripped_at_s is not None else math.inf
+    t_s, current_cmd_a = np.asarray(t_s, dtype=float), np.asarray(current_cmd_a, dtype=float)
+    sel = (t_s >= start) & (t_s < end)
+    command = np.abs(current_cmd_a[sel])
+    at_limit = command >= fw.config.current_limit_a * (1 - 1e-9)  # clamped by the firmware
+    near_limit = command >= 0.95 * fw.config.current_limit_a  # also a controller saturating inside (cascade: its
+    # velocity loop at +-1 plus a feed-forward of the other sign stays just below the clamp)
+    walked_s = round(float(t_s[sel][-1] - t_s[sel][0]), 3) if sel.any() else 0.0
+    check["run"] = {"controller": fw.config.controller, "seconds_walked": walked_s,
+                    "saturated_fraction": round(float(at_limit.mean()), 4) if sel.any() else None,
+                    "near_limit_fraction": round(float(near_limit.mean()), 4) if sel.any() else None,
+                    "heel_strikes_sensed": fw.load_detector.heel_strikes, "toe_offs_sensed": fw.load_detector.toe_offs}
+    plot_design_check(out / "actuator.png", check, params, load, fw.reference)
+    d, dm, k = check["drive"], check["demand"], check["keeps_up_to_body_mass_kg"]
+    lines = ["", f"## Actuator design check (walking, {cfg.body_mass_kg:g} kg)", "",
+             f"Deliverable at the ankle: peak {d['peak_torque_nm']} N·m ({d['peak_current_a']} A), continuous "
+             f"{d['continuous_torque_nm']} N·m ({d['rated_current_a']} A), firmware limit "
+             f"{d['control_limit_torque_nm']} N·m ({d['control_limit_a']} A), no-load speed "
+             f"{d['no_load_speed_rpm']} rpm; "
+             f"the report's design point {DESIGN_POINT[0]} N·m at {DESIGN_POINT[1]} rpm. Demand: peak "
+             f"{dm['peak_torque_nm']} N·m, {dm['peak_speed_rpm']} rpm, mechanical "
+             f"{dm['peak_mechanical_power_w']} W, "
+             f"electrical {dm['peak_electrical_power_w']} W. It keeps up to {k['peak']} kg at peak current, "
+             f"{k['control_limit']} kg at the firmware limit, {k['continuous']} kg continuously. In this run the "
+             f"command sat at the current limit {check['run']['saturated_fraction']} (within 5 % of it "
+             f"{check['run']['near_limit_fraction']}) of the "
+             f"{check['run']['seconds_walked']} s walked (until a fault, if any). Plot: `actuator.png`.", "",
+             "| body mass kg | peak torque N·m | peak speed rpm | peak mech. W | peak elec. W | stride saturated "
+             "(peak) | (firmware limit) | above continuous |", "|---|---|---|---|---|---|---|---|"]
+    for row in check["by_body_mass"]:
+        lines.append(f"| {row['body_mass_kg']:g} | {row['peak_torque_nm']} | {row['peak_speed_rpm']} | "
+                     f"{row['peak_mechanical_power_w']} | {row['peak_electrical_power_w']} | "
+                     f"{row['saturated_fraction_peak']} | {row['saturated_fraction_control_limit']} | "
+                     f"{row['above_continuous_fraction']} |")
+    return check, lines

@@ -1,0 +1,70 @@
+"""The walking scenario's inputs: the ankle-moment curve (packaged normative, or a user's CSV) and the load."""
+
+from __future__ import annotations
+
+import csv
+import io
+from importlib import resources
+from pathlib import Path
+
+from hal.virtual.plant.walking import WalkingLoad
+
+__all__ = ["MOMENT_COLUMN", "SCENARIOS", "moment_curve", "walking_load"]
+
+SCENARIOS = ("suspended", "walk")
+SPEEDS = {"very-slow": "Very Slow", "slow": "Slow", "free": "Free", "fast": "Fast", "very-fast": "Very Fast"}
+"""--speed choices -> speed_category of firmware/data/ankle_normative_all_speeds.csv (Schwartz et al. 2008)."""
+ALL_SPEEDS = "ankle_normative_all_speeds.csv"
+MOMENT_COLUMN = "ankle_moment_nm_per_kg_mean"
+NORMATIVE = "firmware/data/ankle_normative.csv"
+
+
+def all_speeds_path() -> Path:
+    """The packaged all-speeds normative CSV (for GaitReference.from_csv with a speed_category select)."""
+    return Path(str(resources.files("firmware.data").joinpath(ALL_SPEEDS)))
+
+
+def moment_curve(path: Path | None = None, speed: str | None = None) -> tuple[list[float], list[float], str]:
+    """(percent_gait, ankle moment N m/kg, source) from a CSV shaped like the normative one ('#' lines skipped),
+    or the packaged curve of a speed group (SPEEDS)."""
+    if speed is not None:
+        if speed not in SPEEDS:
+            raise ValueError(f"speed {speed!r} unknown: one of {list(SPEEDS)}")
+        if path is not None:
+            raise ValueError("--speed picks a packaged curve and --moment gives one: use one of them")
+        path = all_speeds_path()
+    if path is None:
+        text, source = resources.files("firmware.data").joinpath("ankle_normative.csv").read_text("utf-8"), NORMATIVE
+    else:
+        try:
+            text, source = Path(path).read_text(encoding="utf-8"), str(path)
+        except OSError as e:
+            raise ValueError(f"cannot read moment CSV {path}: {e.strerror or e}") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    reader = csv.DictReader(io.StringIO("\n".join(lines)))
+    fields = [f.strip() for f in reader.fieldnames or []]
+    reader.fieldnames = fields
+    for col in ("percent_gait", MOMENT_COLUMN):
+        if col not in fields:
+            raise ValueError(f"{source}: missing column {col!r} (found columns: {fields})")
+    percent, moment = [], []
+    for row_no, row in enumerate(reader, start=2):
+        if speed is not None and (row.get("speed_category") or "").strip() != SPEEDS[speed]:
+            continue
+        try:
+            percent.append(float(row["percent_gait"]))
+            moment.append(float(row[MOMENT_COLUMN]))
+        except (TypeError, ValueError):
+            raise ValueError(f"{source}: data row {row_no}: not a number in "
+                             f"{[row.get('percent_gait'), row.get(MOMENT_COLUMN)]}") from None
+    return percent, moment, source
+
+
+def walking_load(body_mass_kg: float, stride_s: float, path: Path | None = None,
+                 speed: str | None = None) -> WalkingLoad:
+    """The ground's moment for body_mass_kg on the stride; ValueError naming a bad value or file."""
+    percent, moment, source = moment_curve(path, speed)
+    try:
+        return WalkingLoad(percent, moment, body_mass_kg, stride_s)
+    except ValueError as e:
+        raise ValueError(f"{source}: {e}" if "moment curve" in str(e) else str(e)) from None
