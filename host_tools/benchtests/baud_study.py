@@ -82,8 +82,25 @@ def link_config(base: FirmwareConfig, control_hz: int, mode: str) -> FirmwareCon
                              velocity_cutoff_hz=min(base.velocity_cutoff_hz, VELOCITY_CUTOFF_FRACTION * control_hz))
 
 
+class PassRule:
+    """The pass test of a link study's run (shared by the baud and the link study): fields of the run."""
+
+    deadline_misses: int
+    faults: tuple[str, ...]
+    tx_refused: int
+    missing_replies: int
+    stale_replies: int
+    replies: int
+
+    @property
+    def passed(self) -> bool:
+        """No miss, no fault, no refused write, and every request answered before the next one."""
+        return (self.deadline_misses == 0 and not self.faults and self.tx_refused == 0
+                and self.missing_replies == 0 and self.stale_replies == 0 and self.replies > 0)
+
+
 @dataclass(frozen=True)
-class StudyRun:
+class StudyRun(PassRule):
     """One run of the study: its link configuration, the link accounting and the tracking figures."""
 
     baud: int
@@ -100,12 +117,6 @@ class StudyRun:
     max_feedback_age_ms: float
     rms_error_deg: float
     max_error_deg: float
-
-    @property
-    def passed(self) -> bool:
-        """No miss, no fault, no refused write, and every request answered before the next one."""
-        return (self.deadline_misses == 0 and not self.faults and self.tx_refused == 0
-                and self.missing_replies == 0 and self.stale_replies == 0 and self.replies > 0)
 
 
 def study_run(base: FirmwareConfig, baud: int, mode: str, control_hz: int, *, strides: int, seed: int) -> StudyRun:

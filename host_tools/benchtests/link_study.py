@@ -28,7 +28,7 @@ import numpy as np
 
 from firmware.config import FirmwareConfig, load_firmware_config
 from hal.virtual.can_bits import worst_case_bits
-from host_tools.benchtests.baud_study import analytic_max_hz, link_config
+from host_tools.benchtests.baud_study import PassRule, analytic_max_hz, link_config
 from host_tools.benchtests.output import BenchResult, Figure
 from host_tools.report import summarise
 from host_tools.runner import RunConfig, run_virtual
@@ -73,7 +73,7 @@ def bound_hz(link: str, full_values_hz: int) -> float:
 
 
 @dataclass(frozen=True)
-class LinkRun:
+class LinkRun(PassRule):
     """One run: link, control rate, link accounting, load and tracking."""
 
     link: str
@@ -90,12 +90,6 @@ class LinkRun:
     link_load: float
     rms_error_deg: float
     max_error_deg: float
-
-    @property
-    def passed(self) -> bool:
-        """No miss, no fault, no refused command, every request answered before the next one."""
-        return (self.deadline_misses == 0 and not self.faults and self.tx_refused == 0
-                and self.missing_replies == 0 and self.stale_replies == 0 and self.replies > 0)
 
 
 def _load(r: object) -> float:
