@@ -70,6 +70,7 @@ COMPILED = [
     "firmware/drivers/encoder.py",
     "firmware/drivers/link.py",
     "firmware/drivers/motor_link.py",
+    "firmware/drivers/can_link.py",
     "firmware/drivers/can_servo.py",
     "firmware/drivers/can_mit.py",
     "firmware/control/pid.py",

@@ -15,13 +15,11 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import ClassVar
 
-from firmware.config import FirmwareConfig
-from firmware.drivers.can_servo import _send_stop
-from firmware.drivers.motor_link import MotorFeedback, MotorLink, MotorLinkStats, RxCounter, SafeStop
+from firmware.drivers.can_link import CanLink
+from firmware.drivers.motor_link import SafeStop
 from hal.can import CanFrame, CanPort
-from hal.errors import HalError
-from hal.interfaces import Board
 from protocol import can_mit
 
 __all__ = ["AK60_6_NM_PER_A", "MASTER_ID", "CanMitDriver"]
@@ -31,31 +29,20 @@ AK60_6_NM_PER_A = 0.078 * 6.0  # kt x planetary ratio: output torque per q amp (
 _ERPM_PER_RAD_S = 60.0 / (2.0 * math.pi) * 6.0 * 14  # output rad/s -> ERPM (ratio 6, 14 pole pairs)
 
 
-class CanMitDriver(MotorLink):
+class CanMitDriver(CanLink):
     """Talks to the AK60-6 in MIT mode over ``port``; callers pass the time."""
+
+    LINK: ClassVar[str] = "can-mit"
 
     def __init__(self, port: CanPort, driver_id: int = 1, *, nm_per_a: float = AK60_6_NM_PER_A,
                  brake_kd: float = 1.0, limits: can_mit.MitLimits = can_mit.AK60_6) -> None:
         """Prepare the frames; "enter motor mode" goes out with the first command."""
-        self.port = port
-        self.driver_id = driver_id
+        super().__init__(port, driver_id)
         self.nm_per_a = nm_per_a
         self.brake_kd = brake_kd
         self.limits = limits
-        self.feedback = MotorFeedback()
-        self.stats = MotorLinkStats()
-        self.decoder = RxCounter()
-        self.last_command_s = None
         self.entered = False
         self._outstanding: deque[tuple[float, bool]] = deque()  # (sent at, is a command) per frame to be answered
-        self.other_frames = 0
-
-    @classmethod
-    def from_board(cls, board: Board, config: FirmwareConfig) -> CanMitDriver:
-        """The driver on the board's CAN port (HalError naming the board if it has none)."""
-        if board.can is None:
-            raise HalError("motor link can-mit needs a CAN port on the board (Board.can is None)")
-        return cls(board.can, config.motor_can_id)
 
     def relink(self, port: CanPort) -> None:
         """Continue on a reopened port: motor mode is entered again with the next command."""
@@ -68,16 +55,7 @@ class CanMitDriver(MotorLink):
         """Take every reply waiting; return how many."""
         taken = 0
         fb, st = self.feedback, self.stats
-        while True:
-            try:
-                frame = self.port.receive()
-            except HalError as exc:
-                self._lose(exc, now_s)
-                return taken
-            if frame is None:
-                break
-            self.decoder.stats.frames += 1
-            self.decoder.stats.bytes_in += len(frame.data)
+        for frame in self._take(now_s):
             data = frame.data
             if frame.extended or frame.arbitration_id != MASTER_ID or len(data) not in (6, 8) \
                     or data[0] != self.driver_id:
@@ -102,15 +80,8 @@ class CanMitDriver(MotorLink):
                     st.max_age_s = age
         return taken
 
-    def _put(self, data: bytes, now_s: float) -> bool:
-        try:
-            ok = self.port.send(CanFrame(self.driver_id, data))
-        except HalError as exc:
-            self._lose(exc, now_s)
-            return False
-        if not ok:
-            self.stats.tx_refused += 1
-        return ok
+    def _put_data(self, data: bytes, now_s: float) -> bool:
+        return self._put(CanFrame(self.driver_id, data), now_s)
 
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Send the torque (or damping) command, after "enter motor mode" the first time; return data bytes."""
@@ -120,13 +91,13 @@ class CanMitDriver(MotorLink):
             self.stats.missing_replies += sum(1 for _, command in outstanding if command)
             outstanding.clear()
         if not self.entered:
-            if not self._put(can_mit.ENTER_MOTOR_MODE, now_s):
+            if not self._put_data(can_mit.ENTER_MOTOR_MODE, now_s):
                 return 0
             self.entered = True
             self._outstanding.append((now_s, False))  # the motor answers the special frame too
             written += 8
         cmd = can_mit.MitCommand(kd=self.brake_kd) if brake else can_mit.MitCommand(t_ff=current_a * self.nm_per_a)
-        if not self._put(can_mit.encode_command(cmd, self.limits), now_s):
+        if not self._put_data(can_mit.encode_command(cmd, self.limits), now_s):
             return written
         self.stats.requests += 1
         outstanding.append((now_s, True))
@@ -137,8 +108,7 @@ class CanMitDriver(MotorLink):
         """The stop path: zero torque, then exit motor mode (torque off); wait until both have left."""
         frames = (CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits)),
                   CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
-        stop = _send_stop(self, self.port, frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"),
-                          now_s, timeout_s)
+        stop = self._stop(frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"), now_s, timeout_s)
         self.entered = False
         return stop
 

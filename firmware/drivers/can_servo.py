@@ -13,12 +13,11 @@ failing port latches ``link_lost``. The stop path sends zero current then the br
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
-from firmware.config import FirmwareConfig
-from firmware.drivers.motor_link import MotorFeedback, MotorLink, MotorLinkStats, RxCounter, SafeStop
+from firmware.drivers.can_link import CanLink
+from firmware.drivers.motor_link import SafeStop
 from hal.can import CanFrame, CanPort
-from hal.errors import HalError
-from hal.interfaces import Board
 from protocol import can_servo
 
 __all__ = ["CanServoDriver"]
@@ -26,29 +25,18 @@ __all__ = ["CanServoDriver"]
 _ERPM_PER_POLE_PAIR = 14  # AK60-6: ERPM = 14 x rotor rpm
 
 
-class CanServoDriver(MotorLink):
+class CanServoDriver(CanLink):
     """Talks to the AK60-6 in servo mode over ``port`` (driver id ``driver_id``); callers pass the time."""
+
+    LINK: ClassVar[str] = "can-servo"
 
     def __init__(self, port: CanPort, driver_id: int = 1) -> None:
         """Prepare the IDs; nothing is sent until ``send``."""
-        self.port = port
-        self.driver_id = driver_id
-        self.feedback = MotorFeedback()
-        self.stats = MotorLinkStats()
-        self.decoder = RxCounter()
-        self.last_command_s = None
+        super().__init__(port, driver_id)
         self._status_id = can_servo.status_id(driver_id)
         self._current_id = can_servo.command_id(can_servo.PacketId.SET_CURRENT, driver_id)
         self._brake_id = can_servo.command_id(can_servo.PacketId.SET_CURRENT_BRAKE, driver_id)
         self._last_status_s: float | None = None
-        self.other_frames = 0
-
-    @classmethod
-    def from_board(cls, board: Board, config: FirmwareConfig) -> CanServoDriver:
-        """The driver on the board's CAN port (HalError naming the board if it has none)."""
-        if board.can is None:
-            raise HalError("motor link can-servo needs a CAN port on the board (Board.can is None)")
-        return cls(board.can, config.motor_can_id)
 
     def relink(self, port: CanPort) -> None:
         """Continue on a reopened port (the supervisor's latched fault is not cleared)."""
@@ -59,16 +47,7 @@ class CanServoDriver(MotorLink):
         """Take every status frame waiting; return how many."""
         taken = 0
         fb, st = self.feedback, self.stats
-        while True:
-            try:
-                frame = self.port.receive()
-            except HalError as exc:
-                self._lose(exc, now_s)
-                return taken
-            if frame is None:
-                break
-            self.decoder.stats.frames += 1
-            self.decoder.stats.bytes_in += len(frame.data)
+        for frame in self._take(now_s):
             if not (frame.extended and frame.arbitration_id == self._status_id and len(frame.data) == 8):
                 self.other_frames += 1
                 continue
@@ -89,16 +68,6 @@ class CanServoDriver(MotorLink):
             taken += 1
         return taken
 
-    def _put(self, frame: CanFrame, now_s: float) -> bool:
-        try:
-            ok = self.port.send(frame)
-        except HalError as exc:
-            self._lose(exc, now_s)
-            return False
-        if not ok:
-            self.stats.tx_refused += 1
-        return ok
-
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Send SET_CURRENT (or SET_CURRENT_BRAKE); return the data bytes queued (0 if refused)."""
         packet = can_servo.PacketId.SET_CURRENT_BRAKE if brake else can_servo.PacketId.SET_CURRENT
@@ -115,29 +84,10 @@ class CanServoDriver(MotorLink):
                   CanFrame(self._brake_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE,
                                                                     abs(brake_current_a)), True))
         names = ("SET_CURRENT(0.0 A)", f"SET_CURRENT_BRAKE({abs(brake_current_a)} A)")
-        return _send_stop(self, self.port, frames, names, now_s, timeout_s)
+        return self._stop(frames, names, now_s, timeout_s)
 
     def published(self) -> dict[str, object]:
         """The port's overruns and refusals, frames not from this motor."""
         return {"link": "can-servo", "rx_overruns": self.port.errors.overruns,
                 "tx_refused_frames": self.port.errors.tx_refused, "other_frames": self.other_frames}
 
-
-def _send_stop(drv: MotorLink, port: CanPort, frames: tuple[CanFrame, ...], names: tuple[str, ...],
-               now_s: float, timeout_s: float) -> SafeStop:
-    """Queue frames in order, then wait for the mailboxes to empty; a failing port is latched as lost."""
-    stop = SafeStop(b"".join(f.data for f in frames), now_s, names)
-    try:
-        for f in frames:
-            if not port.send(f):
-                break
-            stop.written += len(f.data)
-        stop.drained = port.flush(timeout_s)
-    except HalError as exc:
-        drv._lose(exc, now_s)
-        stop.error = str(exc)
-    if stop.written < len(stop.frames):
-        drv.stats.tx_refused += 1
-    elif stop.written:
-        drv.last_command_s = now_s
-    return stop
