@@ -419,7 +419,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
             if signals.name is None:
                 signals.name, signals.at_ns = "SIGINT", time.perf_counter_ns()
         except Exception as exc:  # a task raised: the firmware's bug, reported after the stop path
-            error, failed_task = exc, timings.running
+            error, failed_task = exc, timings.running or "serial_probe"  # the one body not instrumented
             log.error("task %s raised %s: stopping", failed_task, exc)
         run_s = sched.now / f_cpu
         stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s)
