@@ -40,6 +40,7 @@ from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.null import NullDigitalIn, NullDigitalOut, NullUart
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.jitter import TaskTimings, instrument
+from host_tools.link_watch import LinkEvent, LinkWatch
 from host_tools.realtime import RealtimeSection, RealtimeSettings
 from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health
 from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
@@ -55,8 +56,6 @@ __all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "SerialRunConfi
 log = logging.getLogger(__name__)
 
 BELT_RATIO = 28 / 6  # rotor : output is 28 : 1 and the planetary 6 : 1, so pid_pos = 28/6 * ankle angle
-STOP_AFTER_LOSS_S = 0.030  # after a lost link: zero current, the brake (10 ms later), then stop
-RECONNECT_EVERY_S = 0.2
 GC_EVERY_TICKS = 100  # probe ticks between two young-generation collections (the collector is off meanwhile)
 STOP_DRAIN_TIMEOUT_S = 0.5  # the stop path waits at most this long for the port to send the safe frames
 EXIT_TASK_EXCEPTION = 3
@@ -142,18 +141,6 @@ class _KernelWatchdog(HalWatchdog):
     def kick(self) -> None:
         """Reload the watchdog."""
         self.wd.kick()
-
-
-@dataclass
-class LinkEvent:
-    """A lost port: which role, its name, why, when the driver saw it and when the supervisor tripped."""
-
-    role: str
-    port: str
-    reason: str
-    lost_at_s: float | None
-    detected_at_s: float | None
-    reconnects: int = 0
 
 
 @dataclass
@@ -385,7 +372,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     wd.on_reset = lambda t: warnings.on_watchdog(t, f_cpu)
     feedback_angle.feedback = fw.motor.feedback
     plant = ports.devices.world.plant if ports.devices is not None and ports.devices.motor is not None else None
-    probe, link = Probe(), _LinkWatch(cfg, fw, wire)
+    probe, link = Probe(), LinkWatch(cfg, fw, wire)
     timings = TaskTimings([t.name for t in fw.tasks], f_cpu, time.perf_counter_ns)
     section = RealtimeSection(cfg.realtime)
 
@@ -447,7 +434,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                            section.granted, link.event, capture.inner_error, seen, time_in_run_s=time_in_run)
 
 
-def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: _LinkWatch,
+def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: LinkWatch,
                  run_s: float, wall0_ns: int, duration_s: float) -> StopRecord:
     """Why the loop ended: a signal, a task's exception, a lost link, or the duration."""
     if signals.name is not None:
@@ -461,50 +448,3 @@ def _stop_record(signals: StopSignals, error: BaseException | None, task: str | 
     if link.stop_at is not None:
         return StopRecord("link_lost", run_s)
     return StopRecord("duration", min(run_s, duration_s))
-
-
-class _LinkWatch:
-    """Watches for LINK_LOST: records the event; stops shortly after, or reopens the port with reconnect."""
-
-    def __init__(self, cfg: SerialRunConfig, fw: Firmware, wire: WireCapture | None = None) -> None:
-        self.cfg, self.fw, self.wire = cfg, fw, wire
-        self.event: LinkEvent | None = None
-        self.stop_at: float | None = None
-        self.next_try = 0.0
-
-    def step(self, t: float) -> bool:
-        """Called every probe tick at time t (s); True when the run should stop."""
-        fw = self.fw
-        if self.event is None and fw.link_lost_seen_s is not None:
-            # the port that failed first is the one named (both go when a whole adapter or emulator dies)
-            lost = [(d.lost_at_s, role, d) for role, d in (("motor", fw.motor), ("imu", fw.imu)) if d.link_lost]
-            lost_at, role, drv = min(lost, key=lambda x: (x[0] if x[0] is not None else float("inf"), x[1]))
-            # detection: from the first failed read or write to the supervisor's first look at it (>= 0)
-            self.event = LinkEvent(role, getattr(self.cfg, role), drv.lost_reason, lost_at, fw.link_lost_seen_s)
-            log.warning("%s port %s lost at %.4f s: %s", role, self.event.port, t, drv.lost_reason)
-            if not self.cfg.reconnect:
-                self.stop_at = t + STOP_AFTER_LOSS_S
-            self.next_try = t + RECONNECT_EVERY_S
-        if self.stop_at is not None:
-            return t >= self.stop_at
-        if self.event is not None and self.cfg.reconnect and t >= self.next_try:
-            self.next_try = t + RECONNECT_EVERY_S
-            self._try_reopen()
-        return False
-
-    def _try_reopen(self) -> None:
-        """Reopen every lost port that is back; the supervisor stays latched in SAFE."""
-        cfg = self.cfg
-        for role, drv, baud in (("motor", self.fw.motor, cfg.baud), ("imu", self.fw.imu, cfg.imu_baud)):
-            if not drv.link_lost:
-                continue
-            try:
-                uart = open_uart(getattr(cfg, role), baud, role=role)
-            except (HalError, ValueError) as exc:
-                log.debug("%s port not back yet: %s", role, exc)
-                continue
-            drv.uart.close()
-            drv.relink(self.wire.tap(role, uart) if self.wire is not None else uart)
-            assert self.event is not None
-            self.event.reconnects += 1
-            log.warning("%s port %s reopened; staying in the safe state", role, getattr(cfg, role))

@@ -19,6 +19,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.drivers.motor import FEEDBACK_MASK, selective_reply_bytes
 from host_tools.benchtests.output import BenchResult, Figure
 from host_tools.report import summarise
-from host_tools.runner import RunConfig, run_virtual
+from host_tools.runner import RunConfig, RunResult, run_virtual
 from protocol.vesc import GetValues, GetValuesSelective, SetCurrent
 
 logger = logging.getLogger(__name__)
@@ -82,29 +83,10 @@ def link_config(base: FirmwareConfig, control_hz: int, mode: str) -> FirmwareCon
                              velocity_cutoff_hz=min(base.velocity_cutoff_hz, VELOCITY_CUTOFF_FRACTION * control_hz))
 
 
-class PassRule:
-    """The pass test of a link study's run (shared by the baud and the link study): fields of the run."""
-
-    deadline_misses: int
-    faults: tuple[str, ...]
-    tx_refused: int
-    missing_replies: int
-    stale_replies: int
-    replies: int
-
-    @property
-    def passed(self) -> bool:
-        """No miss, no fault, no refused write, and every request answered before the next one."""
-        return (self.deadline_misses == 0 and not self.faults and self.tx_refused == 0
-                and self.missing_replies == 0 and self.stale_replies == 0 and self.replies > 0)
-
-
 @dataclass(frozen=True)
-class StudyRun(PassRule):
-    """One run of the study: its link configuration, the link accounting and the tracking figures."""
+class LinkAccount:
+    """A study run's link accounting and tracking (the baud and the link study each add what they vary)."""
 
-    baud: int
-    mode: str
     control_hz: int
     deadline_misses: int
     faults: tuple[str, ...]
@@ -118,17 +100,37 @@ class StudyRun(PassRule):
     rms_error_deg: float
     max_error_deg: float
 
+    @property
+    def passed(self) -> bool:
+        """No miss, no fault, no refused write, and every request answered before the next one."""
+        return (self.deadline_misses == 0 and not self.faults and self.tx_refused == 0
+                and self.missing_replies == 0 and self.stale_replies == 0 and self.replies > 0)
+
+
+def link_account(r: RunResult, control_hz: int) -> dict[str, Any]:
+    """The LinkAccount fields of a run, from its summary (a tracking figure it lacks is NaN)."""
+    s = summarise(r)
+    link = s["motor_link"]
+    return {"control_hz": control_hz, "deadline_misses": s["deadline_misses"], "faults": tuple(s["faults"]),
+            "requests": link["requests"], "replies": link["replies"], "missing_replies": link["missing_replies"],
+            "stale_replies": link["stale_replies"], "tx_refused": r.firmware.motor.stats.tx_refused,
+            "feedback_rate_hz": link["feedback_rate_hz"], "max_feedback_age_ms": link["max_feedback_age_ms"],
+            **{k: math.nan if s[k] is None else s[k] for k in ("rms_error_deg", "max_error_deg")}}
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyRun(LinkAccount):
+    """One run of the study: its link configuration, the link accounting and the tracking figures."""
+
+    baud: int
+    mode: str
+
 
 def study_run(base: FirmwareConfig, baud: int, mode: str, control_hz: int, *, strides: int, seed: int) -> StudyRun:
     """Run the firmware at one (baud, mode, control rate) and account for its link."""
     r = run_virtual(RunConfig(strides=strides, baud=baud, seed=seed, firmware=link_config(base, control_hz, mode),
                               trace_capacity=0))
-    s = summarise(r)
-    link = s["motor_link"]
-    out = StudyRun(baud, mode, control_hz, s["deadline_misses"], tuple(s["faults"]), link["requests"],
-                   link["replies"], link["missing_replies"], link["stale_replies"], r.firmware.motor.stats.tx_refused,
-                   link["feedback_rate_hz"], link["max_feedback_age_ms"],
-                   *(math.nan if s[k] is None else s[k] for k in ("rms_error_deg", "max_error_deg")))
+    out = StudyRun(baud=baud, mode=mode, **link_account(r, control_hz))
     logger.info("baud study %s", out)
     return out
 

@@ -28,9 +28,8 @@ import numpy as np
 
 from firmware.config import FirmwareConfig, load_firmware_config
 from hal.virtual.can_bits import worst_case_bits
-from host_tools.benchtests.baud_study import PassRule, analytic_max_hz, link_config
+from host_tools.benchtests.baud_study import LinkAccount, analytic_max_hz, link_account, link_config
 from host_tools.benchtests.output import BenchResult, Figure
-from host_tools.report import summarise
 from host_tools.runner import RunConfig, run_virtual
 
 logger = logging.getLogger(__name__)
@@ -72,24 +71,12 @@ def bound_hz(link: str, full_values_hz: int) -> float:
     return analytic_max_hz(UART_BAUD, "selective", full_values_hz)[0] if link == "uart" else can_bound_hz(link)
 
 
-@dataclass(frozen=True)
-class LinkRun(PassRule):
+@dataclass(frozen=True, kw_only=True)
+class LinkRun(LinkAccount):
     """One run: link, control rate, link accounting, load and tracking."""
 
     link: str
-    control_hz: int
-    deadline_misses: int
-    faults: tuple[str, ...]
-    requests: int
-    replies: int
-    missing_replies: int
-    stale_replies: int
-    tx_refused: int
-    feedback_rate_hz: float
-    max_feedback_age_ms: float
     link_load: float
-    rms_error_deg: float
-    max_error_deg: float
 
 
 def _load(r: object) -> float:
@@ -105,11 +92,7 @@ def link_run(base: FirmwareConfig, link: str, control_hz: int, *, strides: int, 
     """Run the firmware on one link at one control rate."""
     fw = link_config(base, control_hz, "selective").with_changes(motor_link=link)
     r = run_virtual(RunConfig(strides=strides, baud=UART_BAUD, seed=seed, firmware=fw, trace_capacity=0))
-    s = summarise(r)
-    m = s["motor_link"]
-    out = LinkRun(link, control_hz, s["deadline_misses"], tuple(s["faults"]), m["requests"], m["replies"],
-                  m["missing_replies"], m["stale_replies"], r.firmware.motor.stats.tx_refused, m["feedback_rate_hz"],
-                  m["max_feedback_age_ms"], round(_load(r), 4), s["rms_error_deg"], s["max_error_deg"])
+    out = LinkRun(link=link, link_load=round(_load(r), 4), **link_account(r, control_hz))
     logger.info("link study %s", out)
     return out
 
