@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -14,7 +13,7 @@ from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.safety import SafetyLimits
 from hal.links import link_entry
-from profiles import profile_path
+from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
 
 __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareConfig", "load_firmware_config"]
@@ -213,14 +212,7 @@ def _controller(table: dict[str, Any], profile: Path) -> dict[str, Any]:
 def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file, the section and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ValueError(f"cannot read firmware profile {p}: {e.strerror or e}") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"firmware profile {p} is not a text file (not UTF-8)") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"firmware profile {p} is not valid TOML: {e}") from None
+    doc = read_toml(p, "firmware profile")
     unknown = sorted(set(doc) - set(SECTIONS))
     if unknown:
         raise ValueError(f"firmware profile {p}: unknown section [{unknown[0]}]: the sections are "

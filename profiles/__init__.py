@@ -11,10 +11,12 @@ same lookup works in the checkout, in an editable install and in an installed wh
 
 from __future__ import annotations
 
+import tomllib
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
-__all__ = ["profile_path", "profile_paths", "profiles_dir"]
+__all__ = ["profile_path", "profile_paths", "profiles_dir", "read_toml"]
 
 
 def profiles_dir() -> Path:
@@ -33,3 +35,18 @@ def profile_path(name: str) -> Path:
 def profile_paths(pattern: str) -> list[Path]:
     """The packaged profiles whose names match the glob ``pattern`` (sorted)."""
     return sorted(profiles_dir().glob(pattern))
+
+
+def read_toml(path: Path, what: str) -> dict[str, Any]:
+    """The TOML document at ``path``; ValueError in one line naming ``what`` and the file when it cannot be.
+
+    ``what`` names the kind of file, e.g. "firmware profile" (cannot read it, not UTF-8, not valid TOML).
+    """
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ValueError(f"cannot read {what} {path}: {e.strerror or e}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{what} {path} is not a text file (not UTF-8)") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{what} {path} is not valid TOML: {e}") from None

@@ -12,7 +12,6 @@ documented with their size and change nothing (docs/plant.md, "Imperfections").
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,10 +19,11 @@ from typing import Any
 import numpy as np
 
 from hal.virtual.devices.bno08x_config import Bno08xConfig
+from profiles import profile_path, read_toml
 
 __all__ = ["DEFAULT_PROFILE", "MODELLED", "NAMES", "Imperfections", "load_imperfections"]
 
-DEFAULT_PROFILE = Path(__file__).resolve().parents[2] / "profiles" / "bench_imperfections.toml"
+DEFAULT_PROFILE = profile_path("bench_imperfections.toml")
 #: Every imperfection the profile must describe, in its order.
 NAMES: tuple[str, ...] = ("imu_bias", "imu_drift", "imu_noise", "encoder_offset", "gearbox_backlash",
                           "belt_compliance", "output_pulley_compliance", "torque_ripple")
@@ -88,12 +88,7 @@ class Imperfections:
 def load_imperfections(path: str | Path | None = None) -> Imperfections:
     """Read the imperfection profile; ValueError names the file, the key and the allowed range."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ValueError(f"cannot read imperfection profile {p}: {e.strerror or e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"imperfection profile {p} is not valid TOML: {e}") from None
+    doc = read_toml(p, "imperfection profile")
     unknown = sorted(set(doc) - set(NAMES))
     missing = [n for n in NAMES if n not in doc]
     if unknown or missing:

@@ -10,18 +10,18 @@ The back-EMF constant follows a drawn torque constant (Ke/Kt kept: they are one 
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from hal.virtual.plant.params import PlantParams
+from profiles import profile_path, read_toml
 
 __all__ = ["DEFAULT_TOLERANCES", "Tolerance", "draw_plant", "drawn_values", "load_tolerances"]
 
 #: The packaged tolerance table.
-DEFAULT_TOLERANCES = Path(__file__).resolve().parents[3] / "profiles" / "plant_tolerances.toml"
+DEFAULT_TOLERANCES = profile_path("plant_tolerances.toml")
 #: Seeds accepted (numpy takes any non-negative int; the CLI keeps to 32 bits).
 SEED_RANGE = (0, 2**32 - 1)
 
@@ -46,12 +46,7 @@ class Tolerance:
 def load_tolerances(path: str | Path | None = None) -> tuple[Tolerance, ...]:
     """Read a tolerance table; ValueError names the file, the key and what is wrong."""
     p = Path(path) if path is not None else DEFAULT_TOLERANCES
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ValueError(f"cannot read plant tolerances {p}: {e.strerror or e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"plant tolerances {p} are not valid TOML: {e}") from None
+    doc = read_toml(p, "plant tolerance table")
     known = {f.name for f in fields(PlantParams)}
     out = []
     for name, spec in doc.items():
