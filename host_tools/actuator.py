@@ -19,6 +19,7 @@ import numpy as np
 from firmware.control.reference import GaitReference
 from hal.virtual.plant import PlantParams
 from hal.virtual.plant.walking import WalkingLoad
+from host_tools.outdir import save_figure
 
 __all__ = ["DESIGN_POINT", "RATED_CURRENT_A", "Drive", "design_check", "plot_design_check"]
 
@@ -148,7 +149,7 @@ def plot_design_check(path, check: dict, params: PlantParams, load: WalkingLoad,
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

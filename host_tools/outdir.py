@@ -4,7 +4,14 @@ A run writes into a hidden staging directory beside ``--out`` (``.<name>.<random
 :meth:`RunDir.publish` puts it in place, so ``--out`` never holds the files of two runs: it is either the
 previous run's directory, untouched, or the new one. An existing ``--out`` must be empty or a previous
 run's (it holds a ``summary.json``); anything else is refused before the run, not overwritten. Single files
-are written to a temporary name in their directory and renamed (:func:`write_atomic`).
+are written to a temporary name in their directory and renamed (:func:`write_atomic`, :func:`save_figure`).
+
+Every command checks its output paths before its work (:func:`check_writable`: not a file, creatable,
+writable, at least ``MIN_FREE_BYTES`` free; exit 2). A write that fails later (a disk that fills, a
+device that goes away) is one line naming the file and the error, exit ``EXIT_WRITE_FAILED`` (74, EX_IOERR
+of sysexits.h); the partial file is removed and the files already complete stay as they are. A staging
+directory is named after the process that made it (``.<name>.<pid>@<host>.<random>.partial``): one left by a
+killed run is removed by the next run to the same ``--out`` once that process is gone (:func:`clean_stale`).
 
 >>> import tempfile
 >>> root = Path(tempfile.mkdtemp())
@@ -19,23 +26,54 @@ are written to a temporary name in their directory and renamed (:func:`write_ato
 
 from __future__ import annotations
 
+import io
 import os
+import re
 import shutil
+import socket
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
-__all__ = ["MARKER", "OutDirError", "RunDir", "check_out_dir", "write_atomic"]
+__all__ = ["EXIT_WRITE_FAILED", "MARKER", "MIN_FREE_BYTES", "OutDirError", "RunDir", "check_capture_dir",
+           "check_out_dir", "check_writable", "clean_stale", "naming", "save_figure", "write_atomic", "write_failed"]
 
 MARKER = "summary.json"
 """The file every run writes (interrupted ones too): a directory holding it is a previous run's."""
+EXIT_WRITE_FAILED = 74
+"""Exit code of a command whose output could not be written once its work had begun (EX_IOERR, sysexits.h)."""
+MIN_FREE_BYTES = 1 << 20
+"""An output directory on a filesystem with less free space than this is refused before the work."""
 
 
 class OutDirError(ValueError):
     """An output directory that cannot take a run; the message names it and says what is allowed."""
 
 
+def check_writable(path: Path, option: str = "--out") -> None:
+    """Refuse a directory ``path`` (given as ``option``) that is a file, cannot be created or written, or whose
+    filesystem has less than MIN_FREE_BYTES free (OutDirError naming it)."""
+    if path.exists() and not path.is_dir():
+        raise OutDirError(f"{option} {path} is a file: a directory is needed")
+    parent = _parent(path)
+    if not parent.is_dir():
+        raise OutDirError(f"{option} {path}: {parent} is not a directory")
+    target = path if path.is_dir() else parent
+    if not os.access(target, os.W_OK | os.X_OK):
+        raise OutDirError(f"{option} {path} is not writable (no write permission on {target})")
+    st = os.statvfs(target)
+    if st.f_flag & os.ST_RDONLY:
+        raise OutDirError(f"{option} {path} is not writable ({target} is on a read-only filesystem)")
+    free = st.f_bavail * st.f_frsize
+    if free < MIN_FREE_BYTES:
+        raise OutDirError(f"{option} {path}: only {free} bytes free on the filesystem of {target}, at least "
+                          f"{MIN_FREE_BYTES} (1 MiB) are needed")
+
+
 def check_out_dir(out: Path) -> None:
-    """Refuse an ``out`` that is a file, holds files not from a run, or whose parent is not writable."""
+    """Refuse an ``out`` that is a file, holds files not from a run, or is not writable (:func:`check_writable`)."""
     if out.exists() and not out.is_dir():
         raise OutDirError(f"--out {out} is an existing file: name a new directory, an empty one or a previous run's")
     if out.is_dir():
@@ -43,11 +81,65 @@ def check_out_dir(out: Path) -> None:
         if entries and MARKER not in entries:
             raise OutDirError(f"--out {out} holds files that are not a pafp run's (e.g. {entries[0]!r}): name a new "
                               "directory, an empty one or a previous run's (it has a summary.json)")
-    parent = _parent(out)
-    if not parent.is_dir():
-        raise OutDirError(f"--out {out}: {parent} is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK) or (out.is_dir() and not os.access(out, os.W_OK | os.X_OK)):
-        raise OutDirError(f"--out {out} is not writable (no write permission on {parent if not out.is_dir() else out})")
+    check_writable(out)
+
+
+def check_capture_dir(path: Path) -> None:
+    """Refuse a ``--capture`` directory that is a file, is not writable or already holds a capture (index.csv)."""
+    check_writable(path, "--capture")
+    if (path / "index.csv").exists():
+        raise OutDirError(f"--capture {path} already holds a capture (index.csv): give a new or empty directory")
+
+
+def write_failed(command: str, e: OSError, kept: str) -> str:
+    """The one line of a write that failed during the work: the file, the error, and what ``kept`` holds."""
+    what = f"{e.filename}" if e.filename else "an output file"
+    return f"pafp {command}: cannot write {what}: {e.strerror or e}; {kept} (exit {EXIT_WRITE_FAILED})"
+
+
+@contextmanager
+def naming(path: Path) -> Iterator[None]:
+    """Give an OSError raised inside (a write to an open file has none) the name of ``path``."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is None:
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
+        raise
+
+
+_STAGED = re.compile(r"\.(?P<pid>\d+)@(?P<host>[^.]*)\..*\.(partial|old)$")
+
+
+def _tag() -> str:
+    """``<pid>@<host>``: who made a staging directory (the host's name without dots)."""
+    return f"{os.getpid()}@{socket.gethostname().replace('.', '-')}"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def clean_stale(out: Path) -> list[Path]:
+    """Remove the staging directories beside ``out`` left by runs of this host whose process is gone; return them."""
+    out = out.absolute()
+    if not out.parent.is_dir():
+        return []
+    host = socket.gethostname().replace(".", "-")
+    removed = []
+    prefix = f".{out.name}"
+    for p in out.parent.iterdir():
+        m = _STAGED.match(p.name[len(prefix):]) if p.name.startswith(prefix + ".") else None
+        if m and p.is_dir() and m["host"] == host and not _alive(int(m["pid"])):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
 
 
 def _umask() -> int:
@@ -71,9 +163,11 @@ class RunDir:
         """Check out (:func:`check_out_dir`) and create the staging directory beside it (OutDirError if not)."""
         check_out_dir(out)
         self.out = out.absolute()
+        clean_stale(self.out)
         try:
             self.out.parent.mkdir(parents=True, exist_ok=True)
-            self.path = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".partial", dir=self.out.parent))
+            self.path = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.{_tag()}.", suffix=".partial",
+                                              dir=self.out.parent))
             self.path.chmod(0o777 & ~_umask())  # as mkdir would make it (mkdtemp's is private)
         except OSError as e:
             raise OutDirError(f"--out {out} is not writable: {e.strerror or e}") from None
@@ -85,7 +179,7 @@ class RunDir:
         old = None
         if self.out.exists():
             check_out_dir(self.out)  # still a previous run's: replace it, never mix with it
-            old = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".old", dir=self.out.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.{_tag()}.", suffix=".old", dir=self.out.parent))
             os.replace(self.out, old / "run")
         os.rename(self.path, self.out)
         if old is not None:
@@ -99,12 +193,20 @@ class RunDir:
 def write_atomic(path: Path, data: bytes | str) -> None:
     """Write data (str as UTF-8) to a temporary name in path's directory, then rename it to path."""
     payload = data.encode("utf-8") if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(payload)
-        os.chmod(tmp, 0o666 & ~_umask())  # as open() would make it (mkstemp's is private)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with naming(path):
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(payload)
+            os.chmod(tmp, 0o666 & ~_umask())  # as open() would make it (mkstemp's is private)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+
+def save_figure(fig: Any, path: Path, **savefig: Any) -> None:
+    """Draw a matplotlib figure into memory, then write it to ``path`` atomically (never a 0-byte image)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format=path.suffix.lstrip(".") or "png", **savefig)
+    write_atomic(path, buf.getvalue())

@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
 from host_tools.metrics import StrideSet  # noqa: E402
+from host_tools.outdir import save_figure  # noqa: E402
 
 __all__ = ["plot_tracking"]
 
@@ -63,5 +64,5 @@ def _plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.nda
     ax4.set(xlabel="time (s)", ylabel="tracking error (deg), supervisor in RUN")
     ax4.grid(alpha=0.3)
     ax4.legend(loc="upper right", fontsize=8)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

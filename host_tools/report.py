@@ -11,21 +11,26 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from host_tools.build_info import describe
 from host_tools.metrics import TrackingMetrics
-from host_tools.outdir import write_atomic
+from host_tools.outdir import naming, write_atomic
 from host_tools.process_clock import process_elapsed_s
-from host_tools.runner import RunResult
+from host_tools.runner import RunConfig, RunResult
 from host_tools.telemetry_csv import TelemetryCsv
 from host_tools.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 from protocol.telemetry import TelemetryDecoder
 
-__all__ = ["TRACKING_SIGNALS", "strict_json", "summarise", "tracking_lines", "tracking_of", "tracking_summary",
-           "tracking_text", "write_outputs"]
+if TYPE_CHECKING:
+    from host_tools.outdir import RunDir
+
+__all__ = ["TRACKING_SIGNALS", "run_into", "strict_json", "summarise", "tracking_lines", "tracking_of",
+           "tracking_summary", "tracking_text", "write_outputs"]
 
 
 
@@ -97,6 +102,16 @@ def _bus_load(r: RunResult) -> dict[str, float]:
     return {"bus_load": round(bus.busy_ticks / r.bench.f_cpu_hz / r.sim_time_s, 4)}
 
 
+def _interrupted(r: RunResult) -> dict:
+    """How far a run that was stopped early got: what stopped it, whole strides of gait run, time run."""
+    stop = getattr(r, "stop", None)  # serial mode: the stop record names the signal
+    by = getattr(r, "stopped_by", None) or (getattr(stop, "signal", None) if stop is not None else None)
+    start = r.gait_start_s
+    stride_s = r.firmware.config.stride_s
+    done = 0 if start is None else max(0, int((r.sim_time_s - start + 1e-9) // stride_s))
+    return {"by": by, "strides_run": done, "sim_time_s": round(r.sim_time_s, 6)}
+
+
 def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
     """The summary of a run as plain JSON-able values (tracking: from tracking_of(r), computed if not given)."""
     fw, sched = r.firmware, r.scheduler
@@ -123,9 +138,11 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
     sup = fw.supervisor
     faults = [] if sup.reason.value == 0 else [sup.reason.name]
     link = fw.motor.stats
+    complete = bool(getattr(r, "complete", not getattr(r, "interrupted", False)))
     return {
         "strides": r.config.strides,
-        "complete": bool(getattr(r, "complete", not getattr(r, "interrupted", False))),
+        "complete": complete,
+        **({} if complete else {"interruption": _interrupted(r)}),
         "sim_time_s": round(r.sim_time_s, 6),
         "wall_time_s": round(r.wall_time_s, 3),
         "realtime_factor": round(r.sim_time_s / r.wall_time_s, 2) if r.wall_time_s > 0 else None,
@@ -164,11 +181,15 @@ def _write_telemetry_csv(data: bytes, path: Path, f_cpu_hz: int, chunk_bytes: in
     """Decode data into path (a temporary name, renamed when complete), a chunk at a time."""
     dec = TelemetryDecoder(len(extra_names))
     tmp = path.with_name(f".{path.name}.tmp")
-    with tmp.open("w", encoding="utf-8", newline="") as f:
-        csv = TelemetryCsv(f, f_cpu_hz, extra_names)
-        for k in range(0, len(data), chunk_bytes):
-            csv.write(dec.feed_values(data[k:k + chunk_bytes]))
-    tmp.replace(path)
+    try:
+        with naming(path), tmp.open("w", encoding="utf-8", newline="") as f:
+            csv = TelemetryCsv(f, f_cpu_hz, extra_names)
+            for k in range(0, len(data), chunk_bytes):
+                csv.write(dec.feed_values(data[k:k + chunk_bytes]))
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return asdict(dec.stats)
 
 
@@ -222,10 +243,21 @@ def _bench_lines(s: dict) -> list[str]:
 
 
 
+def _interrupted_lines(s: dict) -> list[str]:
+    """The report's warning that the run was stopped early, and how far it got (nothing for a complete run)."""
+    if s["complete"]:
+        return []
+    i = s["interruption"]
+    return [f"**Interrupted**: stopped by {i['by'] or 'a stop request'} after {i['sim_time_s']:.3f} s, with "
+            f"{i['strides_run']} whole strides of gait run; every figure below covers that part only "
+            "(summary.json: \"complete\": false).", ""]
+
+
 def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
+    asked = "strides asked" if not s["complete"] and "stop" not in s else "strides"  # serial: strides run
     lines = [
-        "# pafp run report", "",
-        f"{s['strides']} strides, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
+        "# pafp run report", "", *_interrupted_lines(s),
+        f"{s['strides']} {asked}, {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.2f} s "
         f"(realtime factor {s['realtime_factor']}; {s['build']}), motor link {s['baud']} baud, seed {s['seed']}.",
         "",
         *tracking_lines(s["tracking"]), "", *_bench_lines(s),
@@ -268,7 +300,8 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
                                  else _write_telemetry_csv(r.telemetry, out / "telemetry.csv", r.firmware.f_cpu_hz,
                                                           extra_names=r.firmware.published_names))
     if trace and r.scheduler.trace is not None:
-        r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
+        with naming(out / "trace.json"):
+            r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
     fw = r.firmware
     if plot:  # drawn on every path, also when no stride ran (a run stopped early still shows its currents)
         from host_tools.plots import plot_tracking  # matplotlib: only when a plot is drawn
@@ -281,11 +314,9 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         label = {"truth": "truth (emulation only)"}
         strides = {label.get(n, n): st for n, st in tracking.strides.items() if n in shown and n in PLOT_STRIDES}
         errors = {label.get(n, n): p.errors_deg[n] for n in shown}
-        tmp = out / ".tracking.tmp.png"  # matplotlib picks the format from the name's end
-        plot_tracking(tmp, strides, (pct, band[:, 0], band[:, 1]), p.t_s, p.current_cmd_a, p.current_meas_a,
+        plot_tracking(out / "tracking.png", strides, (pct, band[:, 0], band[:, 1]), p.t_s, p.current_cmd_a, p.current_meas_a,
                       errors, f"Gait tracking, {s['strides']} strides, IMU-measured RMS "
                       f"{_figure(s['tracking']['imu']['rms_deg'], 2, '°')}")
-        tmp.replace(out / "tracking.png")
     if getattr(r.config, "scenario", "suspended") == "walk":
         from host_tools.actuator import walk_outputs
 
@@ -297,3 +328,29 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     write_atomic(out / "summary.json", json.dumps(strict_json(s), indent=2, allow_nan=False) + "\n")
     write_atomic(out / "report.md", _report_md(s, md_extra))
     return s
+
+
+def run_into(cfg: RunConfig, run_dir: RunDir, *, extra: dict | None = None, plot: bool = True, trace: bool = True,
+             progress: Callable[[float], None] | None = None, should_stop: Callable[[], bool] | None = None,
+             on_run: Callable[[], None] | None = None) -> tuple[RunResult, dict]:
+    """Run cfg on the virtual bench streaming into run_dir's staging directory, write every output, publish it.
+
+    Returns the result and its summary. On any exception (a write that fails: OSError naming the file) the
+    staging directory is removed, so --out keeps what it held. ``on_run`` is called between the run and the
+    writes (the progress bar's end).
+    """
+    from dataclasses import replace
+
+    from host_tools.runner import run_virtual
+
+    try:
+        cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=cfg.trace_capacity if trace else 0)
+        result = run_virtual(cfg, progress=progress, should_stop=should_stop)
+        if on_run is not None:
+            on_run()
+        s = write_outputs(result, run_dir.path, extra, plot=plot, trace=trace)
+        run_dir.publish()
+    except BaseException:
+        run_dir.discard()
+        raise
+    return result, s

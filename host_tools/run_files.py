@@ -17,6 +17,7 @@ import numpy as np
 
 from firmware.app import Firmware
 from hal.virtual.bench import VirtualBench
+from host_tools.outdir import naming
 from host_tools.probe import Probe
 from host_tools.telemetry_csv import TelemetryCsv
 from host_tools.tracking_stream import TrackingResult, TrackingStream, feed_probe
@@ -54,17 +55,21 @@ class RunFiles:
         """Move what the last segment produced out of the bench and the probe into the files and figures."""
         data = bench.telemetry.take()
         if data:
-            self._bin.write(data)
+            with naming(self.directory / "telemetry.bin"):
+                self._bin.write(data)
             self.telemetry_bytes += len(data)
-            self._csv.write(self.decoder.feed_values(data))
+            with naming(self.directory / "telemetry.csv"):
+                self._csv.write(self.decoder.feed_values(data))
         self.tracking.set_start(fw.gait_start_s)
         feed_probe(self.tracking, take_samples(probe))
 
     def close(self) -> TrackingResult:
         """Close the files; return the tracking figures (once; later calls return the same)."""
         if self._result is None:
-            self._bin.close()
-            self._csv_file.close()
+            with naming(self.directory / "telemetry.bin"):
+                self._bin.close()
+            with naming(self.directory / "telemetry.csv"):
+                self._csv_file.close()
             self._result = self.tracking.finish()
         return self._result
 

@@ -131,6 +131,7 @@ class RunResult:
     gait_start_s: float | None
     files: RunFiles | None = None  # the streamed files (then `telemetry` is empty and the probe drained)
     complete: bool = True  # False when should_stop ended the run early
+    stopped_by: str | None = None  # what should_stop answered (a signal's name), when it ended the run
     bench_record: dict = field(default_factory=dict)  # the plant drawn and the imperfections (summary.json)
 
 
@@ -153,8 +154,9 @@ class _Sporadic:
 
 
 def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
-                should_stop: Callable[[], bool] | None = None) -> RunResult:
-    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides (or until should_stop())."""
+                should_stop: Callable[[], bool | str | None] | None = None) -> RunResult:
+    """Run the firmware on the virtual suspended-foot bench for cfg.strides strides (or until should_stop() is
+    true: a string it answers, e.g. a signal's name, is kept as ``RunResult.stopped_by``)."""
     board_cfg = board_profile(cfg.board)
     f_cpu = int(board_cfg["f_cpu_hz"])
     isr = dict(board_cfg.get("isr_cycles", {}))
@@ -215,6 +217,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
         files = RunFiles(cfg.stream_to, tracking, f_cpu, fw.published_names)
     wall = 0.0
     complete = True
+    stopped_by = None
     segment = SEGMENT_S * f_cpu
     try:
         for t in [*range(segment, t_end, segment), t_end]:
@@ -225,8 +228,10 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
                 files.drain(bench, probe, fw)
             if progress is not None:
                 progress(t / t_end)
-            if should_stop is not None and should_stop() and t < t_end:
+            reason = should_stop() if should_stop is not None else None
+            if reason and t < t_end:
                 complete = False
+                stopped_by = reason if isinstance(reason, str) else "a stop request"
                 break
     finally:
         if wire is not None:
@@ -236,4 +241,4 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     bench_record["imperfections"]["backlash_crossings"] = bench.plant.raw.gap_crossings
     telemetry = bench.telemetry_bytes() if files is None else b""
     return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
-                     files, complete, bench_record)
+                     files, complete, stopped_by=stopped_by, bench_record=bench_record)

@@ -2,7 +2,9 @@
 
 The file is written as the firmware logs, so a run stopped at any moment (a lost link, Ctrl-C, a crash)
 leaves `telemetry.bin` complete up to the last record sent. A failing telemetry port does not stop the
-firmware: the capture goes on alone and the error is kept for the report.
+firmware: the capture goes on alone and the error is kept for the report. Nor does a failing file (a full
+disk): the bytes are still kept in memory and sent to the port, the error is kept in ``file_error`` and the
+command reports it after the stop path (exit 74, docs/hardware.md).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ class CaptureUart(Uart):
         self.path = path
         self.inner = inner
         self.inner_error = ""
+        self.file_error: OSError | None = None
         self._file = path.open("wb")
         self._data = bytearray()
 
@@ -60,8 +63,13 @@ class CaptureUart(Uart):
                 accepted = int(n)
         chunk = data[:accepted]
         self._data += chunk
-        self._file.write(chunk)
-        self._file.flush()
+        if self.file_error is None:
+            try:
+                self._file.write(chunk)
+                self._file.flush()
+            except OSError as exc:
+                self.file_error = OSError(exc.errno, exc.strerror or str(exc), str(self.path))
+                log.error("cannot write %s (%s): telemetry kept in memory, the run goes on", self.path, exc)
         return accepted
 
     def _receive(self, max_bytes: int) -> bytes:
@@ -71,4 +79,7 @@ class CaptureUart(Uart):
         return 0
 
     def _close(self) -> None:
-        self._file.close()
+        try:
+            self._file.close()
+        except OSError as exc:  # the last flush: the same failure as a write's
+            self.file_error = self.file_error or OSError(exc.errno, exc.strerror or str(exc), str(self.path))

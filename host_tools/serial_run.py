@@ -210,6 +210,7 @@ class SerialRunResult:
     startup_bytes: dict[str, int] = field(default_factory=dict)
     bounds: list = field(default_factory=list)  # no response-time bounds: host times are measured
     time_in_run_s: float = 0.0
+    telemetry_file_error: OSError | None = None  # writing telemetry.bin failed (a full disk): the run went on
 
     @property
     def interrupted(self) -> bool:
@@ -334,12 +335,14 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     out.mkdir(parents=True, exist_ok=True)
     capture = CaptureUart(out / "telemetry.bin", cfg.telemetry_baud, inner=ports.telemetry)
     try:
-        return _run(cfg, ports, capture, wire, f_cpu, fw_cfg, reference, seen, progress, signals)
+        result = _run(cfg, ports, capture, wire, f_cpu, fw_cfg, reference, seen, progress, signals)
     finally:  # the stop path has run inside _run: the safe frames have left before any port closes
         capture.close()
         ports.close()
         if wire is not None:
             wire.close()
+    result.telemetry_file_error = capture.file_error  # telemetry.bin could not be written (reported after)
+    return result
 
 
 def _since_start() -> Callable[[], float]:

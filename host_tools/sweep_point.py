@@ -87,8 +87,10 @@ def _firmware_config(profile_text: str, items: tuple[tuple[str, Any], ...], prof
             raise ValueError(str(e).replace(str(p), profile_name)) from None
 
 
-def run_config_of(task: PointTask, plant_options: Callable[[int], dict[str, Any]] = plant_seed_run_options) -> Any:
-    """The RunConfig of a point (the plant draw's options merged in for a Monte Carlo point)."""
+def run_config_of(task: PointTask, plant_options: Callable[[int], dict[str, Any]] = plant_seed_run_options,
+                  trace: bool = False) -> Any:
+    """The RunConfig of a point (the plant draw's options merged in for a Monte Carlo point); ``trace``: keep the
+    RTOS trace (`--point` writes trace.json; the sweep's rows do not need it)."""
     from host_tools.runner import RunConfig
 
     params = dict(task.params)
@@ -98,8 +100,9 @@ def run_config_of(task: PointTask, plant_options: Callable[[int], dict[str, Any]
     fw = firmware_config_of(task.profile_text, {k: v for k, v in params.items() if not k.startswith("run.")},
                             task.profile_name)
     extra = plant_options(task.plant_seed) if task.plant_seed is not None else {}
+    traced = {} if trace else {"trace_capacity": 0}  # with it: RunConfig's default, as `pafp run`
     return RunConfig(strides=run["strides"], baud=run["baud"], seed=run["seed"], board=run["board"],
-                     settle_s=run["settle_s"], firmware=fw, trace_capacity=0, **extra)
+                     settle_s=run["settle_s"], firmware=fw, **traced, **extra)
 
 
 class _PointTimeout(Exception):

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from host_tools.outdir import naming, save_figure, write_atomic
 from host_tools.sweep_spec import SweepSpec
 
 __all__ = ["PLOTTED", "rerun_command", "write_report"]
@@ -57,7 +58,7 @@ def _axis_plot(path: Path, rows: list[dict[str, Any]], key: str, values: tuple[A
         axes[-1].set_xticks(list(pos.values()), [str(v) for v in values])
     axes[0].legend(fontsize=7)
     axes[-1].set_xlabel(key)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
     plt.close(fig)
 
 
@@ -80,7 +81,7 @@ def _mc_plot(path: Path, rows: list[dict[str, Any]], samples: int) -> None:
         ax.set_xlabel(figure)
         ax.set_ylabel("points")
     fig.suptitle(f"Monte Carlo: {len(rows)} points ({samples} plant draws per grid point)")
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
     plt.close(fig)
 
 
@@ -89,10 +90,14 @@ def _fmt(v: float) -> str:
 
 
 def write_report(spec: SweepSpec, rows: list[dict[str, Any]], out: Path, *, wall_time_s: float | None = None,
-                 where: str = "") -> Path:
-    """Write out/report.md and out/plots/*.png from the rows (sorted by point); return the report's path."""
+                 where: str = "", interrupted: str | None = None) -> Path:
+    """Write out/report.md and out/plots/*.png from the rows (sorted by point); return the report's path.
+
+    ``interrupted``: the signal that stopped the sweep early (the report says so and how to finish it).
+    """
     plots = out / "plots"
-    plots.mkdir(parents=True, exist_ok=True)
+    with naming(plots):
+        plots.mkdir(parents=True, exist_ok=True)
     status = {s: sum(r["status"] == s for r in rows) for s in ("ok", "fault", "error", "timeout")}
     ran = [r for r in rows if r["status"] in ("ok", "fault")]
     lines = [f"# pafp sweep report: {spec.path.name}", "",
@@ -100,6 +105,8 @@ def write_report(spec: SweepSpec, rows: list[dict[str, Any]], out: Path, *, wall
              f"{spec.run['strides']} strides per point; {len(rows)} of {spec.n_points} points finished"
              + (f" in {wall_time_s:.1f} s" if wall_time_s is not None else "") + (f" ({where})" if where else "")
              + ".", "",
+             *([f"**Interrupted** by {interrupted}: {len(rows)} of {spec.n_points} points finished; "
+                f"`pafp sweep {spec.path} --out {out} --resume` runs the rest.", ""] if interrupted else []),
              "| status | points |", "|---|---|", *(f"| {s} | {n} |" for s, n in status.items()), "",
              "Figures over the points that ran (ok or fault):", "",
              "| figure | median | worst (max) | min |", "|---|---|---|---|"]
@@ -141,5 +148,5 @@ def write_report(spec: SweepSpec, rows: list[dict[str, Any]], out: Path, *, wall
     lines += ["", "Files: `results.parquet` and `results.csv` (one row per point, sorted by point), `rows.jsonl` "
               "(the journal written as points finish), `sweep.json`, `plots/`.", ""]
     path = out / "report.md"
-    path.write_text("\n".join(lines), encoding="utf-8")
+    write_atomic(path, "\n".join(lines))
     return path

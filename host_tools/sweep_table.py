@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from host_tools.outdir import naming
+
 __all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "read_rows"]
 
 JOURNAL = "rows.jsonl"
@@ -45,9 +47,15 @@ def read_rows(out: Path) -> list[dict[str, Any]]:
 
 
 def _atomic(path: Path, write: Any) -> None:
+    """write(tmp) then rename tmp to path; a write that fails leaves no tmp behind and names path."""
     tmp = path.with_name(f".{path.name}.tmp")
-    write(tmp)
-    os.replace(tmp, path)
+    try:
+        with naming(path):
+            write(tmp)
+            os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def check_out(out: Path, digest: str, resume: bool) -> dict[int, dict[str, Any]]:
@@ -79,14 +87,16 @@ class ResultsTable:
         out.mkdir(parents=True, exist_ok=True)
         _atomic(meta, lambda p: p.write_text(json.dumps({"digest": digest, "points": n_points, "columns": columns},
                                                         indent=2) + "\n", encoding="utf-8"))
-        self._journal = open(out / JOURNAL, "a", encoding="utf-8")  # noqa: SIM115 - closed by close()
+        with naming(out / JOURNAL):
+            self._journal = open(out / JOURNAL, "a", encoding="utf-8")  # noqa: SIM115 - closed by close()
         self._last_flush = 0.0
 
     def add(self, row: dict[str, Any]) -> None:
         """Record a finished point: journal now, tables at most every FLUSH_S."""
         self.rows[int(row["point"])] = row
-        self._journal.write(json.dumps({k: _jsonable(v) for k, v in row.items()}, allow_nan=False) + "\n")
-        self._journal.flush()
+        with naming(self.out / JOURNAL):
+            self._journal.write(json.dumps({k: _jsonable(v) for k, v in row.items()}, allow_nan=False) + "\n")
+            self._journal.flush()
         if time.monotonic() - self._last_flush >= FLUSH_S:
             self.flush()
 
@@ -107,6 +117,8 @@ class ResultsTable:
         self._last_flush = time.monotonic()
 
     def close(self) -> None:
-        """Write the tables a last time and close the journal."""
-        self.flush()
-        self._journal.close()
+        """Write the tables a last time and close the journal (closed even when the tables cannot be written)."""
+        try:
+            self.flush()
+        finally:
+            self._journal.close()

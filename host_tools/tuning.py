@@ -10,6 +10,8 @@ over BOUNDS, population POPULATION, seeded with numpy.random.default_rng(seed); 
 the starting gains plus POPULATION - 1 log-normal perturbations (SIGMA0 in log space); each generation's
 candidates are evaluated through its map-like `workers` on Dask (`_DaskMap`) and ranked by (score, index),
 so the result is the same for a seed whatever the number of workers or their completion order.
+A stop signal (host_tools/interrupt.py: Interrupted) ends the search where it is: the result holds every
+candidate finished so far, its best one, and ``interrupted`` names the signal.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from scipy.optimize import differential_evolution
 
 from firmware.config import FirmwareConfig
 from firmware.control.pid import PidGains
+from host_tools.interrupt import Interrupted
+from host_tools.outdir import naming, write_atomic
 from host_tools.report import summarise
 from host_tools.runner import RunConfig, run_virtual
 
@@ -80,11 +84,13 @@ class Evaluation:
 
 @dataclass(frozen=True)
 class TuneResult:
-    """Every evaluation in index order, the starting one (index 0) and the best feasible one."""
+    """Every evaluation in index order, the starting one (index 0) and the best feasible one (the start if none
+    is); ``interrupted``: the signal that ended the search early (its evaluations are those finished by then)."""
 
     evaluations: list[Evaluation]
     start: Evaluation
     best: Evaluation
+    interrupted: str | None = None
 
 
 def gains_of(cfg: FirmwareConfig) -> Candidate:
@@ -176,19 +182,19 @@ class _DaskMap:
     def __call__(self, _func: Callable[[np.ndarray], float], xs: Iterable[np.ndarray]) -> list[float]:
         cands = [_to_gains(np.asarray(x)) for x in xs]
         idx0 = len(self.evaluations)
+        results: list[Evaluation] = []
         if self.client is None:
-            results = []
             for k, c in enumerate(cands):
                 results.append(evaluate(idx0 + k, self.base, c, self.strides, self.seed))
+                self.evaluations.append(results[-1])  # kept as it comes: an interrupted search keeps it
                 self._step()
         else:
             futures = [self.client.submit(evaluate, idx0 + k, self.base, c, self.strides, self.seed, pure=False)
                        for k, c in enumerate(cands)]
-            results = []
             for fut in futures:  # in index order; progress counts them as they come
                 results.append(fut.result())
+                self.evaluations.append(results[-1])
                 self._step()
-        self.evaluations += results
         best = min(self.evaluations, key=_rank)
         logger.info("%d evaluations: best score %.4f (candidate %d)", len(self.evaluations), best.score, best.index)
         return [e.score if math.isfinite(e.score) else INFEASIBLE_ENERGY for e in results]
@@ -220,12 +226,18 @@ def search(base: FirmwareConfig, *, budget: int, strides: int = 2, seed: int = 0
     init = np.array([_to_x(first)] + [_to_x(_perturb(rng, first, SIGMA0)) for _ in range(size - 1)])
     mapper = _DaskMap(client, base, strides, seed, size * generations, progress)
     lo, hi = _to_x({k: b[0] for k, b in BOUNDS.items()}), _to_x({k: b[1] for k, b in BOUNDS.items()})
-    differential_evolution(_energy, list(zip(lo, hi, strict=True)), maxiter=generations - 1, popsize=size,
-                           init=init, mutation=MUTATION, recombination=RECOMBINATION, rng=rng, polish=False,
-                           tol=0.0, atol=0.0, updating="deferred", workers=mapper)
+    interrupted = None
+    try:
+        differential_evolution(_energy, list(zip(lo, hi, strict=True)), maxiter=generations - 1, popsize=size,
+                               init=init, mutation=MUTATION, recombination=RECOMBINATION, rng=rng, polish=False,
+                               tol=0.0, atol=0.0, updating="deferred", workers=mapper)
+    except Interrupted as stop:
+        if not mapper.evaluations:  # not one candidate finished: nothing to keep
+            raise
+        interrupted = stop.signal
     evaluations = mapper.evaluations
     best = min(evaluations, key=_rank)
-    return TuneResult(evaluations, evaluations[0], best if best.feasible else evaluations[0])
+    return TuneResult(evaluations, evaluations[0], best if best.feasible else evaluations[0], interrupted)
 
 
 _TABLES = {"position": ("control", "position"), "velocity": ("control", "velocity")}
@@ -248,8 +260,7 @@ def write_profile(source: Path, gains: Candidate, out: Path) -> Path:
         table[gain] = float(value)
     if missing:
         raise ValueError(f"profile {source} has no line for {sorted(missing)}: cannot write the tuned gains")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text(tomlkit.dumps(doc), encoding="utf-8")
-    tmp.replace(out)
+    with naming(out.parent):
+        out.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(out, tomlkit.dumps(doc))
     return out

@@ -133,20 +133,24 @@ class Trace:
         name = {n: encode(n) for n in tid}
         job = ('{"name": %s, "cat": "job", "ph": "X", "pid": 1, "tid": %d, "ts": %r, "dur": %r, "args": '
                '{"job": %d, "release_cycles": %d, "ready_cycles": %d, "response_cycles": %d}}')
-        with tmp.open("w", encoding="utf-8") as f:
-            f.write('{"traceEvents": [' + ", ".join(head))
-            jobs = iter(self._jobs)
-            while batch := list(itertools.islice(jobs, 10_000)):
-                f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
-                                               ready, finish - release)
-                                 for t, j, release, ready, start, finish in batch]))
-            for kind, time, source, j in self._events:
-                f.write(", " + encode({
-                    "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
-                    "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": j},
-                }))
-            f.write("]}")
-        tmp.replace(path)
+        try:
+            with tmp.open("w", encoding="utf-8") as f:
+                f.write('{"traceEvents": [' + ", ".join(head))
+                jobs = iter(self._jobs)
+                while batch := list(itertools.islice(jobs, 10_000)):
+                    f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
+                                                   ready, finish - release)
+                                     for t, j, release, ready, start, finish in batch]))
+                for kind, time, source, j in self._events:
+                    f.write(", " + encode({
+                        "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
+                        "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": j},
+                    }))
+                f.write("]}")
+            tmp.replace(path)
+        except BaseException:  # a failed write leaves no partial file behind
+            tmp.unlink(missing_ok=True)
+            raise
 
     def _names(self) -> list[str]:
         """Task names in tid order: the declared ones, then any other seen in the jobs."""

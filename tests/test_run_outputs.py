@@ -178,6 +178,13 @@ def test_a_signal_ends_the_run_and_what_it_had_is_written(tmp_path, sig):
     assert f"stopped by {sig.name}" in stderr and "Traceback" not in stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["complete"] is False and 0 < s["sim_time_s"] < 2000
+    stopped = s["interruption"]
+    assert stopped["by"] == sig.name and 0 <= stopped["strides_run"] < 2000
+    report = (out / "report.md").read_text()  # says so first, and how far the run got
+    assert report.splitlines()[2] == (f"**Interrupted**: stopped by {sig.name} after {s['sim_time_s']:.3f} s, with "
+                                      f"{stopped['strides_run']} whole strides of gait run; every figure below "
+                                      "covers that part only (summary.json: \"complete\": false).")
+    assert report.splitlines()[4].startswith("2000 strides asked, ")
     dec = TelemetryDecoder()
     records = dec.feed((out / "telemetry.bin").read_bytes())
     assert records and dec.stats.crc_errors == dec.stats.bad_frames == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from collections.abc import Callable
@@ -90,31 +91,38 @@ def markdown_table(results: list[BenchResult]) -> str:
 
 
 def write_outputs(result: BenchResult, out_dir: Path) -> list[Path]:
-    """Write <test>.png, <test>.csv, <test>.json and <test>.md into out_dir; return their paths."""
+    """Write <test>.png, <test>.csv, <test>.json and <test>.md into out_dir, each atomically (host_tools/outdir.py);
+    return their paths. An OSError names the file that failed; the files written before it stay complete."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out_dir.mkdir(parents=True, exist_ok=True)
+    from host_tools.outdir import naming, save_figure, write_atomic
+
+    with naming(out_dir):
+        out_dir.mkdir(parents=True, exist_ok=True)
     stem = result.test.replace("-", "_")
     paths = [out_dir / f"{stem}.{ext}" for ext in ("png", "csv", "json", "md")]
     fig = plt.figure(figsize=(9, 7), layout="constrained")
-    if result.plotter is not None:
-        result.plotter(fig)
-    fig.savefig(paths[0], dpi=110)
-    plt.close(fig)
+    try:
+        if result.plotter is not None:
+            result.plotter(fig)
+        save_figure(fig, paths[0], dpi=110)
+    finally:
+        plt.close(fig)
     names = list(result.columns)
     n = max((len(v) for v in result.columns.values()), default=0)
-    with paths[1].open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(names)
-        for k in range(n):
-            w.writerow([_cell(result.columns[c], k) for c in names])
+    table = io.StringIO(newline="")
+    w = csv.writer(table)
+    w.writerow(names)
+    for k in range(n):
+        w.writerow([_cell(result.columns[c], k) for c in names])
+    write_atomic(paths[1], table.getvalue())
     doc = {"test": result.test, "parameters": result.parameters,
            "figures": [f.as_dict() for f in result.figures]}
-    paths[2].write_text(json.dumps(doc, indent=2, default=float) + "\n")
-    paths[3].write_text(f"# Bench test `{result.test}`\n\n" + markdown_table([result]))
+    write_atomic(paths[2], json.dumps(doc, indent=2, default=float) + "\n")
+    write_atomic(paths[3], f"# Bench test `{result.test}`\n\n" + markdown_table([result]))
     return paths
 
 

@@ -34,15 +34,33 @@ def _run_one(name: str, seed: int, quick: bool) -> BenchResult:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the selected test(s), write outputs if --out is given, print the comparison table."""
+    """Run the selected test(s), write outputs if --out is given, print the comparison table.
+
+    --out is checked before any test runs (exit 2); a write that fails afterwards is one line, exit 74 (the
+    files already written stay complete, none is left half-written).
+    """
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, check_writable, write_failed
+
+    if args.out is not None:
+        try:
+            check_writable(args.out)
+        except OutDirError as e:
+            print(f"pafp bench: {e}", file=sys.stderr)
+            return 2
     names = list(TESTS) if args.test == "all" else [args.test]
     results = []
     for n in names:
         print(f"pafp bench: {n} ...", file=sys.stderr)
         results.append(_run_one(n, args.seed, args.quick))
+    print(markdown_table(results), end="")
     if args.out is not None:
         for r in results:
-            for path in write_outputs(r, args.out):
+            try:
+                paths = write_outputs(r, args.out)
+            except OSError as e:
+                print(write_failed("bench", e, f"the files written before it in {args.out} are complete"),
+                      file=sys.stderr)
+                return EXIT_WRITE_FAILED
+            for path in paths:
                 print(f"wrote {path}", file=sys.stderr)
-    print(markdown_table(results), end="")
     return 0

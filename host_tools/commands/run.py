@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     """
     if args.motor or args.imu:
         return _run_serial(args)
-    from host_tools.outdir import OutDirError, RunDir
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, check_capture_dir, write_failed
     from host_tools.runner import RunConfig, board_profile
 
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
@@ -138,6 +138,8 @@ def run(args: argparse.Namespace) -> int:
             from firmware.control.reference import GaitReference
 
             GaitReference.from_csv(args.reference, stride_s=fw_cfg.stride_s)
+        if args.capture is not None:
+            check_capture_dir(args.capture)
         run_dir = RunDir(out)  # --out checked and the staging directory made: before the run
     except OSError as e:
         print(f"pafp run: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
@@ -147,17 +149,19 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         return _run_virtual(args, cfg, run_dir)
-    except BaseException:
-        run_dir.discard()
-        raise
+    except OSError as e:  # a write failed during the run: the staging directory is gone, --out untouched
+        if e.filename:
+            e.filename = str(e.filename).replace(str(run_dir.path), f"{run_dir.out} (staged)")
+        print(write_failed("run", e, f"the run was stopped and nothing published: {out} keeps what it held"),
+              file=sys.stderr)
+        return EXIT_WRITE_FAILED
+    finally:
+        run_dir.discard()  # nothing left once published; everything staged if not
 
 
 def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> int:
     """The virtual run proper, streaming into run_dir, which is published at the end."""
-    from dataclasses import replace
-
-    from host_tools.report import tracking_text, write_outputs
-    from host_tools.runner import run_virtual
+    from host_tools.report import run_into, tracking_text
     from host_tools.stop_signals import StopSignals
 
     fw_cfg = cfg.firmware
@@ -168,13 +172,10 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
-    cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity)
     bar = _Progress(not args.quiet)
     with StopSignals() as stop:  # the run ends at its next segment; a second signal interrupts
-        result = run_virtual(cfg, progress=bar, should_stop=lambda: stop.name is not None)
-        bar.done()
-        s = write_outputs(result, run_dir.path, plot=not args.no_plot, trace=not args.no_trace)
-        run_dir.publish()
+        result, s = run_into(cfg, run_dir, plot=not args.no_plot, trace=not args.no_trace, progress=bar,
+                             should_stop=lambda: stop.name, on_run=bar.done)
     print(f"  simulated {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s (realtime factor {s['realtime_factor']}; "
           f"{s['build']}); whole process {s['process_wall_time_s']:.2f} s (factor {s['process_realtime_factor']})")
     for line in tracking_text(s["tracking"]):
@@ -224,6 +225,15 @@ def _controller(fw_cfg, args: argparse.Namespace) -> object:  # FirmwareConfig -
     return build_controller(fw_cfg.controller, fw_cfg, params)
 
 
+def _remove_partial(path: Path, size: int) -> None:
+    """Remove path unless it holds size bytes (serial mode's telemetry.bin, appended as the run went)."""
+    try:
+        if path.stat().st_size != size:
+            path.unlink()
+    except OSError:
+        pass
+
+
 def _run_serial(args: argparse.Namespace) -> int:
     """Serial mode: check the ports, run on the wall clock, stop safely, write the same outputs (exit codes:
     docs/hardware.md)."""
@@ -234,11 +244,13 @@ def _run_serial(args: argparse.Namespace) -> int:
     if not (args.motor and args.imu):
         print("pafp run: serial mode needs both --motor PORT and --imu PORT", file=sys.stderr)
         return 2
-    from host_tools.outdir import OutDirError, check_out_dir
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, check_capture_dir, check_out_dir, write_failed
 
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
         check_out_dir(out)  # before any port is opened (serial mode writes into it, not staged)
+        if args.capture is not None:
+            check_capture_dir(args.capture)
     except OutDirError as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
@@ -249,9 +261,6 @@ def _run_serial(args: argparse.Namespace) -> int:
                               board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
-        if args.capture is not None and (args.capture / "index.csv").exists():
-            raise ValueError(f"--capture {str(args.capture)!r} already holds a capture (index.csv): give a new "
-                             "directory")
         if args.telemetry == "pty":
             from host_tools.telemetry_pty import TelemetryPty
 
@@ -278,7 +287,16 @@ def _run_serial(args: argparse.Namespace) -> int:
         from host_tools.serial_report import serial_extra
 
         extra, md = serial_extra(result)
-        s = write_outputs(result, out, extra, md)
+        try:  # telemetry.bin is rewritten from memory: a capture that failed mid-run is complete if this works
+            s = write_outputs(result, out, extra, md)
+        except OSError as e:
+            _remove_partial(out / "telemetry.bin", len(result.telemetry))
+            safe = result.stop.safe
+            stopped = ("the safe frames on the wire" if safe is not None and safe.on_wire
+                       else "the safe frames NOT confirmed on the wire")
+            print(write_failed("run", e, f"the motor was stopped first ({stopped}); the files complete in {out} "
+                               "are kept, partial ones removed"), file=sys.stderr)
+            return EXIT_WRITE_FAILED
     from host_tools.report import tracking_text
 
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]

@@ -26,8 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _one_point(spec: object, index: int, out: Path) -> int:
-    from host_tools.report import write_outputs
-    from host_tools.runner import run_virtual
+    """Point `index` alone, with the full outputs of `pafp run` staged and published into `out` as `pafp run`
+    does (host_tools/report.py: run_into): --out checked before the run, a failing write exits 74."""
+    from host_tools.outdir import EXIT_WRITE_FAILED, RunDir, write_failed
+    from host_tools.report import run_into
     from host_tools.sweep_engine import tasks_of
     from host_tools.sweep_point import run_config_of
 
@@ -36,20 +38,34 @@ def _one_point(spec: object, index: int, out: Path) -> int:
         print(f"pafp sweep: --point {index} out of range: an int in 0..{len(tasks) - 1}", file=sys.stderr)
         return 2
     t = tasks[index]
+    run_dir = RunDir(out)  # OutDirError (a ValueError): exit 2 before the run
     params = ", ".join(f"{k} = {v!r}" for k, v in t.params) or "base run"
     print(f"pafp sweep: point {index} ({params}; seed {t.seed}, plant seed {t.plant_seed}) -> {out}")
-    s = write_outputs(run_virtual(run_config_of(t)), out, extra={"sweep_point": index, "plant_seed": t.plant_seed})
+    try:
+        _, s = run_into(run_config_of(t, trace=True), run_dir, extra={"sweep_point": index,
+                                                                       "plant_seed": t.plant_seed})
+    except OSError as e:
+        print(write_failed("sweep", e, f"nothing published: {out} keeps what it held"), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     print(f"  tracking: RMS {s['rms_error_deg']:.4f} deg, max {s['max_error_deg']:.4f} deg; deadline misses "
-          f"{s['deadline_misses']}, faults {s['faults'] or 'none'}; outputs: {out}/report.md, tracking.png")
+          f"{s['deadline_misses']}, faults {s['faults'] or 'none'}; outputs: {out}/summary.json, report.md, "
+          "tracking.png, trace.json, telemetry.bin/.csv")
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
 
 
 def run(args: argparse.Namespace) -> int:
-    """Check the spec whole, run the points not yet finished, write the tables and report.md."""
+    """Check the spec whole, run the points not yet finished, write the tables and report.md.
+
+    Exit 2 for a bad spec, option or --out (before any run); 74 when a result cannot be written during the
+    sweep (the journal keeps every row written before); 128 + N after signal N (the report says how far the
+    sweep got; --resume finishes it).
+    """
+    from host_tools.interrupt import Interrupted, interrupting
+    from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.sweep_engine import check_points, dask_client, run_sweep
     from host_tools.sweep_report import write_report
     from host_tools.sweep_spec import load_spec
-    from host_tools.sweep_table import check_out
+    from host_tools.sweep_table import check_out, read_rows
 
     try:
         if args.workers is not None and not 1 <= args.workers <= 1024:
@@ -59,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         if args.point is not None:
             return _one_point(spec, args.point, out)
         check_points(spec)
+        check_writable(out)
         check_out(out, spec.digest, args.resume)  # before a cluster starts
     except ValueError as e:
         print(f"pafp sweep: {e}", file=sys.stderr)
@@ -66,19 +83,46 @@ def run(args: argparse.Namespace) -> int:
     workers = args.workers or os.cpu_count() or 1
     where = f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster of {workers} workers on 127.0.0.1"
     print(f"pafp sweep: {spec.n_points} points of {spec.run['strides']} strides on {where} -> {out}")
+    kept = f"every row finished before it is in {out}/rows.jsonl (--resume runs the rest)"
     try:
-        with dask_client(workers=workers, scheduler=args.scheduler) as client:
+        with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_sweep(spec, out, client, resume=args.resume, progress=not args.quiet)
     except ValueError as e:  # --out holds another sweep, or rows without --resume
         print(f"pafp sweep: {e}", file=sys.stderr)
         return 2
+    except Interrupted as stop:  # the table was flushed and the cluster closed on the way out
+        return _interrupted(spec, out, read_rows(out), stop, where)
     except OSError as e:
-        what = f"cannot reach the Dask scheduler {args.scheduler}" if args.scheduler else "cannot write the results"
+        if e.filename is not None:  # a result file (the tables name theirs)
+            print(write_failed("sweep", e, kept), file=sys.stderr)
+            return EXIT_WRITE_FAILED
+        what = f"cannot reach the Dask scheduler {args.scheduler}" if args.scheduler else "cannot start the cluster"
         print(f"pafp sweep: {what}: {e}", file=sys.stderr)
         return 2
-    report = write_report(spec, outcome.rows, out, wall_time_s=outcome.wall_time_s, where=where)
+    try:
+        report = write_report(spec, outcome.rows, out, wall_time_s=outcome.wall_time_s, where=where)
+    except OSError as e:
+        print(write_failed("sweep", e, kept), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     bad = sum(r["status"] != "ok" for r in outcome.rows)
     print(f"  {outcome.ran} points run, {outcome.skipped} kept from before, in {outcome.wall_time_s:.1f} s; "
           f"{bad} with a fault or an error")
     print(f"  outputs: {out}/results.parquet, results.csv, {report.name}, plots/")
     return 0
+
+
+def _interrupted(spec: object, out: Path, rows: list, stop: object, where: str) -> int:
+    """After a stop signal: the report of the rows finished so far, marked interrupted; exit 128 + N."""
+    from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
+    from host_tools.sweep_report import write_report
+
+    n = spec.n_points  # type: ignore[attr-defined]
+    print(f"pafp sweep: stopped by {stop.signal}: {len(rows)} of {n} points finished, kept in "  # type: ignore[attr-defined]
+          f"{out}; `--resume` runs the rest", file=sys.stderr)
+    if rows:
+        try:
+            write_report(spec, rows, out, where=where, interrupted=stop.signal)  # type: ignore[arg-type,attr-defined]
+        except OSError as e:
+            print(write_failed("sweep", e, f"the rows are in {out}/rows.jsonl"), file=sys.stderr)
+            return EXIT_WRITE_FAILED
+    return stop.exit_code  # type: ignore[attr-defined,no-any-return]

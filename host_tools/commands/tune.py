@@ -37,6 +37,8 @@ def _plot(path: Path, before: object, after: object, title: str) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from host_tools.outdir import save_figure
+
     fig, (ax_a, ax_e) = plt.subplots(2, 1, sharex=True, figsize=(9, 7), layout="constrained")
     ax_a.plot(before.t_s, before.reference_deg, "k", lw=1.5, label="reference")  # type: ignore[attr-defined]
     for case, label in ((before, "before"), (after, "after")):
@@ -50,15 +52,21 @@ def _plot(path: Path, before: object, after: object, title: str) -> None:
     ax_e.set_ylabel("error [deg]")
     ax_e.set_xlabel("time [s]")
     ax_e.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Search, write firmware_tuned.toml, tune.json and tune.png, print the before/after figures."""
+    """Search, write firmware_tuned.toml, tune.json and tune.png, print the before/after figures.
+
+    --out is checked before the search (exit 2). After SIGINT, SIGTERM or SIGHUP the search stops where it is
+    and the best candidate so far is written (tune.json ``"complete": false``, no tune.png), exit 128 + N. A
+    write that fails is one line, exit 74 (files are written whole or not at all).
+    """
     from firmware.config import DEFAULT_PROFILE, load_firmware_config
     from host_tools import tuning
-    from host_tools.benchtests.tracking import run_case
+    from host_tools.interrupt import Interrupted, interrupting
+    from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.sweep_engine import Progress, dask_client
 
     source = args.profile or DEFAULT_PROFILE
@@ -69,28 +77,54 @@ def run(args: argparse.Namespace) -> int:
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
         tuning.check_budget(args.budget)
+        check_writable(args.out)
         workers = args.workers or os.cpu_count() or 1
         where = f"scheduler {args.scheduler}" if args.scheduler else f"{workers} workers"
         print(f"pafp tune: budget {args.budget} runs of {args.strides} strides on {where}, seed {args.seed} "
               f"-> {args.out}")
         bar = Progress(args.budget, not args.quiet, label="candidates")
-        with dask_client(workers=workers, scheduler=args.scheduler) as client:
+        with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             result = tuning.search(base, budget=args.budget, strides=args.strides, seed=args.seed, client=client,
                                    progress=lambda done, total: bar.step())
     except ValueError as e:
         print(f"pafp tune: {e}", file=sys.stderr)
         return 2
+    except Interrupted as stop:
+        print(f"pafp tune: stopped by {stop.signal} before any candidate finished: nothing written", file=sys.stderr)
+        return stop.exit_code
+    try:
+        return _write(args, source, base, result, where)
+    except OSError as e:
+        print(write_failed("tune", e, f"the files complete in {args.out} are kept"), file=sys.stderr)
+        return EXIT_WRITE_FAILED
+
+
+def _write(args: argparse.Namespace, source: Path, base: object, result: object, where: str) -> int:
+    """Write the tuned profile, tune.json and (a finished search) tune.png; print the figures; the exit code."""
+    from firmware.config import load_firmware_config
+    from host_tools import tuning
+    from host_tools.benchtests.tracking import run_case
+    from host_tools.outdir import write_atomic
+    from host_tools.stop_signals import EXIT_CODES
+
+    assert isinstance(result, tuning.TuneResult)
     out: Path = args.out
     profile_path = tuning.write_profile(source, result.best.gains, out / "firmware_tuned.toml")
     check = tuning.gains_of(load_firmware_config(profile_path))
     if any(abs(check[k] - v) > 1e-12 * max(1.0, abs(v)) for k, v in result.best.gains.items()):
         print(f"pafp tune: {profile_path} does not read back the tuned gains", file=sys.stderr)
         return 1
-    before = run_case("before", base, strides=args.strides, seed=args.seed)
-    after = run_case("after", tuning.with_gains(base, result.best.gains), strides=args.strides, seed=args.seed)
-    _plot(out / "tune.png", before, after,
-          f"pafp tune: {args.budget} candidates, {args.strides} strides, seed {args.seed}")
+    if result.interrupted is None:
+        before = run_case("before", base, strides=args.strides, seed=args.seed)
+        after = run_case("after", tuning.with_gains(base, result.best.gains), strides=args.strides, seed=args.seed)
+        _plot(out / "tune.png", before, after,
+              f"pafp tune: {args.budget} candidates, {args.strides} strides, seed {args.seed}")
+    else:  # no before/after runs after a stop signal: a tune.png of an earlier search would not match
+        (out / "tune.png").unlink(missing_ok=True)
     doc = {
+        "complete": result.interrupted is None,
+        **({"interruption": {"by": result.interrupted, "candidates_run": len(result.evaluations)}}
+           if result.interrupted else {}),
         "seed": args.seed, "budget": args.budget, "strides": args.strides, "workers": where,
         "source_profile": str(source), "tuned_profile": str(profile_path),
         "objective": {"score": "rms_error_deg + effort_weight * (rms_current_a + rms_current_step_a)",
@@ -103,13 +137,18 @@ def run(args: argparse.Namespace) -> int:
         "before": result.start.as_dict(), "best": result.best.as_dict(),
         "evaluations": [e.as_dict() for e in result.evaluations],
     }
-    (out / "tune.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    write_atomic(out / "tune.json", json.dumps(doc, indent=2) + "\n")
     b, a = result.start, result.best
     print(f"  before: RMS {b.rms_error_deg:.4f} deg, max {b.max_error_deg:.4f} deg, score {b.score:.4f}")
     print(f"  after:  RMS {a.rms_error_deg:.4f} deg, max {a.max_error_deg:.4f} deg, score {a.score:.4f} "
           f"(candidate {a.index})")
     print("  gains: " + ", ".join(f"{k} {v:.4g}" for k, v in a.gains.items()))
     feasible = sum(e.feasible for e in result.evaluations)
+    if result.interrupted is not None:
+        print(f"pafp tune: stopped by {result.interrupted} after {len(result.evaluations)} of {args.budget} "
+              f"candidates: the best so far is in {profile_path} and {out / 'tune.json'} (\"complete\": false)",
+              file=sys.stderr)
+        return EXIT_CODES.get(result.interrupted, 130)
     print(f"  {feasible}/{len(result.evaluations)} candidates feasible; outputs: {profile_path}, "
           f"{out / 'tune.json'}, {out / 'tune.png'}")
     return 0

@@ -1,0 +1,349 @@
+"""Outputs that cannot be written (issue 25, item 4) and work that is interrupted (item 5).
+
+Every output path is checked before the work (exit 2, one line, nothing written); a write that fails during
+the work is one line naming the file, exit 74 (EX_IOERR), with no partial file and no temporary left behind.
+
+How a failing disk is made here, without privileges: a full filesystem is an ``os.statvfs`` that reports
+no free block (the check reads nothing else); a disk that fills during the work is a child process whose
+file-size limit (RLIMIT_FSIZE, SIGXFSZ ignored) makes every write past it fail with EFBIG, as a full disk
+makes it fail with ENOSPC; a read-only directory is chmod 0o555, or, for root (whom chmod does not stop), a
+tmpfs mounted read-only, skipped where mount is not allowed. With mount allowed, one run fills a real tmpfs.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import resource
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from host_tools import outdir
+from host_tools.cli import main
+from host_tools.outdir import EXIT_WRITE_FAILED, clean_stale
+
+PAFP = [sys.executable, "-m", "host_tools"]
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _file_size_limit(limit: int):
+    def pre() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return pre
+
+
+def _pafp_limited(limit: int, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """pafp in a child process whose writes fail past `limit` bytes per file."""
+    return subprocess.run([*PAFP, *args], preexec_fn=_file_size_limit(limit), capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT)
+
+
+def _one_line(err: str) -> str:
+    lines = [ln for ln in err.strip().splitlines() if ln.startswith("pafp ") and not ln.endswith(" ...")]
+    assert "Traceback" not in err and len(lines) == 1, err
+    return lines[0]
+
+
+def _leftovers(directory: Path) -> list[str]:
+    """Temporary and staged names under directory (none may survive a failed write)."""
+    return sorted(str(p.relative_to(directory)) for p in directory.rglob("*")
+                  if p.name.endswith((".tmp", ".partial", ".old")) or ".tmp." in p.name)
+
+
+@pytest.fixture
+def full_disk(monkeypatch):
+    """Every filesystem reports no free block."""
+    real = os.statvfs
+
+    def statvfs(path):
+        st = tuple(real(path))
+        return os.statvfs_result(st[:3] + (0, 0) + st[5:])
+    monkeypatch.setattr(os, "statvfs", statvfs)
+
+
+@pytest.fixture
+def read_only(tmp_path):
+    """A directory this process cannot write into."""
+    d = tmp_path / "ro"
+    d.mkdir()
+    if os.geteuid() != 0:
+        d.chmod(0o555)
+        yield d
+        d.chmod(0o755)
+        return
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("root, and no mount: chmod does not stop root's writes")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=False)
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """A 2 MiB tmpfs (root with mount allowed only)."""
+    d = tmp_path / "disk"
+    d.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(d)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("mounting a tmpfs needs root and mount")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=False)
+
+
+# ---- pafp run (virtual) --------------------------------------------------------------------------------------
+
+def test_a_run_on_a_disk_that_fills_is_one_line_exit_74_and_out_keeps_the_previous_run(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--strides", "1", "--seed", "5", "--no-plot", "--no-trace", "--out", str(out)]) \
+        in (0, 1)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
+    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "6", "--no-plot", "--no-trace", "--out", str(out))
+    assert r.returncode == EXIT_WRITE_FAILED, r.stderr
+    line = _one_line(r.stderr)
+    assert "cannot write" in line and "telemetry.csv" in line and os.strerror(errno.EFBIG) in line, line
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # the previous run, untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging directory left
+
+
+def test_a_run_filling_a_real_tmpfs_leaves_nothing(small_tmpfs):
+    out = small_tmpfs / "run"
+    r = subprocess.run([*PAFP, "run", "--quiet", "--strides", "20", "--out", str(out)], capture_output=True,
+                       text=True, timeout=300, cwd=ROOT)
+    assert r.returncode == EXIT_WRITE_FAILED, r.stderr
+    assert os.strerror(errno.ENOSPC) in _one_line(r.stderr)
+    assert list(small_tmpfs.iterdir()) == []
+
+
+def test_a_run_on_a_full_disk_is_refused_before_it_starts(tmp_path, capsys, full_disk):
+    code = main(["run", "--quiet", "--strides", "1", "--out", str(tmp_path / "run")])
+    _, err = capsys.readouterr()
+    assert code == 2 and "bytes free" in _one_line(err) and str(tmp_path / "run") in err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("kind", ["file", "read-only"])
+def test_a_capture_directory_that_cannot_be_written_is_refused_before_the_run(tmp_path, capsys, request, kind):
+    if kind == "file":
+        capture = tmp_path / "cap"
+        capture.write_text("not a directory")
+    else:
+        capture = request.getfixturevalue("read_only") / "cap"
+    code = main(["run", "--quiet", "--strides", "1", "--out", str(tmp_path / "run"), "--capture", str(capture)])
+    _, err = capsys.readouterr()
+    assert code == 2 and "--capture" in _one_line(err) and str(capture) in err
+    assert not (tmp_path / "run").exists() and _leftovers(tmp_path) == []
+
+
+# ---- serial mode ------------------------------------------------------------------------------------------------
+
+SIM = ["--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--no-realtime", "--quiet"]
+
+
+def test_a_serial_run_on_a_full_disk_exits_2_before_any_port_and_leaves_nothing(tmp_path, capsys, full_disk):
+    code = main(["run", *SIM, "--duration", "1", "--out", str(tmp_path / "run")])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and "bytes free" in _one_line(err) and stdout == ""
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_serial_capture_onto_a_file_is_refused_before_any_port(tmp_path, capsys):
+    (tmp_path / "cap").write_text("x")
+    code = main(["run", *SIM, "--duration", "1", "--out", str(tmp_path / "run"), "--capture", str(tmp_path / "cap")])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and "--capture" in _one_line(err) and stdout == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cap"]
+
+
+def test_a_serial_run_whose_disk_fills_stops_the_motor_first_then_one_line_exit_74(tmp_path):
+    out = tmp_path / "run"
+    r = _pafp_limited(40_000, "run", *SIM, "--duration", "3", "--out", str(out), timeout=120)
+    assert r.returncode == EXIT_WRITE_FAILED, r.stderr
+    line = _one_line(r.stderr)
+    assert "cannot write" in line and "telemetry.bin" in line, line
+    assert "the motor was stopped first (the safe frames on the wire)" in line, line
+    assert not (out / "telemetry.bin").exists()  # the partial capture is removed
+    assert _leftovers(tmp_path) == []
+
+
+# ---- pafp bench ---------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", ["file", "read-only", "full"])
+def test_bench_out_that_cannot_be_written_is_refused_before_any_test(tmp_path, capsys, request, kind):
+    if kind == "file":
+        out = tmp_path / "f"
+        out.write_text("x")
+    elif kind == "read-only":
+        out = request.getfixturevalue("read_only") / "bench"
+    else:
+        request.getfixturevalue("full_disk")
+        out = tmp_path / "bench"
+    code = main(["bench", "uncontrolled", "--quick", "--out", str(out)])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and "--out" in _one_line(err) and stdout == ""
+    assert "uncontrolled ..." not in err  # refused before the test ran
+
+
+def test_bench_on_a_disk_that_fills_leaves_no_empty_png_and_exits_74(tmp_path):
+    out = tmp_path / "bench"
+    r = _pafp_limited(50_000, "bench", "uncontrolled", "--quick", "--out", str(out))
+    assert r.returncode == EXIT_WRITE_FAILED, r.stderr
+    assert "uncontrolled.png" in _one_line(r.stderr)
+    assert "| uncontrolled |" in r.stdout  # the comparison table is printed all the same
+    assert [p.name for p in out.iterdir()] == []  # no 0-byte PNG, no temporary
+
+
+# ---- pafp tune and sweep: --out checked before the work --------------------------------------------------------
+
+def _spec(tmp_path: Path, text: str = "[base]\nstrides = 1\n") -> Path:
+    spec = tmp_path / "s.toml"
+    spec.write_text(text)
+    return spec
+
+
+@pytest.mark.parametrize("kind", ["file", "read-only"])
+def test_tune_and_sweep_point_refuse_an_unwritable_out_before_the_work(tmp_path, capsys, request, kind):
+    if kind == "file":
+        out = tmp_path / "f"
+        out.write_text("x")
+    else:
+        out = request.getfixturevalue("read_only") / "out"
+    t0 = time.perf_counter()
+    assert main(["tune", "--budget", "5", "--strides", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 2
+    stdout, err = capsys.readouterr()
+    assert "--out" in _one_line(err) and "pafp tune: budget" not in stdout  # before the cluster and the search
+    assert main(["sweep", str(_spec(tmp_path)), "--point", "0", "--out", str(out)]) == 2
+    stdout, err = capsys.readouterr()
+    assert "--out" in _one_line(err) and "pafp sweep: point" not in stdout
+    assert time.perf_counter() - t0 < 60
+
+
+def test_sweep_point_writes_the_files_docs_sweeps_md_lists(tmp_path, capsys):
+    out = tmp_path / "p0"
+    assert main(["sweep", str(_spec(tmp_path)), "--point", "0", "--out", str(out)]) == 0
+    names = {p.name for p in out.iterdir()}
+    assert {"tracking.png", "summary.json", "report.md", "trace.json", "telemetry.bin", "telemetry.csv"} <= names
+    assert json.loads((out / "trace.json").read_text())["traceEvents"]
+    assert "trace.json" in capsys.readouterr().out
+
+
+def test_a_table_that_cannot_be_written_leaves_no_temporary(tmp_path, monkeypatch):
+    from host_tools.sweep_table import ResultsTable
+
+    real = Path.write_text
+
+    def half_then_full(self, data, *a, **k):  # the first bytes land, then the disk is full
+        real(self, data[: len(data) // 2], *a, **k)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    monkeypatch.setattr(Path, "write_text", half_then_full)
+    with pytest.raises(OSError) as e:
+        ResultsTable(tmp_path / "out", ["point"], "d" * 64, 1, resume=False)
+    assert e.value.filename == str(tmp_path / "out" / "sweep.json")
+    assert _leftovers(tmp_path) == [] and not (tmp_path / "out" / "sweep.json").exists()
+
+
+# ---- interrupted work --------------------------------------------------------------------------------------------
+
+def _wait_for(predicate, proc: subprocess.Popen, timeout: float = 180) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None and not predicate():
+        time.sleep(0.1)
+    assert proc.poll() is None, proc.communicate()
+
+
+def test_sweep_stopped_by_sigterm_closes_its_cluster_and_its_report_says_how_far_it_got(tmp_path):
+    spec = _spec(tmp_path, "[base]\nstrides = 1\n[[grid]]\nkey = 'run.seed'\nvalues = "
+                 + str(list(range(60))) + "\n")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([*PAFP, "sweep", str(spec), "--out", str(out), "--workers", "1", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    journal = out / "rows.jsonl"
+    _wait_for(lambda: journal.exists() and journal.read_text().count("\n") >= 2, proc)
+    proc.send_signal(signal.SIGTERM)
+    stdout, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "leaked semaphore" not in err and "Traceback" not in err, err
+    rows = [json.loads(ln) for ln in journal.read_text().splitlines()]
+    assert 2 <= len(rows) < 60
+    report = (out / "report.md").read_text()
+    assert f"**Interrupted** by SIGTERM: {len(rows)} of 60 points finished" in report and "--resume" in report
+    import pyarrow.parquet as pq
+
+    assert pq.read_table(out / "results.parquet").num_rows == len(rows)
+    assert _leftovers(out) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_tune_stopped_by_a_signal_keeps_the_best_candidate_so_far(tmp_path, sig):
+    out = tmp_path / "tune"
+    proc = subprocess.Popen([*PAFP, "tune", "--budget", "40", "--strides", "1", "--workers", "1", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    assert proc.stderr is not None
+    for line in proc.stderr:  # the progress line of the first candidate finished (one per tenth, not a tty)
+        if " candidates, " in line:
+            break
+    proc.send_signal(sig)
+    _, rest = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + sig, rest
+    assert "leaked semaphore" not in rest and "Traceback" not in rest, rest
+    doc = json.loads((out / "tune.json").read_text())
+    assert doc["complete"] is False and doc["interruption"]["by"] == sig.name
+    n = doc["interruption"]["candidates_run"]
+    assert 1 <= n < 40 and len(doc["evaluations"]) == n
+    best = doc["best"]
+    feasible = [e for e in doc["evaluations"] if e["feasible"]]
+    assert best["score"] == min(e["score"] for e in feasible)
+    from firmware.config import load_firmware_config
+    from host_tools.tuning import gains_of
+
+    assert gains_of(load_firmware_config(out / "firmware_tuned.toml")) == pytest.approx(best["gains"])
+    assert not (out / "tune.png").exists()
+    assert f"stopped by {sig.name} after {n} of 40 candidates" in rest
+
+
+def test_a_run_killed_by_sigkill_leaves_a_staging_directory_the_next_run_removes(tmp_path, capsys):
+    out = tmp_path / "run"
+    proc = subprocess.Popen([*PAFP, "run", "--strides", "2000", "--quiet", "--no-plot", "--no-trace", "--out",
+                             str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
+    _wait_for(lambda: any(tmp_path.glob(".run.*.partial")), proc)
+    proc.kill()
+    proc.wait(timeout=60)
+    assert [p.name for p in tmp_path.glob(".run.*.partial")]  # what SIGKILL leaves
+    assert main(["run", "--quiet", "--strides", "1", "--no-plot", "--no-trace", "--out", str(out)]) in (0, 1)
+    capsys.readouterr()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_the_staging_directory_of_a_live_run_is_never_removed(tmp_path):
+    host = socket.gethostname().replace(".", "-")
+    live = tmp_path / f".run.{os.getpid()}@{host}.abc.partial"  # this process: alive
+    other_host = tmp_path / f".run.1@{host}x.abc.partial"  # another machine on a shared disk: unknown
+    unrelated = tmp_path / ".runner.1@x.abc.partial"
+    gone = tmp_path / f".run.{_dead_pid()}@{host}.abc.partial"
+    for d in (live, other_host, unrelated, gone):
+        d.mkdir()
+    assert clean_stale(tmp_path / "run") == [gone]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in (live, other_host, unrelated))
+
+
+def _dead_pid() -> int:
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def test_write_failed_names_the_file_and_the_exit_code():
+    line = outdir.write_failed("run", OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "/x/summary.json"), "kept")
+    assert line == f"pafp run: cannot write /x/summary.json: {os.strerror(errno.ENOSPC)}; kept (exit 74)"
