@@ -22,6 +22,7 @@ import logging
 import time
 import traceback
 from collections.abc import Callable
+from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -211,6 +212,7 @@ class SerialRunResult:
     bounds: list = field(default_factory=list)  # no response-time bounds: host times are measured
     time_in_run_s: float = 0.0
     telemetry_file_error: OSError | None = None  # writing telemetry.bin failed (a full disk): the run went on
+    capture_error: OSError | None = None  # a --capture file could not be written: the capture ended there
 
     @property
     def interrupted(self) -> bool:
@@ -340,8 +342,10 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
         capture.close()
         ports.close()
         if wire is not None:
-            wire.close()
+            with suppress(OSError):  # kept in wire.error, reported after the outputs
+                wire.close()
     result.telemetry_file_error = capture.file_error  # telemetry.bin could not be written (reported after)
+    result.capture_error = wire.error if wire is not None else None
     return result
 
 

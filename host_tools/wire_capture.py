@@ -12,19 +12,22 @@ A capture directory holds, per port (``motor``, ``imu``, ``telemetry``) and dire
   the emulated motor's ``motor.tx.bin`` (``pafp emulate --capture``) is from-motor.
 
 Files are appended as the run goes and flushed every ``FLUSH_EVERY`` records and on close, so a run that
-dies leaves them valid up to the last flush. Reference: docs/serial_mode.md, "Wire capture".
+dies leaves them valid up to the last flush. A write that fails (a full disk) raises once, naming the file,
+and ends the capture: ``error`` keeps it, later records and the close do nothing more (the caller reports it,
+exit 74). Reference: docs/serial_mode.md, "Wire capture".
 """
 
 from __future__ import annotations
 
 import json
-import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import replace
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
 from hal.interfaces import Board, Uart
+from host_tools.outdir import naming, write_atomic
 
 __all__ = ["TapUart", "WireCapture"]
 
@@ -55,6 +58,7 @@ class WireCapture:
         self._index.write("t_s,file,offset,bytes\n")
         self._unflushed = 0
         self.closed = False
+        self.error: OSError | None = None  # the write that failed and ended the capture
 
     def open(self, port: str, *directions: str) -> None:
         """Create the files of `port` for `directions` ('tx', 'rx') now, so an idle direction is an empty file."""
@@ -73,21 +77,36 @@ class WireCapture:
         if not data or self.closed:
             return
         name = f"{port}.{direction}.bin"
-        f = self._file(name)
-        f.write(data)
+        with self._failing(name):
+            f = self._file(name)
+            f.write(data)
         offset = self._sizes[name]
         self._sizes[name] = offset + len(data)
         t = self.clock_s() if t_s is None else t_s
-        self._index.write(f"{t:.9f},{name},{offset},{len(data)}\n")
+        with self._failing("index.csv"):
+            self._index.write(f"{t:.9f},{name},{offset},{len(data)}\n")
         self._unflushed += 1
         if self._unflushed >= FLUSH_EVERY:
             self.flush()
 
+    @contextmanager
+    def _failing(self, name: str) -> Iterator[None]:
+        """An OSError inside names the file `name`, is kept in ``error`` and ends the capture (raised once)."""
+        try:
+            with naming(self.directory / name):
+                yield
+        except OSError as exc:
+            self.error = exc
+            self.closed = True
+            raise
+
     def flush(self) -> None:
         """Push everything recorded so far to the files."""
-        for f in self._files.values():
-            f.flush()
-        self._index.flush()
+        for name, f in self._files.items():
+            with self._failing(name):
+                f.flush()
+        with self._failing("index.csv"):
+            self._index.flush()
         self._unflushed = 0
 
     def tap(self, port: str, uart: Uart) -> TapUart:
@@ -117,14 +136,19 @@ class WireCapture:
     def close(self) -> None:
         """Flush and close every file; write capture.json (atomically). Closing twice is harmless."""
         if self.closed:
+            if self.error is not None:  # a failed capture: let go of the files, say nothing more
+                for f in [*self._files.values(), self._index]:
+                    with suppress(OSError):
+                        f.close()
             return
+        for name, f in self._files.items():
+            with self._failing(name):
+                f.close()
+        with self._failing("index.csv"):
+            self._index.close()
         self.closed = True
-        for f in self._files.values():
-            f.close()
-        self._index.close()
-        tmp = self.directory / "capture.json.tmp"
-        tmp.write_text(json.dumps(self.manifest(), indent=2) + "\n", encoding="utf-8")
-        os.replace(tmp, self.directory / "capture.json")
+        with self._failing("capture.json"):
+            write_atomic(self.directory / "capture.json", json.dumps(self.manifest(), indent=2) + "\n")
 
 
 class TapUart(Uart):

@@ -102,6 +102,18 @@ def small_tmpfs(tmp_path):
         subprocess.run(["umount", str(d)], check=False)
 
 
+def _unwritable(tmp_path: Path, request, kind: str, name: str) -> Path:
+    """A directory path that cannot take outputs: an existing file, below a read-only directory, on a full disk."""
+    if kind == "file":
+        path = tmp_path / name
+        path.write_text("not a directory")
+        return path
+    if kind == "read-only":
+        return request.getfixturevalue("read_only") / name
+    request.getfixturevalue("full_disk")
+    return tmp_path / name
+
+
 # ---- pafp run (virtual) --------------------------------------------------------------------------------------
 
 def test_a_run_on_a_disk_that_fills_is_one_line_exit_74_and_out_keeps_the_previous_run(tmp_path, capsys):
@@ -134,13 +146,9 @@ def test_a_run_on_a_full_disk_is_refused_before_it_starts(tmp_path, capsys, full
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("kind", ["file", "read-only"])
+@pytest.mark.parametrize("kind", ["file", "read-only", "full"])
 def test_a_capture_directory_that_cannot_be_written_is_refused_before_the_run(tmp_path, capsys, request, kind):
-    if kind == "file":
-        capture = tmp_path / "cap"
-        capture.write_text("not a directory")
-    else:
-        capture = request.getfixturevalue("read_only") / "cap"
+    capture = _unwritable(tmp_path, request, kind, "cap")
     code = main(["run", "--quiet", "--strides", "1", "--out", str(tmp_path / "run"), "--capture", str(capture)])
     _, err = capsys.readouterr()
     assert code == 2 and "--capture" in _one_line(err) and str(capture) in err
@@ -178,18 +186,54 @@ def test_a_serial_run_whose_disk_fills_stops_the_motor_first_then_one_line_exit_
     assert _leftovers(tmp_path) == []
 
 
+def test_a_virtual_run_whose_capture_fills_the_disk_is_one_line_exit_74(tmp_path):
+    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "6", "--no-plot", "--no-trace",
+                      "--capture", str(tmp_path / "cap"), "--out", str(tmp_path / "run"))
+    assert r.returncode == EXIT_WRITE_FAILED, r.stderr
+    line = _one_line(r.stderr)
+    assert f"cannot write {tmp_path / 'cap'}" in line and os.strerror(errno.EFBIG) in line, line
+    assert not (tmp_path / "run").exists() and _leftovers(tmp_path) == []
+
+
+class _Filling:
+    """A file on a disk that fills after `room` bytes."""
+
+    def __init__(self, f, room: list[int]) -> None:
+        self.f, self.room = f, room
+
+    def write(self, data: bytes) -> int:
+        if len(data) > self.room[0]:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        self.room[0] -= len(data)
+        return self.f.write(data)
+
+    def __getattr__(self, name: str):
+        return getattr(self.f, name)
+
+
+def test_a_serial_capture_that_fills_the_disk_stops_the_motor_writes_the_run_and_exits_74(tmp_path, capsys,
+                                                                                          monkeypatch):
+    from host_tools.wire_capture import WireCapture
+
+    room = [20_000]  # bytes the capture's port files may take, together
+    real = WireCapture._file
+    monkeypatch.setattr(WireCapture, "_file", lambda self, name: _Filling(real(self, name), room))
+    out, cap = tmp_path / "run", tmp_path / "cap"
+    code = main(["run", *SIM, "--duration", "2", "--out", str(out), "--capture", str(cap)])
+    _, err = capsys.readouterr()
+    assert code == EXIT_WRITE_FAILED, err
+    line = _one_line(err)
+    assert f"cannot write {cap}/" in line and os.strerror(errno.ENOSPC) in line and "stopped first" in line, line
+    stop = json.loads((out / "summary.json").read_text())["stop"]
+    assert stop["reason"] == "exception" and stop["safe_on_wire"] is True
+    assert stop["safe_frames"][-1].startswith("SetCurrentBrake")
+
+
 # ---- pafp bench ---------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("kind", ["file", "read-only", "full"])
 def test_bench_out_that_cannot_be_written_is_refused_before_any_test(tmp_path, capsys, request, kind):
-    if kind == "file":
-        out = tmp_path / "f"
-        out.write_text("x")
-    elif kind == "read-only":
-        out = request.getfixturevalue("read_only") / "bench"
-    else:
-        request.getfixturevalue("full_disk")
-        out = tmp_path / "bench"
+    out = _unwritable(tmp_path, request, kind, "bench")
     code = main(["bench", "uncontrolled", "--quick", "--out", str(out)])
     stdout, err = capsys.readouterr()
     assert code == 2 and "--out" in _one_line(err) and stdout == ""
@@ -213,13 +257,9 @@ def _spec(tmp_path: Path, text: str = "[base]\nstrides = 1\n") -> Path:
     return spec
 
 
-@pytest.mark.parametrize("kind", ["file", "read-only"])
+@pytest.mark.parametrize("kind", ["file", "read-only", "full"])
 def test_tune_and_sweep_point_refuse_an_unwritable_out_before_the_work(tmp_path, capsys, request, kind):
-    if kind == "file":
-        out = tmp_path / "f"
-        out.write_text("x")
-    else:
-        out = request.getfixturevalue("read_only") / "out"
+    out = _unwritable(tmp_path, request, kind, "out")
     t0 = time.perf_counter()
     assert main(["tune", "--budget", "5", "--strides", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 2
     stdout, err = capsys.readouterr()

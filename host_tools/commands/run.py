@@ -321,6 +321,11 @@ def _run_serial(args: argparse.Namespace) -> int:
         print(f"pafp run: {link['role']} port {link['port']!r} lost ({link['reason']}); the supervisor saw it "
               f"{link['detection_ms']} ms after the first failed read or write; files complete up to the fault",
               file=sys.stderr)
+    capture_error = result.capture_error
+    if capture_error is not None:  # the capture's write failed in a task: the stop path ran, the files are written
+        print(write_failed("run", capture_error, f"the motor was stopped first; the capture in {args.capture} holds "
+                           f"what was written before, the run's files in {out} are complete"), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     if stop["reason"] == "exception":
         print(result.stop.traceback, file=sys.stderr, end="")
         print(f"pafp run: task {stop['task']!r} raised {stop['error']}; the motor was stopped and every file "
