@@ -229,6 +229,27 @@ def test_a_serial_capture_that_fills_the_disk_stops_the_motor_writes_the_run_and
     assert stop["safe_frames"][-1].startswith("SetCurrentBrake")
 
 
+def test_an_emulator_whose_capture_fills_the_disk_stops_serving_with_one_line_exit_74(tmp_path, capsys,
+                                                                                    monkeypatch):
+    from host_tools.wire_capture import WireCapture
+
+    room = [400]  # the IMU streams 100 RVC frames of 19 bytes a second
+    real = WireCapture._file
+    monkeypatch.setattr(WireCapture, "_file", lambda self, name: _Filling(real(self, name), room))
+    cap = tmp_path / "cap"
+    code = main(["emulate", "imu", "--pty", "--duration", "5", "--capture", str(cap)])
+    _, err = capsys.readouterr()
+    assert code == EXIT_WRITE_FAILED, err
+    assert f"cannot write {cap / 'imu.tx.bin'}: {os.strerror(errno.ENOSPC)}" in _one_line(err)
+
+
+def test_an_emulator_capture_on_a_full_disk_is_refused_before_serving(tmp_path, capsys, full_disk):
+    code = main(["emulate", "imu", "--pty", "--duration", "1", "--capture", str(tmp_path / "cap")])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and "--capture" in _one_line(err) and stdout == ""
+    assert list(tmp_path.iterdir()) == []
+
+
 # ---- pafp bench ---------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("kind", ["file", "read-only", "full"])

@@ -30,6 +30,7 @@ from types import FrameType
 from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
 from host_tools.stop_signals import STOP_SIGNALS
+from host_tools.outdir import check_capture_dir
 from host_tools.wire_capture import WireCapture
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
@@ -175,6 +176,7 @@ def run(args: argparse.Namespace) -> int:
         _check(args)
         devices = WallDevices(_ROLES[args.device], bauds=_bauds(args), fixture=args.fixture, seed=args.seed)
         if args.capture is not None:
+            check_capture_dir(args.capture)
             capture = WireCapture(args.capture, lambda: devices.now() / 1e9, side="device")
             for role in _ROLES[args.device]:
                 capture.open(role, "rx", "tx")
@@ -195,6 +197,14 @@ def run(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
         _serve(devices, endpoints, stop, args.duration, capture)
+    except OSError as exc:
+        if capture is None or capture.error is not exc:
+            raise
+        from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
+
+        print(write_failed("emulate", exc, f"the capture in {args.capture} holds what was written before; "
+                           "serving stopped"), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     finally:
         if capture is not None:
             capture.close()
