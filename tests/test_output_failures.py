@@ -28,6 +28,7 @@ import pytest
 from host_tools import outdir
 from host_tools.cli import main
 from host_tools.outdir import EXIT_WRITE_FAILED, clean_stale
+from host_tools.sweep_table import JOURNAL
 
 PAFP = [sys.executable, "-m", "host_tools"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -209,6 +210,21 @@ class _Filling:
 
     def __getattr__(self, name: str):
         return getattr(self.f, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.f.close()
+
+
+@pytest.fixture
+def atomic_writes_fill(monkeypatch):
+    """Files written whole (outdir.write_atomic, save_figure) find the disk full once `room[0]` bytes are used."""
+    room = [0]
+    real = os.fdopen
+    monkeypatch.setattr(os, "fdopen", lambda fd, *a, **k: _Filling(real(fd, *a, **k), room))
+    return room
 
 
 def test_a_serial_capture_that_fills_the_disk_stops_the_motor_writes_the_run_and_exits_74(tmp_path, capsys,
@@ -408,3 +424,47 @@ def _dead_pid() -> int:
 def test_write_failed_names_the_file_and_the_exit_code():
     line = outdir.write_failed("run", OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "/x/summary.json"), "kept")
     assert line == f"pafp run: cannot write /x/summary.json: {os.strerror(errno.ENOSPC)}; kept (exit 74)"
+
+
+# ---- a write that fails after the work: tune, sweep --point, sweep ------------------------------------------------
+
+def test_tune_whose_disk_fills_keeps_the_files_written_whole_and_exits_74(tmp_path, capsys, monkeypatch,
+                                                                        atomic_writes_fill):
+    import contextlib
+
+    from host_tools import sweep_engine
+
+    monkeypatch.setattr(sweep_engine, "dask_client", lambda **k: contextlib.nullcontext(None))  # in-process search
+    atomic_writes_fill[0] = 20_000  # the tuned profile fits, the PNG does not
+    out = tmp_path / "tune"
+    code = main(["tune", "--budget", "5", "--strides", "1", "--quiet", "--out", str(out)])
+    _, err = capsys.readouterr()
+    assert code == EXIT_WRITE_FAILED, err
+    assert f"cannot write {out / 'tune.png'}: {os.strerror(errno.ENOSPC)}" in _one_line(err)
+    assert sorted(p.name for p in out.iterdir()) == ["firmware_tuned.toml"]  # whole; no PNG, no temporary
+    from firmware.config import load_firmware_config
+
+    load_firmware_config(out / "firmware_tuned.toml")
+
+
+def test_sweep_point_whose_disk_fills_publishes_nothing_and_exits_74(tmp_path, capsys, atomic_writes_fill):
+    out = tmp_path / "p0"
+    code = main(["sweep", str(_spec(tmp_path)), "--point", "0", "--out", str(out)])
+    _, err = capsys.readouterr()
+    assert code == EXIT_WRITE_FAILED, err
+    assert "cannot write" in _one_line(err) and "tracking.png" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]  # no --out, no staging directory
+
+
+def test_a_sweep_whose_report_cannot_be_written_keeps_its_rows_and_exits_74(tmp_path, capsys, atomic_writes_fill):
+    out = tmp_path / "out"
+    code = main(["sweep", str(_spec(tmp_path, "[base]\nstrides = 1\n[[grid]]\nkey = 'run.seed'\nvalues = [0, 1]\n")),
+                 "--out", str(out), "--workers", "1", "--quiet"])
+    _, err = capsys.readouterr()
+    assert code == EXIT_WRITE_FAILED, err
+    assert "cannot write" in _one_line(err) and str(out / "plots") in err
+    assert len((out / JOURNAL).read_text().splitlines()) == 2
+    import pyarrow.parquet as pq
+
+    assert pq.read_table(out / "results.parquet").num_rows == 2
+    assert _leftovers(out) == [] and not (out / "report.md").exists()
