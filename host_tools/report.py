@@ -108,7 +108,10 @@ def _interrupted(r: RunResult) -> dict:
     by = getattr(r, "stopped_by", None) or (getattr(stop, "signal", None) if stop is not None else None)
     start = r.gait_start_s
     stride_s = r.firmware.config.stride_s
-    done = 0 if start is None else max(0, int((r.sim_time_s - start + 1e-9) // stride_s))
+    if stop is not None:  # serial mode counts its whole strides in RUN itself (SerialRunConfig.strides)
+        done = r.config.strides
+    else:
+        done = 0 if start is None else max(0, int((r.sim_time_s - start + 1e-9) // stride_s))
     return {"by": by, "strides_run": done, "sim_time_s": round(r.sim_time_s, 6)}
 
 

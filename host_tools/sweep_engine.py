@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import logging
 import math
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -58,14 +60,35 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, proces
     # dashboard_address ":0": the HTTP endpoints on a free port of the same host, never a fixed one.
     # processes=False: threads of this process on the in-process transport (no socket at all; tests use it)
     where = {"host": "127.0.0.1"} if processes else {}
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes, dashboard_address=":0",
-                           silence_logs=logging.ERROR, **where)
+    with _workers_ignore(TERMINAL_SIGNALS if processes else ()):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes, dashboard_address=":0",
+                               silence_logs=logging.ERROR, **where)
     client = Client(cluster)
     try:
         yield client
     finally:
         client.close()
         cluster.close()
+
+
+TERMINAL_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGHUP") if hasattr(signal, n))
+"""What a terminal sends its whole process group (Ctrl-C, a closed terminal): the worker processes ignore them
+and are stopped by the command's own clean-up (host_tools/interrupt.py closes the cluster)."""
+
+
+@contextmanager
+def _workers_ignore(signals: tuple[int, ...]) -> Iterator[None]:
+    """Ignore `signals` while worker processes are started (an ignored signal stays ignored across exec, a
+    handler does not), then put the handlers back; one arriving meanwhile is lost. Main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in signals}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def tasks_of(spec: SweepSpec) -> list[PointTask]:

@@ -340,22 +340,28 @@ def _wait_for(predicate, proc: subprocess.Popen, timeout: float = 180) -> None:
     assert proc.poll() is None, proc.communicate()
 
 
-def test_sweep_stopped_by_sigterm_closes_its_cluster_and_its_report_says_how_far_it_got(tmp_path):
+@pytest.mark.parametrize(("sig", "group"), [(signal.SIGTERM, False), (signal.SIGINT, True)],
+                         ids=["SIGTERM", "Ctrl-C to the process group"])
+def test_sweep_stopped_by_a_signal_closes_its_cluster_and_its_report_says_how_far_it_got(tmp_path, sig, group):
     spec = _spec(tmp_path, "[base]\nstrides = 1\n[[grid]]\nkey = 'run.seed'\nvalues = "
                  + str(list(range(60))) + "\n")
     out = tmp_path / "out"
     proc = subprocess.Popen([*PAFP, "sweep", str(spec), "--out", str(out), "--workers", "1", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                            start_new_session=True)
     journal = out / "rows.jsonl"
     _wait_for(lambda: journal.exists() and journal.read_text().count("\n") >= 2, proc)
-    proc.send_signal(signal.SIGTERM)
+    if group:  # as a terminal does: the workers get it too, and must leave the stop to the sweep
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
     stdout, err = proc.communicate(timeout=120)
-    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert proc.returncode == 128 + sig, err
     assert "leaked semaphore" not in err and "Traceback" not in err, err
     rows = [json.loads(ln) for ln in journal.read_text().splitlines()]
     assert 2 <= len(rows) < 60
     report = (out / "report.md").read_text()
-    assert f"**Interrupted** by SIGTERM: {len(rows)} of 60 points finished" in report and "--resume" in report
+    assert f"**Interrupted** by {sig.name}: {len(rows)} of 60 points finished" in report and "--resume" in report
     import pyarrow.parquet as pq
 
     assert pq.read_table(out / "results.parquet").num_rows == len(rows)
