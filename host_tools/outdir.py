@@ -74,6 +74,12 @@ def check_writable(path: Path, option: str = "--out") -> None:
 
 def check_out_dir(out: Path) -> None:
     """Refuse an ``out`` that is a file, holds files not from a run, or is not writable (:func:`check_writable`)."""
+    _check_previous_run(out)
+    check_writable(out)
+
+
+def _check_previous_run(out: Path) -> None:
+    """Refuse an ``out`` that is a file or holds files not from a run."""
     if out.exists() and not out.is_dir():
         raise OutDirError(f"--out {out} is an existing file: name a new directory, an empty one or a previous run's")
     if out.is_dir():
@@ -81,7 +87,6 @@ def check_out_dir(out: Path) -> None:
         if entries and MARKER not in entries:
             raise OutDirError(f"--out {out} holds files that are not a pafp run's (e.g. {entries[0]!r}): name a new "
                               "directory, an empty one or a previous run's (it has a summary.json)")
-    check_writable(out)
 
 
 def check_capture_dir(path: Path) -> None:
@@ -178,7 +183,7 @@ class RunDir:
             self.out.rmdir()
         old = None
         if self.out.exists():
-            check_out_dir(self.out)  # still a previous run's: replace it, never mix with it
+            _check_previous_run(self.out)  # still a previous run's: replace it, never mix with it
             old = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.{_tag()}.", suffix=".old", dir=self.out.parent))
             os.replace(self.out, old / "run")
         os.rename(self.path, self.out)
