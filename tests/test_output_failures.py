@@ -80,13 +80,7 @@ def read_only(tmp_path):
         yield d
         d.chmod(0o755)
         return
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("root, and no mount: chmod does not stop root's writes")
-    try:
-        yield d
-    finally:
-        subprocess.run(["umount", str(d)], check=False)
+    yield from _tmpfs(d, "ro,size=64k", "root, and no mount: chmod does not stop root's writes")
 
 
 @pytest.fixture
@@ -94,9 +88,15 @@ def small_tmpfs(tmp_path):
     """A 2 MiB tmpfs (root with mount allowed only)."""
     d = tmp_path / "disk"
     d.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(d)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("mounting a tmpfs needs root and mount")
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    yield from _tmpfs(d, "size=2m", "mounting a tmpfs needs mount")
+
+
+def _tmpfs(d: Path, options: str, why_not: str):
+    """Mount a tmpfs with `options` on d for the test (skipped with why_not if mount fails)."""
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(d)], capture_output=True).returncode:
+        pytest.skip(why_not)
     try:
         yield d
     finally:
