@@ -333,6 +333,14 @@ def test_a_table_that_cannot_be_written_leaves_no_temporary(tmp_path, monkeypatc
 
 # ---- interrupted work --------------------------------------------------------------------------------------------
 
+def _stopped_cleanly(err: str) -> None:
+    """No leaked semaphore, no worker killed by the signal, no traceback through pafp's code. (A worker's log may
+    show distributed's own chatter as the cluster closes on a busy host: a heartbeat to a scheduler already gone.)"""
+    assert "leaked semaphore" not in err and "KeyboardInterrupt" not in err and "Interrupted" not in err, err
+    frames = [ln for ln in err.splitlines() if ln.strip().startswith('File "')]
+    assert not [f for f in frames if "host_tools" in f or "/tests/" in f], err
+
+
 def _wait_for(predicate, proc: subprocess.Popen, timeout: float = 180) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and proc.poll() is None and not predicate():
@@ -357,7 +365,7 @@ def test_sweep_stopped_by_a_signal_closes_its_cluster_and_its_report_says_how_fa
         proc.send_signal(sig)
     stdout, err = proc.communicate(timeout=120)
     assert proc.returncode == 128 + sig, err
-    assert "leaked semaphore" not in err and "Traceback" not in err, err
+    _stopped_cleanly(err)
     rows = [json.loads(ln) for ln in journal.read_text().splitlines()]
     assert 2 <= len(rows) < 60
     report = (out / "report.md").read_text()
@@ -380,7 +388,7 @@ def test_tune_stopped_by_a_signal_keeps_the_best_candidate_so_far(tmp_path, sig)
     proc.send_signal(sig)
     _, rest = proc.communicate(timeout=120)
     assert proc.returncode == 128 + sig, rest
-    assert "leaked semaphore" not in rest and "Traceback" not in rest, rest
+    _stopped_cleanly(rest)
     doc = json.loads((out / "tune.json").read_text())
     assert doc["complete"] is False and doc["interruption"]["by"] == sig.name
     n = doc["interruption"]["candidates_run"]
