@@ -482,3 +482,31 @@ def test_a_sweep_whose_report_cannot_be_written_keeps_its_rows_and_exits_74(tmp_
 
     assert pq.read_table(out / "results.parquet").num_rows == 2
     assert _leftovers(out) == [] and not (out / "report.md").exists()
+
+
+# ---- pafp decode --csv onto a device -----------------------------------------------------------------------------
+
+def _device(tmp_path: Path, name: str, minor: int) -> Path:
+    """A private node of the memory device `minor` (3 null, 7 full) in tmp_path: never the system's own."""
+    path = tmp_path / name
+    try:
+        os.mknod(path, 0o666 | 0o020000, os.makedev(1, minor))  # S_IFCHR
+    except (PermissionError, OSError):
+        pytest.skip("creating a device node needs root")
+    return path
+
+
+def test_decode_csv_onto_a_device_writes_into_it_and_never_replaces_the_node(tmp_path, capsys):
+    import stat
+
+    capture = tmp_path / "t.bin"
+    assert main(["run", "--quiet", "--strides", "1", "--no-plot", "--no-trace", "--out", str(tmp_path / "r")]) in (0, 1)
+    capture.write_bytes((tmp_path / "r" / "telemetry.bin").read_bytes())
+    null, full = _device(tmp_path, "null", 3), _device(tmp_path, "full", 7)
+    capsys.readouterr()
+    assert main(["decode", "--protocol", "telemetry", str(capture), "--csv", str(null)]) == 0
+    assert main(["decode", "--protocol", "telemetry", str(capture), "--csv", str(full)]) == EXIT_WRITE_FAILED
+    _, err = capsys.readouterr()
+    assert f"cannot write {full}: {os.strerror(errno.ENOSPC)}" in _one_line(err)
+    assert all(stat.S_ISCHR(p.stat().st_mode) for p in (null, full))  # still the devices, not CSV files
+    assert _leftovers(tmp_path) == []

@@ -26,6 +26,7 @@ import json
 import math
 import os
 import pickle
+import stat
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
@@ -33,6 +34,7 @@ from enum import IntEnum
 from pathlib import Path
 from typing import Any, BinaryIO, TextIO
 
+from host_tools.outdir import EXIT_WRITE_FAILED
 from protocol.rvc import RvcDecoder
 from protocol.telemetry import TelemetryDecoder, TelemetryRecord, record_to_row
 
@@ -219,13 +221,20 @@ class _CsvSpool:
 
 
 def _csv_target(out_path: str) -> tuple[str | None, str | None]:
-    """(directory, temporary file name) for --csv OUT, checked writable now; (None, None) for stdout."""
+    """(directory, temporary file name) for --csv OUT, checked writable now; (None, None) for stdout.
+
+    A path that exists and is not a regular file (a device, a FIFO) is written in place: (directory, None)
+    (renaming a temporary file over it would replace the device node itself)."""
     if out_path == "-":
         return None, None
     directory = os.path.dirname(os.path.abspath(out_path))
     try:
         if os.path.isdir(out_path):
             raise IsADirectoryError(21, "Is a directory")
+        if os.path.exists(out_path) and not stat.S_ISREG(os.stat(out_path).st_mode):
+            if not os.access(out_path, os.W_OK):
+                raise PermissionError(13, "Permission denied")
+            return directory, None
         fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(out_path)}.", suffix=".tmp", dir=directory)
         os.close(fd)
     except OSError as exc:
@@ -256,16 +265,19 @@ def run(args: argparse.Namespace) -> int:
             directory, tmp = _csv_target(args.csv)
             spool = _CsvSpool(directory)
             end = _decode(args.file, decoder, lambda msg: spool.add(message_row(msg)))
-            if tmp is None:  # --csv -: the table is the output, the summary goes aside
+            if directory is None:  # --csv -: the table is the output, the summary goes aside
                 spool.write_to(out)
                 summary_to = sys.stderr
             else:
                 try:
-                    with open(tmp, "w", newline="", encoding="utf-8") as handle:
+                    with open(tmp or args.csv, "w", newline="", encoding="utf-8") as handle:
                         spool.write_to(handle)
-                    os.replace(tmp, args.csv)
+                    if tmp is not None:
+                        os.replace(tmp, args.csv)
                 except OSError as exc:
-                    raise DecodeError(f"cannot write {args.csv}: {exc.strerror or exc}") from None
+                    print(f"pafp decode: cannot write {args.csv}: {exc.strerror or exc} (exit {EXIT_WRITE_FAILED})",
+                          file=sys.stderr)
+                    return EXIT_WRITE_FAILED
                 tmp = None
         summary_to.write(json.dumps(_jsonable(_summary(args.protocol, decoder, end))) + "\n")
         summary_to.flush()
