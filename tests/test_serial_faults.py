@@ -183,4 +183,5 @@ def test_garbage_drops_and_late_replies_are_counted_and_survived(tmp_path: Path)
     assert code == (1 if s["faults"] else 0)
     if not s["faults"]:
         assert s["supervisor_state"] == "RUN"
-        assert s["rms_error_deg"] < 1.5, s["rms_error_deg"]  # SAFE (limp foot) gives 3..5 deg
+        truth = s["tracking"]["truth"]["rms_deg"]
+        assert truth < 1.5, truth  # SAFE (limp foot) gives 3..5 deg

@@ -115,7 +115,8 @@ def link_account(r: RunResult, control_hz: int) -> dict[str, Any]:
             "requests": link["requests"], "replies": link["replies"], "missing_replies": link["missing_replies"],
             "stale_replies": link["stale_replies"], "tx_refused": r.firmware.motor.stats.tx_refused,
             "feedback_rate_hz": link["feedback_rate_hz"], "max_feedback_age_ms": link["max_feedback_age_ms"],
-            **{k: math.nan if s[k] is None else s[k] for k in ("rms_error_deg", "max_error_deg")}}
+            **{k: math.nan if s["tracking"]["truth"][src] is None else s["tracking"]["truth"][src]
+               for k, src in (("rms_error_deg", "rms_deg"), ("max_error_deg", "max_deg"))}}
 
 
 @dataclass(frozen=True, kw_only=True)

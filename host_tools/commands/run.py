@@ -156,7 +156,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     """The virtual run proper, streaming into run_dir, which is published at the end."""
     from dataclasses import replace
 
-    from host_tools.report import tracking_text, write_outputs
+    from host_tools.report import readings_text, tracking_text, write_outputs
     from host_tools.runner import run_virtual
     from host_tools.stop_signals import StopSignals
 
@@ -179,6 +179,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
           f"{s['build']}); whole process {s['process_wall_time_s']:.2f} s (factor {s['process_realtime_factor']})")
     for line in tracking_text(s["tracking"]):
         print(line)
+    print(f"  {readings_text(s)}")
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
     print(f"  {'task':<11}{'jobs':>8}{'worst us':>11}{'bound us':>11}{'deadline':>10}{'misses':>8}")

@@ -39,7 +39,9 @@ def _one_point(spec: object, index: int, out: Path) -> int:
     params = ", ".join(f"{k} = {v!r}" for k, v in t.params) or "base run"
     print(f"pafp sweep: point {index} ({params}; seed {t.seed}, plant seed {t.plant_seed}) -> {out}")
     s = write_outputs(run_virtual(run_config_of(t)), out, extra={"sweep_point": index, "plant_seed": t.plant_seed})
-    print(f"  tracking: RMS {s['rms_error_deg']:.4f} deg, max {s['max_error_deg']:.4f} deg; deadline misses "
+    truth = s["tracking"]["truth"]
+    print(f"  tracking (truth, emulation only): RMS {truth['rms_deg']:.4f} deg, max {truth['max_deg']:.4f} deg; "
+          f"IMU RMS {s['imu_rms_error_deg']:.4f} deg; deadline misses "
           f"{s['deadline_misses']}, faults {s['faults'] or 'none'}; outputs: {out}/report.md, tracking.png")
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
 
