@@ -15,6 +15,8 @@ from firmware.config import load_firmware_config
 from hal.virtual.plant import PlantParams, load_plant_params
 from host_tools.benchtests.output import BenchResult, Figure
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"geometry": "n/a", "driver": "n/a", "imu": "n/a"}
 __all__ = ["run"]
 
 DESIGN_TORQUE_NM = 14.0

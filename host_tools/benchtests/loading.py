@@ -26,6 +26,8 @@ from firmware.control.pid import CascadeController
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, spring_bench
 from host_tools.benchtests.output import BenchResult, Figure
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"driver": "current-lag", "imu": "n/a"}
 logger = logging.getLogger(__name__)
 
 SAMPLE_S = 1e-3

@@ -15,6 +15,8 @@ import numpy as np
 
 from host_tools.benchtests.output import BenchResult, Figure
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"geometry": "n/a", "driver": "n/a", "imu": "n/a"}
 __all__ = ["TABLE_B4", "TABLE_B5", "run", "stiffness"]
 
 #: Time of 5 oscillations [s], five trials (Table B4: 680 g; Table B5: 1080 g).

@@ -7,6 +7,8 @@ import importlib
 import sys
 from pathlib import Path
 
+from hal.virtual.plant import load_plant_params
+from hal.virtual.plant.readings import GEOMETRIES, geometry_of, with_geometry
 from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
@@ -21,28 +23,66 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="directory for the PNG, CSV, JSON and Markdown outputs (none written if omitted)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the trial variation (default 0)")
     parser.add_argument("--quick", action="store_true", help="shorter runs and fewer trials")
+    parser.add_argument("--geometry", choices=[*GEOMETRIES, "both"], default=None,
+                        help="the gravity geometry the plant tests run under (docs/bench.md, 'Readings'): level-com "
+                             "(the profile's), hanging (report eq 3.55) or both; default: both for 'all', the "
+                             "profile's for one test")
 
 
-def _run_one(name: str, seed: int, quick: bool) -> BenchResult:
-    """Run one test; a test whose module is missing gives a row saying so instead of a number."""
+def _run_one(name: str, seed: int, quick: bool, geometry: str | None = None) -> BenchResult:
+    """Run one test under a geometry (None: the profile's); a missing module gives a row saying so.
+
+    A test whose READINGS say its geometry is "n/a" does not depend on it and runs as it is.
+    """
     try:
         module = importlib.import_module(f"host_tools.benchtests.{TESTS[name]}")
     except ImportError as exc:
         return BenchResult(name, [Figure("(not available)", "", "", None, None, f"not available: {exc}",
                                          basis="assumed: nothing (the test did not run)")])
-    return module.run(seed=seed, quick=quick)
+    readings = dict(getattr(module, "READINGS", {}))
+    kwargs: dict = {}
+    if readings.get("geometry") != "n/a":
+        params = load_plant_params()
+        if geometry is not None:
+            params = with_geometry(params, geometry)
+        kwargs["params"] = params
+        readings = {"geometry": geometry_of(params), **readings}
+    result: BenchResult = module.run(seed=seed, quick=quick, **kwargs)
+    result.readings = readings
+    return result
+
+
+def plan(test: str, geometry: str | None) -> list[tuple[str, str | None]]:
+    """The (test, geometry) runs a command line asks for: 'all' runs the geometry-dependent tests under both."""
+    names = list(TESTS) if test == "all" else [test]
+    if geometry is None:
+        geometry = "both" if test == "all" else None
+    geometries: list[str | None] = list(GEOMETRIES) if geometry == "both" else [geometry]
+    runs: list[tuple[str, str | None]] = []
+    for n in names:
+        module = importlib.import_module(f"host_tools.benchtests.{TESTS[n]}")
+        independent = getattr(module, "READINGS", {}).get("geometry") == "n/a"
+        runs += [(n, None)] if independent else [(n, g) for g in geometries]
+    return runs
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the selected test(s), write outputs if --out is given, print the comparison table."""
-    names = list(TESTS) if args.test == "all" else [args.test]
+    """Run the selected test(s), write outputs if --out is given, print the comparison table.
+
+    With more than one geometry the outputs of each go to DIR/<geometry>/ (tests that do not depend on the
+    geometry: DIR/).
+    """
+    runs = plan(args.test, args.geometry)
+    split = len({g for _, g in runs if g is not None}) > 1
     results = []
-    for n in names:
-        print(f"pafp bench: {n} ...", file=sys.stderr)
-        results.append(_run_one(n, args.seed, args.quick))
+    for n, g in runs:
+        print(f"pafp bench: {n}" + (f" [{g}]" if g else "") + " ...", file=sys.stderr)
+        results.append(_run_one(n, args.seed, args.quick, g))
     if args.out is not None:
         for r in results:
-            for path in write_outputs(r, args.out):
+            g = r.readings.get("geometry", "n/a")
+            out = args.out / g if split and g != "n/a" else args.out
+            for path in write_outputs(r, out):
                 print(f"wrote {path}", file=sys.stderr)
     print(markdown_table(results), end="")
     return 0
