@@ -215,3 +215,87 @@ def test_design_point_within_the_current_limit_above_the_rated_torque():
     assert rows["ankle torque at the firmware's current limit"] == pytest.approx(22.4, abs=0.1)
     assert rows["maker's rated (continuous) torque at the ankle"] < 14.0
     assert r.parameters["safety_case"]["voltage_v"] > 24.0
+
+
+def test_motor_tf_shows_eq_3_39_erratum_and_the_corrected_poles():
+    # Report eq 3.39: numerator K_t/(J L) = 23.21e6 from Table B2; its constant term 3.261e9 is 140.5 times
+    # that, the Kv (140 rpm/V) where K_e belongs. With K_e: omega_n = 1289 rad/s, zeta = 0.57 (no viscous
+    # term), DC gain about 1/K_e.
+    from host_tools.benchtests import motor_tf
+
+    r = motor_tf.run()
+    p = load_plant_params()
+    assert r.parameters["constant_over_numerator"] == pytest.approx(p.kv_rpm_per_v, abs=1.0)
+    assert r.parameters["corrected"]["num"][0] == pytest.approx(23.21e6, rel=2e-3)
+    nob = r.parameters["without_viscous"]
+    assert nob["wn_rad_s"] == pytest.approx(1289, abs=3) and nob["zeta"] == pytest.approx(0.57, abs=0.01)
+    assert r.parameters["eq339"]["zeta"] < 0.02  # as printed: rings
+    rows = {f.name: f for f in r.figures}
+    assert rows["DC gain, speed per volt"].emulated_value == pytest.approx(1 / p.ke_v_s_per_rad, rel=0.05)
+    assert rows["no-load speed at 24 V"].emulated_value == pytest.approx(3360, rel=0.1)
+    assert 0 < r.parameters["step_corrected"]["overshoot_pct"] < 20 < r.parameters["step_eq339"]["overshoot_pct"]
+
+
+@pytest.mark.parametrize("geometry", ["level-com", "hanging"])
+def test_kinematics_report_chain_moves_the_ankle_and_the_plant_matches_the_belt_chain(geometry):
+    # Table 3.3 chained as a serial arm turns the foot by (1 + 1/G) theta_1, G + 1 times the ankle angle,
+    # and carries the ankle axis around the input pulley; the belt drive keeps the axis fixed. The plant's
+    # potential energy is m g z of the centre of mass the belt-drive chain places, under either geometry.
+    from hal.virtual.plant.readings import with_geometry
+    from host_tools.benchtests import kinematics
+
+    p = with_geometry(load_plant_params(), geometry)
+    r = kinematics.run(params=p)
+    assert r.parameters["turn_ratio"] == pytest.approx(1 + p.belt_ratio, rel=1e-6)
+    assert r.parameters["axis_travel_m"] > 0.1
+    assert r.parameters["potential_error_j"] < 1e-9
+    com0 = next(f.emulated_value for f in r.figures if f.name.startswith("centre of mass height"))
+    assert com0 == pytest.approx(-p.foot_com_distance_m if geometry == "hanging" else 0.0, abs=1e-12)
+    _, t02 = kinematics.report_chain(0.0, p.belt_ratio, 0.08, 0.21)
+    assert t02[0, 3] == pytest.approx(-0.21) and t02[1, 3] == pytest.approx(-0.08)  # 90 deg + 90 deg at theta_1 = 0
+    toe_x, toe_y = r.columns["dh_toe_x_m"], r.columns["belt_toe_x_m"]
+    zero = int(np.argmin(np.abs(r.columns["ankle_rad"])))
+    assert toe_x[zero] == pytest.approx(toe_y[zero], abs=1e-12)  # the chains agree at 0 deg only
+    assert r.parameters["toe_error_m"] > 0.1
+
+
+def test_open_loop_eq_3_67_is_stable_and_the_hanging_loop_brakes_through_the_windings():
+    # Eq 3.67 as written is a hanging pendulum with back-EMF damping: all poles in the left half plane and
+    # overdamped, so released from pi/5 it creeps back to 0 and never "falls [...] within 0.5 s" (3.6.1).
+    # The bench loop under the voltage-amplifier reading shorts the windings at zero output: with the COM
+    # level gravity has no restoring part (a pole at 0), hanging the slowest pole is about mgd / (K_t K_e N^2
+    # eta / R) away from 0.
+    from hal.virtual.plant.readings import with_geometry
+    from host_tools.benchtests import open_loop
+
+    level = open_loop.run()
+    rows = {f.name: f for f in level.figures}
+    assert rows["eq 3.67 as written: largest real part of its poles"].emulated_value < 0
+    assert math.isnan(rows["eq 3.67 as written: release from pi/5, time to -30 deg"].emulated_value)
+    assert min(level.columns["release_eq367_deg"]) > -1.0
+    assert abs(level.parameters["slowest_pole_real_1_s"]) < 1e-9
+    p = with_geometry(load_plant_params(), "hanging")
+    hanging = open_loop.run(params=p)
+    b_emf = p.output_torque_per_amp_nm * p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm
+    assert hanging.parameters["slowest_pole_real_1_s"] == pytest.approx(-p.gravity_moment_nm / (
+        b_emf + p.foot_damping_nm_s_per_rad), rel=0.05)
+
+
+def test_root_locus_reproduces_appendix_b_and_its_pick_tracks_on_the_emulator():
+    # Appendix B: k = R wc / (1 - exp(-R Ts/L)), ki = 1 - exp(-R Ts/L); the PI zero cancels the winding's
+    # pole and the closed-loop pole is 1 - wc = 0.372, whatever R and L.
+    from host_tools.benchtests import root_locus
+
+    g = root_locus.appendix_b_gains(**root_locus.APPENDIX_B)
+    assert g["k"] == pytest.approx(0.5 * math.pi / 5, rel=1e-9) and g["ki"] == pytest.approx(1.0)
+    assert g["closed_loop_pole_z"] == pytest.approx(1 - math.pi / 5)
+    g2 = root_locus.appendix_b_gains(0.202, 138e-6, 1e-4, math.pi / 5)
+    assert g2["pi_zero_z"] == pytest.approx(g2["plant_pole_z"]) and g2["closed_loop_pole_z"] == pytest.approx(
+        1 - math.pi / 5)
+    r = root_locus.run(quick=True)
+    pick = r.parameters["pick_gain_per_rad"]
+    assert 0 < pick < r.parameters["unstable_above_per_rad"]
+    poles = [complex(s) for s in r.parameters["pick_poles"]]
+    slow = min(poles, key=lambda s: -s.real)
+    assert -slow.real / abs(slow) == pytest.approx(root_locus.TARGET_ZETA, abs=0.03)
+    assert 0 < r.parameters["track_rms_deg"] < 3.0  # the pick follows the gait on the nonlinear plant

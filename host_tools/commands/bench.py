@@ -13,7 +13,7 @@ from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
 HELP = ("reproduce the report's bench-top tests (uncontrolled, backdrive, fast-response, loading, tracking, "
-        "baud-study, link-study, all)")
+        "baud-study, link-study, motor-tf, open-loop, root-locus, kinematics, all)")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
