@@ -323,3 +323,20 @@ def test_loading_current_changes_sign_only_hanging_with_the_tables_spring():
         assert lo < 0 < hi and hi - lo < 4.0, key
     level = loading.run(periods=1.0).parameters
     assert level["current_a_tables_spring_no_load"][0] > 0 and level["current_a_tables_spring_1.48kg"][0] > 0
+
+
+def test_docs_readings_table_is_what_pafp_bench_readings_table_prints(capsys):
+    # docs/bench.md carries the table `pafp bench readings-table` prints, verbatim: regenerate it when a
+    # figure moves. Every row names a reproducing reading or "neither", for both geometries.
+    from pathlib import Path
+
+    assert main(["bench", "readings-table"]) == 0
+    printed = capsys.readouterr().out
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "bench.md").read_text()
+    start = doc.index("<!-- readings-table")
+    block = doc[doc.index("\n", start) + 1:doc.index("<!-- /readings-table -->")]
+    assert block == printed
+    rows = [line for line in printed.splitlines() if line.startswith("| geometry |")]
+    assert len(rows) >= 10
+    verdicts = [row.rstrip(" |").rsplit("| ", 1)[1] for row in rows]
+    assert any(v.startswith("level-com (") for v in verdicts) and any(v.startswith("hanging (") for v in verdicts)

@@ -18,7 +18,9 @@ HELP = ("reproduce the report's bench-top tests (uncontrolled, backdrive, fast-r
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register TEST, --out, --seed and --quick."""
-    parser.add_argument("test", choices=[*TESTS, "all"], help="which bench test to run, or all")
+    parser.add_argument("test", choices=[*TESTS, "all", "readings-table"],
+                        help="which bench test to run, all, or readings-table (the report's figures under both "
+                             "geometries and both IMU readings: docs/bench.md)")
     parser.add_argument("--out", type=Path, default=None,
                         help="directory for the PNG, CSV, JSON and Markdown outputs (none written if omitted)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the trial variation (default 0)")
@@ -72,6 +74,18 @@ def run(args: argparse.Namespace) -> int:
     With more than one geometry the outputs of each go to DIR/<geometry>/ (tests that do not depend on the
     geometry: DIR/).
     """
+    if args.test == "readings-table":
+        from host_tools.benchtests.readings_table import default_runner, readings_table
+
+        table = readings_table(default_runner)
+        if args.out is not None:
+            from host_tools.outdir import write_atomic
+
+            args.out.mkdir(parents=True, exist_ok=True)
+            write_atomic(args.out / "readings_table.md", table)
+            print(f"wrote {args.out / 'readings_table.md'}", file=sys.stderr)
+        print(table, end="")
+        return 0
     runs = plan(args.test, args.geometry)
     split = len({g for _, g in runs if g is not None}) > 1
     results = []
