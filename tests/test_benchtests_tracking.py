@@ -91,6 +91,18 @@ def test_imu_model_alone_depends_on_the_reading(tracking_result):
     assert 1.5 < lag < 3.0 and 0.8 < hold < 1.6
 
 
+def test_tracking_under_the_sample_hold_imu_reading(tracking_result):
+    # The same tuned run with the IMU model holding the pitch every 19.5 ms instead of lagging it: the run
+    # names its reading, keeps running, and the IMU-measured error drops (the hold's mean delay is half an
+    # interval, the lag's a whole time constant), while the foot's true error hardly moves.
+    hold = tracking_result.parameters["imu_sample_hold"]
+    tuned = _case(tracking_result, "tuned")
+    assert hold["readings"]["imu"] == "sample-hold" and hold["faults"] == []
+    assert hold["imu"]["rms_deg"] < 0.8 * tuned["imu"]["rms_deg"]
+    assert hold["imu"]["lag_ms"] < tuned["imu"]["lag_ms"]
+    assert hold["truth"]["rms_deg"] < 2 * tuned["truth"]["rms_deg"] + 0.2
+
+
 @pytest.mark.parametrize(("baud", "mode", "expected"), [(921600, "full", (1961, 980)),
                                                         (115200, "selective", (245, 235))])
 def test_wire_time_bound(baud, mode, expected):
@@ -147,4 +159,4 @@ def test_pafp_bench_tracking_writes_outputs(tmp_path, capsys):
     assert doc["parameters"]["strides"] == 2
     assert all(f["emulated"] is None or math.isfinite(f["emulated"]) for f in doc["figures"])
     assert all(f["basis"] for f in doc["figures"])
-    assert "| tracking | tuned: IMU RMS error |" in capsys.readouterr().out
+    assert "| tracking [level-com] | tuned: IMU RMS error |" in capsys.readouterr().out
