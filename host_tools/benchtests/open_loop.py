@@ -17,7 +17,7 @@ import math
 import numpy as np
 from scipy import signal
 
-from hal.virtual.plant import PlantParams, load_plant_params
+from hal.virtual.plant import Plant, PlantParams, load_plant_params
 from hal.virtual.plant.linear import loop_state_space, report_state_space
 from hal.virtual.plant.readings import geometry_of
 from host_tools.benchtests.output import BenchResult, Figure
@@ -77,6 +77,10 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None) -
     pulse_r = _pulse(a_r, b_r * p.supply_voltage_v, c_r, t)  # eq 3.67's input is the voltage: 24 V
     pulse_l = _pulse(a_l, b_l, c_l, t)
     stop = p.stop_min_rad
+    # the nonlinear plant with the voltage-amplifier driver at zero output (windings shorted), from pi/5
+    plant = Plant(p, initial_angle_rad=RELEASE_RAD, driver="voltage-amplifier")
+    plant.set_voltage_command(0.0, 0.0)
+    free_p = np.array([plant.output_angle_rad(float(x)) for x in t])
     reach = np.nonzero(free_r <= stop)[0]
     t_stop_r = float(t[reach[0]]) if reach.size else math.nan
     slowest = max(e.real for e in eig_l)
@@ -100,6 +104,10 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None) -
         Figure(f"bench loop ({geometry}): release from pi/5, angle after 0.5 s", "deg", words, None,
                math.degrees(float(free_l[int(round(0.5 / (t[1] - t[0])))])),
                slow_text + "; gravity's constant part included", basis=lin),
+        Figure(f"plant, voltage amplifier at 0 ({geometry}): release from pi/5, angle after 0.5 s", "deg", words,
+               None, math.degrees(float(free_p[int(round(0.5 / (t[1] - t[0])))])),
+               "nonlinear (friction, stops); with the bridge open instead: pafp bench uncontrolled",
+               basis=f"assumed: geometry {geometry}"),
         Figure("eq 3.67: 24 V for 1 ms, peak angle", "deg", "Fig 3.15 (plot only)", None,
                math.degrees(float(np.max(np.abs(pulse_r)))), f"2 % settling {_settle(t, pulse_r, 0.02):.2f} s",
                basis=pred),
@@ -113,6 +121,7 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None) -
         ax1, ax2 = fig.subplots(2, 1, sharex=True)  # type: ignore[attr-defined]
         ax1.plot(t, np.degrees(free_r), label="eq 3.67 as written")
         ax1.plot(t, np.degrees(free_l), label=f"bench loop, {geometry}, voltage amplifier at 0")
+        ax1.plot(t, np.degrees(free_p), label=f"plant, {geometry}, voltage amplifier at 0")
         ax1.axhline(math.degrees(stop), color="0.5", ls="--", label="plantarflexion stop")
         ax1.set(ylabel="angle [deg]", title="Released from π/5 without a controller (Fig 3.13)")
         ax1.legend(fontsize=8)
@@ -123,6 +132,7 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None) -
 
     return BenchResult("open-loop", figures,
                        {"t_s": t, "release_eq367_deg": np.degrees(free_r), "release_loop_deg": np.degrees(free_l),
+                        "release_plant_deg": np.degrees(free_p),
                         "impulse_eq367_deg": np.degrees(pulse_r), "impulse_loop_deg": np.degrees(pulse_l)}, plot,
                        {"geometry": geometry, "poles_eq367": [str(e) for e in eig_r],
                         "poles_loop": [str(e) for e in eig_l], "release_rad": RELEASE_RAD, "pulse_s": PULSE_S,

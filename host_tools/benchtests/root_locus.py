@@ -8,8 +8,8 @@ Then the method on the linearised position loop (hal.virtual.plant.linear, the v
 the PID's +-1 is +-24 V behind 24/(1 + 0.00114 s), the bench's geometry): the root locus of a P position
 gain, and the gain at which the dominant pair reaches zeta = 0.7 (assumed: the report gives neither its
 design point nor its gains). Those poles are checked on the emulator: the nonlinear plant follows the
-normative gait for 2 strides with that gain, the voltage amplifier emulated as the current it drives,
-i = (24 u - K_e N omega) / R, commanded every 1 ms (L/R = 0.68 ms is under the period).
+normative gait for 2 strides with that gain, its driver the voltage amplifier (Plant(driver=
+"voltage-amplifier"): the PID's output as a voltage, the current set by the winding and the back-EMF).
 """
 
 from __future__ import annotations
@@ -60,22 +60,19 @@ def _dominant_zeta(poles: np.ndarray) -> float:
 
 
 def track(p: PlantParams, kp: float, strides: int = 2) -> dict[str, np.ndarray]:
-    """The nonlinear plant following the normative gait with u = kp (r - theta), voltage amplifier emulated."""
+    """The nonlinear plant, its driver a voltage amplifier, following the normative gait with u = kp (r - theta)."""
     ref = GaitReference.normative(stride_s=STRIDE_S)
     th0 = ref.sample(0.0)[0]
-    plant = Plant(p, initial_angle_rad=th0)
+    plant = Plant(p, initial_angle_rad=th0, driver="voltage-amplifier")
     n = int(round(strides * STRIDE_S / CONTROL_S))
     t = np.arange(n) * CONTROL_S
     angle = np.empty(n)
     reference = np.empty(n)
-    kemf = p.ke_v_s_per_rad * p.total_ratio
     for k, tk in enumerate(t):
         st = plant.state_at(float(tk))
         r = ref.sample(float(tk))[0]
         angle[k], reference[k] = st.output_angle_rad, r
-        u = min(1.0, max(-1.0, kp * (r - st.output_angle_rad)))
-        i = (p.supply_voltage_v * u - kemf * st.output_velocity_rad_s) / p.phase_resistance_ohm
-        plant.set_current_command(i, float(tk))
+        plant.set_voltage_command(kp * (r - st.output_angle_rad), float(tk))
     return {"t_s": t, "angle_rad": angle, "reference_rad": reference}
 
 
@@ -121,8 +118,8 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None) -
                basis=design),
         Figure(f"position loop ({geometry}): that gain on the emulator, RMS error", "deg",
                "\"smoother data\" after tuning (4.4)", None, rms,
-               f"max {max_err:.2f} deg; nonlinear plant, normative gait, 1 kHz, amplifier emulated as i = "
-               "(24 u - K_e N w)/R; the plant's true angle (emulation only)", basis=design),
+               f"max {max_err:.2f} deg; nonlinear plant with the voltage-amplifier driver, normative gait, 1 kHz; "
+               "the plant's true angle (emulation only)", basis=design),
     ]
 
     def plot(fig: object) -> None:

@@ -10,9 +10,9 @@ The report can be read two ways in three places (docs/bench.md, "Readings"):
 - **driver** -- ``current-lag`` (the plant's): the driver closes a current loop, the q current follows the
   command with the report's 1.14 ms time constant (eq 3.41's pole, its gain dropped); ``voltage-amplifier``:
   eq 3.41 as written, 24/(1 + 0.00114 s), the PID's +-1 becoming +-24 V on the winding (3.6.3), the current
-  then set by L di/dt = V - R i - K_e w (eq 3.62). The nonlinear plant runs the current-lag reading (the
-  firmware commands current in servo mode); the voltage-amplifier reading is the linear model of
-  :mod:`hal.virtual.plant.linear` the report's analyses use (motor-tf, open-loop, root-locus).
+  then set by L di/dt = V - R i - K_e w (eq 3.62). A plant choice: ``Plant(driver=...)``; the firmware's
+  runs use the current-lag reading (it commands current in servo mode); the report's analyses (motor-tf,
+  open-loop, root-locus) use the voltage amplifier, linear (:mod:`hal.virtual.plant.linear`) and on the plant.
 - **imu** -- ``first-order-lag``: 1/(1 + 0.0195 s), eq 3.42 as written; ``sample-hold``: 0.0195 s as the
   interval between two data points (3.5.4, "the time difference between two data points"), a 51 Hz
   sample-and-hold.
@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from hal.virtual.plant.params import PlantParams
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["DRIVERS", "GEOMETRIES", "IMUS", "IMU_INTERVAL_S", "READINGS", "check_reading", "geometry_of",
            "imu_reading_signal", "with_geometry"]
@@ -72,6 +74,8 @@ def imu_reading_signal(t_s: np.ndarray, angle: np.ndarray, name: str,
     first-order-lag: the exact lag for a piecewise-linear input; sample-hold: the angle sampled every
     interval_s (the sample at or before each hold instant) and held.
     """
+    import numpy as np  # only the analyses need it
+
     check_reading("imu", name)
     t = np.asarray(t_s, dtype=float)
     u = np.asarray(angle, dtype=float)
