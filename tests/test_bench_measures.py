@@ -185,3 +185,15 @@ def test_backlash_holds_off_torque_while_the_rotor_crosses_the_gap():
     assert 3 <= len(crossing) <= 8, with_gap
     assert with_gap[-1] < -0.95
     assert slack.gap_crossings == 1 and stiff.gap_crossings == 0
+
+
+def test_tracking_plot_draws_the_encoder_strides_beside_the_imu_and_the_truth():
+    # tracking.png's top panel: the IMU (what the report plotted), the encoder (the bench-measurable stand-in
+    # for the foot) and the truth (emulation only), each stride cut from the run
+    from host_tools.report import tracking_of
+    from host_tools.tracking_stream import PLOT_STRIDES
+
+    assert PLOT_STRIDES == ("imu", "encoder", "truth")
+    strides = tracking_of(run_virtual(RunConfig(strides=2, trace_capacity=0))).strides
+    assert len(strides["encoder"].angles_deg) == 2 and len(strides["imu"].angles_deg) == 2
+    assert not np.allclose(strides["encoder"].angles_deg, strides["truth"].angles_deg)  # its own signal
