@@ -106,7 +106,7 @@ def render(text: str) -> str:
     for name, make in BLOCKS.items():
         if _pattern(name).search(text):
             body = make() + "\n"
-            text = _pattern(name).sub(lambda m: m.group(1) + body + m.group(3), text)
+            text = _pattern(name).sub(lambda m, body=body: m.group(1) + body + m.group(3), text)
     return text
 
 

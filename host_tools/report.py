@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,8 +29,8 @@ from protocol.telemetry import TelemetryDecoder
 if TYPE_CHECKING:
     from host_tools.outdir import RunDir
 
-__all__ = ["TRACKING_SIGNALS", "run_into", "strict_json", "summarise", "tracking_lines", "tracking_of",
-           "tracking_summary", "tracking_text", "write_outputs"]
+__all__ = ["TRACKING_SIGNALS", "readings_text", "run_into", "strict_json", "summarise", "tracking_lines",
+           "tracking_of", "tracking_summary", "tracking_text", "write_outputs"]
 
 
 
@@ -90,6 +90,17 @@ def tracking_summary(r: RunResult, tracking: TrackingResult) -> dict:
     return out
 
 
+#: The top-level tracking keys of summary.json: bench-measurable figures only (docs/outputs.md).
+HEADLINE_KEYS = ("imu_rms_error_deg", "imu_max_error_deg", "imu_lag_ms",
+                 "encoder_rms_error_deg", "encoder_max_error_deg", "encoder_lag_ms")
+
+
+def measured_headline(imu: dict, encoder: dict) -> dict[str, float | None]:
+    """The top-level figures of summary.json from the IMU's and the encoder's tracking figures."""
+    return {f"{name}_{key}": f[src] for name, f in (("imu", imu), ("encoder", encoder))
+            for key, src in (("rms_error_deg", "rms_deg"), ("max_error_deg", "max_deg"), ("lag_ms", "lag_ms"))}
+
+
 def _us(cycles: int | None, f_cpu: int) -> float | None:
     return None if cycles is None else round(cycles * 1e6 / f_cpu, 3)
 
@@ -120,8 +131,9 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
     fw, sched = r.firmware, r.scheduler
     f_cpu = fw.f_cpu_hz
     tracking = tracking or tracking_of(r)
-    # the legacy top-level figures: the probe's angle (the plant's true one in virtual mode) over the window
-    m = _figures(tracking.metrics["truth"], tracking.enough)
+    # the top-level figures are what a bench measures (IMU, encoder); the truth is only under tracking.truth
+    imu = _figures(tracking.metrics["imu"], tracking.enough)
+    enc = _figures(tracking.metrics["encoder"], tracking.enough)
     files = getattr(r, "files", None)
     bounds = {b.name: b for b in r.bounds}
     deadlines = {t.name: t.relative_deadline for t in fw.tasks}  # firmware tasks only (no bench probe)
@@ -152,9 +164,7 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
         "build": describe(),
         "tracking": tracking_summary(r, tracking),
         **getattr(r, "bench_record", {}),
-        "rms_error_deg": m["rms_deg"],
-        "max_error_deg": m["max_deg"],
-        "lag_ms": m["lag_ms"],
+        **measured_headline(imu, enc),
         "deadline_misses": sum(t["misses"] for t in tasks.values()),
         "faults": faults,
         "cpu_utilisation": round(util.total, 5),
@@ -241,7 +251,15 @@ def _bench_lines(s: dict) -> list[str]:
     on = [k for k, v in imp.items() if isinstance(v, dict) and v["enabled"] and v["modelled"]]
     off = [k for k, v in imp.items() if isinstance(v, dict) and not v["enabled"] and v["modelled"]]
     return [f"Bench: {plant}; imperfections on: {', '.join(on) or 'none'}"
-            + (f"; switched off: {', '.join(off)}" if off else "") + ".", ""]
+            + (f"; switched off: {', '.join(off)}" if off else "") + ".", "", readings_text(s) + ".", ""]
+
+
+def readings_text(s: dict) -> str:
+    """Which readings of the report the run's bench used (docs/bench.md, "Readings"), or an empty string."""
+    r = s.get("readings")
+    if not r:
+        return ""
+    return "Readings of the report: " + ", ".join(f"{k} {v}" for k, v in r.items())
 
 
 
@@ -317,9 +335,10 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
         label = {"truth": "truth (emulation only)"}
         strides = {label.get(n, n): st for n, st in tracking.strides.items() if n in shown and n in PLOT_STRIDES}
         errors = {label.get(n, n): p.errors_deg[n] for n in shown}
-        plot_tracking(out / "tracking.png", strides, (pct, band[:, 0], band[:, 1]), p.t_s, p.current_cmd_a, p.current_meas_a,
-                      errors, f"Gait tracking, {s['strides']} strides, IMU-measured RMS "
-                      f"{_figure(s['tracking']['imu']['rms_deg'], 2, '°')}")
+        plot_tracking(out / "tracking.png", strides, (pct, band[:, 0], band[:, 1]), p.t_s, p.current_cmd_a,
+                      p.current_meas_a, errors, f"Gait tracking, {s['strides']} strides, RMS measured by the IMU "
+                      f"{_figure(s['imu_rms_error_deg'], 2, '°')}, by the encoder "
+                      f"{_figure(s['encoder_rms_error_deg'], 2, '°')}")
     if getattr(r.config, "scenario", "suspended") == "walk":
         from host_tools.actuator import walk_outputs
 

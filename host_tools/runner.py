@@ -23,9 +23,11 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
+from hal.virtual.devices.bno08x_config import imu_reading_of
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.draw import draw_plant, drawn_values
+from hal.virtual.plant.readings import DRIVERS, geometry_of
 from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
 from host_tools.run_files import RunFiles
@@ -111,6 +113,9 @@ class RunConfig:
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
                             "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
+                  # the readings of the report the bench ran under (hal.virtual.plant.readings, docs/bench.md)
+                  "readings": {"geometry": geometry_of(params), "driver": DRIVERS[0],
+                               "imu": imu_reading_of(options["imu_config"])},
                   "imperfections": {**imp.as_dict(), "encoder_offset_rad": options.get("initial_angle_rad", 0.0)}}
         return options, record
 

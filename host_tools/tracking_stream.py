@@ -43,8 +43,9 @@ TRACKING_SIGNALS: tuple[tuple[str, str, str], ...] = (
     ("fused", "fused_angle_rad", "the firmware's fused estimate (encoder + IMU), what it controls"),
     ("truth", "true_angle_rad", "the plant's true output angle: emulation only, no bench has it"),
 )
-#: Whose strides tracking.png draws: what the report plotted (the IMU) and the truth.
-PLOT_STRIDES = ("imu", "truth")
+#: Whose strides tracking.png draws: what the report plotted (the IMU), the encoder (the bench-measurable
+#: stand-in for the foot) and the truth (emulation only).
+PLOT_STRIDES = ("imu", "encoder", "truth")
 #: Value of SupervisorState.RUN as the probe records it (protocol.telemetry).
 _RUN_STATE = 1
 

@@ -121,7 +121,8 @@ def evaluate(index: int, base: FirmwareConfig, gains: Candidate, strides: int, s
     rms_di = float(np.sqrt(np.mean(np.diff(i) ** 2)))
     sat = float(np.mean(np.abs(i) >= SATURATION_LEVEL * cfg.current_limit_a))
     # None: less than one stride in RUN (host_tools.metrics), scored as not stable below
-    rms, mx = (math.nan if s[k] is None else float(s[k]) for k in ("rms_error_deg", "max_error_deg"))
+    truth = s["tracking"]["truth"]  # the tuner scores the plant (emulation only)
+    rms, mx = (math.nan if truth[k] is None else float(truth[k]) for k in ("rms_deg", "max_deg"))
     reasons = []
     if s["deadline_misses"]:
         reasons.append(f"{s['deadline_misses']} deadline misses")

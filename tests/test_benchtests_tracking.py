@@ -26,7 +26,7 @@ def test_tuning_improves_tracking(tracking_result):
     # feed-forward) at least halves the truth RMS of the untuned run (no feed-forward, P-only), cuts the
     # IMU RMS by a quarter and the lag, and neither run misses a deadline or latches a fault.
     untuned, tuned = _case(tracking_result, "untuned"), _case(tracking_result, "tuned")
-    assert tuned["rms_error_deg"] < 0.5 * untuned["rms_error_deg"]
+    assert tuned["truth"]["rms_deg"] < 0.5 * untuned["truth"]["rms_deg"]
     assert tuned["imu"]["rms_deg"] < 0.75 * untuned["imu"]["rms_deg"]
     assert tuned["imu"]["lag_ms"] < untuned["imu"]["lag_ms"]
     for c in (untuned, tuned):
@@ -47,7 +47,7 @@ def test_butterworth_on_imu_cannot_remove_the_imus_lag(tracking_result):
     bw = _case(tracking_result, f"tuned + Butterworth {tracking.BUTTERWORTH_HZ:g} Hz")
     low = _case(tracking_result, f"tuned + Butterworth {tracking.BUTTERWORTH_LOW_HZ:g} Hz")
     assert bw["faults"] == [] and bw["deadline_misses"] == 0
-    assert low["faults"] == ["SENSOR_DISAGREEMENT"] and low["rms_error_deg"] is None
+    assert low["faults"] == ["SENSOR_DISAGREEMENT"] and low["truth"]["rms_deg"] is None
 
 
 def test_tracking_rows_cover_each_case(tracking_result):
@@ -61,6 +61,46 @@ def test_tracking_rows_cover_each_case(tracking_result):
             if f.name.endswith("lag") and f.emulated_value is not None]
     assert all(-200.0 <= x <= 200.0 for x in lags)  # the lag search spans +-200 ms (negative: the foot leads)
     assert all(f.basis for f in tracking_result.figures)
+
+
+def test_feedforward_is_its_own_row_and_tuned_rows_hold_on_seeds_not_tuned_on(tracking_result):
+    # The profile's gains were tuned on seed 0: the tuned case is also run on ten other seeds (median and
+    # spread), and the feed-forward the report never had is separated from the gains in its own case.
+    held = tracking_result.parameters["held_out"]
+    assert tracking_result.parameters["held_out_seeds"] == list(range(1, 11))
+    for name in (tracking.NO_FF, "tuned"):
+        for sig in ("imu", "encoder", "truth"):
+            st = held[name][sig]
+            assert st["n"] == 10 and st["min"] <= st["median"] <= st["max"]
+    # the seed the gains were tuned on flatters them: its truth RMS is below the median of the other seeds
+    no_ff, tuned = _case(tracking_result, tracking.NO_FF), _case(tracking_result, "tuned")
+    assert tuned["truth"]["rms_deg"] < held["tuned"]["truth"]["median"]
+    # the feed-forward is a case of its own: same gains, different run
+    assert no_ff["truth"]["rms_deg"] != tuned["truth"]["rms_deg"] and no_ff["faults"] == []
+    names = [f.name for f in tracking_result.figures]
+    for name in (tracking.NO_FF, "tuned"):
+        assert f"{name}, seeds not tuned on: encoder RMS error (median)" in names
+
+
+def test_imu_model_alone_depends_on_the_reading(tracking_result):
+    # Report 3.5.4's 0.0195 s read as a first-order lag costs a perfect tracker half as much again as a
+    # 51 Hz sample-and-hold (emulated: 1.88 deg against 1.23 deg RMS; issue 24 estimated 2.3 and 1.1).
+    model = tracking_result.parameters["imu_model_alone"]
+    lag, hold = model["first-order-lag"]["rms_deg"], model["sample-hold"]["rms_deg"]
+    assert 1.3 < lag / hold < 3.0
+    assert 1.5 < lag < 3.0 and 0.8 < hold < 1.6
+
+
+def test_tracking_under_the_sample_hold_imu_reading(tracking_result):
+    # The same tuned run with the IMU model holding the pitch every 19.5 ms instead of lagging it: the run
+    # names its reading, keeps running, and the IMU-measured error drops (the hold's mean delay is half an
+    # interval, the lag's a whole time constant), while the foot's true error hardly moves.
+    hold = tracking_result.parameters["imu_sample_hold"]
+    tuned = _case(tracking_result, "tuned")
+    assert hold["readings"]["imu"] == "sample-hold" and hold["faults"] == []
+    assert hold["imu"]["rms_deg"] < 0.8 * tuned["imu"]["rms_deg"]
+    assert hold["imu"]["lag_ms"] < tuned["imu"]["lag_ms"]
+    assert hold["truth"]["rms_deg"] < 2 * tuned["truth"]["rms_deg"] + 0.2
 
 
 @pytest.mark.parametrize(("baud", "mode", "expected"), [(921600, "full", (1961, 980)),
@@ -119,4 +159,4 @@ def test_pafp_bench_tracking_writes_outputs(tmp_path, capsys):
     assert doc["parameters"]["strides"] == 2
     assert all(f["emulated"] is None or math.isfinite(f["emulated"]) for f in doc["figures"])
     assert all(f["basis"] for f in doc["figures"])
-    assert "| tracking | tuned: IMU RMS error |" in capsys.readouterr().out
+    assert "| tracking [level-com] | tuned: IMU RMS error |" in capsys.readouterr().out

@@ -120,6 +120,28 @@ def test_pitch_follows_the_falling_foot_through_the_lag() -> None:
     assert frames[-1].pitch_rad < -0.45  # the foot fell to the plantarflexion stop
 
 
+def test_sample_hold_reading_holds_the_pitch_every_interval_without_lag() -> None:
+    """Report 3.5.4 read as a sample interval: the pitch sampled every 19.5 ms and held, no lag."""
+    from hal.virtual.devices.bno08x_config import imu_reading_of, with_imu_reading
+
+    hold = with_imu_reading(QUIET, "sample-hold")
+    assert hold.lag_time_constant_s == 0.0 and hold.hold_interval_s == TAU and imu_reading_of(hold) == "sample-hold"
+    assert imu_reading_of(with_imu_reading(hold, "first-order-lag")) == "first-order-lag"
+    rig = Rig(StepPlant(), hold)
+    frames = RvcDecoder().feed(rig.read_until(0.3))
+    for k, frame in enumerate(frames):
+        t = 0.01 * (k + 1)
+        held_at = math.floor(t / TAU + 1e-9) * TAU  # the latest hold instant
+        if held_at < 0.0975:  # held before the step's substep ramp: 0
+            assert frame.pitch_rad == 0.0, t
+        elif held_at >= 0.1:  # held after it: the whole step, no lag
+            assert frame.pitch_rad == pytest.approx(0.2, abs=2e-4), t
+    first = next(k for k, f in enumerate(frames) if f.pitch_rad > 0.1)
+    assert 0.01 * (first + 1) == pytest.approx(0.12, abs=1e-9)  # the hold instants 97.5 ms (before), 117 ms
+    with pytest.raises(ValueError, match="hold_interval_s"):
+        Bno08xConfig(hold_interval_s=-1.0)
+
+
 def test_accelerations_include_gravity_and_the_lever_arm() -> None:
     rig = Rig(Plant(initial_angle_rad=0.5), QUIET)
     frames = RvcDecoder().feed(rig.read_until(0.6))

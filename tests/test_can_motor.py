@@ -157,7 +157,8 @@ def test_can_runs_track_and_are_deterministic(link):
     # tracks the reference as well as the UART link on the same bench (seed 7 draws an IMU bias and an
     # encoder offset that set the truth RMS near 1.1 deg on every link; 0.14 deg with --ideal all)
     uart = summarise(run_virtual(RunConfig(strides=1, seed=7, trace_capacity=0)))
-    assert s["rms_error_deg"] <= 1.05 * uart["rms_error_deg"], (s["rms_error_deg"], uart["rms_error_deg"])
+    truth, uart_truth = s["tracking"]["truth"]["rms_deg"], uart["tracking"]["truth"]["rms_deg"]
+    assert truth <= 1.05 * uart_truth, (truth, uart_truth)
     assert s["motor_link"]["link"] == link and s["motor_link"]["rx_overruns"] == 0
     assert 0.0 < s["motor_link"]["bus_load"] < 0.5
 

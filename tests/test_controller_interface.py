@@ -97,7 +97,7 @@ def test_user_controller_tracks_publishes_and_its_cost_is_the_control_tasks(user
     code = main(["run", "--quiet", "--strides", "1", "--controller", f"{user_file}:PdGravity", "--out", str(out)])
     assert code == 0
     s = json.loads((out / "summary.json").read_text())
-    assert s["rms_error_deg"] < 3.0  # a plain PD + gravity: looser than the cascade, but it tracks
+    assert s["tracking"]["truth"]["rms_deg"] < 3.0  # a plain PD + gravity: looser than the cascade, but it tracks
     assert s["controller"] == {"name": f"{user_file}:PdGravity", "class": "PdGravity",
                                "published": ["torque_nm", "error_deg"], "error": None}
     with (out / "telemetry.csv").open() as f:
@@ -184,4 +184,4 @@ def test_the_readme_example_controller_runs_as_written(tmp_path):
     assert r.firmware.published_names == ("torque_nm", "error_deg")
     from host_tools.report import summarise
 
-    assert summarise(r)["rms_error_deg"] < 3.0
+    assert summarise(r)["tracking"]["truth"]["rms_deg"] < 3.0

@@ -38,14 +38,14 @@ def test_default_run_meets_acceptance(default_run):
     code, out, s = default_run
     assert code == 0
     assert s["strides"] == 10 and s["baud"] == 921600
-    assert s["rms_error_deg"] <= 1.0
+    assert s["tracking"]["truth"]["rms_deg"] <= 1.0
     assert s["deadline_misses"] == 0
     assert s["faults"] == []
     for name, t in s["tasks"].items():
         assert t["jobs"] > 0, name
         assert t["wcrt_us"] <= t["bound_us"] <= t["deadline_us"], name
-    for key in ("strides", "sim_time_s", "wall_time_s", "realtime_factor", "rms_error_deg", "max_error_deg",
-                "lag_ms", "deadline_misses", "faults", "cpu_utilisation", "baud", "tasks"):
+    for key in ("strides", "sim_time_s", "wall_time_s", "realtime_factor", "imu_rms_error_deg", "encoder_max_error_deg",
+                "encoder_lag_ms", "deadline_misses", "faults", "cpu_utilisation", "baud", "tasks"):
         assert key in s
     for f in ("telemetry.bin", "telemetry.csv", "trace.json", "tracking.png", "report.md"):
         assert (out / f).stat().st_size > 0, f
@@ -142,7 +142,7 @@ def test_garbage_and_dropped_bytes_on_the_motor_line_are_counted_and_survived():
     assert fw.supervisor.state is SupervisorState.RUN and fw.supervisor.reason is FaultReason.NONE
     assert fw.motor.decoder.stats.dropped_bytes > 0
     assert fw.motor.stats.replies > 0.9 * fw.motor.stats.requests
-    assert summarise(r)["rms_error_deg"] < 1.0
+    assert summarise(r)["tracking"]["truth"]["rms_deg"] < 1.0
 
 
 def test_receive_overrun_loses_full_replies_but_the_loop_survives():
@@ -152,7 +152,7 @@ def test_receive_overrun_loses_full_replies_but_the_loop_survives():
     assert errors.overrun > 0 and errors.rx_lost > 0
     assert fw.motor.stats.full_replies == 0  # 78-byte replies never fit a 48-byte buffer
     assert fw.supervisor.state is SupervisorState.RUN
-    assert summarise(r)["rms_error_deg"] < 1.0
+    assert summarise(r)["tracking"]["truth"]["rms_deg"] < 1.0
 
 
 def test_task_overrunning_its_budget_tenfold_is_seen_by_the_kernel():
@@ -174,7 +174,7 @@ def test_task_overrunning_its_budget_tenfold_is_seen_by_the_kernel():
     ctl = s["tasks"]["control"]
     assert ctl["wcrt_us"] > ctl["bound_us"] and not ctl["within_bound"]  # the analysis trusted the budget
     assert ctl["wcrt_us"] >= 10 * declared(None) / 168.0
-    assert isinstance(declared, CostModel) and not math.isnan(s["rms_error_deg"])
+    assert isinstance(declared, CostModel) and not math.isnan(s["tracking"]["truth"]["rms_deg"])
 
 
 def test_cli_warns_before_running_a_link_too_slow_for_the_control_rate(tmp_path, capsys):

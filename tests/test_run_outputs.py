@@ -122,10 +122,10 @@ def test_summary_is_strict_json_with_null_for_what_a_run_does_not_have(tmp_path)
 
     r = run_virtual(RunConfig(strides=1, trace_capacity=0, setup=setup, stream_to=tmp_path))
     s = write_outputs(r, tmp_path, plot=False)
-    assert s["rms_error_deg"] is None and s["tracking"]["enough_run"] is False
+    assert s["imu_rms_error_deg"] is None and s["tracking"]["enough_run"] is False
     text = (tmp_path / "summary.json").read_text()
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in summary.json"))
-    assert doc["rms_error_deg"] is None and doc["lag_ms"] is None and doc["complete"] is True
+    assert doc["imu_rms_error_deg"] is None and doc["encoder_lag_ms"] is None and doc["complete"] is True
     assert doc["process_wall_time_s"] > 0 and doc["process_realtime_factor"] > 0
     assert all(doc["tracking"][k]["rms_deg"] is None for k in ("imu", "encoder", "fused", "truth"))
     assert "| imu: IMU pitch as the firmware received it (the report's Figs 4.8-4.10) | n/a | n/a | n/a |" \
@@ -137,7 +137,8 @@ def test_streamed_run_gives_the_in_memory_run_s_telemetry_and_figures(tmp_path):
     streamed = run_virtual(RunConfig(strides=2, seed=4, trace_capacity=0, stream_to=tmp_path))
     assert (tmp_path / "telemetry.bin").read_bytes() == memory.telemetry and streamed.telemetry == b""
     a, b = summarise(memory), summarise(streamed)
-    for key in ("rms_error_deg", "max_error_deg", "lag_ms", "deadline_misses", "sim_time_s"):
+    for key in ("imu_rms_error_deg", "encoder_max_error_deg", "encoder_lag_ms", "tracking", "deadline_misses",
+                "sim_time_s"):
         assert a[key] == b[key], key
     assert len(streamed.probe.t_s) < 600  # drained segment by segment: at most about one segment's samples
 

@@ -233,7 +233,7 @@ def test_sweep_command_on_a_local_process_cluster(tmp_path, capsys):
     assert "--resume" in capsys.readouterr().err
     assert main(["sweep", str(spec), "--point", "0", "--out", str(tmp_path / "p0")]) == 0
     summary = json.loads((tmp_path / "p0" / "summary.json").read_text())
-    assert summary["rms_error_deg"] == rows[0]["rms_error_deg"]
+    assert summary["tracking"]["truth"]["rms_deg"] == rows[0]["rms_error_deg"]
 
 
 def test_an_out_that_is_a_file_is_refused_before_any_cluster(tmp_path, capsys):

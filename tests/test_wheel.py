@@ -61,7 +61,7 @@ def test_the_installed_package_runs_outside_the_checkout(installed: Path, tmp_pa
     assert summary["strides"] == 1 and summary["build"].startswith("pure Python")
     assert summary["deadline_misses"] == 0
     r = _run([pafp, "bench", "uncontrolled", "--out", str(tmp_path / "bench")], Path("/"))
-    assert "warning" not in r.stderr.lower() and "| uncontrolled |" in r.stdout
+    assert "warning" not in r.stderr.lower() and "| uncontrolled [level-com] |" in r.stdout
     assert (tmp_path / "bench" / "uncontrolled.json").is_file()
     r = _run([pafp, "--version"], Path("/"))
     assert r.stdout.startswith("pafp 0.")

@@ -13,4 +13,8 @@ TESTS: dict[str, str] = {
     "spring-calibration": "spring_calibration",
     "design-point": "design_point",
     "link-study": "link_study",
+    "motor-tf": "motor_tf",
+    "open-loop": "open_loop",
+    "root-locus": "root_locus",
+    "kinematics": "kinematics",
 }

@@ -21,6 +21,10 @@ from hal.virtual.plant import Plant, PlantParams, TorqueProfile, backdrive, load
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.benchtests.output import BenchResult, Figure
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+#: The report's belt ratio as it states it (3.2): 4.6 (the pitch diameters give 14/3).
+REPORT_BELT_RATIO = 4.6
+READINGS = {"driver": "unpowered", "imu": "n/a"}
 logger = logging.getLogger(__name__)
 
 TARGET_RAD = math.radians(16.0)
@@ -49,7 +53,8 @@ def alpha_from_counts(counts: np.ndarray, dt_s: float, counts_per_rev: int, cuto
 
 def trial(p: PlantParams, direction: int, amplitude_n: float, ramp_s: float) -> dict[str, np.ndarray]:
     """One push (+1 dorsiflexion, -1 plantarflexion): time, angle, counts, true and encoder alpha."""
-    hold_n = p.gravity_moment_nm / p.toe_lever_m  # balances gravity (m g d cos 0) at 0 deg
+    # balances gravity at 0 deg, m g d sin(psi0): all of m g d with the COM level, nothing hanging (eq 3.55)
+    hold_n = p.gravity_moment_nm * math.sin(p.com_angle_at_zero_rad) / p.toe_lever_m
     force = TorqueProfile.from_points([(0.0, hold_n), (PUSH_START_S, hold_n),
                                        (PUSH_START_S + ramp_s, hold_n + direction * amplitude_n)])
     plant = Plant(p, backdrive(force), initial_angle_rad=0.0)
@@ -133,6 +138,22 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
     figures.append(Figure("least peak tau_b at breakaway (any push)", "N*m", "2.06 / 2.14 \"Nmm\" (4.2.1)", None,
                           floor_nm, "J_total (T_static - T_kinetic) / (J_out eta): the N*mm reading is below it",
                           basis="predicted"))
+    # The report's own J_total: "the reflected inertia for the motor, the input pulley" (3.8.1) through the
+    # belt's 4.6 (eqs 2.8-2.10): no 6:1 planetary, so the belt's efficiency only.
+    j_report = (p.rotor_inertia_kg_m2 + p.actuator_output_inertia_kg_m2) * REPORT_BELT_RATIO**2
+    eta_report = p.belt_efficiency
+    report_j = (f"assumed: the report's J_total = (J_m + J_input pulley) x 4.6^2 = {j_report:.3g} kg*m^2 (3.8.1, "
+                f"eqs 2.8-2.10: no planetary), eta = belt {eta_report:g}; the push as above")
+    for name in peaks:
+        alpha = [x * eta / j_total for x in peaks[name]]  # each trial's peak alpha from the encoder
+        tau_r = float(np.mean([a_k * j_report / eta_report for a_k in alpha]))
+        need = REPORT_NMM[name] / 1000 * eta_report / j_report
+        figures.append(Figure(
+            f"mean peak tau_b, {name}, report's J_total (no planetary)", "N*m",
+            f"\"{REPORT_NMM[name]} Nmm\" (4.2.1) = {REPORT_NMM[name] / 1000:g} N*m", REPORT_NMM[name] / 1000, tau_r,
+            f"in N*mm the report's figure needs alpha = {need:.2g} rad/s^2: 16 deg in "
+            f"{math.sqrt(2 * math.radians(16.0) / need):.2f} s, an ordinary push; neither unit is excluded",
+            basis=report_j))
 
     def plot(fig: object) -> None:
         ax1, ax2 = fig.subplots(2, 1)  # type: ignore[attr-defined]
@@ -155,6 +176,7 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
     columns = {k: np.asarray(v) for k, v in cols.items()}
     return BenchResult("backdrive", figures, columns, plot,
                        {"seed": seed, "trials": n_trials, "j_total_kg_m2": j_total, "efficiency": eta,
+                        "report_j_total_kg_m2": j_report, "report_efficiency": eta_report,
                         "push_amplitude_n": PUSH_AMPLITUDE_N, "push_ramp_s": PUSH_RAMP_S,
                         "variation": VARIATION, "alpha_cutoff_hz": ALPHA_CUTOFF_HZ, "target_deg": 16.0,
                         "peaks_nm": peaks, "peaks_true_alpha_nm": peaks_true})

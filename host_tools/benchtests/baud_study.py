@@ -25,11 +25,14 @@ import numpy as np
 
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.drivers.motor import FEEDBACK_MASK, selective_reply_bytes
+from hal.virtual.plant import PlantParams
 from host_tools.benchtests.output import BenchResult, Figure
 from host_tools.report import summarise
 from host_tools.runner import RunConfig, RunResult, run_virtual
 from protocol.vesc import GetValues, GetValuesSelective, SetCurrent
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"driver": "current-lag", "imu": "first-order-lag"}
 logger = logging.getLogger(__name__)
 
 __all__ = ["BAUDS", "CANDIDATE_HZ", "MODES", "StudyRun", "analytic_max_hz", "link_config", "run", "study_run"]
@@ -115,7 +118,8 @@ def link_account(r: RunResult, control_hz: int) -> dict[str, Any]:
             "requests": link["requests"], "replies": link["replies"], "missing_replies": link["missing_replies"],
             "stale_replies": link["stale_replies"], "tx_refused": r.firmware.motor.stats.tx_refused,
             "feedback_rate_hz": link["feedback_rate_hz"], "max_feedback_age_ms": link["max_feedback_age_ms"],
-            **{k: math.nan if s[k] is None else s[k] for k in ("rms_error_deg", "max_error_deg")}}
+            **{k: math.nan if s["tracking"]["truth"][src] is None else s["tracking"]["truth"][src]
+               for k, src in (("rms_error_deg", "rms_deg"), ("max_error_deg", "max_deg"))}}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -126,21 +130,22 @@ class StudyRun(LinkAccount):
     mode: str
 
 
-def study_run(base: FirmwareConfig, baud: int, mode: str, control_hz: int, *, strides: int, seed: int) -> StudyRun:
-    """Run the firmware at one (baud, mode, control rate) and account for its link."""
+def study_run(base: FirmwareConfig, baud: int, mode: str, control_hz: int, *, strides: int, seed: int,
+              params: PlantParams | None = None) -> StudyRun:
+    """Run the firmware at one (baud, mode, control rate) and account for its link (params: the plant)."""
     r = run_virtual(RunConfig(strides=strides, baud=baud, seed=seed, firmware=link_config(base, control_hz, mode),
-                              trace_capacity=0))
+                              trace_capacity=0, bench_options={} if params is None else {"plant_params": params}))
     out = StudyRun(baud=baud, mode=mode, **link_account(r, control_hz))
     logger.info("baud study %s", out)
     return out
 
 
 def _search(base: FirmwareConfig, baud: int, mode: str, candidates: tuple[int, ...], strides: int,
-            seed: int) -> tuple[StudyRun | None, list[StudyRun]]:
+            seed: int, params: PlantParams | None = None) -> tuple[StudyRun | None, list[StudyRun]]:
     """Try the candidates fastest first; return the first that passes (or None) and every run made."""
     runs: list[StudyRun] = []
     for hz in sorted(candidates, reverse=True):
-        runs.append(study_run(base, baud, mode, hz, strides=strides, seed=seed))
+        runs.append(study_run(base, baud, mode, hz, strides=strides, seed=seed, params=params))
         if runs[-1].passed:
             return runs[-1], runs
     return None, runs
@@ -152,7 +157,7 @@ def _fmt_hz(x: float) -> str:
 
 def run(seed: int = 0, quick: bool = False, profile: Path | None = None, bauds: tuple[int, ...] = BAUDS,
         modes: tuple[str, ...] = MODES, candidates: tuple[int, ...] = CANDIDATE_HZ,
-        strides: int | None = None) -> BenchResult:
+        strides: int | None = None, params: PlantParams | None = None) -> BenchResult:
     """Find the achievable control rate per baud and mode; compare with the wire-time bound."""
     n = strides if strides is not None else 1
     del quick  # already one stride per run
@@ -162,7 +167,7 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, bauds: 
     figures: list[Figure] = []
     for baud in bauds:
         for mode in modes:
-            found, runs = _search(base, baud, mode, candidates, n, seed)
+            found, runs = _search(base, baud, mode, candidates, n, seed, params)
             best[(baud, mode)], every = found, every + runs
             bound_hz, bound_fb = analytic_max_hz(baud, mode, base.full_values_hz)
             tag = f"{baud} {mode}"

@@ -28,10 +28,13 @@ import numpy as np
 
 from firmware.config import FirmwareConfig, load_firmware_config
 from hal.virtual.can_bits import worst_case_bits
+from hal.virtual.plant import PlantParams
 from host_tools.benchtests.baud_study import LinkAccount, analytic_max_hz, link_account, link_config
 from host_tools.benchtests.output import BenchResult, Figure
 from host_tools.runner import RunConfig, run_virtual
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"driver": "current-lag", "imu": "first-order-lag"}
 logger = logging.getLogger(__name__)
 
 __all__ = ["CANDIDATE_HZ", "LINKS", "LinkRun", "can_bound_hz", "link_run", "run"]
@@ -88,17 +91,20 @@ def _load(r: object) -> float:
     return max(up, down) / span
 
 
-def link_run(base: FirmwareConfig, link: str, control_hz: int, *, strides: int, seed: int) -> LinkRun:
-    """Run the firmware on one link at one control rate."""
+def link_run(base: FirmwareConfig, link: str, control_hz: int, *, strides: int, seed: int,
+             params: PlantParams | None = None) -> LinkRun:
+    """Run the firmware on one link at one control rate (params: the plant, default the profile's)."""
     fw = link_config(base, control_hz, "selective").with_changes(motor_link=link)
-    r = run_virtual(RunConfig(strides=strides, baud=UART_BAUD, seed=seed, firmware=fw, trace_capacity=0))
+    r = run_virtual(RunConfig(strides=strides, baud=UART_BAUD, seed=seed, firmware=fw, trace_capacity=0,
+                              bench_options={} if params is None else {"plant_params": params}))
     out = LinkRun(link=link, link_load=round(_load(r), 4), **link_account(r, control_hz))
     logger.info("link study %s", out)
     return out
 
 
 def run(seed: int = 0, quick: bool = False, profile: Path | None = None, links: tuple[str, ...] = LINKS,
-        candidates: tuple[int, ...] = CANDIDATE_HZ, strides: int | None = None) -> BenchResult:
+        candidates: tuple[int, ...] = CANDIDATE_HZ, strides: int | None = None,
+        params: PlantParams | None = None) -> BenchResult:
     """Find the achievable control rate per link; rows side by side, with the wire-time bounds."""
     n = strides if strides is not None else 1
     del quick  # already one stride per run
@@ -109,7 +115,7 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, links: 
     for link in links:
         found = None
         for hz in sorted(candidates, reverse=True):
-            every.append(link_run(base, link, hz, strides=n, seed=seed))
+            every.append(link_run(base, link, hz, strides=n, seed=seed, params=params))
             if every[-1].passed:
                 found = every[-1]
                 break
@@ -135,7 +141,7 @@ def run(seed: int = 0, quick: bool = False, profile: Path | None = None, links: 
     for link in links:  # the same control rate on every link
         same = next((r for r in every if r.link == link and r.control_hz == SAME_RATE_HZ), None)
         if same is None:
-            same = link_run(base, link, SAME_RATE_HZ, strides=n, seed=seed)
+            same = link_run(base, link, SAME_RATE_HZ, strides=n, seed=seed, params=params)
             every.append(same)
         figures += [
             Figure(f"{link} at {SAME_RATE_HZ} Hz: worst feedback age", "ms", REPORT_TEXT, None,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,7 +26,10 @@ from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.pid import CascadeController
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, spring_bench
 from host_tools.benchtests.output import BenchResult, Figure
+from host_tools.benchtests.spring_calibration import two_mass_stiffness
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"driver": "current-lag", "imu": "n/a"}
 logger = logging.getLogger(__name__)
 
 SAMPLE_S = 1e-3
@@ -104,6 +108,12 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
     fitted_theta0 = "fitted: spring_bench.spring_offset_rad (theta0 = pi/6 makes 2 k_l theta0 = 5.068 N*m)"
     fitted_w = f"fitted: w = {omega:.4f} rad/s (theta0 w = 0.05 rad/s, the report's speed range)"
     i_q, i_s = heavy["current_a"], heavy["supply_current_a"]
+    k_tables = two_mass_stiffness()
+    p_tables = replace(p, spring_rate_n_per_m=k_tables)
+    tables = run_load(p_tables, max(runs), omega, n_periods, fw)
+    i_tab = tables["current_a"][tables["t_s"] >= SETTLE_S]
+    bare = run_load(p_tables, 0.0, omega, n_periods, fw)  # the spring alone, no load hung
+    i_bare = bare["current_a"][bare["t_s"] >= SETTLE_S]
     figures = [
         Figure("peak spring torque, 1.48 kg", "N*m", "5.068 (target, 3.8.3)", REPORT_TARGET_TORQUE_NM,
                float(heavy["spring_torque_nm"].max()), f"tracking error rms {track_rms_deg:.2f} deg",
@@ -121,6 +131,15 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
         Figure("q-axis (phase) current range, 1.48 kg", "A", "-0.2..0.7 (measured, 4.2.3)", REPORT_CURRENT_A[1],
                float(i_q.max()), f"{i_q.min():.2f}..{i_q.max():.2f} A: what the driver reports; compared: the max",
                basis="predicted"),
+        Figure("q-axis current range with the tables' spring, 1.48 kg", "A", "-0.2..0.7 (measured, 4.2.3)",
+               REPORT_CURRENT_A[1], float(i_tab.max()),
+               f"{i_tab.min():.2f}..{i_tab.max():.2f} A with {k_tables:.1f} N/m (Tables B4/B5, two-mass) instead "
+               f"of {p.spring_rate_n_per_m:g} N/m; changes sign: {'yes' if i_tab.min() < 0 < i_tab.max() else 'no'}; "
+               f"without a load {i_bare.min():.2f}..{i_bare.max():.2f} A",
+               basis="assumed: the spring rate Tables B4/B5 give (pafp bench spring-calibration)"),
+        Figure("q-axis current minimum with the tables' spring, 1.48 kg", "A", "-0.2..0.7 (measured, 4.2.3)",
+               REPORT_CURRENT_A[0], float(i_tab.min()), "below 0: the current changes sign as the report's",
+               basis="assumed: the spring rate Tables B4/B5 give (pafp bench spring-calibration)"),
         Figure("supply current range (P/V), 1.48 kg", "A", "-0.2..0.7 (measured, 4.2.3)", REPORT_CURRENT_A[1],
                float(i_s.max()), f"{i_s.min():.3f}..{i_s.max():.3f} A: what a meter on the 24 V supply reads",
                basis="predicted"),
@@ -157,6 +176,9 @@ def run(seed: int = 0, quick: bool = False, params: PlantParams | None = None,
     return BenchResult("loading", figures, columns, plot,
                        {"omega_rad_s": omega, "periods": n_periods, "theta0_rad": p.spring_offset_rad,
                         "tracking_rms_deg_1.48kg": track_rms_deg, "settle_s": SETTLE_S,
+                        "tables_spring_n_per_m": k_tables,
+                        "current_a_tables_spring_1.48kg": [float(i_tab.min()), float(i_tab.max())],
+                        "current_a_tables_spring_no_load": [float(i_bare.min()), float(i_bare.max())],
                         "supply_current_a_1.48kg": [float(heavy["supply_current_a"].min()),
                                                     float(heavy["supply_current_a"].max())],
                         "peak_torque_nm": {f"{m:g}": float(np.abs(r["torque_nm"][r["t_s"] >= SETTLE_S]).max())

@@ -70,6 +70,14 @@ class BenchResult:
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     plotter: Plotter | None = None
     parameters: dict[str, object] = field(default_factory=dict)
+    #: The readings of the report it ran under (hal.virtual.plant.readings): kind -> name ("n/a": not used).
+    readings: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """The test's name with the geometry it ran under, when it names one."""
+        g = self.readings.get("geometry")
+        return f"{self.test} [{g}]" if g and g != "n/a" else self.test
 
 
 def _fmt(value: float | None) -> str:
@@ -81,12 +89,13 @@ def _fmt(value: float | None) -> str:
 
 def markdown_table(results: list[BenchResult]) -> str:
     """A Markdown table with one row per figure of every result: report, emulated, difference, note."""
-    lines = ["| test | figure | unit | report | emulated | difference | basis | note |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| test | figure | unit | report | emulated | difference | basis | readings | note |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
+        readings = ", ".join(f"{k} {v}" for k, v in r.readings.items())
         for f in r.figures:
-            lines.append(f"| {r.test} | {f.name} | {f.unit} | {f.report_text} | {_fmt(f.emulated_value)} | "
-                         f"{_fmt(f.difference)} | {f.basis} | {f.note} |")
+            lines.append(f"| {r.label} | {f.name} | {f.unit} | {f.report_text} | {_fmt(f.emulated_value)} | "
+                         f"{_fmt(f.difference)} | {f.basis} | {readings} | {f.note} |")
     return "\n".join(lines) + "\n"
 
 
@@ -119,7 +128,7 @@ def write_outputs(result: BenchResult, out_dir: Path) -> list[Path]:
     for k in range(n):
         w.writerow([_cell(result.columns[c], k) for c in names])
     write_atomic(paths[1], table.getvalue())
-    doc = {"test": result.test, "parameters": result.parameters,
+    doc = {"test": result.test, "readings": result.readings, "parameters": result.parameters,
            "figures": [f.as_dict() for f in result.figures]}
     write_atomic(paths[2], json.dumps(doc, indent=2, default=float) + "\n")
     write_atomic(paths[3], f"# Bench test `{result.test}`\n\n" + markdown_table([result]))

@@ -10,6 +10,8 @@ import numpy as np
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
 from host_tools.benchtests.output import BenchResult, Figure
 
+#: The readings of the report this test runs under (hal.virtual.plant.readings); the geometry is the bench's.
+READINGS = {"driver": "unpowered", "imu": "n/a"}
 logger = logging.getLogger(__name__)
 
 #: Report: the foot reaches the stop within 0.5 s.

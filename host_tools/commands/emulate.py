@@ -29,8 +29,8 @@ from types import FrameType
 
 from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
-from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.outdir import check_capture_dir
+from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.wire_capture import WireCapture
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"

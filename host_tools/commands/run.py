@@ -161,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> int:
     """The virtual run proper, streaming into run_dir, which is published at the end."""
-    from host_tools.report import run_into, tracking_text
+    from host_tools.report import readings_text, run_into, tracking_text
     from host_tools.stop_signals import StopSignals
 
     fw_cfg = cfg.firmware
@@ -180,6 +180,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
           f"{s['build']}); whole process {s['process_wall_time_s']:.2f} s (factor {s['process_realtime_factor']})")
     for line in tracking_text(s["tracking"]):
         print(line)
+    print(f"  {readings_text(s)}")
     print(f"  deadline misses {s['deadline_misses']}, faults {s['faults'] or 'none'}, "
           f"CPU {100 * s['cpu_utilisation']:.2f} %, motor feedback {s['motor_link']['feedback_rate_hz']} Hz")
     print(f"  {'task':<11}{'jobs':>8}{'worst us':>11}{'bound us':>11}{'deadline':>10}{'misses':>8}")

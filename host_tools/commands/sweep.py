@@ -47,9 +47,11 @@ def _one_point(spec: object, index: int, out: Path) -> int:
     except OSError as e:
         print(write_failed("sweep", e, f"nothing published: {out} keeps what it held"), file=sys.stderr)
         return EXIT_WRITE_FAILED
-    print(f"  tracking: RMS {s['rms_error_deg']:.4f} deg, max {s['max_error_deg']:.4f} deg; deadline misses "
-          f"{s['deadline_misses']}, faults {s['faults'] or 'none'}; outputs: {out}/summary.json, report.md, "
-          "tracking.png, trace.json, telemetry.bin/.csv")
+    truth = s["tracking"]["truth"]
+    print(f"  tracking (truth, emulation only): RMS {truth['rms_deg']:.4f} deg, max {truth['max_deg']:.4f} deg; "
+          f"IMU RMS {s['imu_rms_error_deg']:.4f} deg; deadline misses {s['deadline_misses']}, faults "
+          f"{s['faults'] or 'none'}; outputs: {out}/summary.json, report.md, tracking.png, trace.json, "
+          "telemetry.bin/.csv")
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
 
 

@@ -42,7 +42,7 @@ def _plot(path: Path, before: object, after: object, title: str) -> None:
     fig, (ax_a, ax_e) = plt.subplots(2, 1, sharex=True, figsize=(9, 7), layout="constrained")
     ax_a.plot(before.t_s, before.reference_deg, "k", lw=1.5, label="reference")  # type: ignore[attr-defined]
     for case, label in ((before, "before"), (after, "after")):
-        rms = case.summary["rms_error_deg"]  # type: ignore[attr-defined]
+        rms = case.summary["tracking"]["truth"]["rms_deg"]  # type: ignore[attr-defined]
         ax_a.plot(case.t_s, case.angle_deg, lw=0.9, label=f"{label} (RMS {rms:.3f}°)")  # type: ignore[attr-defined]
         err = case.angle_deg - np.interp(case.t_s, before.t_s, before.reference_deg)  # type: ignore[attr-defined]
         ax_e.plot(case.t_s, err, lw=0.8, label=label)  # type: ignore[attr-defined]

@@ -11,7 +11,9 @@ in the sensor axes rotated by ``theta + mounting_offset_rad``; y = 0; clipped to
 The sensor's first-order lag (report eq 3.42, tau = 19.5 ms) is applied to pitch: the true pitch is
 sampled every ``substep_s`` and at every frame time, and the lag is integrated exactly for an input
 that is linear between samples (``y1 = u1 - m tau + (y0 - u0 + m tau) e^(-h/tau)``, m the slope).
-Accelerations are not lagged. Noise and biases are Gaussian from ``random.Random(seed)``: the same seed
+With ``hold_interval_s`` (the sample-hold reading of report 3.5.4) the pitch is instead held at its value
+at every multiple of that interval (interpolated between samples) and not lagged. Accelerations are not
+lagged. Noise and biases are Gaussian from ``random.Random(seed)``: the same seed
 gives byte-identical output. With ``bias_drift_sigma_rad`` the pitch bias also drifts, a first-order
 Gauss-Markov process updated at every frame (``d = d a + sigma sqrt(1 - a^2) n``, ``a = e^(-T/tau)``),
 starting from a stationary draw. The frame period is ``1/rate_hz`` plus a uniform jitter in
@@ -66,6 +68,7 @@ class Bno08x(EventDevice):
         self._sample_at = min(t0 + self._substep, self._frame_at)
         u0 = self._true_pitch(plant.output_angle_rad(t0_s))
         self._lag_t_s, self._lag_u, self.lagged_pitch_rad = t0_s, u0, u0
+        self._hold_next_s = t0_s + cfg.hold_interval_s  # the next hold instant (sample-hold reading)
         self.index = 0
         self.frames_sent = 0
         self.frames_silenced = 0
@@ -118,7 +121,15 @@ class Bno08x(EventDevice):
         u = self._true_pitch(theta)
         dt = t_s - self._lag_t_s
         tau = self.config.lag_time_constant_s
-        if dt > 0.0:
+        hold = self.config.hold_interval_s
+        if hold > 0.0:
+            if dt > 0.0 and t_s >= self._hold_next_s:  # the latest hold instant: the input at it, linear between
+                th = self._hold_next_s + math.floor((t_s - self._hold_next_s) / hold) * hold
+                self.lagged_pitch_rad = self._lag_u + (u - self._lag_u) * (th - self._lag_t_s) / dt
+                self._hold_next_s = th + hold
+            if dt > 0.0:
+                self._lag_t_s, self._lag_u = t_s, u
+        elif dt > 0.0:
             if tau > 0.0:
                 m = (u - self._lag_u) / dt
                 self.lagged_pitch_rad = u - m * tau + (self.lagged_pitch_rad - self._lag_u + m * tau) * math.exp(

@@ -20,6 +20,7 @@ BANNER_LINES: tuple[str, ...] = (
 _RANGES: dict[str, tuple[float, float]] = {
     "rate_hz": (0.1, 1000.0),
     "lag_time_constant_s": (0.0, 10.0),
+    "hold_interval_s": (0.0, 10.0),
     "substep_s": (1e-5, 1.0),
     "period_jitter_s": (0.0, 1.0),
     "boot_delay_s": (0.0, 10.0),
@@ -45,6 +46,10 @@ class Bno08xConfig:
     """RVC report rate (datasheet: 100 Hz)."""
     lag_time_constant_s: float = 0.0195
     """First-order lag of the sensor output (report eq 3.42: 1/(1 + 0.0195 s)); 0 = none."""
+    hold_interval_s: float = 0.0
+    """Sample-and-hold of the pitch at this interval (report 3.5.4 read as "the time difference between two
+    data points", 0.0195 s: the sample-hold reading, hal.virtual.plant.readings); 0 = none. With a hold the
+    first-order lag is not applied (the other reading)."""
     substep_s: float = 2.5e-3
     """[I] sampling step of the true pitch for the lag integration (frames are always sample points)."""
     period_jitter_s: float = 0.0
@@ -86,3 +91,22 @@ class Bno08xConfig:
         if self.period_jitter_s >= 0.5 / self.rate_hz:
             raise ValueError(f"Bno08xConfig.period_jitter_s = {self.period_jitter_s!r} must be below half "
                              f"the period, {0.5 / self.rate_hz!r} s")
+
+
+def with_imu_reading(config: Bno08xConfig, reading: str, interval_s: float = 0.0195) -> Bno08xConfig:
+    """The config under an IMU reading of report 3.5.4 (hal.virtual.plant.readings.IMUS).
+
+    first-order-lag: the lag of interval_s, no hold; sample-hold: held every interval_s, no lag.
+    """
+    from dataclasses import replace
+
+    from hal.virtual.plant.readings import check_reading
+
+    if check_reading("imu", reading) == "sample-hold":
+        return replace(config, lag_time_constant_s=0.0, hold_interval_s=interval_s)
+    return replace(config, lag_time_constant_s=interval_s, hold_interval_s=0.0)
+
+
+def imu_reading_of(config: Bno08xConfig) -> str:
+    """The IMU reading a config models: sample-hold when it holds, else first-order-lag."""
+    return "sample-hold" if config.hold_interval_s > 0.0 else "first-order-lag"

@@ -20,7 +20,7 @@ class Coefficients:
 
     def __init__(self, *, inv_j: float, kto: float, ks: float, c0: float, kd: float, mg: float, psi0: float,
                  lo: float, hi: float, kst: float, cst: float, tc: float, tsx: float, tau: float, ker: float,
-                 bscale: float) -> None:
+                 bscale: float, ipk: float = math.inf) -> None:
         """Store the constants (keyword arguments, in SI units divided by J where noted)."""
         self.inv_j = inv_j  # 1 / J_total [1/(kg m^2)]
         self.kto = kto  # ankle torque per ampere / J
@@ -38,17 +38,21 @@ class Coefficients:
         self.tau = tau  # current-loop time constant [s]
         self.ker = ker  # back-EMF per output rad/s over R: Ke*N/R [A s/rad]
         self.bscale = bscale  # N / brake speed scale: tanh argument per output rad/s
+        self.ipk = ipk  # peak current [A]: the voltage mode's target is clamped to it (current mode: before)
 
 
 @mypyc_attr(free_list_len=1, acyclic=True)  # one made per input event: allocation from a free list, no GC
 class Drive:
     """Motor-driver inputs, constant between input events."""
 
-    def __init__(self, target_a: float, brake_a: float, v_over_r: float) -> None:
+    def __init__(self, target_a: float, brake_a: float, v_over_r: float, emf: float = 0.0) -> None:
         """Store the driver inputs."""
-        self.target_a = target_a  # commanded q-axis current (already clamped to the peak current)
+        self.target_a = target_a  # commanded q-axis current (clamped to the peak current), or V/R (voltage mode)
         self.brake_a = brake_a  # regenerative brake current magnitude; 0 = current mode
         self.v_over_r = v_over_r  # bus voltage / R: the back-EMF current limit (inf when unpowered)
+        # 1.0 in voltage mode (the voltage-amplifier reading): the back-EMF current ker*w comes off the target,
+        # which is then the winding's steady current V/R - Ke N w / R; 0.0: the driver closes a current loop
+        self.emf = emf
 
 
 def static_accel(c: Coefficients, th: float, i: float, ext: float) -> float:
@@ -96,8 +100,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
     """
     th, w, i, s = state
     inv_j, kto, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.ks, c.c0, c.kd, c.mg, c.psi0
-    lo, hi, kst, cst, tc, tsx, ker, bscale = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale
-    tgt, brake, vr = d.target_a, d.brake_a, d.v_over_r
+    lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk
+    tgt, brake, vr, emf = d.target_a, d.brake_a, d.v_over_r, d.emf
     hh = 0.5 * h
     h6 = h / 6.0
     eh, e1 = exps
@@ -116,6 +120,9 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
                 x4 = fn(t + h) * inv_j
         # motor driver: target (brake opposes rotation), back-EMF voltage limit, exact first-order lag
         tg = -brake * math.tanh(w * bscale) if brake else tgt
+        if emf:
+            tg -= emf * ker * w
+            tg = ipk if tg > ipk else -ipk if tg < -ipk else tg
         lim = vr - ker * w
         if tg > lim:
             tg = lim
@@ -207,6 +214,9 @@ def lag_target(c: Coefficients, d: Drive, w: float) -> float:
     The same expression as inside :func:`integrate` (kept inline there for speed).
     """
     tg = -d.brake_a * math.tanh(w * c.bscale) if d.brake_a else d.target_a
+    if d.emf:
+        tg -= d.emf * c.ker * w
+        tg = c.ipk if tg > c.ipk else -c.ipk if tg < -c.ipk else tg
     lim = d.v_over_r - c.ker * w
     if tg > lim:
         return lim

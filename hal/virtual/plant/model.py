@@ -13,6 +13,7 @@ from mypy_extensions import mypyc_attr
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, check_load, suspended
 from hal.virtual.plant.integrator import Coefficients, Drive, accel, hermite, integrate, lag_factors, lag_target
 from hal.virtual.plant.params import PlantParams, load_plant_params
+from hal.virtual.plant.readings import check_reading
 
 logger = logging.getLogger(__name__)
 
@@ -81,10 +82,15 @@ class Plant:
     def __init__(self, params: PlantParams | None = None, fixture: Fixture | None = None, *,
                  initial_angle_rad: float = 0.0, initial_velocity_rad_s: float = 0.0,
                  start_time_s: float = 0.0, step_s: float = MAX_STEP_S,
-                 motor_angle_offset_rad: float = 0.0, backlash_rad: float = 0.0) -> None:
+                 motor_angle_offset_rad: float = 0.0, backlash_rad: float = 0.0,
+                 driver: str = "current-lag") -> None:
         """Build the plant at rest-state values given; the fixture defaults to SUSPENDED.
 
         backlash_rad is the gearbox's free play at its (6:1) output; 0 = none (see set_current_command).
+        driver is the driver reading (hal.virtual.plant.readings): "current-lag" (set_current_command: the q
+        current follows the command with current_time_constant_s) or "voltage-amplifier" (set_voltage_command:
+        the PID's +-1 as +-V_bus, the current towards (V - K_e N w)/R with one lag of the amplifier's time
+        constant plus the winding's L/R, the two in series taken as one of the same mean delay).
         """
         self.params = params if params is not None else load_plant_params()
         self.fixture = fixture if fixture is not None else suspended()
@@ -100,6 +106,11 @@ class Plant:
             _check_finite(name, value)
         if backlash_rad < 0.0:
             raise ValueError(f"backlash_rad = {backlash_rad!r} outside the allowed range [0, inf)")
+        self.driver = check_reading("driver", driver)
+        self._emf = 1.0 if driver == "voltage-amplifier" else 0.0
+        tau = p.current_time_constant_s
+        if self._emf:
+            tau += p.phase_inductance_h / p.phase_resistance_ohm
         self.step_s = step_s
         self.motor_angle_offset_rad = motor_angle_offset_rad
         # backlash: half the free play at the rotor; the rotor's angle in it relative to N x the output
@@ -129,9 +140,9 @@ class Plant:
             mg=self._gravity_moment_nm * inv_j, psi0=p.com_angle_at_zero_rad,
             lo=p.stop_min_rad, hi=p.stop_max_rad,
             kst=p.stop_stiffness_nm_per_rad * inv_j, cst=p.stop_damping_nm_s_per_rad * inv_j,
-            tc=p.coulomb_friction_nm * inv_j, tsx=p.static_friction_nm * inv_j, tau=p.current_time_constant_s,
+            tc=p.coulomb_friction_nm * inv_j, tsx=p.static_friction_nm * inv_j, tau=tau,
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
-            bscale=p.total_ratio / p.brake_speed_scale_rad_s)
+            bscale=p.total_ratio / p.brake_speed_scale_rad_s, ipk=p.peak_current_a)
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
         self._grid_lag = lag_factors(step_s, self._c.tau)  # current-lag factors of one grid step
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
@@ -156,6 +167,9 @@ class Plant:
     def set_current_command(self, current_a: float, t_s: float) -> None:
         """From t_s on, command this q-axis current (clamped to the peak current); ignored when unpowered."""
         _check_finite("current_a", current_a)
+        if self._emf:
+            raise ValueError("set_current_command: this plant's driver is the voltage amplifier "
+                             "(driver='voltage-amplifier'); use set_voltage_command")
         self._commit_event(t_s)
         peak = self._peak_a
         self._command_a = min(peak, max(-peak, current_a))
@@ -165,6 +179,21 @@ class Plant:
             self._command_a = 0.0
         if self._gap_half > 0.0:
             self._cross_gap(t_s)
+        self._drive = self._make_drive()
+
+    def set_voltage_command(self, duty: float, t_s: float) -> None:
+        """From t_s on, the PID output duty in [-1, 1] (clamped) as duty x V_bus on the winding; voltage driver only.
+
+        Zero duty shorts the winding through the amplifier (the back-EMF brakes the motor); unpowered, ignored.
+        """
+        _check_finite("duty", duty)
+        if not self._emf:
+            raise ValueError("set_voltage_command needs driver='voltage-amplifier' (this plant's driver is "
+                             f"{self.driver!r})")
+        self._commit_event(t_s)
+        u = min(1.0, max(-1.0, duty))
+        self._command_a = u * self._v_over_r if self._powered else 0.0
+        self._brake_a = 0.0
         self._drive = self._make_drive()
 
     def set_brake_current(self, current_a: float, t_s: float) -> None:
@@ -300,8 +329,9 @@ class Plant:
     # -------------------------------------------------------------- internals
     def _make_drive(self) -> Drive:
         """Driver inputs for the integrator from the current mode."""
-        v_over_r = self._v_over_r if self._powered else _UNPOWERED_V_OVER_R
-        return Drive(self._command_a, self._brake_a, v_over_r)
+        if not self._powered:  # the bridge open: no current, whatever the driver
+            return Drive(self._command_a, self._brake_a, _UNPOWERED_V_OVER_R)
+        return Drive(self._command_a, self._brake_a, self._v_over_r, self._emf)
 
     def _set_load(self, load: Load) -> None:
         """Install an external torque load (profile segments, a function, or a constant)."""
