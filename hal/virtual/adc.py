@@ -1,0 +1,130 @@
+"""The virtual STM32 ADC: regular channels scanned on a timer trigger, copied to memory by circular DMA.
+
+Timing (RM0090, 13.5 "Channel-wise programmable sampling time" and 13.6 "Conversion on external trigger"):
+a timer triggers one scan of the regular sequence ``sample_rate_hz`` times a second; each channel is
+sampled for ``sampling_cycles`` ADC clock cycles and converted in ``conversion_cycles`` more (12 on the
+STM32F4, 12.5 on the F1), so ``T_conv = (sampling + conversion) / f_ADC`` per channel, one after the
+other. The held voltage is the input's at the end of its sampling window; the code reaches the DMA
+buffer at the end of its conversion. The whole scan must fit in one trigger period.
+
+Values: ``code = floor(V / LSB + 0.5 + noise)`` clamped to 0..2**bits - 1 (an input beyond 0..Vref
+saturates), LSB = Vref / 2**bits, ``noise`` Gaussian with ``noise_lsb_rms`` LSB. The noise of
+conversion n of channel k is a pure function of (seed, k, n) (a counter-based generator), so what a
+run reads does not depend on when or how often the firmware looks: laziness keeps determinism. Each
+channel is a source ``volts(t_cycles)`` (a device model's output pin).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+from hal.interfaces import Adc
+
+__all__ = ["AdcTiming", "VirtualAdc", "gaussian"]
+
+_MASK64 = (1 << 64) - 1
+
+
+def _splitmix64(x: int) -> int:
+    """One step of SplitMix64 (Steele, Lea, Flood 2014): a well-mixed 64-bit value from x."""
+    x = (x + 0x9E3779B97F4A7C15) & _MASK64
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return x ^ (x >> 31)
+
+
+def gaussian(seed: int, channel: int, n: int) -> float:
+    """A standard normal number that depends only on (seed, channel, n) (Box-Muller on two hashes).
+
+    >>> gaussian(0, 1, 5) == gaussian(0, 1, 5) != gaussian(1, 1, 5)
+    True
+    """
+    h1 = _splitmix64((seed * 0x1000193) ^ (channel << 48) ^ (n & 0xFFFF_FFFF_FFFF))
+    h2 = _splitmix64(h1)
+    u1 = ((h1 >> 11) + 1) / (1 << 53)  # (0, 1]
+    u2 = (h2 >> 11) / (1 << 53)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+class AdcTiming:
+    """The scan timing in CPU cycles: trigger period, per-channel conversion, sampling window."""
+
+    def __init__(self, f_cpu_hz: int, n_channels: int, sample_rate_hz: float, adc_clock_hz: float,
+                 sampling_cycles: float, conversion_cycles: float = 12.0) -> None:
+        """ValueError naming a value out of range, or a scan that does not fit in the trigger period."""
+        for name, value, lo, hi in (("sample_rate_hz", sample_rate_hz, 1.0, 1e6),
+                                    ("adc_clock_hz", adc_clock_hz, 1e5, 36e6),
+                                    ("sampling_cycles", sampling_cycles, 1.5, 480.0),
+                                    ("conversion_cycles", conversion_cycles, 6.0, 16.0)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+                raise ValueError(f"ADC {name} {value!r} out of range: {lo:g}..{hi:g}")
+        self.period_cycles = f_cpu_hz / sample_rate_hz
+        self.conversion_s = (sampling_cycles + conversion_cycles) / adc_clock_hz
+        self.conv_cycles = self.conversion_s * f_cpu_hz
+        self.sample_cycles = sampling_cycles / adc_clock_hz * f_cpu_hz
+        scan = n_channels * self.conv_cycles
+        if scan >= self.period_cycles:
+            raise ValueError(f"ADC scan of {n_channels} channels takes {scan / f_cpu_hz * 1e6:.1f} us, longer than "
+                             f"the {1e6 / sample_rate_hz:.1f} us trigger period: lower sample_rate_hz or sampling_cycles")
+
+    def ready_cycles(self, k: int, n: int) -> float:
+        """When conversion n of channel k lands in the DMA buffer."""
+        return n * self.period_cycles + (k + 1) * self.conv_cycles
+
+    def held_cycles(self, k: int, n: int) -> float:
+        """When conversion n of channel k holds its input (end of the sampling window)."""
+        return n * self.period_cycles + k * self.conv_cycles + self.sample_cycles
+
+    def last_ready(self, k: int, t_cycles: int) -> int:
+        """The index of channel k's last conversion completed by t_cycles (-1: none yet)."""
+        return math.floor((t_cycles - (k + 1) * self.conv_cycles) / self.period_cycles)
+
+
+class VirtualAdc(Adc):
+    """The STM32 ADC + DMA on the bench clock ``now`` (module docstring); ``sources[k]`` drives channel k."""
+
+    def __init__(self, now: Callable[[], int], f_cpu_hz: int, channels: Sequence[str],
+                 sources: Sequence[Callable[[int], float]], *, sample_rate_hz: float = 1000.0,
+                 adc_clock_hz: float = 21e6, sampling_cycles: float = 84.0, conversion_cycles: float = 12.0,
+                 bits: int = 12, vref_v: float = 3.3, noise_lsb_rms: float = 0.0, seed: int = 0) -> None:
+        """Bind the channels to their sources; the trigger timer starts at cycle 0."""
+        super().__init__(channels, bits, vref_v)
+        if len(sources) != len(self.channels):
+            raise ValueError(f"{len(sources)} sources for {len(self.channels)} ADC channels")
+        if isinstance(noise_lsb_rms, bool) or not isinstance(noise_lsb_rms, (int, float)) \
+                or not 0.0 <= noise_lsb_rms <= 100.0:
+            raise ValueError(f"ADC noise_lsb_rms {noise_lsb_rms!r} out of range: 0..100 LSB")
+        self.now = now
+        self.f_cpu_hz = f_cpu_hz
+        self.timing = AdcTiming(f_cpu_hz, len(self.channels), sample_rate_hz, adc_clock_hz, sampling_cycles,
+                                conversion_cycles)
+        self.sources = list(sources)
+        self.noise_lsb_rms = float(noise_lsb_rms)
+        self.seed = seed
+        self._lsb_per_v = (1 << bits) / vref_v
+        self._last_n = [-1] * len(self.channels)
+        self._codes = [0] * len(self.channels)
+        self.conversions = 0  # conversions computed (the ones somebody looked at)
+
+    def convert(self, k: int, n: int) -> int:
+        """The code of conversion n of channel k (its source at the hold instant, quantised, with noise)."""
+        t_hold = self.timing.held_cycles(k, n)
+        v = self.sources[k](int(t_hold))
+        x = v * self._lsb_per_v + 0.5
+        if self.noise_lsb_rms > 0.0:
+            x += self.noise_lsb_rms * gaussian(self.seed, k, n)
+        if not math.isfinite(x):
+            return 0
+        return min(self.full_scale, max(0, math.floor(x)))
+
+    def _dma_buffer(self) -> list[int]:
+        t = self.now()
+        timing, last, codes = self.timing, self._last_n, self._codes
+        for k in range(len(codes)):
+            n = timing.last_ready(k, t)
+            if n != last[k]:
+                last[k] = n
+                codes[k] = self.convert(k, n) if n >= 0 else 0
+                self.conversions += 1
+        return list(codes)
