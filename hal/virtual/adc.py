@@ -66,7 +66,8 @@ class AdcTiming:
         scan = n_channels * self.conv_cycles
         if scan >= self.period_cycles:
             raise ValueError(f"ADC scan of {n_channels} channels takes {scan / f_cpu_hz * 1e6:.1f} us, longer than "
-                             f"the {1e6 / sample_rate_hz:.1f} us trigger period: lower sample_rate_hz or sampling_cycles")
+                             f"the {1e6 / sample_rate_hz:.1f} us trigger period: lower sample_rate_hz or "
+                             "sampling_cycles")
 
     def ready_cycles(self, k: int, n: int) -> float:
         """When conversion n of channel k lands in the DMA buffer."""

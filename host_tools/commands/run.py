@@ -61,6 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                       help="the gait (angle reference and, walking, moment) of that speed group of the packaged "
                            "normative data (Schwartz et al. 2008; default: free speed); the stride time stays "
                            "the profile's")
+    walk.add_argument("--ground-sensors", choices=("auto", "on", "off"), default="auto",
+                      help="the pylon load cell and heel/toe FSRs on the ADC, gait events from them (docs/hardware.md, "
+                           "'Ground sensors'): auto (default) fits them when walking")
+    walk.add_argument("--sensor-fault", action="append", default=[], metavar="PART:MODE",
+                      help="start with a ground sensor failed: fsr_heel:open|short, fsr_toe:open|short, "
+                           "load_cell:open|stuck_high; repeatable (the firmware falls back to its motor-load estimate)")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -127,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
                         plant_seed=args.plant_seed, ideal=tuple(args.ideal),
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
-                        body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed)
+                        body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
+                        ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
+                        sensor_faults=tuple(args.sensor_fault))
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 

@@ -1,0 +1,103 @@
+"""A force-sensing resistor under the heel or the toes, read through a voltage divider.
+
+Interlink FSR 402 (datasheet "FSR 400 Series", PDS-10004): open above 10 MOhm below the actuation force
+(about 0.2 N), then a resistance that falls as a power of the force over the sensitivity range (to about
+20 N, where it stops falling: saturation); hysteresis +10 % average, (R_F+ - R_F-)/R_F+, i.e. the
+resistance while the force falls is 10 % below the one while it rises (modelled on the sign of the force's
+change, so the model keeps no state and a lazy reader sees the same values). The divider (the datasheet's
+"FSR voltage divider"): FSR from the supply to the output, R_M to ground, V = V+ R_M / (R_M + R_FSR).
+
+The sensor sees ``load_share`` of the force of its region of the sole (its active area over the region's
+contact area: a design estimate). ``fault``: None, ``"open"`` (a broken lead: 0 V) or ``"short"`` (V+).
+Parameters and sources: profiles/ground_sensors.toml.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["Fsr", "FsrParams"]
+
+FAULTS = (None, "open", "short")
+_DT_S = 0.001  # the step over which the force's change is judged (hysteresis)
+
+
+@dataclass(frozen=True)
+class FsrParams:
+    """One FSR and its divider (profiles/ground_sensors.toml, [fsr])."""
+
+    actuation_n: float = 0.2
+    open_ohm: float = 10e6
+    ohm_at_1n: float = 8e3
+    exponent: float = 0.9
+    saturation_n: float = 20.0
+    hysteresis: float = 0.10
+    divider_ohm: float = 10e3
+    supply_v: float = 3.3
+    load_share: float = 0.05
+
+    def __post_init__(self) -> None:
+        """ValueError naming a value out of its range."""
+        for name, lo, hi in (("actuation_n", 0.0, 10.0), ("open_ohm", 1e5, 1e9), ("ohm_at_1n", 10.0, 1e7),
+                             ("exponent", 0.1, 3.0), ("saturation_n", 0.5, 1e4), ("hysteresis", 0.0, 0.5),
+                             ("divider_ohm", 10.0, 1e7), ("supply_v", 1.8, 5.5), ("load_share", 0.0, 1.0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+                raise ValueError(f"[fsr] {name} = {value!r} out of range: {lo:g}..{hi:g}")
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> FsrParams:
+        """From a profile table (keys ending in _source are the citations, skipped)."""
+        values = {k: v for k, v in table.items() if not k.endswith("_source")}
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"[fsr] has no key {unknown[0]!r}: known {sorted(known)}")
+        return cls(**values)
+
+    def resistance_ohm(self, force_n: float, falling: bool = False) -> float:
+        """The FSR's resistance under force_n on its active area (lower by the hysteresis while unloading)."""
+        if force_n < self.actuation_n:
+            return self.open_ohm
+        r = self.ohm_at_1n * min(force_n, self.saturation_n) ** -self.exponent
+        r = min(r, self.open_ohm)
+        return r * (1.0 - self.hysteresis) if falling else r
+
+    def volts(self, resistance_ohm: float) -> float:
+        """The divider's output for an FSR resistance."""
+        return self.supply_v * self.divider_ohm / (self.divider_ohm + resistance_ohm)
+
+
+class Fsr:
+    """One FSR on the force of its region of the sole, ``region_force_n(t_s)``; its divider's output voltage."""
+
+    def __init__(self, params: FsrParams, region_force_n: Callable[[float], float], f_hz: int) -> None:
+        """Bind the sensor to its region's force and the tick rate."""
+        self.params = params
+        self.region_force_n = region_force_n
+        self.f_hz = f_hz
+        self.fault: str | None = None
+
+    def set_fault(self, mode: str | None) -> None:
+        """Inject a fault (FAULTS) from now on; None clears it."""
+        if mode not in FAULTS:
+            raise ValueError(f"FSR fault {mode!r} unknown: one of {list(FAULTS)}")
+        self.fault = mode
+
+    def force_n(self, t_s: float) -> float:
+        """The force on the active area at t_s (emulation truth)."""
+        return self.params.load_share * self.region_force_n(t_s)
+
+    def volts(self, t: int) -> float:
+        """The divider's output at tick t."""
+        p = self.params
+        if self.fault == "open":
+            return 0.0
+        if self.fault == "short":
+            return p.supply_v
+        t_s = t / self.f_hz
+        f = self.force_n(t_s)
+        falling = f < self.force_n(t_s - _DT_S)
+        return p.volts(p.resistance_ohm(f, falling))
