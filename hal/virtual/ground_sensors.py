@@ -89,6 +89,12 @@ class GroundSensors:
         self.load_cell = load_cell
         self.heel = heel
         self.toe = toe
+        self.tick = 0  # the ADC's clock when the wiring was given none (codes_at sets it)
+
+    def codes_at(self, t: int) -> list[int]:
+        """The ADC's buffer at tick t (for a board that samples on its own schedule; wired with now=None)."""
+        self.tick = t
+        return self.adc.read()
 
     def set_fault(self, part: str, mode: str | None) -> None:
         """Fail one part (load_cell, fsr_heel, fsr_toe) in a mode its model knows."""
@@ -98,9 +104,10 @@ class GroundSensors:
         parts[part].set_fault(mode)
 
 
-def wire_ground_sensors(now: Callable[[], int], f_hz: int, ground: Any, adc: AdcSettings, *, seed: int = 0,
+def wire_ground_sensors(now: Callable[[], int] | None, f_hz: int, ground: Any, adc: AdcSettings, *, seed: int = 0,
                         profile: Path | None = None) -> GroundSensors:
-    """The load cell and FSRs under ``ground`` (``at(t_s) -> (F_z, F_x, CoP)``) on a virtual ADC on clock ``now``."""
+    """The load cell and FSRs under ``ground`` (``at(t_s) -> (F_z, F_x, CoP)``) on a virtual ADC on clock ``now``
+    (None: the clock ``GroundSensors.codes_at`` sets)."""
     cell_p, fsr_p, foot = load_ground_profile(profile)
     cell = LoadCell(cell_p, ground, f_hz, seed)
 
@@ -114,8 +121,12 @@ def wire_ground_sensors(now: Callable[[], int], f_hz: int, ground: Any, adc: Adc
 
     heel, toe = Fsr(fsr_p, heel_force, f_hz), Fsr(fsr_p, toe_force, f_hz)
     pins = {**cell.outputs(), "fsr_heel": heel.volts, "fsr_toe": toe.volts}
-    virtual = VirtualAdc(now, f_hz, ADC_CHANNELS, [pins[name] for name in ADC_CHANNELS],
+    clock: list[GroundSensors] = []
+    virtual = VirtualAdc(now if now is not None else lambda: clock[0].tick, f_hz, ADC_CHANNELS,
+                         [pins[name] for name in ADC_CHANNELS],
                          sample_rate_hz=adc.sample_rate_hz, adc_clock_hz=adc.adc_clock_hz,
                          sampling_cycles=adc.sampling_cycles, conversion_cycles=adc.conversion_cycles,
                          bits=adc.bits, vref_v=adc.vref_v, noise_lsb_rms=adc.noise_lsb_rms, seed=seed)
-    return GroundSensors(virtual, cell, heel, toe)
+    sensors = GroundSensors(virtual, cell, heel, toe)
+    clock.append(sensors)
+    return sensors

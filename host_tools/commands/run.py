@@ -75,6 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "prints its path for `pafp monitor PATH`")
     serial.add_argument("--encoder", choices=("motor", "sim"), default="motor",
                         help="encoder from the motor's position feedback (default) or the in-process plant")
+    serial.add_argument("--ground", metavar="PORT", default=None,
+                        help="the ground sensors' Firmata board (load cell, heel/toe FSRs on A0..A3; docs/hardware.md, "
+                             "'Ground sensors'): device path, pyserial URL or sim://ground-sensors")
     serial.add_argument("--duration", type=float, default=10.0, metavar="S", help="run time in s (default 10)")
     serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
     serial.add_argument("--reconnect", action="store_true",
@@ -256,7 +259,8 @@ def _run_serial(args: argparse.Namespace) -> int:
                               duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
                               board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
-                              realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
+                              realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings(),
+                              ground=args.ground)
         if args.capture is not None and (args.capture / "index.csv").exists():
             raise ValueError(f"--capture {str(args.capture)!r} already holds a capture (index.csv): give a new "
                              "directory")
