@@ -75,7 +75,7 @@ def test_the_load_cell_saturates_at_the_amplifier_rails_and_the_driver_says_so()
     t[0] = F
     drv.sample(1.0)
     assert drv.at_rail
-    with pytest.raises(ValueError, match=r"\[load_cell\] crosstalk = 0.9 out of range"):
+    with pytest.raises(ValueError, match=r"LoadCellParams.crosstalk = 0.9 is outside the allowed range"):
         LoadCellParams(crosstalk=0.9)
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from hal.virtual.adc import VirtualAdc
+from hal.virtual.checks import from_table
 from hal.virtual.devices.fsr import Fsr, FsrParams
 from hal.virtual.devices.load_cell import LoadCell, LoadCellParams
 from profiles import profile_path, read_toml
@@ -65,19 +66,14 @@ class AdcSettings:
     @classmethod
     def from_board(cls, board: Mapping[str, Any]) -> AdcSettings:
         """From a board profile (its [adc] table; defaults when it has none)."""
-        table = dict(board.get("adc", {}))
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(table) - known)
-        if unknown:
-            raise ValueError(f"board [adc] has no key {unknown[0]!r}: known {sorted(known)}")
-        return cls(**table)
+        return from_table(cls, board.get("adc", {}), "adc")
 
 
 def load_ground_profile(path: Path | None = None) -> tuple[LoadCellParams, FsrParams, FootGeometry]:
     """The load cell, FSR and foot parameters of profiles/ground_sensors.toml (or path)."""
     doc = read_toml(path or profile_path(DEFAULT_PROFILE), "ground sensor profile")
     return (LoadCellParams.from_table(doc.get("load_cell", {})), FsrParams.from_table(doc.get("fsr", {})),
-            FootGeometry(**doc.get("foot", {})))
+            from_table(FootGeometry, doc.get("foot", {}), "foot"))
 
 
 class GroundSensors:

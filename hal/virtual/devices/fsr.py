@@ -18,9 +18,14 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from hal.virtual.checks import check_field_ranges, from_table
+
 __all__ = ["Fsr", "FsrParams"]
 
 FAULTS = (None, "open", "short")
+_RANGES = {"actuation_n": (0.0, 10.0), "open_ohm": (1e5, 1e9), "ohm_at_1n": (10.0, 1e7), "exponent": (0.1, 3.0),
+           "saturation_n": (0.5, 1e4), "hysteresis": (0.0, 0.5), "divider_ohm": (10.0, 1e7), "supply_v": (1.8, 5.5),
+           "load_share": (0.0, 1.0)}
 _DT_S = 0.001  # the step over which the force's change is judged (hysteresis)
 
 
@@ -40,22 +45,12 @@ class FsrParams:
 
     def __post_init__(self) -> None:
         """ValueError naming a value out of its range."""
-        for name, lo, hi in (("actuation_n", 0.0, 10.0), ("open_ohm", 1e5, 1e9), ("ohm_at_1n", 10.0, 1e7),
-                             ("exponent", 0.1, 3.0), ("saturation_n", 0.5, 1e4), ("hysteresis", 0.0, 0.5),
-                             ("divider_ohm", 10.0, 1e7), ("supply_v", 1.8, 5.5), ("load_share", 0.0, 1.0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-                raise ValueError(f"[fsr] {name} = {value!r} out of range: {lo:g}..{hi:g}")
+        check_field_ranges(self, _RANGES)
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> FsrParams:
-        """From a profile table (keys ending in _source are the citations, skipped)."""
-        values = {k: v for k, v in table.items() if not k.endswith("_source")}
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"[fsr] has no key {unknown[0]!r}: known {sorted(known)}")
-        return cls(**values)
+        """From the profile's [fsr] table."""
+        return from_table(cls, table, "fsr")
 
     def resistance_ohm(self, force_n: float, falling: bool = False) -> float:
         """The FSR's resistance under force_n on its active area (lower by the hysteresis while unloading)."""

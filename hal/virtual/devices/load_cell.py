@@ -18,9 +18,16 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from hal.virtual.checks import check_field_ranges, from_table
+
 __all__ = ["LoadCell", "LoadCellParams"]
 
 FAULTS = (None, "open", "stuck_high")
+_RANGES = {"rated_force_n": (100.0, 1e5), "rated_moment_nm": (1.0, 1e4), "rated_output_mv_per_v": (0.1, 10.0),
+           "crosstalk": (0.0, 0.5), "excitation_v": (0.5, 10.0), "force_gain_resistor_ohm": (10.0, 1e6),
+           "moment_gain_resistor_ohm": (10.0, 1e6), "supply_v": (1.8, 5.5), "force_ref_v": (0.0, 5.5),
+           "moment_ref_v": (0.0, 5.5), "swing_v": (0.0, 0.5), "zero_balance": (0.0, 0.2), "drift_per_min": (0.0, 0.1),
+           "height_m": (0.0, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -44,25 +51,12 @@ class LoadCellParams:
 
     def __post_init__(self) -> None:
         """ValueError naming a value out of its range."""
-        for name, lo, hi in (("rated_force_n", 100.0, 1e5), ("rated_moment_nm", 1.0, 1e4),
-                             ("rated_output_mv_per_v", 0.1, 10.0), ("crosstalk", 0.0, 0.5),
-                             ("excitation_v", 0.5, 10.0), ("force_gain_resistor_ohm", 10.0, 1e6),
-                             ("moment_gain_resistor_ohm", 10.0, 1e6), ("supply_v", 1.8, 5.5),
-                             ("force_ref_v", 0.0, 5.5), ("moment_ref_v", 0.0, 5.5), ("swing_v", 0.0, 0.5),
-                             ("zero_balance", 0.0, 0.2), ("drift_per_min", 0.0, 0.1), ("height_m", 0.0, 1.0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-                raise ValueError(f"[load_cell] {name} = {value!r} out of range: {lo:g}..{hi:g}")
+        check_field_ranges(self, _RANGES)
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> LoadCellParams:
-        """From a profile table (keys ending in _source are the citations, skipped)."""
-        values = {k: v for k, v in table.items() if not k.endswith("_source")}
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"[load_cell] has no key {unknown[0]!r}: known {sorted(known)}")
-        return cls(**values)
+        """From the profile's [load_cell] table."""
+        return from_table(cls, table, "load_cell")
 
     @property
     def force_gain(self) -> float:
