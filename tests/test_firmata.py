@@ -73,3 +73,33 @@ def test_serial_mode_reads_the_ground_sensors_from_the_firmata_board(tmp_path):
     assert ev.driver.adc.decoder.stats.analog > 100 and ev.heel_strike_s == []
     assert abs(ev.driver.force_n) < 10.0
     assert ev.driver.moment_v == pytest.approx(1.65, abs=0.05)  # the moment channel at its REF
+
+
+def test_emulate_serves_the_ground_sensors_on_a_pty():
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import serial
+
+    from protocol.firmata import FirmataDecoder
+
+    proc = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "ground", "--pty"],
+                            cwd=Path(__file__).resolve().parents[1], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        role, path = proc.stdout.readline().strip().split(": ", 1)  # type: ignore[union-attr]
+        assert role == "ground"
+        port = serial.Serial(path, 115_200, timeout=0.5)
+        port.write(sampling_interval(2) + report_analog(0) + report_analog(2))
+        time.sleep(0.3)
+        d = FirmataDecoder()
+        d.feed(port.read(port.in_waiting or 1))
+        assert set(d.analog) == {0, 2} and d.stats.analog >= 20  # only the pins asked for
+        port.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0, err
+    assert "ground: frames_in=3 frames_out=" in out.strip().splitlines()[-1]

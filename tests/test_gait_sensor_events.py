@@ -82,6 +82,13 @@ def test_a_shorted_fsr_and_a_saturated_load_cell_latch_a_fault():
     for k in range(400, 406):
         det2.update(k / 1000)
     assert det2.fault == "load cell at an amplifier rail"
+    adc.codes = [0, 0, 0, 0]  # a board that never sends: never tared, never healthy, then a fault
+    det3 = GroundEvents(GroundSensorDriver(adc, cfg, 0.001))
+    for k in range(800):
+        det3.update(k / 1000)
+    assert not det3.healthy and det3.fault == ""
+    det3.update(0.801)
+    assert det3.fault == "no load-cell data since boot"
 
 
 def test_suspended_with_the_sensors_fitted_sees_no_ground():

@@ -8,11 +8,12 @@ Heel strike is swing -> contact, toe off contact -> swing (each state held at le
 FSR going off after foot flat with the toe still on (Au, Weber, Herr 2009: the stance sub-phases of a
 powered ankle). In swing the driver re-zeros the load cell.
 
-Checks (a fault latches; the firmware then falls back to its motor-load detector, gait_events.py):
-a load-cell channel at an amplifier rail for ``fault_samples`` periods; an FSR above ``fsr_short_v``
-(shorted: the divider at the supply) for ``fault_samples`` periods; at the end of a stance in which the
-load cell carried the body (above ``contact_on_n``), an FSR that never came on (open: a broken lead); at
-the end of a stance the FSRs saw but the load cell did not (a dead load cell).
+Checks (a fault latches; the firmware then falls back to its motor-load detector, gait_events.py; it
+also uses that one until the load cell is tared): no load-cell code ``NO_DATA_S`` after the tare window
+(a silent acquisition board); a load-cell channel at an amplifier rail for ``fault_samples`` periods;
+an FSR above ``fsr_short_v`` (shorted: the divider at the supply) for ``fault_samples`` periods; at the
+end of a stance in which the load cell carried the body (above ``contact_on_n``), an FSR that never came
+on (open: a broken lead); at the end of a stance the FSRs saw but the load cell did not (a dead load cell).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from firmware.drivers.ground_sensors import GroundSensorDriver
 
 __all__ = ["GroundEvents"]
 
+NO_DATA_S = 0.5
+"""How long after the tare window a board that has sent nothing is a fault."""
 SWING, LOADING, FLAT, PUSH = 0, 1, 2, 3
 """Sub-phases: in the air; heel strike to foot flat; foot flat to heel off; heel off to toe off."""
 
@@ -55,8 +58,8 @@ class GroundEvents:
 
     @property
     def healthy(self) -> bool:
-        """True while no check has fired."""
-        return not self.fault
+        """True once the load cell is tared and while no check has fired."""
+        return not self.fault and self.driver.tared
 
     def _latch(self, what: str, now_s: float) -> None:
         if not self.fault:
@@ -68,6 +71,8 @@ class GroundEvents:
         d = self.driver
         d.sample(now_s)
         if not d.tared:
+            if now_s > d.cfg.tare_s + NO_DATA_S:
+                self._latch("no load-cell data since boot", now_s)
             return False
         heel_v, toe_v, force = d.heel_v, d.toe_v, d.force_n
         self.heel_on = heel_v > (self.fsr_off_v if self.heel_on else self.fsr_on_v)

@@ -94,7 +94,7 @@ class GroundSensors:
 
     def set_fault(self, part: str, mode: str | None) -> None:
         """Fail one part (load_cell, fsr_heel, fsr_toe) in a mode its model knows."""
-        parts = {"load_cell": self.load_cell, "fsr_heel": self.heel, "fsr_toe": self.toe}
+        parts: dict[str, LoadCell | Fsr] = {"load_cell": self.load_cell, "fsr_heel": self.heel, "fsr_toe": self.toe}
         if part not in parts:
             raise ValueError(f"ground sensor {part!r} unknown: one of {sorted(parts)}")
         parts[part].set_fault(mode)
