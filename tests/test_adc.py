@@ -9,7 +9,7 @@ import pytest
 
 from hal.errors import HalError
 from hal.interfaces import Adc
-from hal.virtual.adc import AdcTiming, VirtualAdc, gaussian
+from hal.virtual.adc import NOISE_BLOCK, AdcTiming, VirtualAdc, noise_block
 
 F_CPU = 168_000_000
 
@@ -77,7 +77,7 @@ def test_noise_has_its_rms_and_is_the_same_whenever_the_firmware_looks():
     assert statistics.pstdev(codes_a) == pytest.approx(2.0, rel=0.1)
     other = _adc([lambda c: 1.65], [t[0]], noise_lsb_rms=2.0, seed=8)
     assert [other.convert(0, n) for n in range(1, 51)] != codes_a[:50]  # another seed, other noise
-    assert gaussian(3, 0, 1) == gaussian(3, 0, 1)
+    assert a.noise(0, NOISE_BLOCK + 3) == noise_block(7, 0, 1)[3]  # the second block, by its own seed
 
 
 def test_interface_checks_and_the_backend_contract():

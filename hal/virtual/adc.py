@@ -9,8 +9,9 @@ buffer at the end of its conversion. The whole scan must fit in one trigger peri
 
 Values: ``code = floor(V / LSB + 0.5 + noise)`` clamped to 0..2**bits - 1 (an input beyond 0..Vref
 saturates), LSB = Vref / 2**bits, ``noise`` Gaussian with ``noise_lsb_rms`` LSB. The noise of
-conversion n of channel k is a pure function of (seed, k, n) (a counter-based generator), so what a
-run reads does not depend on when or how often the firmware looks: laziness keeps determinism. Each
+conversion n of channel k is a pure function of (seed, k, n) (drawn in blocks of NOISE_BLOCK from a
+generator seeded with (seed, k, n // NOISE_BLOCK)), so what a run reads does not depend on when or how
+often the firmware looks: laziness keeps determinism. Each
 channel is a source ``volts(t_cycles)`` (a device model's output pin).
 """
 
@@ -19,32 +20,23 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from hal.interfaces import Adc
 
-__all__ = ["AdcTiming", "VirtualAdc", "gaussian"]
+__all__ = ["AdcTiming", "NOISE_BLOCK", "VirtualAdc", "noise_block"]
 
-_MASK64 = (1 << 64) - 1
-
-
-def _splitmix64(x: int) -> int:
-    """One step of SplitMix64 (Steele, Lea, Flood 2014): a well-mixed 64-bit value from x."""
-    x = (x + 0x9E3779B97F4A7C15) & _MASK64
-    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
-    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _MASK64
-    return x ^ (x >> 31)
+NOISE_BLOCK = 4096
+"""Conversions per block of noise drawn at once for one channel."""
 
 
-def gaussian(seed: int, channel: int, n: int) -> float:
-    """A standard normal number that depends only on (seed, channel, n) (Box-Muller on two hashes).
+def noise_block(seed: int, channel: int, block: int) -> list[float]:
+    """Standard normal numbers for conversions block*NOISE_BLOCK.. of a channel: a pure function of its arguments.
 
-    >>> gaussian(0, 1, 5) == gaussian(0, 1, 5) != gaussian(1, 1, 5)
+    >>> noise_block(0, 1, 5) == noise_block(0, 1, 5) != noise_block(1, 1, 5)
     True
     """
-    h1 = _splitmix64((seed * 0x1000193) ^ (channel << 48) ^ (n & 0xFFFF_FFFF_FFFF))
-    h2 = _splitmix64(h1)
-    u1 = ((h1 >> 11) + 1) / (1 << 53)  # (0, 1]
-    u2 = (h2 >> 11) / (1 << 53)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+    return np.random.default_rng([seed, channel, block]).standard_normal(NOISE_BLOCK).tolist()
 
 
 class AdcTiming:
@@ -106,24 +98,37 @@ class VirtualAdc(Adc):
         self._lsb_per_v = (1 << bits) / vref_v
         self._last_n = [-1] * len(self.channels)
         self._codes = [0] * len(self.channels)
+        timing = self.timing
+        self._period = timing.period_cycles
+        self._ready = [(k + 1) * timing.conv_cycles for k in range(len(self.channels))]
+        self._held = [k * timing.conv_cycles + timing.sample_cycles for k in range(len(self.channels))]
+        self._noise: list[tuple[int, list[float]]] = [(-1, [])] * len(self.channels)
         self.conversions = 0  # conversions computed (the ones somebody looked at)
+
+    def noise(self, k: int, n: int) -> float:
+        """The standard normal number of conversion n of channel k."""
+        block, i = divmod(n, NOISE_BLOCK)
+        held, values = self._noise[k]
+        if held != block:
+            values = noise_block(self.seed, k, block)
+            self._noise[k] = (block, values)
+        return values[i]
 
     def convert(self, k: int, n: int) -> int:
         """The code of conversion n of channel k (its source at the hold instant, quantised, with noise)."""
-        t_hold = self.timing.held_cycles(k, n)
-        v = self.sources[k](int(t_hold))
+        v = self.sources[k](int(n * self._period + self._held[k]))  # AdcTiming.held_cycles, inlined
         x = v * self._lsb_per_v + 0.5
         if self.noise_lsb_rms > 0.0:
-            x += self.noise_lsb_rms * gaussian(self.seed, k, n)
+            x += self.noise_lsb_rms * self.noise(k, n)
         if not math.isfinite(x):
             return 0
         return min(self.full_scale, max(0, math.floor(x)))
 
     def _dma_buffer(self) -> list[int]:
         t = self.now()
-        timing, last, codes = self.timing, self._last_n, self._codes
-        for k in range(len(codes)):
-            n = timing.last_ready(k, t)
+        last, codes, period = self._last_n, self._codes, self._period
+        for k, ready in enumerate(self._ready):
+            n = math.floor((t - ready) / period)  # AdcTiming.last_ready, inlined
             if n != last[k]:
                 last[k] = n
                 codes[k] = self.convert(k, n) if n >= 0 else 0

@@ -4,7 +4,8 @@ Interlink FSR 402 (datasheet "FSR 400 Series", PDS-10004): open above 10 MOhm be
 (about 0.2 N), then a resistance that falls as a power of the force over the sensitivity range (to about
 20 N, where it stops falling: saturation); hysteresis +10 % average, (R_F+ - R_F-)/R_F+, i.e. the
 resistance while the force falls is 10 % below the one while it rises (modelled on the sign of the force's
-change, so the model keeps no state and a lazy reader sees the same values). The divider (the datasheet's
+change over 1 ms, so the model keeps no state and a lazy reader sees the same values). The divider (the
+datasheet's
 "FSR voltage divider"): FSR from the supply to the output, R_M to ground, V = V+ R_M / (R_M + R_FSR).
 
 The sensor sees ``load_share`` of the force of its region of the sole (its active area over the region's
@@ -74,6 +75,8 @@ class Fsr:
         self.region_force_n = region_force_n
         self.f_hz = f_hz
         self.fault: str | None = None
+        self._dt = round(_DT_S * f_hz)  # the hysteresis step in ticks
+        self._memo = (-1, 0.0)  # (tick, force): the last force computed (a reader every 1 ms asks for it again)
 
     def set_fault(self, mode: str | None) -> None:
         """Inject a fault (FAULTS) from now on; None clears it."""
@@ -85,6 +88,13 @@ class Fsr:
         """The force on the active area at t_s (emulation truth)."""
         return self.params.load_share * self.region_force_n(t_s)
 
+    def _force_at(self, t: int) -> float:
+        tick, force = self._memo
+        if tick != t:
+            force = self.force_n(t / self.f_hz)
+            self._memo = (t, force)
+        return force
+
     def volts(self, t: int) -> float:
         """The divider's output at tick t."""
         p = self.params
@@ -92,7 +102,6 @@ class Fsr:
             return 0.0
         if self.fault == "short":
             return p.supply_v
-        t_s = t / self.f_hz
-        f = self.force_n(t_s)
-        falling = f < self.force_n(t_s - _DT_S)
-        return p.volts(p.resistance_ohm(f, falling))
+        before = self._force_at(t - self._dt)
+        f = self._force_at(t)
+        return p.volts(p.resistance_ohm(f, f < before))

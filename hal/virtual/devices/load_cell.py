@@ -88,6 +88,8 @@ class LoadCell:
         self.offset_v = (rng.uniform(-1, 1) * p.zero_balance * full_v, rng.uniform(-1, 1) * p.zero_balance * full_v)
         self.drift_v_per_s = p.drift_per_min * full_v / 60.0
         self.fault: str | None = None
+        (self._a, self._b), (self._c, self._d) = p.sensitivity()
+        self._force_gain, self._moment_gain = p.force_gain, p.moment_gain
 
     def set_fault(self, mode: str | None) -> None:
         """Inject a fault (FAULTS) from now on; None clears it."""
@@ -113,17 +115,15 @@ class LoadCell:
         """The force channel's amplifier output at tick t."""
         t_s = t / self.f_hz
         fz, my = self.loads(t_s)
-        (a, b), _ = self.params.sensitivity()
-        bridge = a * fz + b * my + self.offset_v[0] + self.drift_v_per_s * t_s
-        return self._output(bridge, self.params.force_gain, self.params.force_ref_v)
+        bridge = self._a * fz + self._b * my + self.offset_v[0] + self.drift_v_per_s * t_s
+        return self._output(bridge, self._force_gain, self.params.force_ref_v)
 
     def moment_volts(self, t: int) -> float:
         """The moment channel's amplifier output at tick t."""
         t_s = t / self.f_hz
         fz, my = self.loads(t_s)
-        _, (c, d) = self.params.sensitivity()
-        bridge = c * fz + d * my + self.offset_v[1] + self.drift_v_per_s * t_s
-        return self._output(bridge, self.params.moment_gain, self.params.moment_ref_v)
+        bridge = self._c * fz + self._d * my + self.offset_v[1] + self.drift_v_per_s * t_s
+        return self._output(bridge, self._moment_gain, self.params.moment_ref_v)
 
     def outputs(self) -> dict[str, Callable[[int], float]]:
         """The output pins by ADC channel name."""

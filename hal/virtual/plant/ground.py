@@ -26,16 +26,6 @@ __all__ = ["G_M_S2", "GroundReaction", "NoGround"]
 G_M_S2 = 9.81
 
 
-def _interp(xs: Sequence[float], ys: Sequence[float], x: float) -> float:
-    k = bisect.bisect_right(xs, x)
-    if k <= 0:
-        return ys[0]
-    if k >= len(xs):
-        return ys[-1]
-    a = (x - xs[k - 1]) / (xs[k] - xs[k - 1])
-    return ys[k - 1] + a * (ys[k] - ys[k - 1])
-
-
 class NoGround:
     """No ground under the foot (the suspended bench): zero force everywhere."""
 
@@ -79,8 +69,12 @@ class GroundReaction:
         pct = self.percent_at(t_s)
         if pct is None or pct >= self.load.toe_off_pct:
             return 0.0, 0.0, 0.0
-        fz = max(0.0, _interp(self.percent, self.vertical_bw, pct)) * self.weight_n
-        fx = _interp(self.percent, self.fore_aft_bw, pct) * self.weight_n
+        p = self.percent
+        k = min(max(bisect.bisect_right(p, pct), 1), len(p) - 1)  # one look-up for both curves
+        a = min(1.0, (pct - p[k - 1]) / (p[k] - p[k - 1]))
+        vz, vx = self.vertical_bw, self.fore_aft_bw
+        fz = max(0.0, vz[k - 1] + a * (vz[k] - vz[k - 1])) * self.weight_n
+        fx = (vx[k - 1] + a * (vx[k] - vx[k - 1])) * self.weight_n
         if fz <= 0.0:
             return 0.0, 0.0, 0.0
         moment = self.load.moment_nm(pct)
