@@ -11,7 +11,7 @@ from typing import Any
 from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
-from firmware.drivers.ground_sensors import GroundSensorConfig
+from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.safety import SafetyLimits
 from hal.links import link_entry
 from profiles import profile_path, read_toml

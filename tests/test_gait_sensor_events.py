@@ -10,7 +10,8 @@ import pytest
 from firmware.config import load_firmware_config
 from firmware.control.ground_events import GroundEvents
 from firmware.control.registry import build_controller
-from firmware.drivers.ground_sensors import GroundSensorConfig, GroundSensorDriver
+from firmware.drivers.ground_sensor_config import GroundSensorConfig
+from firmware.drivers.ground_sensors import GroundSensorDriver
 from hal.interfaces import Adc
 from host_tools.cli import main
 from host_tools.gait_latency import event_summary, latencies

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from firmware.config import load_firmware_config
-from firmware.drivers.ground_sensors import GroundSensorConfig, GroundSensorDriver
+from firmware.drivers.ground_sensor_config import GroundSensorConfig
+from firmware.drivers.ground_sensors import GroundSensorDriver
 from hal.virtual.devices.fsr import Fsr, FsrParams
 from hal.virtual.devices.load_cell import LoadCell, LoadCellParams
 from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, load_ground_profile, wire_ground_sensors

@@ -12,7 +12,8 @@ saturates), LSB = Vref / 2**bits, ``noise`` Gaussian with ``noise_lsb_rms`` LSB.
 conversion n of channel k is a pure function of (seed, k, n) (drawn in blocks of NOISE_BLOCK from a
 generator seeded with (seed, k, n // NOISE_BLOCK)), so what a run reads does not depend on when or how
 often the firmware looks: laziness keeps determinism. Each
-channel is a source ``volts(t_cycles)`` (a device model's output pin).
+channel is a source ``volts(t_cycles)`` (a device model's output pin). Compiled (setup.py): the firmware
+reads it every control period.
 """
 
 from __future__ import annotations
@@ -39,18 +40,26 @@ def noise_block(seed: int, channel: int, block: int) -> list[float]:
     return np.random.default_rng([seed, channel, block]).standard_normal(NOISE_BLOCK).tolist()
 
 
+def _number(name: str, value: object, lo: float, hi: float) -> float:
+    """value as a float if it is a number (not a bool) in lo..hi, else ValueError naming it."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+        raise ValueError(f"ADC {name} {value!r} out of range: {lo:g}..{hi:g}")
+    return float(value)
+
+
 class AdcTiming:
     """The scan timing in CPU cycles: trigger period, per-channel conversion, sampling window."""
 
-    def __init__(self, f_cpu_hz: int, n_channels: int, sample_rate_hz: float, adc_clock_hz: float,
-                 sampling_cycles: float, conversion_cycles: float = 12.0) -> None:
-        """ValueError naming a value out of range, or a scan that does not fit in the trigger period."""
-        for name, value, lo, hi in (("sample_rate_hz", sample_rate_hz, 1.0, 1e6),
-                                    ("adc_clock_hz", adc_clock_hz, 1e5, 36e6),
-                                    ("sampling_cycles", sampling_cycles, 1.5, 480.0),
-                                    ("conversion_cycles", conversion_cycles, 6.0, 16.0)):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-                raise ValueError(f"ADC {name} {value!r} out of range: {lo:g}..{hi:g}")
+    def __init__(self, f_cpu_hz: int, n_channels: int, sample_rate_hz: object, adc_clock_hz: object,
+                 sampling_cycles: object, conversion_cycles: object = 12.0) -> None:
+        """ValueError naming a value out of range, or a scan that does not fit in the trigger period.
+
+        The rates and cycle counts are typed ``object`` so that the compiled build still sees a bool as one.
+        """
+        sample_rate_hz = _number("sample_rate_hz", sample_rate_hz, 1.0, 1e6)
+        adc_clock_hz = _number("adc_clock_hz", adc_clock_hz, 1e5, 36e6)
+        sampling_cycles = _number("sampling_cycles", sampling_cycles, 1.5, 480.0)
+        conversion_cycles = _number("conversion_cycles", conversion_cycles, 6.0, 16.0)
         self.period_cycles = f_cpu_hz / sample_rate_hz
         self.conversion_s = (sampling_cycles + conversion_cycles) / adc_clock_hz
         self.conv_cycles = self.conversion_s * f_cpu_hz
@@ -78,22 +87,20 @@ class VirtualAdc(Adc):
     """The STM32 ADC + DMA on the bench clock ``now`` (module docstring); ``sources[k]`` drives channel k."""
 
     def __init__(self, now: Callable[[], int], f_cpu_hz: int, channels: Sequence[str],
-                 sources: Sequence[Callable[[int], float]], *, sample_rate_hz: float = 1000.0,
-                 adc_clock_hz: float = 21e6, sampling_cycles: float = 84.0, conversion_cycles: float = 12.0,
-                 bits: int = 12, vref_v: float = 3.3, noise_lsb_rms: float = 0.0, seed: int = 0) -> None:
+                 sources: Sequence[Callable[[int], float]], *, sample_rate_hz: object = 1000.0,
+                 adc_clock_hz: object = 21e6, sampling_cycles: object = 84.0, conversion_cycles: object = 12.0,
+                 bits: int = 12, vref_v: float = 3.3, noise_lsb_rms: object = 0.0, seed: int = 0) -> None:
         """Bind the channels to their sources; the trigger timer starts at cycle 0."""
         super().__init__(channels, bits, vref_v)
         if len(sources) != len(self.channels):
             raise ValueError(f"{len(sources)} sources for {len(self.channels)} ADC channels")
-        if isinstance(noise_lsb_rms, bool) or not isinstance(noise_lsb_rms, (int, float)) \
-                or not 0.0 <= noise_lsb_rms <= 100.0:
-            raise ValueError(f"ADC noise_lsb_rms {noise_lsb_rms!r} out of range: 0..100 LSB")
+        noise = _number("noise_lsb_rms", noise_lsb_rms, 0.0, 100.0)
         self.now = now
         self.f_cpu_hz = f_cpu_hz
         self.timing = AdcTiming(f_cpu_hz, len(self.channels), sample_rate_hz, adc_clock_hz, sampling_cycles,
                                 conversion_cycles)
         self.sources = list(sources)
-        self.noise_lsb_rms = float(noise_lsb_rms)
+        self.noise_lsb_rms = noise
         self.seed = seed
         self._lsb_per_v = (1 << bits) / vref_v
         self._last_n = [-1] * len(self.channels)
