@@ -24,7 +24,7 @@ EARLY_S = 0.1
 def latencies(true_s: Sequence[float], detected_s: Sequence[float], window_s: float) -> tuple[list[float], int]:
     """(latency in s of each true event that was detected, number missed).
 
-    >>> latencies([1.0, 2.0], [1.004, 2.9], 0.5)
+    >>> found, missed = latencies([1.0, 2.0], [1.004, 2.9], 0.5); [round(x, 9) for x in found], missed
     ([0.004], 1)
     """
     found, missed = [], 0
@@ -101,7 +101,8 @@ def gait_event_lines(g: dict[str, Any]) -> list[str]:
              f"Median over {g['true_events']['heel_strike']} heel strikes and {g['true_events']['toe_off']} toe offs "
              "of the scenario's true contact times; negative = early.", "",
              "| detector | heel strike | toe off |", "|---|---|---|"]
-    rows = [("ground sensors (load cell + FSRs)", g.get("ground_sensors")), ("motor load (today's)", g["motor_load"])]
+    rows = [("ground sensors (load cell + FSRs)", g.get("ground_sensors")),
+            ("motor load (today's; in this run)", g["motor_load"])]
     for name, d in rows:
         if d is not None:
             lines.append(f"| {name} | {_cell(d['heel_strike'])} | {_cell(d['toe_off'])} |")

@@ -115,7 +115,7 @@ def test_cli_walk_reports_both_detectors_and_which_one_was_used(tmp_path):
     g = s["gait_events"]
     assert g["detector"] == "motor_load" and g["fallback"]["reason"] == "toe FSR shorted"
     md = (out / "report.md").read_text()
-    assert "## Gait events (detection latency, emulation only)" in md and "motor load (today's)" in md
+    assert "## Gait events (detection latency, emulation only)" in md and "motor load (today's; in this run)" in md
     assert "fallback after: toe FSR shorted" in md
 
 

@@ -13,17 +13,19 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qs, urlsplit
 
 from hal.virtual.bench import fixture_by_name
 from hal.virtual.devices.ak60 import Ak60
 from hal.virtual.devices.bno08x import Bno08x
-from hal.virtual.devices.firmata_board import FirmataBoard
 from hal.virtual.devices.world import World
-from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, GroundSensors, wire_ground_sensors
 from hal.virtual.plant import Fixture, Plant
-from hal.virtual.plant.ground import NoGround
 from hal.virtual.uart import VirtualUart
+
+if TYPE_CHECKING:  # the ground sensors are imported when served: a sim:// port of another device stays quick to open
+    from hal.virtual.devices.firmata_board import FirmataBoard
+    from hal.virtual.ground_sensors import GroundSensors
 
 __all__ = ["DEFAULT_BAUDS", "DEVICE_ROLES", "NS_PER_S", "SimUrl", "WallDevices", "arrival_end_times",
            "parse_sim_url"]
@@ -141,6 +143,10 @@ class WallDevices:
             elif role == "imu":
                 device = self.imu = Bno08x(self.world, seed=seed, link=uart)
             else:
+                from hal.virtual.devices.firmata_board import FirmataBoard
+                from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, wire_ground_sensors
+                from hal.virtual.plant.ground import NoGround
+
                 sensors = wire_ground_sensors(None, NS_PER_S, NoGround(), AdcSettings(), seed=seed)
                 self.ground_sensors = sensors
                 device = self.ground = FirmataBoard(self.world, sensors.codes_at, len(ADC_CHANNELS), link=uart)

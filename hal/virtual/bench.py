@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart
 from hal.links import link_entry, resolve
@@ -29,11 +29,13 @@ from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.devices.plant_view import PlantView
 from hal.virtual.devices.sink import ByteSink
 from hal.virtual.devices.world import World
-from hal.virtual.ground_sensors import AdcSettings, GroundSensors, wire_ground_sensors
 from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.mcu import VirtualMcu
 from hal.virtual.plant import Fixture, Plant, PlantParams, backdrive, spring_bench, suspended
 from hal.virtual.plant.ground import NoGround
+
+if TYPE_CHECKING:  # imported when fitted (numpy and the sensor models): a bench without them starts quicker
+    from hal.virtual.ground_sensors import AdcSettings, GroundSensors
 
 __all__ = ["FIXTURES", "VirtualBench", "fixture_by_name"]
 
@@ -134,9 +136,11 @@ class VirtualBench:
         self.watchdog = mcu.watchdog(self._forward_kick)
         self.ground: Any = ground if ground is not None else NoGround()
         """What the ground does to the foot (``at(t_s) -> (F_z, F_x, CoP)``); nothing on the suspended bench."""
-        self.ground_sensors: GroundSensors | None = (
-            wire_ground_sensors(mcu.now, f_cpu_hz, self.ground, adc or AdcSettings(), seed=seed)
-            if ground_sensors else None)
+        self.ground_sensors: GroundSensors | None = None
+        if ground_sensors:
+            from hal.virtual.ground_sensors import AdcSettings, wire_ground_sensors
+
+            self.ground_sensors = wire_ground_sensors(mcu.now, f_cpu_hz, self.ground, adc or AdcSettings(), seed=seed)
         """The load cell and heel/toe FSRs on the ADC, when fitted (hal/virtual/ground_sensors.py)."""
         self.board: Board = mcu.board(self.motor_uart, self.imu_uart, self.telemetry_uart, self.encoder,
                                       self.estop, self.led, self.watchdog, self.can,
