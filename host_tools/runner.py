@@ -23,7 +23,6 @@ from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
 from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
-from hal.virtual.ground_sensors import AdcSettings
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.draw import draw_plant, drawn_values
@@ -189,6 +188,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
         bench_options["fixture"] = walk(load)
         bench_options["ground"] = ground_reaction(load, cfg.speed)
     if cfg.sensors_fitted():
+        from hal.virtual.ground_sensors import AdcSettings  # numpy and the sensor models: only when fitted
+
         bench_options.update(ground_sensors=True, adc=AdcSettings.from_board(board_cfg))
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,

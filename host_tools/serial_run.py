@@ -35,11 +35,8 @@ from hal.errors import HalError
 from hal.interfaces import Board, Uart
 from hal.interfaces import Watchdog as HalWatchdog
 from hal.pycan import is_can_url, open_can, parse_can_url
-from hal.serial.backend import SerialUart
-from hal.serial.firmata_adc import FirmataAdc
 from hal.serial.sim_port import WallDevices, parse_sim_url
 from hal.virtual.devices.encoder import EncoderMount
-from hal.virtual.ground_sensors import ADC_CHANNELS
 from hal.virtual.null import NullDigitalIn, NullDigitalOut, NullUart
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.jitter import TaskTimings, instrument
@@ -293,8 +290,12 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
                 opened[role] = devices.uarts[role]  # type: ignore[union-attr]
                 continue
             try:
-                # the ground board is no role of hal.binding (its sim:// is handled above): pyserial opens it
-                opened[role] = SerialUart(url, baud) if role == "ground" else open_uart(url, baud, role=role)
+                if role == "ground":  # no role of hal.binding (its sim:// is handled above): pyserial opens it
+                    from hal.serial.backend import SerialUart
+
+                    opened[role] = SerialUart(url, baud)
+                else:
+                    opened[role] = open_uart(url, baud, role=role)
             except (HalError, ValueError) as exc:
                 raise StartupError(f"{role} port {url!r}: {exc}") from exc
     except BaseException:
@@ -374,10 +375,15 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     else:
         encoder = VirtualEncoderTimer(lambda: 0, feedback_angle.angle_rad)
     telemetry: Uart = capture if wire is None else wire.tap("telemetry", capture)  # the others are tapped already
+    adc = None
+    if ports.ground is not None:  # imported only then: the sensors' models and numpy slow every start by 0.25 s
+        from hal.serial.firmata_adc import FirmataAdc
+        from hal.virtual.ground_sensors import ADC_CHANNELS
+
+        adc = FirmataAdc(ports.ground, ADC_CHANNELS)
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
                   encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
-                  now_cycles=now, f_cpu_hz=f_cpu, can=ports.can,
-                  adc=FirmataAdc(ports.ground, ADC_CHANNELS) if ports.ground is not None else None)
+                  now_cycles=now, f_cpu_hz=f_cpu, can=ports.can, adc=adc)
     fw = Firmware(board, fw_cfg, reference=reference)
     fw.supervisor.latch_deadline_misses = False  # on the wall clock a late job is the host's (see module doc)
     warnings = HostWarnings()

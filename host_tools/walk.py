@@ -7,7 +7,6 @@ import io
 from importlib import resources
 from pathlib import Path
 
-from hal.virtual.ground_sensors import load_ground_profile
 from hal.virtual.plant.ground import GroundReaction
 from hal.virtual.plant.walking import WalkingLoad
 
@@ -87,6 +86,8 @@ def ground_reaction(load: WalkingLoad, speed: str | None = None) -> GroundReacti
     percent, vertical, fore_aft = _columns(text, f"firmware/data/{GRF_CSV}",
                                            ("percent_gait", "grf_vertical_bw_mean", "grf_anterior_posterior_bw_mean"),
                                            SPEEDS[speed or "free"])
+    from hal.virtual.ground_sensors import load_ground_profile  # numpy and the sensor models: only when walking
+
     foot = load_ground_profile()[2]
     return GroundReaction(load, percent, vertical, fore_aft, ankle_height_m=foot.ankle_height_m, heel_m=foot.heel_m,
                           toe_m=foot.toe_m)
