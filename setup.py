@@ -2,8 +2,9 @@
 
 The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop (with the job record
 its task bodies read and its watchdog), the interrupt interference solve, the virtual peripherals and
-device models with their event base classes, the plant, the firmware's tasks, drivers and codecs, the
-shipped controllers (cascade, impedance) with the observation they read and the load detector, and
+device models with their event base classes, the plant, the ADC with the ground sensors and the ground
+reaction, the firmware's tasks, drivers and codecs, the shipped controllers (cascade, impedance) with
+the observation they read, the load detector and the ground sensors' driver and event detector, and
 the bench probe of a virtual run.
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
@@ -57,12 +58,18 @@ COMPILED = [
     "hal/virtual/devices/ak60_can.py",
     "hal/virtual/devices/bno08x.py",
     "hal/virtual/devices/encoder.py",
+    "hal/virtual/adc.py",
+    "hal/virtual/plant/ground.py",
+    "hal/virtual/devices/load_cell.py",
+    "hal/virtual/devices/fsr.py",
     "firmware/app.py",
     "firmware/tasks.py",
     "firmware/control/observation.py",
     "firmware/control/cascade.py",
     "firmware/control/gait_events.py",
     "firmware/control/impedance.py",
+    "firmware/control/ground_events.py",
+    "firmware/drivers/ground_sensors.py",
     "firmware/safety.py",
     "firmware/logger.py",
     "firmware/drivers/motor.py",

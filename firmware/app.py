@@ -26,6 +26,16 @@ log = logging.getLogger(__name__)
 __all__ = ["ControlOutput", "Firmware", "KernelHealth"]
 
 
+def _plus(cost: int | Callable[[object], int], extra: int) -> int | Callable[[object], int]:
+    """A cost (cycles, a CostModel or any cost callable) priced extra cycles more."""
+    if isinstance(cost, int):
+        return cost + extra
+    if isinstance(cost, CostModel):
+        return CostModel(cost.base + extra, cost.per_byte)
+    model = cost
+    return lambda handled: model(handled) + extra
+
+
 class Firmware(FirmwareTasks):
     """The prosthesis firmware bound to `board`: build it, then hand `tasks` to the RTOS."""
 
@@ -45,6 +55,8 @@ class Firmware(FirmwareTasks):
             if isinstance(own, int):
                 check_controller(self.controller, f // hz)
                 cost = own
+            if name == "control" and self.ground_events is not None:  # the ground sensors read in the control task
+                cost = _plus(cost, c.ground_sensors.cost_cycles)
             if isinstance(cost, CostModel) and not cost.per_byte:
                 cost = cost.base  # a fixed cost: the kernel need not call the model for every job
             return Task(name, prio, period=f // hz, cost=cost, body=body, overrun=OverrunPolicy.SKIP)

@@ -11,6 +11,7 @@ from typing import Any
 from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
+from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.safety import SafetyLimits
 from hal.links import link_entry
 from profiles import profile_path, read_toml
@@ -20,7 +21,7 @@ __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareCo
 
 DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
-SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller")
+SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller", "ground_sensors")
 """The tables of a firmware profile ([control] holds the sub-tables position and velocity)."""
 TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "watchdog")
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
@@ -89,6 +90,7 @@ class FirmwareConfig:
     motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
     controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
     controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
+    ground_sensors: GroundSensorConfig = GroundSensorConfig()  # [ground_sensors]: used on boards with the ADC
 
     def __post_init__(self) -> None:
         """Check every rate, control scalar and task name (profile keys: firmware/config.py's tables)."""
@@ -251,10 +253,12 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
             links["motor_can_id"] = motor["can_id"]
         section = "controller"
         controller = _controller(_section(doc, "controller"), p)
+        section = "ground_sensors"
+        ground_sensors = GroundSensorConfig.from_table(_section(doc, "ground_sensors"))
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
                               feedforward_params=feedforward_params, safety=safety, task_cycles=task_cycles,
-                              **links, **controller, **ctl)
+                              **links, **controller, **ctl, ground_sensors=ground_sensors)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

@@ -18,12 +18,14 @@ from firmware.config import FirmwareConfig
 from firmware.control.estimation import AngleEstimator
 from firmware.control.filters import ButterworthLowPass
 from firmware.control.gait_events import LoadDetector
+from firmware.control.ground_events import GroundEvents
 from firmware.control.interface import as_number, check_controller, describe_failure, published_names
 from firmware.control.observation import MotorCommand, Observation
 from firmware.control.pid import Feedforward
 from firmware.control.reference import GaitReference, MinimumJerk, Trajectory
 from firmware.control.registry import build_controller
 from firmware.drivers.encoder import EncoderDriver
+from firmware.drivers.ground_sensors import GroundSensorDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor_links import make_motor_driver
 from firmware.logger import TelemetryLogger
@@ -94,6 +96,9 @@ class FirmwareTasks:
         self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
         self.load_detector = LoadDetector(self.ts_s, feedforward.nm_per_a, feedforward.inertia_kg_m2,
                                           feedforward.gravity_moment_nm, c.com_angle_rad)
+        # gait events from the load cell and FSRs, on boards with the ADC; the load detector is the fallback
+        self.ground_events: GroundEvents | None = (
+            GroundEvents(GroundSensorDriver(board.adc, c.ground_sensors, self.ts_s)) if board.adc is not None else None)
         self._controller_state = _INIT  # the supervisor state the controller last saw (reset on a change)
         # what the kernel says of deadlines; the runner sets it once the scheduler exists
         self.kernel_health: KernelHealth = lambda: (0, 0)
@@ -146,6 +151,8 @@ class FirmwareTasks:
     def control_task(self, job: Job) -> None:
         now_s = job.start / self.f_cpu_hz
         self._heartbeat += 1
+        ground = self.ground_events
+        ground_stance = ground.update(now_s) if ground is not None else False  # from boot: the load cell tares
         imu = self.imu_pitch_rad if self._new_imu else None
         self._new_imu = False
         fused = self.estimator.update(self.encoder.angle_rad, imu)
@@ -186,6 +193,14 @@ class FirmwareTasks:
         obs.gait_phase = (gait_t / self._stride_s) % 1.0 if gait_t >= 0 else 0.0
         obs.stance = detector.update(now_s, current_meas_a, fused, ref[2])
         obs.load_torque_nm = detector.load_torque_nm
+        if ground is not None:
+            if ground.healthy:
+                obs.stance = ground_stance
+            obs.ground_sensors_ok = ground.healthy
+            obs.heel_contact = ground.heel_on
+            obs.toe_contact = ground.toe_on
+            obs.axial_force_n = ground.driver.force_n
+            obs.sagittal_moment_nm = ground.driver.moment_nm
         if self._controller_state is not _RUN:
             self._controller_state = _RUN
             if not self._reset_controller(now_s):

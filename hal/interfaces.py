@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -20,6 +20,7 @@ from hal.can import CanPort
 from hal.errors import HalError
 
 __all__ = [
+    "Adc",
     "Board",
     "DigitalIn",
     "DigitalOut",
@@ -233,6 +234,73 @@ class EncoderTimer(ABC):
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
+class Adc(ABC):
+    """An ADC whose regular channels a DMA stream copies to memory (STM32 scan mode + circular DMA).
+
+    The firmware reads the DMA buffer: ``read()`` returns, for every channel in scan order, the code of
+    its last completed conversion (0 before the first), never blocking. ``bits`` is the resolution (the
+    STM32's RES field: 12, 10, 8 or 6; a backend over another converter may say up to 16); ``vref_v`` the
+    reference voltage, so one LSB is ``vref_v / 2**bits`` volts (RM0090 13.3.4 / AN2834: an ideal
+    12-bit code is V_in * 4096 / V_REF). Backends supply ``_dma_buffer``.
+    """
+
+    def __init__(self, channels: Sequence[str], bits: int = 12, vref_v: float = 3.3) -> None:
+        """Check the channel names (unique, non-empty), the resolution (6..16 bits) and the reference (V)."""
+        names = tuple(channels)
+        if not names or len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
+            raise ValueError(f"channels {names!r} invalid: one or more distinct non-empty names")
+        if isinstance(bits, bool) or not isinstance(bits, int) or not 6 <= bits <= 16:
+            raise ValueError(f"bits {bits!r} out of range: an int in 6..16")
+        if isinstance(vref_v, bool) or not isinstance(vref_v, (int, float)) or not 1.0 <= vref_v <= 5.5:
+            raise ValueError(f"vref_v {vref_v!r} out of range: 1.0..5.5 V")
+        self._channels = names
+        self._bits = bits
+        self._vref_v = float(vref_v)
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The channel names in scan (DMA buffer) order."""
+        return self._channels
+
+    @property
+    def bits(self) -> int:
+        """Resolution in bits."""
+        return self._bits
+
+    @property
+    def vref_v(self) -> float:
+        """The reference voltage (full scale) in V."""
+        return self._vref_v
+
+    @property
+    def full_scale(self) -> int:
+        """The largest code, 2**bits - 1."""
+        return (1 << self._bits) - 1
+
+    def index(self, name: str) -> int:
+        """The position of channel name in the buffer; ValueError naming the channels otherwise."""
+        try:
+            return self._channels.index(name)
+        except ValueError:
+            raise ValueError(f"ADC channel {name!r} unknown: one of {list(self._channels)}") from None
+
+    def read(self) -> list[int]:
+        """The DMA buffer now: the last completed code of each channel, in scan order."""
+        codes = self._dma_buffer()
+        if len(codes) != len(self._channels):
+            raise HalError(f"ADC backend returned {len(codes)} codes for {len(self._channels)} channels")
+        return codes
+
+    def volts(self, code: int) -> float:
+        """The input voltage a code stands for (code * vref / 2**bits)."""
+        return code * self._vref_v / (1 << self._bits)
+
+    @abstractmethod
+    def _dma_buffer(self) -> list[int]:
+        """Backend hook: the codes of the last completed conversions, one per channel."""
+
+
+@mypyc_attr(allow_interpreted_subclasses=True)  # backends and test doubles subclass it
 class Watchdog(ABC):
     """The independent watchdog as the firmware sees it: kick it or the MCU resets."""
 
@@ -292,6 +360,7 @@ class Board:
     now_cycles: Callable[[], int]
     f_cpu_hz: int
     can: CanPort | None = None  # the CAN controller, on boards whose motor link is CAN (hal.links)
+    adc: Adc | None = None  # the ADC with the ground sensors (load cell, heel/toe FSRs), on boards that have them
 
     def __post_init__(self) -> None:
         """Check the clock frequency."""

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from host_tools.build_info import describe
+from host_tools.gait_latency import event_summary, gait_event_lines
 from host_tools.metrics import TrackingMetrics
 from host_tools.outdir import naming, write_atomic
 from host_tools.process_clock import process_elapsed_s
@@ -344,6 +345,10 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
 
         s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a)
         md_extra = [*(md_extra or []), *walk_md]
+    gait = event_summary(r)
+    if gait is not None:
+        s["gait_events"] = gait
+        md_extra = [*(md_extra or []), *gait_event_lines(gait)]
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)
     s["process_realtime_factor"] = round(r.sim_time_s / elapsed, 2) if elapsed > 0 else None

@@ -32,7 +32,7 @@ from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
 from host_tools.run_files import RunFiles
 from host_tools.tracking_stream import probe_stream
-from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, walking_load
+from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, ground_reaction, walking_load
 from host_tools.wire_capture import WireCapture
 from profiles import profile_path, profile_paths
 from rtos import Scheduler, Task, Trace, VirtualClock, Watchdog
@@ -42,6 +42,8 @@ from rtos.stats import DeadlineHealth
 
 __all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
 
+SENSOR_FAULTS = {"fsr_heel": ("open", "short"), "fsr_toe": ("open", "short"), "load_cell": ("open", "stuck_high")}
+"""The ground sensors' faults a run can start with (hal/virtual/devices/fsr.py, load_cell.py)."""
 PROBE_HZ = 500
 SEGMENT_S = 1  # simulated seconds between two hand-overs to the files (and two checks of should_stop)
 WATCHDOG_TIMEOUT_S = 0.050
@@ -85,6 +87,9 @@ class RunConfig:
     body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
     moment_csv: Path | None = None  # walk: the ankle moment per kg (default: the packaged normative curve)
     speed: str | None = None  # a speed group of the packaged data (host_tools/walk.py SPEEDS): reference and moment
+    # the load cell and heel/toe FSRs on the ADC (hal/virtual/ground_sensors.py); None: fitted when walking
+    ground_sensors: bool | None = None
+    sensor_faults: tuple[str, ...] = ()  # "PART:MODE" from the start, e.g. "fsr_heel:open" (SENSOR_FAULTS)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -96,9 +101,20 @@ class RunConfig:
             raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
         if self.scenario not in SCENARIOS:
             raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
+        for fault in self.sensor_faults:
+            part, _, mode = fault.partition(":")
+            if mode not in SENSOR_FAULTS.get(part, ()):
+                raise ValueError(f"sensor fault {fault!r} unknown: PART:MODE, one of "
+                                 f"{[f'{p}:{m}' for p, ms in SENSOR_FAULTS.items() for m in ms]}")
+        if self.sensor_faults and not self.sensors_fitted():
+            raise ValueError("sensor faults need the ground sensors: walk, or fit them (ground_sensors)")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
+
+    def sensors_fitted(self) -> bool:
+        """Whether the bench has the ground sensors (by default when walking)."""
+        return self.scenario == "walk" if self.ground_sensors is None else bool(self.ground_sensors)
 
     def bench_setup(self) -> tuple[dict, dict]:
         """(VirtualBench arguments of the plant and the imperfections, their record for summary.json).
@@ -177,10 +193,19 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     bench_options, bench_record = cfg.bench_setup()
     if load is not None:
         bench_options["fixture"] = walk(load)
+        bench_options["ground"] = ground_reaction(load, cfg.speed)
+    if cfg.sensors_fitted():
+        from hal.virtual.ground_sensors import AdcSettings  # numpy and the sensor models: only when fitted
+
+        bench_options.update(ground_sensors=True, adc=AdcSettings.from_board(board_cfg))
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,
                          can_id=fw_cfg.motor_can_id, **bench_options)
     bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
+    for fault in cfg.sensor_faults:
+        part, _, mode = fault.partition(":")
+        assert bench.ground_sensors is not None  # RunConfig checked
+        bench.ground_sensors.set_fault(part, mode)
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
                   controller=cfg.controller)

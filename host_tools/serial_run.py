@@ -85,6 +85,8 @@ class SerialRunConfig:
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
     realtime: RealtimeSettings = field(default_factory=RealtimeSettings)
     strides: int = 0  # whole gait strides run in RUN (filled in after the run)
+    ground: str | None = None  # the ground sensors' Firmata board (hal/serial/firmata_adc.py): a port or sim://
+    ground_baud: int = 115200
 
     def __post_init__(self) -> None:
         """Reject values serial mode cannot run."""
@@ -92,7 +94,7 @@ class SerialRunConfig:
             raise ValueError(f"encoder {self.encoder!r} invalid: 'motor' (position feedback) or 'sim' (plant)")
         if not 0.1 <= self.duration_s <= 86_400:
             raise ValueError(f"duration {self.duration_s!r} s out of range: 0.1..86400")
-        for name in ("baud", "imu_baud", "telemetry_baud"):
+        for name in ("baud", "imu_baud", "telemetry_baud", "ground_baud"):
             v = getattr(self, name)
             if not isinstance(v, int) or not 1200 <= v <= 20_000_000:
                 raise ValueError(f"{name} {v!r} out of range: an int in 1200..20000000")
@@ -243,9 +245,10 @@ class _Ports:
     telemetry: Uart | None
     devices: WallDevices | None
     can: CanPort | None = None  # the motor's CAN bus (--motor can://...; then motor is a NullUart)
+    ground: Uart | None = None  # the ground sensors' Firmata board (--ground)
 
     def close(self) -> None:
-        for u in (self.motor, self.imu, self.telemetry, self.can):
+        for u in (self.motor, self.imu, self.telemetry, self.can, self.ground):
             if u is not None:
                 u.close()
         if self.devices is not None:
@@ -257,19 +260,23 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
 
     `telemetry_uart`, when given, is the telemetry port already open (``--telemetry pty``).
     """
-    sim_roles = {r: parse_sim_url(u) for r, u in (("motor", cfg.motor), ("imu", cfg.imu)) if _is_sim(u)}
+    sim_roles = {r: parse_sim_url(u) for r, u in (("motor", cfg.motor), ("imu", cfg.imu), ("ground", cfg.ground))
+                 if _is_sim(u)}
     for role, url in sim_roles.items():
         if url.role != role:
-            raise StartupError(f"{role} port {getattr(cfg, role)!r}: serves a {url.role}; expected {EXPECTED[role]}")
+            raise StartupError(f"{role} port {getattr(cfg, role)!r}: serves a {url.role}; expected "
+                               f"{EXPECTED.get(role, 'sim://ground-sensors')}")
     devices = None
     if sim_roles:
-        devices = WallDevices(list(sim_roles), bauds={"motor": cfg.baud, "imu": cfg.imu_baud},
+        bauds = {"motor": cfg.baud, "imu": cfg.imu_baud, "ground": cfg.ground_baud}
+        devices = WallDevices(list(sim_roles), bauds=bauds,
                               fixture=cfg.fixture, seed=cfg.seed)
     opened: dict[str, Uart] = {}
     can_port: CanPort | None = None
     try:
         for role, url, baud in (("motor", cfg.motor, cfg.baud), ("imu", cfg.imu, cfg.imu_baud),
-                                ("telemetry", cfg.telemetry, cfg.telemetry_baud)):
+                                ("telemetry", cfg.telemetry, cfg.telemetry_baud),
+                                ("ground", cfg.ground, cfg.ground_baud)):
             if role == "telemetry" and telemetry_uart is not None:
                 opened[role] = telemetry_uart
                 continue
@@ -286,7 +293,12 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
                 opened[role] = devices.uarts[role]  # type: ignore[union-attr]
                 continue
             try:
-                opened[role] = open_uart(url, baud, role=role)
+                if role == "ground":  # no role of hal.binding (its sim:// is handled above): pyserial opens it
+                    from hal.serial.backend import SerialUart
+
+                    opened[role] = SerialUart(url, baud)
+                else:
+                    opened[role] = open_uart(url, baud, role=role)
             except (HalError, ValueError) as exc:
                 raise StartupError(f"{role} port {url!r}: {exc}") from exc
     except BaseException:
@@ -297,7 +309,7 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
         if devices is not None:
             devices.close()
         raise
-    return _Ports(opened["motor"], opened["imu"], opened.get("telemetry"), devices, can_port)
+    return _Ports(opened["motor"], opened["imu"], opened.get("telemetry"), devices, can_port, opened.get("ground"))
 
 
 def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None] | None = None,
@@ -370,9 +382,15 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     else:
         encoder = VirtualEncoderTimer(lambda: 0, feedback_angle.angle_rad)
     telemetry: Uart = capture if wire is None else wire.tap("telemetry", capture)  # the others are tapped already
+    adc = None
+    if ports.ground is not None:  # imported only then: the sensors' models and numpy slow every start by 0.25 s
+        from hal.serial.firmata_adc import FirmataAdc
+        from hal.virtual.ground_sensors import ADC_CHANNELS
+
+        adc = FirmataAdc(ports.ground, ADC_CHANNELS)
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
                   encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
-                  now_cycles=now, f_cpu_hz=f_cpu, can=ports.can)
+                  now_cycles=now, f_cpu_hz=f_cpu, can=ports.can, adc=adc)
     fw = Firmware(board, fw_cfg, reference=reference)
     fw.supervisor.latch_deadline_misses = False  # on the wall clock a late job is the host's (see module doc)
     warnings = HostWarnings()

@@ -7,9 +7,10 @@ import io
 from importlib import resources
 from pathlib import Path
 
+from hal.virtual.plant.ground import GroundReaction
 from hal.virtual.plant.walking import WalkingLoad
 
-__all__ = ["MOMENT_COLUMN", "SCENARIOS", "moment_curve", "walking_load"]
+__all__ = ["GRF_CSV", "MOMENT_COLUMN", "SCENARIOS", "ground_reaction", "moment_curve", "walking_load"]
 
 SCENARIOS = ("suspended", "walk")
 SPEEDS = {"very-slow": "Very Slow", "slow": "Slow", "free": "Free", "fast": "Fast", "very-fast": "Very Fast"}
@@ -17,6 +18,8 @@ SPEEDS = {"very-slow": "Very Slow", "slow": "Slow", "free": "Free", "fast": "Fas
 ALL_SPEEDS = "ankle_normative_all_speeds.csv"
 MOMENT_COLUMN = "ankle_moment_nm_per_kg_mean"
 NORMATIVE = "firmware/data/ankle_normative.csv"
+GRF_CSV = "grf_normative_all_speeds.csv"
+"""Ground reaction forces in body weights, all speed groups (Schwartz et al. 2008): firmware/data/README.md."""
 
 
 def all_speeds_path() -> Path:
@@ -40,24 +43,30 @@ def moment_curve(path: Path | None = None, speed: str | None = None) -> tuple[li
             text, source = Path(path).read_text(encoding="utf-8"), str(path)
         except OSError as e:
             raise ValueError(f"cannot read moment CSV {path}: {e.strerror or e}") from None
+    columns = _columns(text, source, ("percent_gait", MOMENT_COLUMN), SPEEDS[speed] if speed is not None else None)
+    return columns[0], columns[1], source
+
+
+def _columns(text: str, source: str, names: tuple[str, ...], speed_category: str | None) -> list[list[float]]:
+    """The named numeric columns of a CSV text ('#' lines skipped; rows of speed_category only, if given)."""
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     reader = csv.DictReader(io.StringIO("\n".join(lines)))
     fields = [f.strip() for f in reader.fieldnames or []]
     reader.fieldnames = fields
-    for col in ("percent_gait", MOMENT_COLUMN):
+    for col in names:
         if col not in fields:
             raise ValueError(f"{source}: missing column {col!r} (found columns: {fields})")
-    percent, moment = [], []
+    out: list[list[float]] = [[] for _ in names]
     for row_no, row in enumerate(reader, start=2):
-        if speed is not None and (row.get("speed_category") or "").strip() != SPEEDS[speed]:
+        if speed_category is not None and (row.get("speed_category") or "").strip() != speed_category:
             continue
         try:
-            percent.append(float(row["percent_gait"]))
-            moment.append(float(row[MOMENT_COLUMN]))
+            values = [float(row[col]) for col in names]
         except (TypeError, ValueError):
-            raise ValueError(f"{source}: data row {row_no}: not a number in "
-                             f"{[row.get('percent_gait'), row.get(MOMENT_COLUMN)]}") from None
-    return percent, moment, source
+            raise ValueError(f"{source}: data row {row_no}: not a number in {[row.get(c) for c in names]}") from None
+        for column, value in zip(out, values, strict=True):
+            column.append(value)
+    return out
 
 
 def walking_load(body_mass_kg: float, stride_s: float, path: Path | None = None,
@@ -68,3 +77,17 @@ def walking_load(body_mass_kg: float, stride_s: float, path: Path | None = None,
         return WalkingLoad(percent, moment, body_mass_kg, stride_s)
     except ValueError as e:
         raise ValueError(f"{source}: {e}" if "moment curve" in str(e) else str(e)) from None
+
+
+def ground_reaction(load: WalkingLoad, speed: str | None = None) -> GroundReaction:
+    """The ground reaction under the walking load's strides: the packaged GRF of the speed group (default free),
+    the CoP from the load's moment, the foot of profiles/ground_sensors.toml."""
+    text = resources.files("firmware.data").joinpath(GRF_CSV).read_text("utf-8")
+    percent, vertical, fore_aft = _columns(text, f"firmware/data/{GRF_CSV}",
+                                           ("percent_gait", "grf_vertical_bw_mean", "grf_anterior_posterior_bw_mean"),
+                                           SPEEDS[speed or "free"])
+    from hal.virtual.ground_sensors import load_ground_profile  # numpy and the sensor models: only when walking
+
+    foot = load_ground_profile()[2]
+    return GroundReaction(load, percent, vertical, fore_aft, ankle_height_m=foot.ankle_height_m, heel_m=foot.heel_m,
+                          toe_m=foot.toe_m)

@@ -42,6 +42,8 @@ class LoadDetector:
         self.changed_s = -math.inf
         self.heel_strikes = 0
         self.toe_offs = 0
+        self.heel_strike_s: list[float] = []  # when each was detected (for the detection latency)
+        self.toe_off_s: list[float] = []
 
     def update(self, now_s: float, current_meas_a: float, angle_rad: float, accel_rad_s2: float) -> bool:
         """Take one period's measurements; return True while in stance."""
@@ -55,8 +57,10 @@ class LoadDetector:
                 self.stance = False
                 self.changed_s = now_s
                 self.toe_offs += 1
+                self.toe_off_s.append(now_s)
         elif load > self.on_nm and held_s >= self.min_swing_s:
             self.stance = True
             self.changed_s = now_s
             self.heel_strikes += 1
+            self.heel_strike_s.append(now_s)
         return self.stance

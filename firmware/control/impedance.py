@@ -22,6 +22,11 @@ firmware/control/gait_events.py):
   ``push_moment_nm_per_kg`` times the body mass, or the angle passes ``push_angle_deg``;
 - any stance phase -> SWING on toe off (``obs.stance`` becomes false).
 
+With the ground sensors fitted and healthy (``obs.ground_sensors_ok``: the load cell and the heel/toe FSRs,
+firmware/control/ground_events.py), ``obs.stance`` comes from them, EARLY -> MID is foot flat (the toe FSR
+comes on) and MID -> LATE is heel off (the heel FSR goes off) or the load cell's sagittal moment passing
+the push threshold; otherwise the transitions above.
+
 Stance parameters are per kg of body mass, from the quasi-stiffness of the normative ankle
 (firmware/data/ankle_normative.csv, the moment-angle slope of each sub-phase): early stance
 2 N m/rad/kg about -2 deg; mid stance 5.2 N m/rad/kg about -1 deg; late stance 2.65 N m/rad/kg about
@@ -118,6 +123,12 @@ class Impedance:
             return EARLY_STANCE if obs.stance else SWING
         if not obs.stance:
             return SWING  # toe off
+        if obs.ground_sensors_ok:  # the foot's own sensors: foot flat when the toes touch, push-off at heel off
+            if phase == EARLY_STANCE and obs.toe_contact:
+                return MID_STANCE
+            if phase == MID_STANCE and (not obs.heel_contact or obs.sagittal_moment_nm > self.push_moment_nm):
+                return LATE_STANCE
+            return phase
         if phase == EARLY_STANCE and obs.velocity_rad_s > self.flat_velocity_rad_s:
             return MID_STANCE
         if phase == MID_STANCE and (obs.load_torque_nm > self.push_moment_nm or obs.angle_rad > self.push_angle_rad):

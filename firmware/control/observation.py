@@ -27,12 +27,19 @@ class Observation:
         self.gait_phase = 0.0  # 0..1 through the stride on the firmware's gait clock (0 before the gait)
         self.stance = False  # the firmware's load detector: the foot carries the body
         self.load_torque_nm = 0.0  # that detector's estimate of the external moment at the ankle
+        # the ground sensors (load cell, heel/toe FSRs on the ADC), on boards that have them:
+        self.ground_sensors_ok = False  # True while they are fitted and healthy: `stance` comes from them
+        self.heel_contact = False  # heel FSR on
+        self.toe_contact = False  # toe FSR on
+        self.axial_force_n = 0.0  # load cell, compression positive
+        self.sagittal_moment_nm = 0.0  # load cell, positive when the ground reaction is ahead of the pylon
 
     def __repr__(self) -> str:
         """Every field, for a user's print()."""
         names = ("t_s", "dt_s", "reference_rad", "reference_velocity_rad_s", "reference_acceleration_rad_s2",
                  "angle_rad", "velocity_rad_s", "encoder_angle_rad", "imu_pitch_rad", "motor_current_a",
-                 "gait_phase", "stance", "load_torque_nm")
+                 "gait_phase", "stance", "load_torque_nm", "ground_sensors_ok", "heel_contact", "toe_contact",
+                 "axial_force_n", "sagittal_moment_nm")
         return "Observation(" + ", ".join(f"{n}={getattr(self, n)!r}" for n in names) + ")"
 
 

@@ -1,15 +1,19 @@
-"""pyserial URL handler ``sim://``: a virtual AK60-6 or BNO08x on a virtual plant, in wall-clock time.
+"""pyserial URL handler ``sim://``: a virtual AK60-6, BNO08x or ground-sensor board on a virtual plant, in
+wall-clock time.
 
 After :func:`register_sim_handler` (which lists ``hal.serial`` in ``serial.protocol_handler_packages``)
 any pyserial program can open::
 
     serial.serial_for_url("sim://ak60-6?baud=921600", timeout=0.1)
     serial.serial_for_url("sim://bno08x")          # 115200, banner then RVC frames at 100 Hz
+    serial.serial_for_url("sim://ground-sensors")  # 115200, a Firmata board with the load cell and FSRs
 
-URL: ``sim://DEVICE[?baud=N&fixture=NAME&seed=S]``; DEVICE is ``ak60-6`` (alias ``motor``) or ``bno08x``
-(alias ``imu``). The baud is the URL's, else the port's ``baudrate`` unless that is pyserial's default
-9600, else the device's default. The device runs on the wall clock from ``open()``: a read returns only
-bytes whose stop bit has ended by now; writes go on the wire from the moment of the call. Timeouts follow
+URL: ``sim://DEVICE[?baud=N&fixture=NAME&seed=S]``; DEVICE is ``ak60-6`` (alias ``motor``), ``bno08x``
+(alias ``imu``) or ``ground-sensors`` (alias ``firmata``: the load cell and FSRs, unloaded, behind a Firmata
+board; hal/virtual/devices/firmata_board.py). The baud is the URL's, else the port's ``baudrate`` unless
+that is pyserial's default 9600, else the device's default. The device runs on the wall clock from
+``open()``: a read returns only bytes whose stop bit has ended by now; writes go on the wire from the moment
+of the call. Timeouts follow
 pyserial: ``timeout=None`` blocks until ``size`` bytes, ``0`` returns at once, a float waits up to that
 many seconds (polling every 0.5 ms). A baud rate changed after opening is ignored (logged).
 """

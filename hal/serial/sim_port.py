@@ -1,4 +1,5 @@
-"""Virtual devices on the wall clock: the AK60-6 and/or BNO08x on one plant, ticks = nanoseconds since start.
+"""Virtual devices on the wall clock: the AK60-6, BNO08x and/or the ground sensors' Firmata board on one plant,
+ticks = nanoseconds since start.
 
 Used by the pyserial ``sim://`` URL handler (:mod:`hal.serial.protocol_sim`) and by ``pafp emulate``.
 The device models and the plant are the very ones of the virtual bench; only the clock differs: a
@@ -12,6 +13,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qs, urlsplit
 
 from hal.virtual.bench import fixture_by_name
@@ -21,15 +23,21 @@ from hal.virtual.devices.world import World
 from hal.virtual.plant import Fixture, Plant
 from hal.virtual.uart import VirtualUart
 
+if TYPE_CHECKING:  # the ground sensors are imported when served: a sim:// port of another device stays quick to open
+    from hal.virtual.devices.firmata_board import FirmataBoard
+    from hal.virtual.ground_sensors import GroundSensors
+
 __all__ = ["DEFAULT_BAUDS", "DEVICE_ROLES", "NS_PER_S", "SimUrl", "WallDevices", "arrival_end_times",
            "parse_sim_url"]
 
 NS_PER_S = 1_000_000_000
 DEVICE_ROLES: Mapping[str, str] = {"ak60-6": "motor", "ak60": "motor", "motor": "motor",
-                                   "bno08x": "imu", "bno085": "imu", "imu": "imu"}
+                                   "bno08x": "imu", "bno085": "imu", "imu": "imu",
+                                   "ground-sensors": "ground", "firmata": "ground", "ground": "ground"}
 """Device names accepted after ``sim://`` and the role each one plays."""
-DEFAULT_BAUDS: Mapping[str, int] = {"motor": 921_600, "imu": 115_200}
-"""Default baud per role: 921600 for the AK60-6 (PROTOCOLS.md C), 115200 for UART-RVC (D.1)."""
+DEFAULT_BAUDS: Mapping[str, int] = {"motor": 921_600, "imu": 115_200, "ground": 115_200}
+"""Default baud per role: 921600 for the AK60-6 (PROTOCOLS.md C), 115200 for UART-RVC (D.1) and for the
+ground sensors' Firmata board (docs/hardware.md, "Ground sensors")."""
 _OPTIONS = ("baud", "fixture", "seed")
 
 
@@ -121,23 +129,33 @@ class WallDevices:
         self.uarts: dict[str, VirtualUart] = {}
         self.motor: Ak60 | None = None
         self.imu: Bno08x | None = None
+        self.ground: FirmataBoard | None = None  # the ground sensors' acquisition board (unloaded: no ground here)
+        self.ground_sensors: GroundSensors | None = None
         bauds = dict(bauds or {})
         for role in dict.fromkeys(roles):
             if role not in DEFAULT_BAUDS:
                 raise ValueError(f"role {role!r} unknown: one of {sorted(DEFAULT_BAUDS)}")
             baud = bauds.get(role, DEFAULT_BAUDS[role])
             uart = VirtualUart(self.now, NS_PER_S, baud, rx_buffer_size, tx_queue_size, name=role)
-            device: Ak60 | Bno08x
+            device: Ak60 | Bno08x | FirmataBoard
             if role == "motor":
                 device = self.motor = Ak60(self.world, link=uart)
-            else:
+            elif role == "imu":
                 device = self.imu = Bno08x(self.world, seed=seed, link=uart)
+            else:
+                from hal.virtual.devices.firmata_board import FirmataBoard
+                from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, wire_ground_sensors
+                from hal.virtual.plant.ground import NoGround
+
+                sensors = wire_ground_sensors(None, NS_PER_S, NoGround(), AdcSettings(), seed=seed)
+                self.ground_sensors = sensors
+                device = self.ground = FirmataBoard(self.world, sensors.codes_at, len(ADC_CHANNELS), link=uart)
             uart.connect(device)
             self.uarts[role] = uart
 
-    def device(self, role: str) -> Ak60 | Bno08x:
+    def device(self, role: str) -> Ak60 | Bno08x | FirmataBoard:
         """The device model playing role."""
-        dev = self.motor if role == "motor" else self.imu if role == "imu" else None
+        dev = {"motor": self.motor, "imu": self.imu, "ground": self.ground}.get(role)
         if dev is None:
             raise ValueError(f"no device plays role {role!r}; served: {sorted(self.uarts)}")
         return dev
@@ -148,7 +166,7 @@ class WallDevices:
 
     def next_event_ns(self) -> int:
         """The earliest scheduled device event (a time to wake up for)."""
-        return min(d.next_event for d in (self.motor, self.imu) if d is not None)
+        return min(d.next_event for d in (self.motor, self.imu, self.ground) if d is not None)
 
     def close(self) -> None:
         """Close the UARTs."""

@@ -7,14 +7,16 @@ the e-stop input, the status LED and the watchdog; all devices share one :class:
 and are advanced in time order by one :class:`~hal.virtual.devices.world.World`. It hands the
 firmware a :class:`~hal.interfaces.Board`, the scheduler its interrupt sources, and tests their
 fault-injection handles (``motor_uart.inject_garbage``, ``imu.silence``, ``motor.inject_fault``,
-``estop.set_at``). It also serves as the ``SimContext`` of ``hal.binding`` for ``sim://`` bindings.
+``estop.set_at``, ``ground_sensors.set_fault``). With ``ground_sensors`` the board also has the ADC with the
+pylon load cell and the heel/toe FSRs under ``ground`` (default: no ground, the sensors unloaded). It also
+serves as the ``SimContext`` of ``hal.binding`` for ``sim://`` bindings.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart
 from hal.links import link_entry, resolve
@@ -30,6 +32,10 @@ from hal.virtual.devices.world import World
 from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.mcu import VirtualMcu
 from hal.virtual.plant import Fixture, Plant, PlantParams, backdrive, spring_bench, suspended
+from hal.virtual.plant.ground import NoGround
+
+if TYPE_CHECKING:  # imported when fitted (numpy and the sensor models): a bench without them starts quicker
+    from hal.virtual.ground_sensors import AdcSettings, GroundSensors
 
 __all__ = ["FIXTURES", "VirtualBench", "fixture_by_name"]
 
@@ -92,6 +98,9 @@ class VirtualBench:
         can_bitrate: int = 1_000_000,
         can_id: int = 1,
         can_options: Mapping[str, Any] | None = None,
+        ground_sensors: bool = False,
+        ground: Any = None,
+        adc: AdcSettings | None = None,
     ) -> None:
         """Build the bench at cycle 0 (see the class docstring); the plant starts at rest at initial_angle_rad."""
         self.f_cpu_hz = f_cpu_hz
@@ -125,8 +134,17 @@ class VirtualBench:
         self.led = mcu.digital_out("led")
         self._watchdog_target: Any = None
         self.watchdog = mcu.watchdog(self._forward_kick)
+        self.ground: Any = ground if ground is not None else NoGround()
+        """What the ground does to the foot (``at(t_s) -> (F_z, F_x, CoP)``); nothing on the suspended bench."""
+        self.ground_sensors: GroundSensors | None = None
+        if ground_sensors:
+            from hal.virtual.ground_sensors import AdcSettings, wire_ground_sensors
+
+            self.ground_sensors = wire_ground_sensors(mcu.now, f_cpu_hz, self.ground, adc or AdcSettings(), seed=seed)
+        """The load cell and heel/toe FSRs on the ADC, when fitted (hal/virtual/ground_sensors.py)."""
         self.board: Board = mcu.board(self.motor_uart, self.imu_uart, self.telemetry_uart, self.encoder,
-                                      self.estop, self.led, self.watchdog, self.can)
+                                      self.estop, self.led, self.watchdog, self.can,
+                                      self.ground_sensors.adc if self.ground_sensors else None)
         """The peripherals handed to the firmware."""
 
     # ------------------------------------------------------------------ wiring

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import fields
 from typing import Any
 
-__all__ = ["check_field_ranges", "check_int"]
+__all__ = ["check_field_ranges", "check_int", "from_table"]
 
 
 def check_int(label: str, value: object, minimum: int) -> int:
@@ -50,3 +50,16 @@ def check_field_ranges(config: Any, ranges: Mapping[str, tuple[float, float]]) -
         if isinstance(value, bool) or not isinstance(value, int | float) or not (
                 math.isfinite(value) and lo <= value <= hi):
             raise ValueError(f"{type(config).__name__}.{f.name} = {value!r} is outside the allowed range [{lo}, {hi}]")
+
+
+def from_table(cls: Any, table: Mapping[str, Any], section: str) -> Any:
+    """The dataclass ``cls`` built from a profile table; keys ending in ``_source`` (citations) are skipped.
+
+    ValueError naming the section and an unknown key.
+    """
+    values = {k: v for k, v in table.items() if not k.endswith("_source")}
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"[{section}] has no key {unknown[0]!r}: known {sorted(known)}")
+    return cls(**values)

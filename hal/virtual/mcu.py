@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 from hal.can import CanPort
-from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart, Watchdog
+from hal.interfaces import Adc, Board, DigitalIn, DigitalOut, EncoderTimer, Uart, Watchdog
 from hal.virtual.gpio import VirtualDigitalIn, VirtualDigitalOut, VirtualWatchdog
 from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.timer import SysTick, VirtualEncoderTimer
@@ -109,8 +109,9 @@ class VirtualMcu:
         led: DigitalOut,
         watchdog: Watchdog,
         can: CanPort | None = None,
+        adc: Adc | None = None,
     ) -> Board:
         """Bundle peripherals with this MCU's clock into the Board handed to the firmware."""
         return Board(
-            motor_uart, imu_uart, telemetry_uart, encoder, estop, led, watchdog, self.now, self.f_cpu_hz, can
+            motor_uart, imu_uart, telemetry_uart, encoder, estop, led, watchdog, self.now, self.f_cpu_hz, can, adc
         )

@@ -1,6 +1,7 @@
-"""`pafp emulate`: serve the virtual AK60-6 and/or BNO08x on new ptys or real serial ports, in wall-clock time.
+"""`pafp emulate`: serve the virtual AK60-6 and/or BNO08x (or the ground sensors' Firmata board) on new ptys or
+real serial ports, in wall-clock time.
 
-``pafp emulate motor|imu|bench (--pty | --port DEVICE [--imu-port DEVICE]) [--baud N] [--fixture NAME]
+``pafp emulate motor|imu|bench|ground (--pty | --port DEVICE [--imu-port DEVICE]) [--baud N] [--fixture NAME]
 [--seed S] [--duration S]``. ``bench`` serves the motor and the IMU on one shared plant. Before serving it
 prints one line per device, ``motor: PATH`` / ``imu: PATH``, and flushes. It then runs until Ctrl-C or
 SIGTERM or SIGHUP (or ``--duration``) and exits 0 after one summary line. A port that cannot be opened or a bad
@@ -35,7 +36,7 @@ from host_tools.wire_capture import WireCapture
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
 MAX_SLEEP_S = 0.001
-_ROLES = {"motor": ("motor",), "imu": ("imu",), "bench": ("motor", "imu")}
+_ROLES = {"motor": ("motor",), "imu": ("imu",), "bench": ("motor", "imu"), "ground": ("ground",)}
 
 
 class EmulateError(Exception):
@@ -68,7 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "(any python-can interface, e.g. socketcan/can0 or udp_multicast/239.74.163.2)")
     parser.add_argument("--imu-port", metavar="DEVICE", help="bench with --port: the IMU's serial port")
     parser.add_argument("--baud", type=int, default=None,
-                        help="link baud: the motor's (default 921600), or the IMU's for `imu` (default 115200)")
+                        help="link baud: the motor's (default 921600), or the IMU's for `imu` or the Firmata "
+                             "board's for `ground` (default 115200)")
     parser.add_argument("--fixture", default="suspended", choices=sorted(FIXTURES), help="bench fixture")
     parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
@@ -110,7 +112,7 @@ def _bauds(args: argparse.Namespace) -> dict[str, int]:
         return {}
     if not 1 <= args.baud <= 20_000_000:
         raise EmulateError(f"--baud {args.baud} out of range: 1..20000000")
-    return {"imu" if args.device == "imu" else "motor": args.baud}
+    return {args.device if args.device in ("imu", "ground") else "motor": args.baud}
 
 
 def _endpoints(args: argparse.Namespace, devices: WallDevices) -> list[Endpoint]:
@@ -289,6 +291,10 @@ def _summary(devices: WallDevices, endpoints: list[Endpoint], reason: str) -> st
             errors = ds.crc_errors + ds.bad_end_bytes + ds.short_payloads + ds.unknown_ids
             counts = (f"frames_in={ds.frames} frames_out={st.requests + st.stream_frames} "
                       f"errors={errors} junk_bytes={ds.dropped_bytes}")
+        elif ep.role == "ground":
+            ds = dev.decoder.stats  # type: ignore[union-attr]
+            counts = (f"frames_in={ds.report_analog + ds.sysex} frames_out={dev.messages_sent} "  # type: ignore[union-attr]
+                      f"junk_bytes={ds.dropped}")
         else:
             counts = f"frames_in=0 frames_out={dev.frames_sent} ignored_bytes={dev.bytes_ignored}"  # type: ignore[union-attr]
         failed = f" failed='{ep.failed}'" if ep.failed else ""

@@ -61,6 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                       help="the gait (angle reference and, walking, moment) of that speed group of the packaged "
                            "normative data (Schwartz et al. 2008; default: free speed); the stride time stays "
                            "the profile's")
+    walk.add_argument("--ground-sensors", choices=("auto", "on", "off"), default="auto",
+                      help="the pylon load cell and heel/toe FSRs on the ADC, gait events from them (docs/hardware.md, "
+                           "'Ground sensors'): auto (default) fits them when walking")
+    walk.add_argument("--sensor-fault", action="append", default=[], metavar="PART:MODE",
+                      help="start with a ground sensor failed: fsr_heel:open|short, fsr_toe:open|short, "
+                           "load_cell:open|stuck_high; repeatable (the firmware falls back to its motor-load estimate)")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -69,6 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "prints its path for `pafp monitor PATH`")
     serial.add_argument("--encoder", choices=("motor", "sim"), default="motor",
                         help="encoder from the motor's position feedback (default) or the in-process plant")
+    serial.add_argument("--ground", metavar="PORT", default=None,
+                        help="the ground sensors' Firmata board (load cell, heel/toe FSRs on A0..A3; docs/hardware.md, "
+                             "'Ground sensors'): device path, pyserial URL or sim://ground-sensors")
     serial.add_argument("--duration", type=float, default=10.0, metavar="S", help="run time in s (default 10)")
     serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
     serial.add_argument("--reconnect", action="store_true",
@@ -127,7 +136,9 @@ def run(args: argparse.Namespace) -> int:
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
                         plant_seed=args.plant_seed, ideal=tuple(args.ideal),
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
-                        body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed)
+                        body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
+                        ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
+                        sensor_faults=tuple(args.sensor_fault))
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 
@@ -261,7 +272,8 @@ def _run_serial(args: argparse.Namespace) -> int:
                               duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
                               board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
-                              realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
+                              realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings(),
+                              ground=args.ground)
         if args.telemetry == "pty":
             from host_tools.telemetry_pty import TelemetryPty
 

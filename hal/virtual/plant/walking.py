@@ -50,6 +50,10 @@ class WalkingLoad:
         """Take the stride clock from gait_start_s() (None until the gait has a start time)."""
         self._start = gait_start_s
 
+    def start_s(self) -> float | None:
+        """When the first stride began (None until the gait has a start time)."""
+        return self._start()
+
     def moment_nm(self, percent: float) -> float:
         """The ankle moment the stride demands at percent of the stride (0 in swing)."""
         if percent >= self.toe_off_pct:
