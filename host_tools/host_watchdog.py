@@ -169,7 +169,9 @@ class HostWatchdog:
         self.t0 = clock()
         self.record = WatchdogRecord(True, round(timeout_s * 1e3, 3), sender.handle)
         self._last = self.t0
-        self._halt = threading.Event()
+        self._halt = threading.Event()  # wakes the thread to end (close)
+        self._halted = False  # no more writes (halt: a flag, so the stop path does not wait for the thread to run)
+        self._sending = threading.Lock()  # held while writing: halt() waits for a write under way
         self._thread = threading.Thread(target=self._watch, name="pafp-host-watchdog", daemon=True)
 
     def start(self) -> None:
@@ -191,9 +193,10 @@ class HostWatchdog:
                 if self._halt.wait(due - now):
                     return
                 continue
-            if self._halt.is_set():
-                return
-            self._fire(now, last)
+            with self._sending:
+                if self._halted:
+                    return
+                self._fire(now, last)
             sent_at = self.clock()
 
     def _fire(self, now: float, last: float) -> None:
@@ -211,8 +214,16 @@ class HostWatchdog:
             log.error("host watchdog: no kick for %.0f ms (task %s running): sent zero current and the brake",
                       r.silent_ms, r.task)
 
+    def halt(self) -> WatchdogRecord:
+        """Stop writing: once this returns nothing more is sent (a write under way is waited for). Call it
+        before the stop path writes, so the stop path's frames are the last on the wire."""
+        with self._sending:
+            self._halted = True
+        return self.record
+
     def close(self) -> WatchdogRecord:
-        """Stop watching (before the stop path writes, so the stop path's frames are the last), release."""
+        """Halt, wait for the thread to end, release the handle."""
+        self.halt()
         self._halt.set()
         if self._thread.is_alive():
             self._thread.join()
@@ -236,7 +247,8 @@ def arm_watchdog(motor: Uart, motor_url: str, board: Board, config: FirmwareConf
         elif isinstance(motor, SerialUart):
             sender = FdSender(motor, data)
         else:
-            record.handle = f"not armed: the motor port {motor.name!r} is served in this process and stalls with the loop"
+            record.handle = (f"not armed: the motor port {motor.name!r} is served in this process and stalls with "
+                             "the loop")
             return record
     except (OSError, ValueError, AttributeError, HalError) as exc:  # no descriptor to duplicate, no second bus
         record.handle = f"not armed: {type(exc).__name__}: {exc}"

@@ -94,7 +94,8 @@ def serial_extra(r: SerialRunResult) -> tuple[dict, list[str]]:
           f"Stopped by {stop['reason']}{' ' + stop['signal'] if stop['signal'] else ''} at {stop['at_s']} s; "
           f"stop path: {safe}, {'on the wire' if stop['safe_on_wire'] else 'NOT all on the wire'} "
           f"{stop['latency_ms']} ms after the stop began (goal {stop['goal_ms']} ms)."
-          + (f" The host watchdog fired: {stop['error']}, task `{stop['task']}` running." if stop["reason"] == "watchdog"
+          + (f" The host watchdog fired: {stop['error']}, task `{stop['task']}` running."
+             if stop["reason"] == "watchdog"
              else f" Task `{stop['task']}` raised {stop['error']}." if stop["error"] else ""), "",
           f"Host stalls (warnings, not faults): {warnings['deadline_miss_streaks']} deadline-miss streaks, "
           f"{warnings['watchdog_expiries']} watchdog expiries; {rt['late_releases']} late releases, "

@@ -328,7 +328,11 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     wire = WireCapture(cfg.capture_dir, _since_start(), side="host") if cfg.capture_dir is not None else None
     ports.untapped_motor = ports.motor
     if wire is not None:
-        ports.motor, ports.imu = wire.tap("motor", ports.motor), wire.tap("imu", ports.imu)
+        ports.imu = wire.tap("imu", ports.imu)
+        if ports.can is not None:  # the motor's frames, as a candump log (the motor's UART stands unused)
+            ports.can = wire.tap_can("motor", ports.can, f"can-{parse_can_url(cfg.motor, '--motor').mode}")
+        else:
+            ports.motor = wire.tap("motor", ports.motor)
     try:
         # over CAN no start-up check: a silent bus is caught by the supervisor (MOTOR_TIMEOUT)
         seen = {"motor": 0 if ports.can is not None else check_motor(ports.motor, cfg.motor,
@@ -410,19 +414,19 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     error: BaseException | None = None
     failed_task: str | None = None
     with section:
+        if host_wd is not None and signals.name is None:
+            host_wd.start()  # before the anchor: starting a thread takes a few ms on a busy host
         started_unix = time.time()  # the wall clock is anchored at cycle 0 right after this
         wall0_ns = time.perf_counter_ns()
         try:
             if signals.name is None:  # a signal during the start-up: straight to the stop path
-                if host_wd is not None:
-                    host_wd.start()
                 sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
         except BaseException as exc:  # a task raised (SystemExit too): the firmware's bug, reported after the stop path
             if not (isinstance(exc, KeyboardInterrupt) and signals.name is not None):  # not the second signal
                 error, failed_task = exc, timings.running or "serial_probe"  # the one body not instrumented
                 log.error("task %s raised %r: stopping", failed_task, exc)
-        finally:  # stopped before the stop path, whose frames are then the last on the wire
-            watch = host_wd.close() if host_wd is not None else armed
+        finally:  # halted before the stop path, whose frames are then the last on the wire
+            watch = host_wd.halt() if host_wd is not None else armed
         run_s = sched.now / f_cpu
         assert isinstance(watch, WatchdogRecord)
         if watch.fired_at_s is not None:
@@ -430,6 +434,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s, watch)
         stop.safe = fw.stop(run_s, STOP_DRAIN_TIMEOUT_S)  # the stop path: on the wire before any port closes
         done_ns = time.perf_counter_ns()
+        if host_wd is not None:
+            host_wd.close()  # its thread and its handle
         wall = (done_ns - wall0_ns) / 1e9
     period_s = fw.ts_s
     wire_s = (len(stop.safe.frames) * 10 / ports.motor.baud if ports.can is None
