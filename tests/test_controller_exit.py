@@ -118,3 +118,61 @@ def test_serial_run_over_uart_blocking_controller_gets_the_safe_frames_from_the_
     k = next(i for i, (_, offset, n) in enumerate(rows) if offset <= first < offset + n)
     gap_s = rows[k][0] - rows[k - 1][0]  # from the last bytes the loop sent to the watchdog's frames
     assert gap_s < 1.0, gap_s  # the motor's own timeout; the controller slept 2 s
+
+
+@pytest.mark.parametrize("mode", ["servo", "mit"])
+def test_serial_run_over_can_stops_safely_when_the_controller_exits(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], mode: str) -> None:
+    pytest.importorskip("can")
+    pytest.importorskip("msgpack")
+    from test_serial_can import assert_stopped_safely_on_can, can_bench, can_url, stop_bench
+
+    url = can_url(mode, 1)
+    bench, imu = can_bench(url, tmp_path / "device")
+    out = tmp_path / "out"
+    try:
+        code = main(["run", "--motor", url, "--imu", imu, "--duration", "2.5", "--out", str(out), "--quiet",
+                     "--controller", f"{CONTROLLERS}:Exits"])
+    finally:
+        stop_bench(bench)
+    err = capsys.readouterr().err
+    s = assert_outputs_complete(out)
+    assert code == 1 and s["exit_code"] == 1, err
+    assert s["stop"]["reason"] == "duration" and s["stop"]["safe_on_wire"], s["stop"]
+    if s["fault"]["reason"] == "CONTROLLER_ERROR":  # else a host stall latched first (the controller never ran on)
+        assert "raised SystemExit: 0" in s["controller"]["error"] and "raised SystemExit: 0" in err
+    assert_stopped_safely_on_can(tmp_path / "device" / "motor.can.log", mode)
+
+
+@pytest.mark.parametrize("mode", ["servo", "mit"])
+def test_serial_run_over_can_blocking_controller_gets_the_safe_frames_from_the_host_watchdog(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], mode: str) -> None:
+    pytest.importorskip("can")
+    pytest.importorskip("msgpack")
+    from test_serial_can import assert_stopped_safely_on_can, can_bench, can_url, received, safe_frames, stop_bench
+
+    url = can_url(mode, 2)
+    bench, imu = can_bench(url, tmp_path / "device")
+    out = tmp_path / "out"
+    try:
+        code = main(["run", "--motor", url, "--imu", imu, "--duration", "4", "--out", str(out), "--quiet",
+                     "--controller", f"{CONTROLLERS}:Blocks"])
+    finally:
+        stop_bench(bench)
+    err = capsys.readouterr().err
+    s = assert_outputs_complete(out)
+    assert code == 1 and s["exit_code"] == 1, err
+    stop, hw = s["stop"], s["host_watchdog"]
+    assert stop["reason"] == "watchdog" and stop["task"] == "control" and stop["safe_on_wire"], stop
+    assert hw["armed"] and hw["handle"].startswith("second bus") and hw["fired"] and hw["sends"] >= 3, hw
+    assert hw["timeout_ms"] <= hw["silent_ms"] < 1000.0, hw
+    # the motor's side: the watchdog's frames long before the 2 s block ended, the stop path's last
+    log = tmp_path / "device" / "motor.can.log"
+    assert_stopped_safely_on_can(log, mode)
+    got = received(log)
+    pair = safe_frames(mode)
+    keys = [(m.arbitration_id, bytes(m.data)) for m in got]
+    starts = [i for i in range(1, len(keys) - 1) if keys[i:i + 2] == pair]
+    assert len(starts) >= 3, len(starts)  # the watchdog's, again while the loop slept, then the stop path's
+    gap_s = got[starts[0]].timestamp - got[starts[0] - 1].timestamp
+    assert gap_s < 1.0, gap_s  # the motor's own timeout; the controller slept 2 s
