@@ -83,8 +83,9 @@ def test_can_stop_latency_and_host_watchdog_bound(benchmark, tmp_path: Path) -> 
         rows: dict[str, dict] = {}
         for mode in ("servo", "mit"):
             stops = [_can_stop(tmp_path / f"can-{mode}-{k}", mode, k) for k in range(RUNS)]
-            rows[f"CAN {mode} stop latency"] = {"median_ms": statistics.median(s["latency_ms"] for s in stops),
-                                                "goal_ms": stops[0]["goal_ms"], "runs": [s["latency_ms"] for s in stops]}
+            latencies = [s["latency_ms"] for s in stops]
+            rows[f"CAN {mode} stop latency"] = {"median_ms": statistics.median(latencies),
+                                                "goal_ms": stops[0]["goal_ms"], "runs": latencies}
         for link in ("uart", "can"):
             runs = [_watchdog(tmp_path / f"wd-{link}-{k}", link, k) for k in range(RUNS)]
             rows[f"host watchdog over {link}"] = {
