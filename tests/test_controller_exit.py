@@ -58,25 +58,58 @@ def test_virtual_run_latches_controller_error_and_writes_everything(
     assert_safe_at_the_end((capture / "motor.tx.bin").read_bytes())
 
 
-@pytest.mark.parametrize(("cls", "named"), WAYS_OUT)
-def test_serial_run_over_uart_stops_safely_when_the_controller_exits(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], cls: str, named: str) -> None:
-    bench, motor, imu = _emulator(20.0, "--capture", str(tmp_path / "device"))
+def run_against_emulator(tmp_path: Path, link: str, controller: str, duration_s: float, mode: str = "servo",
+                         tag: int = 0) -> tuple[int, dict, Path]:
+    """`pafp run` with `controller` against `pafp emulate bench` (--pty, or --can on udp_multicast), capturing on
+    the motor's side: the exit code, summary.json (every output checked) and the emulator's capture folder."""
+    device = tmp_path / "device"
+    if link == "uart":
+        bench, motor, imu = _emulator(20.0, "--capture", str(device))
+        stop = lambda: _stop(bench)  # noqa: E731
+    else:
+        pytest.importorskip("can")
+        pytest.importorskip("msgpack")
+        from test_serial_can import can_bench, can_url, stop_bench
+
+        motor = can_url(mode, tag)
+        can_proc, imu = can_bench(motor, device)
+        stop = lambda: stop_bench(can_proc)  # noqa: E731
     out = tmp_path / "out"
     try:
-        code = main(["run", "--motor", motor, "--imu", imu, "--duration", "2.5", "--out", str(out), "--quiet",
-                     "--controller", f"{CONTROLLERS}:{cls}"])
+        code = main(["run", "--motor", motor, "--imu", imu, "--duration", str(duration_s), "--out", str(out),
+                     "--quiet", "--controller", f"{CONTROLLERS}:{controller}"])
     finally:
-        _stop(bench)
-    err = capsys.readouterr().err
-    s = assert_outputs_complete(out)
-    assert code == 1 and s["exit_code"] == 1, err
-    stop = s["stop"]
-    assert stop["reason"] == "duration" and stop["signal"] is None and stop["safe_on_wire"], stop
-    if s["fault"]["reason"] == "CONTROLLER_ERROR":  # else a host stall latched first (the controller never ran on)
-        assert f"raised {named}" in s["controller"]["error"] and f"raised {named}" in err
-    # the motor's side of the wire: the stop path's zero current then brake are the last frames it got
-    assert_stopped_safely((tmp_path / "device" / "motor.rx.bin").read_bytes())
+        stop()
+    return code, assert_outputs_complete(out), device
+
+
+def assert_stopped_safely_on(device: Path, link: str, mode: str = "servo") -> None:
+    """The motor's side of the wire (the emulator's capture): the stop path's frames are the last it got."""
+    if link == "uart":
+        assert_stopped_safely((device / "motor.rx.bin").read_bytes())
+    else:
+        from test_serial_can import assert_stopped_safely_on_can
+
+        assert_stopped_safely_on_can(device / "motor.can.log", mode)
+
+
+def watchdog_on_the_wire(device: Path, link: str, mode: str = "servo") -> tuple[float, int]:
+    """On the motor's side: ms from the loop's last bytes (frame) to the first safe pair, and how many pairs came."""
+    if link == "uart":
+        to_motor = (device / "motor.rx.bin").read_bytes()
+        safe = SetCurrent(0.0).encode() + SetCurrentBrake(2.0).encode()
+        first = to_motor.find(safe)
+        assert first > 0, "no safe frames"
+        rows = _rows(device / "index.csv", "motor.rx.bin")
+        k = next(i for i, (_, offset, n) in enumerate(rows) if offset <= first < offset + n)
+        return (rows[k][0] - rows[k - 1][0]) * 1e3, to_motor.count(safe)
+    from test_serial_can import received, safe_frames
+
+    got = received(device / "motor.can.log")
+    keys = [(m.arbitration_id, bytes(m.data)) for m in got]
+    starts = [i for i in range(1, len(keys) - 1) if keys[i:i + 2] == safe_frames(mode)]
+    assert starts, "no safe frames"
+    return (got[starts[0]].timestamp - got[starts[0] - 1].timestamp) * 1e3, len(starts)
 
 
 def _rows(index: Path, file: str) -> list[tuple[float, int, int]]:
@@ -89,90 +122,45 @@ def _rows(index: Path, file: str) -> list[tuple[float, int, int]]:
     return rows
 
 
-def test_serial_run_over_uart_blocking_controller_gets_the_safe_frames_from_the_host_watchdog(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    device = tmp_path / "device"
-    bench, motor, imu = _emulator(20.0, "--capture", str(device))
-    out = tmp_path / "out"
-    try:
-        code = main(["run", "--motor", motor, "--imu", imu, "--duration", "4", "--out", str(out), "--quiet",
-                     "--controller", f"{CONTROLLERS}:Blocks"])
-    finally:
-        _stop(bench)
-    err = capsys.readouterr().err
-    s = assert_outputs_complete(out)
-    assert code == 1 and s["exit_code"] == 1, err
-    stop, hw = s["stop"], s["host_watchdog"]
-    assert stop["reason"] == "watchdog" and stop["task"] == "control" and stop["safe_on_wire"], stop
-    assert s["fault"]["reason"] in ("WATCHDOG", "COMMAND_STALE", "MOTOR_TIMEOUT", "IMU_TIMEOUT"), s["fault"]
-    assert hw["armed"] and hw["fired"] and hw["sends"] >= 3, hw  # sent again every timeout while the loop slept
-    assert hw["timeout_ms"] <= hw["silent_ms"] < 1000.0 and stop["latency_ms"] == hw["silent_ms"], hw
-    assert "host watchdog fired" in err
-    # the motor's side: the watchdog's frames came long before the 2 s block ended, the stop path's are last
-    to_motor = (device / "motor.rx.bin").read_bytes()
-    assert_stopped_safely(to_motor)
-    safe = SetCurrent(0.0).encode() + SetCurrentBrake(2.0).encode()
-    first = to_motor.find(safe)
-    assert first > 0 and to_motor.count(safe) >= 3
-    rows = _rows(device / "index.csv", "motor.rx.bin")
-    k = next(i for i, (_, offset, n) in enumerate(rows) if offset <= first < offset + n)
-    gap_s = rows[k][0] - rows[k - 1][0]  # from the last bytes the loop sent to the watchdog's frames
-    assert gap_s < 1.0, gap_s  # the motor's own timeout; the controller slept 2 s
+@pytest.mark.parametrize(("cls", "named"), WAYS_OUT)
+def test_serial_run_over_uart_stops_safely_when_the_controller_exits(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], cls: str, named: str) -> None:
+    code, s, device = run_against_emulator(tmp_path, "uart", cls, 2.5)
+    _assert_controller_exit(s, code, capsys.readouterr().err, named)
+    assert_stopped_safely_on(device, "uart")
 
 
 @pytest.mark.parametrize("mode", ["servo", "mit"])
 def test_serial_run_over_can_stops_safely_when_the_controller_exits(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], mode: str) -> None:
-    pytest.importorskip("can")
-    pytest.importorskip("msgpack")
-    from test_serial_can import assert_stopped_safely_on_can, can_bench, can_url, stop_bench
+    code, s, device = run_against_emulator(tmp_path, "can", "Exits", 2.5, mode, 1)
+    _assert_controller_exit(s, code, capsys.readouterr().err, "SystemExit: 0")
+    assert_stopped_safely_on(device, "can", mode)
 
-    url = can_url(mode, 1)
-    bench, imu = can_bench(url, tmp_path / "device")
-    out = tmp_path / "out"
-    try:
-        code = main(["run", "--motor", url, "--imu", imu, "--duration", "2.5", "--out", str(out), "--quiet",
-                     "--controller", f"{CONTROLLERS}:Exits"])
-    finally:
-        stop_bench(bench)
-    err = capsys.readouterr().err
-    s = assert_outputs_complete(out)
+
+def _assert_controller_exit(s: dict, code: int, err: str, named: str) -> None:
     assert code == 1 and s["exit_code"] == 1, err
-    assert s["stop"]["reason"] == "duration" and s["stop"]["safe_on_wire"], s["stop"]
+    stop = s["stop"]
+    assert stop["reason"] == "duration" and stop["signal"] is None and stop["safe_on_wire"], stop
     if s["fault"]["reason"] == "CONTROLLER_ERROR":  # else a host stall latched first (the controller never ran on)
-        assert "raised SystemExit: 0" in s["controller"]["error"] and "raised SystemExit: 0" in err
-    assert_stopped_safely_on_can(tmp_path / "device" / "motor.can.log", mode)
+        assert f"raised {named}" in s["controller"]["error"] and f"raised {named}" in err
 
 
-@pytest.mark.parametrize("mode", ["servo", "mit"])
-def test_serial_run_over_can_blocking_controller_gets_the_safe_frames_from_the_host_watchdog(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], mode: str) -> None:
-    pytest.importorskip("can")
-    pytest.importorskip("msgpack")
-    from test_serial_can import assert_stopped_safely_on_can, can_bench, can_url, received, safe_frames, stop_bench
-
-    url = can_url(mode, 2)
-    bench, imu = can_bench(url, tmp_path / "device")
-    out = tmp_path / "out"
-    try:
-        code = main(["run", "--motor", url, "--imu", imu, "--duration", "4", "--out", str(out), "--quiet",
-                     "--controller", f"{CONTROLLERS}:Blocks"])
-    finally:
-        stop_bench(bench)
+@pytest.mark.parametrize(("link", "mode"), [("uart", "servo"), ("can", "servo"), ("can", "mit")])
+def test_blocking_controller_gets_the_safe_frames_from_the_host_watchdog(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], link: str, mode: str) -> None:
+    code, s, device = run_against_emulator(tmp_path, link, "Blocks", 4, mode, 2)
     err = capsys.readouterr().err
-    s = assert_outputs_complete(out)
     assert code == 1 and s["exit_code"] == 1, err
     stop, hw = s["stop"], s["host_watchdog"]
     assert stop["reason"] == "watchdog" and stop["task"] == "control" and stop["safe_on_wire"], stop
-    assert hw["armed"] and hw["handle"].startswith("second bus") and hw["fired"] and hw["sends"] >= 3, hw
-    assert hw["timeout_ms"] <= hw["silent_ms"] < 1000.0, hw
-    # the motor's side: the watchdog's frames long before the 2 s block ended, the stop path's last
-    log = tmp_path / "device" / "motor.can.log"
-    assert_stopped_safely_on_can(log, mode)
-    got = received(log)
-    pair = safe_frames(mode)
-    keys = [(m.arbitration_id, bytes(m.data)) for m in got]
-    starts = [i for i in range(1, len(keys) - 1) if keys[i:i + 2] == pair]
-    assert len(starts) >= 3, len(starts)  # the watchdog's, again while the loop slept, then the stop path's
-    gap_s = got[starts[0]].timestamp - got[starts[0] - 1].timestamp
-    assert gap_s < 1.0, gap_s  # the motor's own timeout; the controller slept 2 s
+    assert s["fault"]["reason"] in ("WATCHDOG", "COMMAND_STALE", "MOTOR_TIMEOUT", "IMU_TIMEOUT"), s["fault"]
+    assert hw["armed"] and hw["fired"] and hw["sends"] >= 3, hw  # sent again every timeout while the loop slept
+    assert hw["handle"].startswith("duplicate of fd" if link == "uart" else "second bus"), hw
+    assert hw["timeout_ms"] <= hw["silent_ms"] < 1000.0 and stop["latency_ms"] == hw["silent_ms"], hw
+    assert "host watchdog fired" in err
+    # the motor's side: the watchdog's frames came long before the 2 s block ended, the stop path's are last
+    assert_stopped_safely_on(device, link, mode)
+    gap_ms, pairs = watchdog_on_the_wire(device, link, mode)
+    assert pairs >= 3  # the watchdog's, again while the loop slept, then the stop path's
+    assert gap_ms < 1000.0, gap_ms  # the motor's own timeout; the controller slept 2 s

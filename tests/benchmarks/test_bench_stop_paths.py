@@ -24,12 +24,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 can = pytest.importorskip("can")
 pytest.importorskip("msgpack")
 
-from test_controller_exit import CONTROLLERS, _rows  # noqa: E402
-from test_serial_can import can_bench, can_url, received, safe_frames, stop_bench  # noqa: E402
-from test_serial_run import _emulator, _stop  # noqa: E402
+from test_controller_exit import run_against_emulator, watchdog_on_the_wire  # noqa: E402
+from test_serial_can import can_bench, can_url, stop_bench  # noqa: E402
 
 from host_tools.cli import main  # noqa: E402
-from protocol.vesc import SetCurrent, SetCurrentBrake  # noqa: E402
 
 RUNS = 3
 
@@ -44,38 +42,9 @@ def _can_stop(tmp: Path, mode: str, k: int) -> dict:
     return json.loads((tmp / "out" / "summary.json").read_text())["stop"]
 
 
-def _uart_gap(device: Path) -> float:
-    to_motor = (device / "motor.rx.bin").read_bytes()
-    first = to_motor.find(SetCurrent(0.0).encode() + SetCurrentBrake(2.0).encode())
-    rows = _rows(device / "index.csv", "motor.rx.bin")
-    k = next(i for i, (_, offset, n) in enumerate(rows) if offset <= first < offset + n)
-    return (rows[k][0] - rows[k - 1][0]) * 1e3
-
-
-def _can_gap(log: Path, mode: str) -> float:
-    got = received(log)
-    keys = [(m.arbitration_id, bytes(m.data)) for m in got]
-    i = next(i for i in range(1, len(keys) - 1) if keys[i:i + 2] == safe_frames(mode))
-    return (got[i].timestamp - got[i - 1].timestamp) * 1e3
-
-
 def _watchdog(tmp: Path, link: str, k: int) -> tuple[float, float]:
-    device = tmp / "device"
-    if link == "uart":
-        bench, motor, imu = _emulator(20.0, "--capture", str(device))
-        stop = lambda: _stop(bench)  # noqa: E731
-    else:
-        motor = can_url("servo", 6 + k)
-        bench, imu = can_bench(motor, device)
-        stop = lambda: stop_bench(bench)  # noqa: E731
-    try:
-        main(["run", "--motor", motor, "--imu", imu, "--duration", "3.5", "--out", str(tmp / "out"), "--quiet",
-              "--controller", f"{CONTROLLERS}:Blocks"])
-    finally:
-        stop()
-    hw = json.loads((tmp / "out" / "summary.json").read_text())["host_watchdog"]
-    gap = _uart_gap(device) if link == "uart" else _can_gap(device / "motor.can.log", "servo")
-    return hw["silent_ms"], gap
+    _, s, device = run_against_emulator(tmp, link, "Blocks", 3.5, "servo", 6 + k)
+    return s["host_watchdog"]["silent_ms"], watchdog_on_the_wire(device, link)[0]
 
 
 def test_can_stop_latency_and_host_watchdog_bound(benchmark, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
