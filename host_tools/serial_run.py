@@ -422,7 +422,10 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
             if signals.name is None:  # a signal during the start-up: straight to the stop path
                 sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
         except BaseException as exc:  # a task raised (SystemExit too): the firmware's bug, reported after the stop path
-            if not (isinstance(exc, KeyboardInterrupt) and signals.name is not None):  # not the second signal
+            if isinstance(exc, KeyboardInterrupt) and (signals.name is not None or not signals.installed):
+                if signals.name is None:  # Ctrl-C with no handler of ours in place (else: the second signal)
+                    signals.name, signals.at_ns = "SIGINT", time.perf_counter_ns()
+            else:
                 error, failed_task = exc, timings.running or "serial_probe"  # the one body not instrumented
                 log.error("task %s raised %r: stopping", failed_task, exc)
         finally:  # halted before the stop path, whose frames are then the last on the wire

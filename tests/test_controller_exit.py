@@ -164,3 +164,32 @@ def test_blocking_controller_gets_the_safe_frames_from_the_host_watchdog(
     gap_ms, pairs = watchdog_on_the_wire(device, link, mode)
     assert pairs >= 3  # the watchdog's, again while the loop slept, then the stop path's
     assert gap_ms < 1000.0, gap_ms  # the motor's own timeout; the controller slept 2 s
+
+
+@pytest.mark.parametrize("raised", [SystemExit(5), KeyboardInterrupt(), GeneratorExit()])
+def test_any_base_exception_from_a_task_ends_in_the_stop_path_with_exit_3(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        raised: BaseException) -> None:
+    """Not the controller (that latches): a task of the firmware itself; no signal came, so no signal is named."""
+    import host_tools.serial_run as serial_run
+
+    calls = [0]
+    angle = serial_run.FeedbackAngle.angle_rad
+
+    def failing(self: serial_run.FeedbackAngle, t: int) -> float:  # the encoder task reads it every period
+        calls[0] += 1
+        if calls[0] == 300:
+            raise raised
+        return angle(self, t)
+
+    monkeypatch.setattr(serial_run.FeedbackAngle, "angle_rad", failing)
+    out, capture = tmp_path / "out", tmp_path / "capture"
+    code = main(["run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--duration", "3", "--out", str(out),
+                 "--capture", str(capture), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 3, err
+    s = assert_outputs_complete(out)
+    stop = s["stop"]
+    assert stop["reason"] == "exception" and stop["signal"] is None and stop["task"] == "encoder", stop
+    assert stop["error"].startswith(type(raised).__name__) and stop["safe_on_wire"], stop
+    assert_stopped_safely((capture / "motor.tx.bin").read_bytes())
