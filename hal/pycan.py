@@ -10,7 +10,8 @@ the wire (python-can cannot report a frame as sent: each frame is taken to occup
 worst-case length after the previous one, so the wait is at most the wire time of the frames still
 possibly queued, not one frame time per frame since the last flush); a python-can error latches as
 :class:`~hal.errors.HalError`. On interfaces that hand a bus its own frames back (``udp_multicast``:
-multicast loopback) the echoes of what this port sent are dropped and counted (``echoes``), not received.
+multicast loopback) the echoes of what this port sent are dropped and counted (``echoes``), not received;
+a ``udp_multicast`` bus hears its own group only (Linux delivers every joined group's datagrams otherwise).
 """
 
 from __future__ import annotations
@@ -156,5 +157,29 @@ def open_can(url: CanUrl, *, receive_own_messages: bool = False) -> PythonCanPor
                       receive_own_messages=receive_own_messages)
     except Exception as exc:  # noqa: BLE001 (python-can raises many kinds: name the URL)
         raise HalError(f"can://{url.interface}/{url.channel}: cannot open ({type(exc).__name__}: {exc})") from exc
+    if url.interface == "udp_multicast":
+        _own_group_only(bus)
     return PythonCanPort(bus, url.bitrate, f"can://{url.interface}/{url.channel}",
                          echoes=url.interface in ECHOING_INTERFACES and not receive_own_messages)
+
+
+def _own_group_only(bus: Any) -> None:
+    """Make a udp_multicast bus hear its own group only.
+
+    python-can binds the socket to the port on every address, and Linux then delivers to it the datagrams
+    of every group any socket of the host joined on that port (``IP_MULTICAST_ALL`` is on by default, ip(7)):
+    two buses on two groups would hear each other. Best effort: where the option or the socket is missing,
+    nothing changes.
+    """
+    import socket
+
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None:
+        return
+    v6 = sock.family == socket.AF_INET6
+    level = socket.IPPROTO_IPV6 if v6 else socket.IPPROTO_IP
+    option = getattr(socket, "IPV6_MULTICAST_ALL" if v6 else "IP_MULTICAST_ALL", 29 if v6 else 49)  # Linux values
+    try:
+        sock.setsockopt(level, option, 0)
+    except OSError:
+        pass

@@ -189,3 +189,15 @@ def test_bad_can_url_is_one_line_exit_2(capsys: pytest.CaptureFixture[str]) -> N
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mode='foc' not one of ('servo', 'mit')" in err[0], err
+
+
+def test_udp_multicast_buses_on_two_groups_do_not_hear_each_other() -> None:
+    a = pycan.open_can(parse_can_url(can_url("servo", 5)))
+    b = pycan.open_can(parse_can_url(can_url("servo", 6)))
+    try:
+        a.send(CanFrame(0x101, bytes(4), True))
+        time.sleep(0.1)
+        assert b.receive() is None  # Linux hands a socket bound to the port every joined group's datagrams
+    finally:
+        a.close()
+        b.close()
