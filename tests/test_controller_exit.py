@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from test_serial_run import _emulator, _stop, _summary, assert_stopped_safely
-from test_serial_stop import assert_outputs_complete
+from test_serial_stop import assert_outputs_complete, fail_encoder_read
 
 from host_tools.cli import main
 from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
@@ -177,18 +177,7 @@ def test_any_base_exception_from_a_task_ends_in_the_stop_path_with_exit_3(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
         raised: BaseException) -> None:
     """Not the controller (that latches): a task of the firmware itself; no signal came, so no signal is named."""
-    import host_tools.serial_run as serial_run
-
-    calls = [0]
-    angle = serial_run.FeedbackAngle.angle_rad
-
-    def failing(self: serial_run.FeedbackAngle, t: int) -> float:  # the encoder task reads it every period
-        calls[0] += 1
-        if calls[0] == 300:
-            raise raised
-        return angle(self, t)
-
-    monkeypatch.setattr(serial_run.FeedbackAngle, "angle_rad", failing)
+    fail_encoder_read(monkeypatch, raised)
     out, capture = tmp_path / "out", tmp_path / "capture"
     code = main(["run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--duration", "3", "--out", str(out),
                  "--capture", str(capture), "--quiet"])
