@@ -21,7 +21,8 @@ __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareCo
 
 DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
-SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller", "ground_sensors")
+SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller", "ground_sensors",
+            "host_watchdog")
 """The tables of a firmware profile ([control] holds the sub-tables position and velocity)."""
 TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "watchdog")
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
@@ -29,6 +30,9 @@ MAX_JOB_CYCLES = 10_000_000
 """Largest cost of one job, base + per_byte * 512 bytes (60 ms at 168 MHz: no task of ours comes near)."""
 MAX_CURRENT_A = 100.0
 """Largest current command limit: above the AK60-6's 22.7 A peak, well inside the wire's int32 field."""
+HOST_WATCHDOG_RANGE_S = (0.03, 0.5)
+"""[host_watchdog] timeout_s: above the 10 ms kick interval plus the 20 ms age limits, at most half the motor's
+own 1 s command timeout (docs/serial_mode.md, "The host watchdog")."""
 # [control] scalars: (lo, hi, lo_open, hi_open, unit); hi None = a bound from the rates, checked in FirmwareConfig
 CONTROL_RANGES: dict[str, tuple[float, float, bool, bool, str]] = {
     "current_limit_a": (0.0, MAX_CURRENT_A, True, False, "A"),
@@ -91,6 +95,7 @@ class FirmwareConfig:
     controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
     controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
     ground_sensors: GroundSensorConfig = GroundSensorConfig()  # [ground_sensors]: used on boards with the ADC
+    host_watchdog_s: float = 0.1  # [host_watchdog] timeout_s: serial mode's watchdog outside the loop
 
     def __post_init__(self) -> None:
         """Check every rate, control scalar and task name (profile keys: firmware/config.py's tables)."""
@@ -102,6 +107,7 @@ class FirmwareConfig:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
         _check_control(lambda name: getattr(self, name), self.control_hz)
+        check_range("host_watchdog_s", self.host_watchdog_s, *HOST_WATCHDOG_RANGE_S, unit="s")
         unknown = sorted(set(self.task_cycles) - set(TASK_NAMES))
         if unknown:
             raise ValueError(f"task {unknown[0]!r} is not a firmware task: one of {', '.join(TASK_NAMES)}")
@@ -211,6 +217,16 @@ def _controller(table: dict[str, Any], profile: Path) -> dict[str, Any]:
     return {"controller": name, "controller_params": params}
 
 
+def _host_watchdog(table: dict[str, Any]) -> dict[str, Any]:
+    """[host_watchdog]: `timeout_s`, checked against HOST_WATCHDOG_RANGE_S."""
+    unknown = sorted(set(table) - {"timeout_s"})
+    if unknown:
+        raise ValueError(f"has no key {unknown[0]!r}: its key is timeout_s")
+    if "timeout_s" not in table:
+        return {}
+    return {"host_watchdog_s": check_range("timeout_s", table["timeout_s"], *HOST_WATCHDOG_RANGE_S, unit="s")}
+
+
 def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file, the section and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
@@ -255,10 +271,12 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         controller = _controller(_section(doc, "controller"), p)
         section = "ground_sensors"
         ground_sensors = GroundSensorConfig.from_table(_section(doc, "ground_sensors"))
+        section = "host_watchdog"
+        host_watchdog = _host_watchdog(_section(doc, "host_watchdog"))
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
                               feedforward_params=feedforward_params, safety=safety, task_cycles=task_cycles,
-                              **links, **controller, **ctl, ground_sensors=ground_sensors)
+                              **links, **controller, **host_watchdog, **ctl, ground_sensors=ground_sensors)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

@@ -207,7 +207,7 @@ class FirmwareTasks:
                 return
         try:
             returned: object = self._update(obs)
-        except Exception as e:  # noqa: BLE001 -- any failure of the controller latches the safe state
+        except BaseException as e:  # noqa: BLE001 -- sys.exit, KeyboardInterrupt, GeneratorExit too: latch SAFE
             self._controller_failed(now_s, e, None)
             return
         brake = False
@@ -239,13 +239,14 @@ class FirmwareTasks:
             return True
         try:
             reset()
-        except Exception as e:  # noqa: BLE001 -- any failure of the controller latches the safe state
+        except BaseException as e:  # noqa: BLE001 -- any failure of the controller latches the safe state
             self._controller_failed(now_s, e, None)
             return False
         return True
 
-    def _controller_failed(self, now_s: float, error: Exception | None, returned: object) -> None:
-        """The controller raised or returned a bad value: zero current now, the safe state latched."""
+    def _controller_failed(self, now_s: float, error: BaseException | None, returned: object) -> None:
+        """The controller raised (anything, sys.exit and KeyboardInterrupt included: the run is not the
+        controller's to end) or returned a bad value: zero current now, the safe state latched."""
         if not self.controller_error:
             self.controller_error = describe_failure(self.controller, error, returned)
         out = self.out

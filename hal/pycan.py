@@ -2,16 +2,22 @@
 
 ``can://INTERFACE/CHANNEL?id=N&mode=servo|mit[&bitrate=B]`` names a python-can interface, its channel,
 the motor's driver id and the AK-series CAN mode, e.g. ``can://socketcan/can0?id=1&mode=mit`` or
-``can://udp_multicast/239.74.163.2?id=1&mode=servo``. :class:`PythonCanPort` adapts a ``can.BusABC`` to
+``can://udp_multicast/239.74.163.2?id=1&mode=servo``; ``id`` and ``mode`` are required (a wrong guess
+drives another motor, or this one in the other mode). :class:`PythonCanPort` adapts a ``can.BusABC`` to
 :class:`~hal.can.CanPort`: ``send`` hands the frame to the bus without blocking (a full transmit queue
-is a refusal), ``receive`` polls without waiting, ``flush`` waits for the interface's transmit queue
-where python-can can tell (``flush_tx_buffer`` is not a wait, so it sleeps one frame time per frame
-sent in the last call at most); a python-can error latches as :class:`~hal.errors.HalError`.
+is a refusal), ``receive`` polls without waiting, ``flush`` waits until the frames sent could have left
+the wire (python-can cannot report a frame as sent: each frame is taken to occupy the bus for its
+worst-case length after the previous one, so the wait is at most the wire time of the frames still
+possibly queued, not one frame time per frame since the last flush); a python-can error latches as
+:class:`~hal.errors.HalError`. On interfaces that hand a bus its own frames back (``udp_multicast``:
+multicast loopback) the echoes of what this port sent are dropped and counted (``echoes``), not received;
+a ``udp_multicast`` bus hears its own group only (Linux delivers every joined group's datagrams otherwise).
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -22,6 +28,9 @@ from hal.errors import HalError
 __all__ = ["CanUrl", "PythonCanPort", "is_can_url", "open_can", "parse_can_url"]
 
 MODES = ("servo", "mit")
+FRAME_BITS = 160  # a worst-case 8-byte extended data frame with bit stuffing and the interframe space
+ECHOING_INTERFACES = frozenset({"udp_multicast"})  # python-can interfaces whose buses receive their own frames
+MAX_PENDING_ECHOES = 1024
 
 
 @dataclass(frozen=True)
@@ -30,8 +39,8 @@ class CanUrl:
 
     interface: str
     channel: str
-    driver_id: int = 1
-    mode: str = "servo"
+    driver_id: int
+    mode: str
     bitrate: int = 1_000_000
 
 
@@ -50,7 +59,7 @@ def parse_can_url(text: str, where: str = "--motor") -> CanUrl:
     if unknown:
         raise ValueError(f"{where} {text!r}: unknown parameter {unknown[0]!r} (id, mode, bitrate)")
     try:
-        driver_id = int(q.get("id", "1"))
+        driver_id = int(q.get("id", "0"))
         bitrate = int(q.get("bitrate", "1000000"))
     except ValueError:
         raise ValueError(f"{where} {text!r}: id and bitrate must be integers") from None
@@ -58,20 +67,30 @@ def parse_can_url(text: str, where: str = "--motor") -> CanUrl:
         raise ValueError(f"{where} {text!r}: id={driver_id} out of range 0..127")
     if not 10_000 <= bitrate <= 1_000_000:
         raise ValueError(f"{where} {text!r}: bitrate={bitrate} out of range 10000..1000000")
-    mode = q.get("mode", "servo")
-    if mode not in MODES:
+    mode = q.get("mode", "")
+    if "mode" in q and mode not in MODES:
         raise ValueError(f"{where} {text!r}: mode={mode!r} not one of {MODES}")
+    missing = [k for k in ("id", "mode") if k not in q]
+    if missing:
+        raise ValueError(f"{where} {text!r}: {' and '.join(missing)} missing: the motor's driver id (id=0..127) "
+                         "and its CAN mode (mode=servo|mit) are both required")
     return CanUrl(u.netloc, u.path.lstrip("/"), driver_id, mode, bitrate)
 
 
 class PythonCanPort(CanPort):
     """A python-can bus as a CanPort (see the module docstring)."""
 
-    def __init__(self, bus: Any, bitrate: int = 1_000_000, name: str = "can") -> None:
-        """Wrap an open ``can.BusABC``; the port owns it (close closes it)."""
+    def __init__(self, bus: Any, bitrate: int = 1_000_000, name: str = "can", *, echoes: bool = False,
+                 clock_s: Any = time.perf_counter) -> None:
+        """Wrap an open ``can.BusABC``; the port owns it (close closes it). ``echoes``: the bus hands its own
+        frames back (drop them)."""
         super().__init__(bitrate, name)
         self.bus = bus
-        self._last_burst = 0
+        self.clock_s = clock_s
+        self.frame_s = FRAME_BITS / bitrate
+        self._busy_until = 0.0  # when the frames sent so far have left the wire at the latest
+        self._pending: deque[tuple[int, bytes, bool]] | None = deque(maxlen=MAX_PENDING_ECHOES) if echoes else None
+        self.echoes = 0  # own frames the bus handed back, dropped
 
     def _send(self, frame: CanFrame) -> bool:
         import can
@@ -85,23 +104,37 @@ class PythonCanPort(CanPort):
             raise HalError(f"{self.name}: {exc}") from exc
         except (can.CanError, OSError) as exc:
             raise HalError(f"{self.name}: {exc}") from exc
-        self._last_burst += 1
+        now = self.clock_s()
+        self._busy_until = max(now, self._busy_until) + self.frame_s
+        if self._pending is not None:
+            self._pending.append((frame.arbitration_id, frame.data, frame.extended))
         return True
 
     def _receive(self) -> CanFrame | None:
         import can
 
-        try:
-            msg = self.bus.recv(0.0)
-        except (can.CanError, OSError) as exc:
-            raise HalError(f"{self.name}: {exc}") from exc
-        if msg is None or msg.is_error_frame or msg.is_remote_frame:
-            return None
-        return CanFrame(msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+        while True:
+            try:
+                msg = self.bus.recv(0.0)
+            except (can.CanError, OSError) as exc:
+                raise HalError(f"{self.name}: {exc}") from exc
+            if msg is None or msg.is_error_frame or msg.is_remote_frame:
+                return None
+            frame = CanFrame(msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+            pending = self._pending
+            if not pending:
+                return frame
+            try:
+                pending.remove((frame.arbitration_id, frame.data, frame.extended))  # the oldest equal one we sent
+            except ValueError:
+                return frame
+            self.echoes += 1  # our own frame handed back: dropped, take the next
 
     def _drain(self, timeout_s: float) -> bool:
-        wait = min(timeout_s, self._last_burst * 160 / self.bitrate)  # worst-case 8-byte extended frames
-        self._last_burst = 0
+        wait = self._busy_until - self.clock_s()
+        if wait > timeout_s:
+            time.sleep(timeout_s)
+            return False
         if wait > 0:
             time.sleep(wait)
         return True
@@ -124,4 +157,29 @@ def open_can(url: CanUrl, *, receive_own_messages: bool = False) -> PythonCanPor
                       receive_own_messages=receive_own_messages)
     except Exception as exc:  # noqa: BLE001 (python-can raises many kinds: name the URL)
         raise HalError(f"can://{url.interface}/{url.channel}: cannot open ({type(exc).__name__}: {exc})") from exc
-    return PythonCanPort(bus, url.bitrate, f"can://{url.interface}/{url.channel}")
+    if url.interface == "udp_multicast":
+        _own_group_only(bus)
+    return PythonCanPort(bus, url.bitrate, f"can://{url.interface}/{url.channel}",
+                         echoes=url.interface in ECHOING_INTERFACES and not receive_own_messages)
+
+
+def _own_group_only(bus: Any) -> None:
+    """Make a udp_multicast bus hear its own group only.
+
+    python-can binds the socket to the port on every address, and Linux then delivers to it the datagrams
+    of every group any socket of the host joined on that port (``IP_MULTICAST_ALL`` is on by default, ip(7)):
+    two buses on two groups would hear each other. Best effort: where the option or the socket is missing,
+    nothing changes.
+    """
+    import socket
+
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None:
+        return
+    v6 = sock.family == socket.AF_INET6
+    level = socket.IPPROTO_IPV6 if v6 else socket.IPPROTO_IP
+    option = getattr(socket, "IPV6_MULTICAST_ALL" if v6 else "IP_MULTICAST_ALL", 29 if v6 else 49)  # Linux values
+    try:
+        sock.setsockopt(level, option, 0)
+    except OSError:
+        pass

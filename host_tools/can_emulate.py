@@ -13,7 +13,6 @@ import time
 from collections.abc import Callable
 
 from hal.can import CanFrame, CanPort
-from hal.errors import HalError
 from hal.pycan import CanUrl
 from hal.virtual.bench import fixture_by_name
 from hal.virtual.devices.ak60_can import Ak60Can, Ak60CanConfig
@@ -68,15 +67,18 @@ class WallCanMotor:
     """The AK60-6 over CAN on ``port`` (a :class:`~hal.can.CanPort`), one plant, wall-clock ns."""
 
     def __init__(self, port: CanPort, url: CanUrl, fixture: Fixture | str | None = "suspended",
-                 clock_ns: Callable[[], int] | None = None) -> None:
-        """Start the plant and the device now."""
+                 clock_ns: Callable[[], int] | None = None, world: World | None = None) -> None:
+        """Start the plant and the device now; with `world` (and its clock), the device joins that plant
+        (`pafp emulate bench --can`: the IMU on a pty sees the same foot)."""
         if clock_ns is None:
             t0 = time.perf_counter_ns()
             clock_ns = lambda: time.perf_counter_ns() - t0  # noqa: E731
         self.now = clock_ns
         self.port = port
-        fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
-        self.world = World(Plant(None, fx), NS_PER_S)
+        if world is None:
+            fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
+            world = World(Plant(None, fx), NS_PER_S)
+        self.world = world
         self.bus = WallCanBus()
         self.device = Ak60Can(self.world, self.bus, Ak60CanConfig(driver_id=url.driver_id, mode=url.mode))
         self.frames_in = 0
@@ -119,25 +121,8 @@ class WallCanMotor:
     def summary(self, why: str) -> str:
         """One line: what was served and counted."""
         d = self.device
+        echoes = getattr(self.port, "echoes", 0)
         return (f"pafp emulate: stopped ({why}); motor over CAN ({d.mode} mode, id {d.driver_id}): "
                 f"{self.frames_in} frames in, {self.frames_out} out, {d.ignored_frames} ignored, "
-                f"{d.core.stats.timeouts} command timeouts, {self.tx_refused} refused by the bus")
-
-
-def open_and_serve(url_text: str, fixture: str, duration_s: float | None, stop: list[str],
-                   announce: Callable[[str], None]) -> str:
-    """Open the bus a can:// URL names, announce it, serve; return the summary (HalError, ValueError: bad input)."""
-    from hal.pycan import open_can, parse_can_url
-
-    url = parse_can_url(url_text, "--can")
-    port = open_can(url)
-    try:
-        motor = WallCanMotor(port, url, fixture)
-        announce(f"motor: {url_text}")
-        try:
-            motor.serve(stop, duration_s)
-        except HalError as exc:
-            return f"pafp emulate: the bus failed ({exc})"
-        return motor.summary(stop[0] if stop else "duration")
-    finally:
-        port.close()
+                f"{d.core.stats.timeouts} command timeouts, {self.tx_refused} refused by the bus, "
+                f"{echoes} own echoes dropped")

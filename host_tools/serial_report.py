@@ -85,6 +85,7 @@ def serial_extra(r: SerialRunResult) -> tuple[dict, list[str]]:
         "realtime": rt,
         "wire_errors": _errors(r),
         "link_lost": link,
+        "host_watchdog": r.host_watchdog.as_dict() if r.host_watchdog is not None else None,
         "telemetry_port_error": r.telemetry_port_error or None,
     }
     j = rt["release_jitter_us"]
@@ -93,7 +94,9 @@ def serial_extra(r: SerialRunResult) -> tuple[dict, list[str]]:
           f"Stopped by {stop['reason']}{' ' + stop['signal'] if stop['signal'] else ''} at {stop['at_s']} s; "
           f"stop path: {safe}, {'on the wire' if stop['safe_on_wire'] else 'NOT all on the wire'} "
           f"{stop['latency_ms']} ms after the stop began (goal {stop['goal_ms']} ms)."
-          + (f" Task `{stop['task']}` raised {stop['error']}." if stop["error"] else ""), "",
+          + (f" The host watchdog fired: {stop['error']}, task `{stop['task']}` running."
+             if stop["reason"] == "watchdog"
+             else f" Task `{stop['task']}` raised {stop['error']}." if stop["error"] else ""), "",
           f"Host stalls (warnings, not faults): {warnings['deadline_miss_streaks']} deadline-miss streaks, "
           f"{warnings['watchdog_expiries']} watchdog expiries; {rt['late_releases']} late releases, "
           f"{rt['overruns']} overruns, {rt['skipped_releases']} skipped releases. Real-time settings: "
@@ -109,6 +112,11 @@ def serial_extra(r: SerialRunResult) -> tuple[dict, list[str]]:
         a, b = t["release_jitter"], t["execution"]
         md.append(f"| {name} | {a['p50_us']} | {a['p99_us']} | {a['max_us']} | {b['p50_us']} | {b['p99_us']} | "
                   f"{b['max_us']} | {t['late_releases']} | {t['overruns']} |")
+    hw = extra["host_watchdog"]
+    if hw is not None:
+        md += ["", f"Host watchdog ({hw['timeout_ms']} ms): {hw['handle']}"
+               + (f"; fired at {hw['fired_at_s']} s, {hw['silent_ms']} ms after the last kick (task `{hw['task']}` "
+                  f"running), {hw['sends']} sends of the safe frames." if hw["fired"] else "; did not fire.")]
     if link is not None:
         md += ["", f"**Link lost**: {link['role']} port `{link['port']}` ({link['reason']}) at {link['lost_at_s']} s, "
                f"safe state at {link['detected_at_s']} s ({link['detection_ms']} ms); reconnects {link['reconnects']}."]

@@ -19,6 +19,7 @@ counted as warnings; the supervisor latches on the ages of the last command and 
 from __future__ import annotations
 
 import logging
+import sys
 import time
 import traceback
 from collections.abc import Callable
@@ -40,6 +41,7 @@ from hal.serial.sim_port import WallDevices, parse_sim_url
 from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.null import NullDigitalIn, NullDigitalOut, NullUart
 from hal.virtual.timer import VirtualEncoderTimer
+from host_tools.host_watchdog import HostWatchdog, WatchdogRecord, arm_watchdog
 from host_tools.jitter import TaskTimings, instrument
 from host_tools.link_watch import LinkEvent, LinkWatch
 from host_tools.realtime import RealtimeSection, RealtimeSettings
@@ -136,14 +138,17 @@ class FeedbackAngle:
 
 
 class _KernelWatchdog(HalWatchdog):
-    """The firmware's IWDG handle: kicks the RTOS watchdog."""
+    """The firmware's IWDG handle: kicks the RTOS watchdog and the host watchdog outside the loop."""
 
     def __init__(self, wd: Watchdog) -> None:
         self.wd = wd
+        self.host: HostWatchdog | None = None
 
     def kick(self) -> None:
-        """Reload the watchdog."""
+        """Reload the watchdogs."""
         self.wd.kick()
+        if self.host is not None:
+            self.host.kick()
 
 
 @dataclass
@@ -167,7 +172,7 @@ class HostWarnings:
 class StopRecord:
     """Why and when the run ended, and what the stop path put on the motor's wire."""
 
-    reason: str  # duration | signal | link_lost | exception
+    reason: str  # duration | signal | link_lost | exception | watchdog
     at_s: float  # run time at which the stop began (signal: its arrival)
     signal: str | None = None
     task: str | None = None
@@ -209,6 +214,7 @@ class SerialRunResult:
     warnings: HostWarnings
     realtime_granted: dict[str, object]
     link: LinkEvent | None = None
+    host_watchdog: WatchdogRecord | None = None
     telemetry_port_error: str = ""
     startup_bytes: dict[str, int] = field(default_factory=dict)
     bounds: list = field(default_factory=list)  # no response-time bounds: host times are measured
@@ -246,6 +252,7 @@ class _Ports:
     devices: WallDevices | None
     can: CanPort | None = None  # the motor's CAN bus (--motor can://...; then motor is a NullUart)
     ground: Uart | None = None  # the ground sensors' Firmata board (--ground)
+    untapped_motor: Uart | None = None  # the motor's port as opened, not a capture's tap (the host watchdog's)
 
     def close(self) -> None:
         for u in (self.motor, self.imu, self.telemetry, self.can, self.ground):
@@ -334,8 +341,13 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     ports = _open_ports(cfg, telemetry_uart)
     # the capture starts with the ports, so a start-up check that fails (wrong baud) leaves its bytes too
     wire = WireCapture(cfg.capture_dir, _since_start(), side="host") if cfg.capture_dir is not None else None
+    ports.untapped_motor = ports.motor
     if wire is not None:
-        ports.motor, ports.imu = wire.tap("motor", ports.motor), wire.tap("imu", ports.imu)
+        ports.imu = wire.tap("imu", ports.imu)
+        if ports.can is not None:  # the motor's frames, as a candump log (the motor's UART stands unused)
+            ports.can = wire.tap_can("motor", ports.can, f"can-{parse_can_url(cfg.motor, '--motor').mode}")
+        else:
+            ports.motor = wire.tap("motor", ports.motor)
     try:
         # over CAN no start-up check: a silent bus is caught by the supervisor (MOTOR_TIMEOUT)
         seen = {"motor": 0 if ports.can is not None else check_motor(ports.motor, cfg.motor,
@@ -388,8 +400,9 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         from hal.virtual.ground_sensors import ADC_CHANNELS
 
         adc = FirmataAdc(ports.ground, ADC_CHANNELS)
+    kernel_wd = _KernelWatchdog(wd)
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
-                  encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=_KernelWatchdog(wd),
+                  encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=kernel_wd,
                   now_cycles=now, f_cpu_hz=f_cpu, can=ports.can, adc=adc)
     fw = Firmware(board, fw_cfg, reference=reference)
     fw.supervisor.latch_deadline_misses = False  # on the wall clock a late job is the host's (see module doc)
@@ -419,24 +432,38 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     fw.kernel_health = kernel_health(sched, fw)
     sched.add_watchdog(wd)
     signals.on_stop = sched.request_stop
+    armed = arm_watchdog(ports.untapped_motor or ports.motor, cfg.motor, board, fw_cfg, sched.request_stop,
+                         lambda: timings.running)
+    host_wd = armed if isinstance(armed, HostWatchdog) else None
+    kernel_wd.host = host_wd
     error: BaseException | None = None
     failed_task: str | None = None
     with section:
+        if host_wd is not None and signals.name is None:
+            host_wd.start()  # before the anchor: starting a thread takes a few ms on a busy host
         started_unix = time.time()  # the wall clock is anchored at cycle 0 right after this
         wall0_ns = time.perf_counter_ns()
         try:
             if signals.name is None:  # a signal during the start-up: straight to the stop path
                 sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
-        except KeyboardInterrupt:  # a second signal, or one raised before the handlers were in
-            if signals.name is None:
-                signals.name, signals.at_ns = "SIGINT", time.perf_counter_ns()
-        except Exception as exc:  # a task raised: the firmware's bug, reported after the stop path
-            error, failed_task = exc, timings.running or "serial_probe"  # the one body not instrumented
-            log.error("task %s raised %s: stopping", failed_task, exc)
+        except BaseException as exc:  # a task raised (SystemExit too): the firmware's bug, reported after the stop path
+            if isinstance(exc, KeyboardInterrupt) and (signals.name is not None or not signals.installed):
+                if signals.name is None:  # Ctrl-C with no handler of ours in place (else: the second signal)
+                    signals.name, signals.at_ns = "SIGINT", time.perf_counter_ns()
+            else:
+                error, failed_task = exc, timings.running or "serial_probe"  # the one body not instrumented
+                log.error("task %s raised %r: stopping", failed_task, exc)
+        finally:  # halted before the stop path, whose frames are then the last on the wire
+            watch = host_wd.halt() if host_wd is not None else armed
         run_s = sched.now / f_cpu
-        stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s)
+        assert isinstance(watch, WatchdogRecord)
+        if watch.fired_at_s is not None:
+            fw.on_watchdog_reset(sched.now)  # the IWDG's job done from outside: the safe state latched
+        stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s, watch)
         stop.safe = fw.stop(run_s, STOP_DRAIN_TIMEOUT_S)  # the stop path: on the wire before any port closes
         done_ns = time.perf_counter_ns()
+        if host_wd is not None:
+            host_wd.close()  # its thread and its handle
         wall = (done_ns - wall0_ns) / 1e9
     period_s = fw.ts_s
     wire_s = (len(stop.safe.frames) * 10 / ports.motor.baud if ports.can is None
@@ -444,6 +471,9 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     start_ns = signals.at_ns if signals.at_ns is not None else wall0_ns + round(stop.at_s * 1e9)
     stop.latency_ms = round(max(0, done_ns - start_ns) / 1e6, 3)
     stop.goal_ms = round((period_s + wire_s) * 1e3, 3)
+    if stop.reason == "watchdog":  # its frames left when it fired: from the loop's last kick to them
+        stop.latency_ms = watch.silent_ms
+        stop.goal_ms = round(watch.timeout_ms + (sys.getswitchinterval() + wire_s) * 1e3, 3)
     if not stop.safe.on_wire:
         log.error("stop path: the safe frames did not all leave the motor port (%s)", stop.safe.error or
                   f"{stop.safe.written} of {len(stop.safe.frames)} bytes, drained {stop.safe.drained}")
@@ -456,12 +486,12 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     cfg.strides = strides
     return SerialRunResult(cfg, fw, sched, probe, timings, capture.captured(), run_s, wall, fw.gait_start_s,
                            started_unix, "plant" if plant is not None else "fused estimate", stop, warnings,
-                           section.granted, link.event, capture.inner_error, seen, time_in_run_s=time_in_run)
+                           section.granted, link.event, watch, capture.inner_error, seen, time_in_run_s=time_in_run)
 
 
 def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: LinkWatch,
-                 run_s: float, wall0_ns: int, duration_s: float) -> StopRecord:
-    """Why the loop ended: a signal, a task's exception, a lost link, or the duration."""
+                 run_s: float, wall0_ns: int, duration_s: float, watch: WatchdogRecord) -> StopRecord:
+    """Why the loop ended: a signal, a task's exception, the host watchdog, a lost link, or the duration."""
     if signals.name is not None:
         at = (signals.at_ns - wall0_ns) / 1e9 if signals.at_ns is not None else run_s
         return StopRecord("signal", max(0.0, at), signal=signals.name)
@@ -470,6 +500,10 @@ def _stop_record(signals: StopSignals, error: BaseException | None, task: str | 
         text = f"{type(error).__name__}: {error}" + (f" ({where.filename}:{where.lineno})" if where else "")
         return StopRecord("exception", run_s, task=task, error=text,
                           traceback="".join(traceback.format_exception(error)))
+    if watch.fired_at_s is not None and watch.silent_ms is not None:
+        return StopRecord("watchdog", max(0.0, watch.fired_at_s - watch.silent_ms / 1e3), task=watch.task,
+                          error=f"the loop did not kick the host watchdog for {watch.silent_ms} ms "
+                                f"(limit {watch.timeout_ms} ms)")
     if link.stop_at is not None:
         return StopRecord("link_lost", run_s)
     return StopRecord("duration", min(run_s, duration_s))

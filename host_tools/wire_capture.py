@@ -7,9 +7,13 @@ A capture directory holds, per port (``motor``, ``imu``, ``telemetry``) and dire
 * ``index.csv``: one row per read or write that moved bytes: ``t_s,file,offset,bytes``: at ``t_s``
   (seconds on the run's clock: virtual time in a virtual run, wall time since the start otherwise)
   ``bytes`` bytes went to ``file`` starting at ``offset``;
+* ``<port>.can.log`` for a port on a CAN bus: every frame sent (``T``) and received (``R``), one line each in
+  candump's ``-L`` format with python-can's direction flag, ``(t_s) can0 ID#DATA T``, which python-can's
+  ``can.LogReader`` and the can-utils tools (``canplayer``, ``log2asc``) read;
 * ``capture.json`` (written on close): per file its byte count, protocol and the ``pafp decode`` command
-  that reads it. Which way a file goes depends on the side: the firmware's ``motor.tx.bin`` is to-motor,
-  the emulated motor's ``motor.tx.bin`` (``pafp emulate --capture``) is from-motor.
+  that reads it (for a ``.can.log``: its frame count and how to read it). Which way a file goes depends on
+  the side: the firmware's ``motor.tx.bin`` is to-motor, the emulated motor's ``motor.tx.bin``
+  (``pafp emulate --capture``) is from-motor.
 
 Files are appended as the run goes and flushed every ``FLUSH_EVERY`` records and on close, so a run that
 dies leaves them valid up to the last flush. A write that fails (a full disk) raises once, naming the file,
@@ -26,10 +30,11 @@ from dataclasses import replace
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
+from hal.can import CanFrame, CanPort
 from hal.interfaces import Board, Uart
 from host_tools.outdir import naming, write_atomic
 
-__all__ = ["TapUart", "WireCapture"]
+__all__ = ["TapCanPort", "TapUart", "WireCapture", "candump_line"]
 
 FLUSH_EVERY = 256
 PROTOCOLS = {"motor": "vesc", "imu": "rvc", "telemetry": "telemetry"}
@@ -56,6 +61,9 @@ class WireCapture:
         self._sizes: dict[str, int] = {}
         self._index: TextIO = (directory / "index.csv").open("w", encoding="ascii", newline="")
         self._index.write("t_s,file,offset,bytes\n")
+        self._can_logs: dict[str, TextIO] = {}
+        self._can_frames: dict[str, int] = {}
+        self._can_protocols: dict[str, str] = {}
         self._unflushed = 0
         self.closed = False
         self.error: OSError | None = None  # the write that failed and ended the capture
@@ -100,9 +108,25 @@ class WireCapture:
             self.closed = True
             raise
 
+    def record_frame(self, port: str, frame: CanFrame, received: bool, t_s: float | None = None) -> None:
+        """Append one CAN frame sent (received False) or received on `port` to `<port>.can.log`."""
+        if self.closed:
+            return
+        name = f"{port}.can.log"
+        with self._failing(name):
+            log = self._can_logs.get(name)
+            if log is None:
+                log = self._can_logs[name] = (self.directory / name).open("w", encoding="ascii", newline="\n")
+                self._can_frames[name] = 0
+            log.write(candump_line(self.clock_s() if t_s is None else t_s, frame, received))
+        self._can_frames[name] += 1
+        self._unflushed += 1
+        if self._unflushed >= FLUSH_EVERY:
+            self.flush()
+
     def flush(self) -> None:
         """Push everything recorded so far to the files."""
-        for name, f in self._files.items():
+        for name, f in [*self._files.items(), *self._can_logs.items()]:
             with self._failing(name):
                 f.flush()
         with self._failing("index.csv"):
@@ -113,6 +137,15 @@ class WireCapture:
         """`uart` seen through a tap that records what crosses it as `port`."""
         self.open(port, "tx", "rx")
         return TapUart(uart, self, port)
+
+    def tap_can(self, port: str, can_port: CanPort, protocol: str = "can") -> TapCanPort:
+        """`can_port` seen through a tap that logs every frame to `<port>.can.log` (`protocol` for capture.json)."""
+        name = f"{port}.can.log"
+        self._can_protocols[name] = protocol
+        if name not in self._can_logs:
+            self._can_logs[name] = (self.directory / name).open("w", encoding="ascii", newline="\n")
+            self._can_frames[name] = 0
+        return TapCanPort(can_port, self, port)
 
     def tap_board(self, board: Board) -> Board:
         """The board with its three UARTs tapped (the firmware gets this one)."""
@@ -131,17 +164,21 @@ class WireCapture:
                 cmd += f" --direction {_VESC_DIRECTION[self.side, direction]}"
             files[name] = {"bytes": self._sizes[name], "port": port, "direction": direction,
                            "protocol": protocol, "decode": f"{cmd} {name}"}
+        for name in sorted(self._can_frames):
+            files[name] = {"frames": self._can_frames[name], "port": name.split(".")[0], "direction": "both (T/R)",
+                           "protocol": self._can_protocols.get(name, "can"), "format": "candump -L",
+                           "decode": f"python -c \"import can; print(*can.LogReader('{name}'), sep=chr(10))\""}
         return {"side": self.side, "clock": "seconds since the run's start", "files": files}
 
     def close(self) -> None:
         """Flush and close every file; write capture.json (atomically). Closing twice is harmless."""
         if self.closed:
             if self.error is not None:  # a failed capture: let go of the files, say nothing more
-                for f in [*self._files.values(), self._index]:
+                for f in [*self._files.values(), *self._can_logs.values(), self._index]:
                     with suppress(OSError):
                         f.close()
             return
-        for name, f in self._files.items():
+        for name, f in [*self._files.items(), *self._can_logs.items()]:
             with self._failing(name):
                 f.close()
         with self._failing("index.csv"):
@@ -182,6 +219,61 @@ class TapUart(Uart):
 
     def _refresh_errors(self) -> None:
         self._errors = self.inner.errors  # the inner port's counters (it counted the refused bytes too)
+
+    def _close(self) -> None:
+        self.inner.close()
+
+
+def candump_line(t_s: float, frame: CanFrame, received: bool) -> str:
+    """One frame as a line of ``candump -L`` with python-can's direction flag (R received, T sent).
+
+    >>> candump_line(0.5, CanFrame(0x101, bytes([0, 0, 0, 0]), True), False)
+    '(0.500000) can0 00000101#00000000 T\\n'
+    >>> candump_line(1.25, CanFrame(0x1, b"\\xff"), True)
+    '(1.250000) can0 001#FF R\\n'
+    """
+    ident = f"{frame.arbitration_id:08X}" if frame.extended else f"{frame.arbitration_id:03X}"
+    return f"({t_s:.6f}) can0 {ident}#{frame.data.hex().upper()} {'R' if received else 'T'}\n"
+
+
+class TapCanPort(CanPort):
+    """A `CanPort` that forwards to `inner` and logs every frame sent and received (a bus analyser)."""
+
+    def __init__(self, inner: CanPort, capture: WireCapture, port: str) -> None:
+        """Same bit rate and name as `inner`."""
+        super().__init__(inner.bitrate, inner.name)
+        self.inner = inner
+        self.capture = capture
+        self.port = port
+        self.errors = inner.errors
+
+    def send(self, frame: CanFrame) -> bool:
+        """Send through `inner` (which counts a refusal in the errors both share) and log the frame if sent."""
+        self._check_open()
+        ok = self.inner.send(frame)
+        if ok:
+            self.capture.record_frame(self.port, frame, False)
+        return ok
+
+    def _send(self, frame: CanFrame) -> bool:
+        return self.inner.send(frame)  # not reached: send is the tap's own
+
+    def _receive(self) -> CanFrame | None:
+        frame = self.inner.receive()
+        if frame is not None:
+            self.capture.record_frame(self.port, frame, True)
+        return frame
+
+    @property
+    def echoes(self) -> int:
+        """The inner port's own frames handed back by the bus and dropped (hal.pycan), if it counts them."""
+        return int(getattr(self.inner, "echoes", 0))
+
+    def _tx_pending(self) -> int:
+        return self.inner.tx_pending()
+
+    def _drain(self, timeout_s: float) -> bool:
+        return self.inner.flush(timeout_s)
 
     def _close(self) -> None:
         self.inner.close()

@@ -87,18 +87,23 @@ def test_signal_mid_run_stops_the_motor_and_writes_everything(tmp_path: Path, si
     assert_faults_justified(s)
 
 
-def test_exception_in_a_task_stops_the_motor_names_the_task_and_exits_3(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def fail_encoder_read(monkeypatch: pytest.MonkeyPatch, raised: BaseException, at_call: int = 300) -> None:
+    """The encoder task's read (FeedbackAngle.angle_rad, every period) raises `raised` at its at_call-th call."""
     calls = [0]
     angle = serial_run.FeedbackAngle.angle_rad
 
-    def failing(self: serial_run.FeedbackAngle, t: int) -> float:  # the encoder task reads it every period
+    def failing(self: serial_run.FeedbackAngle, t: int) -> float:
         calls[0] += 1
-        if calls[0] == 300:
-            raise RuntimeError("encoder read failed (injected)")
+        if calls[0] == at_call:
+            raise raised
         return angle(self, t)
 
     monkeypatch.setattr(serial_run.FeedbackAngle, "angle_rad", failing)
+
+
+def test_exception_in_a_task_stops_the_motor_names_the_task_and_exits_3(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    fail_encoder_read(monkeypatch, RuntimeError("encoder read failed (injected)"))
     out, capture = tmp_path / "out", tmp_path / "capture"
     code = main(["run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--duration", "3", "--out", str(out),
                  "--capture", str(capture), "--quiet"])

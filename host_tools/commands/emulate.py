@@ -27,12 +27,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
 from host_tools.outdir import check_capture_dir
 from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.wire_capture import WireCapture
+
+if TYPE_CHECKING:
+    from host_tools.can_emulate import WallCanMotor
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
 MAX_SLEEP_S = 0.001
@@ -65,9 +69,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--pty", action="store_true", help="create a new pty per device and print its path")
     where.add_argument("--port", metavar="DEVICE", help="serve on this serial port (bench: the motor's)")
     where.add_argument("--can", metavar="URL",
-                       help="motor only: serve the AK60-6 on a CAN bus, can://INTERFACE/CHANNEL?id=N&mode=servo|mit "
-                            "(any python-can interface, e.g. socketcan/can0 or udp_multicast/239.74.163.2)")
-    parser.add_argument("--imu-port", metavar="DEVICE", help="bench with --port: the IMU's serial port")
+                       help="serve the AK60-6 on a CAN bus, can://INTERFACE/CHANNEL?id=N&mode=servo|mit (any "
+                            "python-can interface, e.g. socketcan/can0 or udp_multicast/239.74.163.2); with bench, "
+                            "the IMU on the same plant goes on a new pty (or --imu-port)")
+    parser.add_argument("--imu-port", metavar="DEVICE", help="bench with --port or --can: the IMU's serial port")
     parser.add_argument("--baud", type=int, default=None,
                         help="link baud: the motor's (default 921600), or the IMU's for `imu` or the Firmata "
                              "board's for `ground` (default 115200)")
@@ -134,8 +139,8 @@ def _endpoints(args: argparse.Namespace, devices: WallDevices) -> list[Endpoint]
 
 
 def _check(args: argparse.Namespace) -> None:
-    if args.imu_port and not (args.device == "bench" and args.port):
-        raise EmulateError("--imu-port is only for `bench` with --port")
+    if args.imu_port and not (args.device == "bench" and (args.port or getattr(args, "can", None))):
+        raise EmulateError("--imu-port is only for `bench` with --port or --can")
     if args.device == "bench" and args.port and not args.imu_port:
         raise EmulateError("`bench --port MOTOR_DEVICE` also needs --imu-port IMU_DEVICE")
     if args.duration is not None and not args.duration > 0:
@@ -143,9 +148,13 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def _run_can(args: argparse.Namespace) -> int:
-    """`emulate motor --can URL` (host_tools/can_emulate.py)."""
+    """`emulate motor|bench --can URL` (host_tools/can_emulate.py); bench: the IMU on a new pty, or on
+    --imu-port, on the motor's plant."""
+    import time
+
     from hal.errors import HalError
-    from host_tools.can_emulate import open_and_serve
+    from hal.pycan import open_can, parse_can_url
+    from host_tools.can_emulate import WallCanMotor
 
     stop: list[str] = []
 
@@ -154,17 +163,57 @@ def _run_can(args: argparse.Namespace) -> int:
         stop.append(signal.Signals(signum).name)
 
     previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
+    port, capture, devices, endpoints = None, None, None, []
     try:
-        if args.device != "motor":
-            raise EmulateError(f"--can serves the motor only, not {args.device!r}")
-        _check(args)
-        line = open_and_serve(args.can, args.fixture, args.duration, stop, lambda t: print(t, flush=True))
-    except (EmulateError, ValueError, HalError) as exc:
-        print(f"pafp emulate: {exc}", file=sys.stderr)
-        return 2
+        try:
+            if args.device == "imu":
+                raise EmulateError("--can serves the motor: `motor --can URL`, or `bench --can URL` with the IMU "
+                                   "on a pty")
+            _check(args)
+            url = parse_can_url(args.can, "--can")
+            t0 = time.perf_counter_ns()
+            clock_ns: Callable[[], int] = lambda: time.perf_counter_ns() - t0  # noqa: E731
+            if args.device == "bench":
+                devices = WallDevices(["imu"], bauds=_bauds(args), fixture=args.fixture, seed=args.seed,
+                                      clock_ns=clock_ns)
+            if args.capture is not None:
+                capture = WireCapture(args.capture, lambda: clock_ns() / 1e9, side="device")
+            port = open_can(url)
+            motor = WallCanMotor(capture.tap_can("motor", port, f"can-{url.mode}") if capture else port, url,
+                                 args.fixture, clock_ns, world=devices.world if devices is not None else None)
+            if devices is not None:
+                if capture is not None:
+                    capture.open("imu", "rx", "tx")
+                endpoints = ([_open_port("imu", args.imu_port, devices.uarts["imu"].baud)] if args.imu_port
+                             else [_open_pty("imu")])
+        except (EmulateError, ValueError, HalError, OSError) as exc:
+            print(f"pafp emulate: {exc}", file=sys.stderr)
+            return 2
+        print(f"motor: {args.can}", flush=True)
+        for ep in endpoints:
+            print(f"{ep.role}: {ep.path}", flush=True)
+        try:
+            if devices is None:
+                motor.serve(stop, args.duration)
+            else:
+                _serve(devices, endpoints, stop, args.duration, capture, motor)
+        except HalError as exc:
+            line = f"pafp emulate: the bus failed ({exc})"
+        else:
+            why = stop[0] if stop else "duration"
+            imu = _summary(devices, endpoints, why) if devices is not None else ""
+            line = motor.summary(why) + imu.removeprefix(f"pafp emulate: stopped ({why})")
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
+        for ep in endpoints:
+            ep.close()
+        if port is not None:
+            port.close()
+        if capture is not None:
+            capture.close()
+        if devices is not None:
+            devices.close()
     print(line, flush=True)
     return 0
 
@@ -220,15 +269,19 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], duration_s: float | None,
-           capture: WireCapture | None = None) -> None:
-    """The wall-clock loop: take bytes in, let the world catch up, write what has ended, sleep."""
+           capture: WireCapture | None = None, can_motor: WallCanMotor | None = None) -> None:
+    """The wall-clock loop: take bytes (and CAN frames) in, let the world catch up, write what has ended, sleep."""
     end_ns = None if duration_s is None else devices.now() + int(duration_s * 1e9)
     by_fd = {ep.fd: ep for ep in endpoints}
     while not stop:
+        if can_motor is not None:
+            can_motor.step()
         now = devices.now()
         if end_ns is not None and now >= end_ns:
             return
         wake = devices.next_event_ns()
+        if can_motor is not None:
+            wake = min(wake, can_motor.world_next(), can_motor.bus.next_at())
         for uart in devices.uarts.values():
             if uart.rx_line_busy_until > now:
                 wake = min(wake, uart.rx_line_busy_until)

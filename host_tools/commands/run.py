@@ -201,14 +201,19 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
                *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
     print(f"  outputs: {out}/{', '.join(written)}")
-    if result.firmware.controller_error:
-        print(f"pafp run: {result.firmware.controller_error}; the supervisor latched the safe state "
-              f"(CONTROLLER_ERROR) and every file was written", file=sys.stderr)
+    _say_controller_error(result.firmware.controller_error)
     if stop.exit_code is not None:
         print(f"pafp run: stopped by {stop.name} after {s['sim_time_s']:.2f} s simulated; the outputs hold "
               "what the run had (\"complete\": false)", file=sys.stderr)
         return stop.exit_code
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
+
+
+def _say_controller_error(error: str) -> None:
+    """The controller raised (anything, sys.exit included) or returned a bad value: one line on stderr."""
+    if error:
+        print(f"pafp run: {error}; the supervisor latched the safe state (CONTROLLER_ERROR) and every file was "
+              "written", file=sys.stderr)
 
 
 def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
@@ -334,6 +339,10 @@ def _run_serial(args: argparse.Namespace) -> int:
         print(f"pafp run: {link['role']} port {link['port']!r} lost ({link['reason']}); the supervisor saw it "
               f"{link['detection_ms']} ms after the first failed read or write; files complete up to the fault",
               file=sys.stderr)
+    _say_controller_error(result.firmware.controller_error)
+    if stop["reason"] == "watchdog":
+        print(f"pafp run: the host watchdog fired: {stop['error']} (task {stop['task']!r} running); it sent zero "
+              "current and the brake, the stop path followed and every file was written", file=sys.stderr)
     capture_error = result.capture_error
     if capture_error is not None:  # the capture's write failed in a task: the stop path ran, the files are written
         print(write_failed("run", capture_error, f"the motor was stopped first; the capture in {args.capture} holds "
