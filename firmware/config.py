@@ -12,6 +12,7 @@ from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.safety import SafetyLimits
+from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S
 from hal.links import link_entry
 from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
@@ -26,12 +27,13 @@ TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "wat
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
 MAX_JOB_CYCLES = 10_000_000
 """Largest cost of one job, base + per_byte * 512 bytes (60 ms at 168 MHz: no task of ours comes near)."""
-MAX_CURRENT_A = 100.0
-"""Largest current command limit: above the AK60-6's 22.7 A peak, well inside the wire's int32 field."""
+MAX_VELOCITY_RAD_S = 560 * 2 * math.pi / 60 / (14 / 3)
+"""Largest ankle velocity limit: the AK60-6's no-load output speed, 560 rpm (maker, PROTOCOLS.md section C), through
+the 14:3 belt = 12.6 rad/s; the drive cannot go faster, so a higher limit would never act."""
 # [control] scalars: (lo, hi, lo_open, hi_open, unit); hi None = a bound from the rates, checked in FirmwareConfig
 CONTROL_RANGES: dict[str, tuple[float, float, bool, bool, str]] = {
-    "current_limit_a": (0.0, MAX_CURRENT_A, True, False, "A"),
-    "velocity_limit_rad_s": (0.0, 100.0, True, False, "rad/s"),
+    "current_limit_a": (0.0, PEAK_CURRENT_A, True, False, "A (the AK60-6's peak current)"),
+    "velocity_limit_rad_s": (0.0, MAX_VELOCITY_RAD_S, True, False, "rad/s (the AK60-6's no-load speed at the ankle)"),
     "imu_lowpass_hz": (0.0, RVC_RATE_HZ / 2, False, True, "Hz (0 = off; below the IMU's Nyquist)"),
     "estimator_offset_tau_s": (0.0, 1000.0, True, False, "s"),
     "velocity_cutoff_hz": (0.0, 5000.0, True, False, "Hz"),
@@ -96,6 +98,11 @@ class FirmwareConfig:
             check_int_range(name, getattr(self, name), 1, 10_000)
         link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
         check_int_range("motor_can_id", self.motor_can_id, 0, 127)
+        streak_max = max(1, int(TIMEOUT_MAX_S * self.control_hz))
+        if self.safety.deadline_miss_streak > streak_max:
+            raise ValueError(f"[safety] deadline_miss_streak = {self.safety.deadline_miss_streak} is not allowed: "
+                             f"must be an integer in [1, {streak_max}] ({TIMEOUT_MAX_S:g} s of control periods "
+                             f"at {self.control_hz} Hz, the longest age limit)")
         if self.full_values_hz > self.control_hz:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
@@ -147,17 +154,34 @@ def _rates(table: dict[str, Any]) -> dict[str, Any]:
 
 
 def _safety(table: dict[str, Any]) -> dict[str, Any]:
-    """[safety] keys as SafetyLimits fields (`*_deg` in degrees -> `*_rad`); ValueError names an unknown key."""
+    """[safety] keys as SafetyLimits fields (`*_deg` in degrees -> `*_rad`); ValueError names an unknown key.
+
+    The angles are checked here in the profile's degrees, so that a message names the key as written.
+    """
     known = {f.name for f in fields(SafetyLimits)}
     out = {}
     for key, value in table.items():
         degrees = key.endswith("_deg")
         name = key[:-len("_deg")] + "_rad" if degrees else key
         if name not in known:
-            raise ValueError(f"[safety] has no key {key!r}")
-        # a value that is no number goes on unconverted: SafetyLimits' check names it and its range
+            raise ValueError(f"[safety] has no key {key!r}: the keys are {', '.join(_safety_keys())}")
+        # a value that is no number goes on unconverted: the check names it and its range
         out[name] = math.radians(value) if degrees and is_number(value) else value
+    limit_deg = math.degrees(ANGLE_LIMIT_RAD)
+    for key in ("angle_min_deg", "angle_max_deg"):
+        if key in table:
+            check_range(key, table[key], -limit_deg, limit_deg, unit="deg (the foot along the shank)")
+    if "disagreement_deg" in table:
+        lo, hi = (table.get(k, math.degrees(getattr(SafetyLimits, k.replace("_deg", "_rad"))))
+                  for k in ("angle_min_deg", "angle_max_deg"))
+        check_range("disagreement_deg", table["disagreement_deg"], 0.0, hi - lo, lo_open=True,
+                    unit="deg (the span of the angle limits)")
     return out
+
+
+def _safety_keys() -> list[str]:
+    """The [safety] keys of a profile: SafetyLimits' fields, angles in degrees."""
+    return [f.name.removesuffix("_rad") + "_deg" if f.name.endswith("_rad") else f.name for f in fields(SafetyLimits)]
 
 
 def _control(table: dict[str, Any], control_hz: int) -> dict[str, Any]:

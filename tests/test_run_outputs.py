@@ -35,8 +35,23 @@ def _profile(tmp_path: Path, old: str, new: str) -> Path:
 
 
 @pytest.mark.parametrize(("old", "new", "needles"), [
-    ("current_limit_a = 12.0", "current_limit_a = -12.0", ["[control] current_limit_a = -12.0", "(0, 100] A"]),
-    ("current_limit_a = 12.0", "current_limit_a = 1e9", ["[control] current_limit_a = 1000000000.0", "(0, 100] A"]),
+    ("current_limit_a = 12.0", "current_limit_a = -12.0", ["[control] current_limit_a = -12.0", "(0, 22.7] A"]),
+    ("current_limit_a = 12.0", "current_limit_a = 1e9", ["[control] current_limit_a = 1000000000.0", "(0, 22.7] A"]),
+    ("current_limit_a = 12.0", "current_limit_a = 22.8", ["[control] current_limit_a = 22.8", "(0, 22.7] A"]),
+    ("velocity_limit_rad_s = 8.0", "velocity_limit_rad_s = 100", ["[control] velocity_limit_rad_s = 100",
+                                                                  "(0, 12.5664] rad/s"]),
+    # every [safety] limit is bounded by the hardware (firmware/safety_limits.py names the sources)
+    ("brake_current_a = 2.0", "brake_current_a = 500", ["[safety] brake_current_a = 500", "(0, 6.5] A"]),
+    ("current_limit_a = 20.0", "current_limit_a = 1e9", ["[safety] current_limit_a = 1000000000.0", "(0, 22.7] A"]),
+    ("angle_max_deg = 38.0", "angle_max_deg = 1000", ["[safety] angle_max_deg = 1000", "[-90, 90] deg"]),
+    ("angle_min_deg = -33.0", "angle_min_deg = -91", ["[safety] angle_min_deg = -91", "[-90, 90] deg"]),
+    ("disagreement_deg = 6.0", "disagreement_deg = 1e9", ["[safety] disagreement_deg = 1000000000.0", "(0, 71] deg"]),
+    ("command_timeout_s = 0.020", "command_timeout_s = 1e6", ["[safety] command_timeout_s = 1000000.0", "(0, 0.1] s"]),
+    ("motor_timeout_s = 0.020", "motor_timeout_s = 0.2", ["[safety] motor_timeout_s = 0.2", "(0, 0.1] s"]),
+    ("imu_timeout_s = 0.050", "imu_timeout_s = 10", ["[safety] imu_timeout_s = 10", "(0, 0.1] s"]),
+    ("startup_grace_s = 0.5", "startup_grace_s = 1e9", ["[safety] startup_grace_s = 1000000000.0", "(0, 5] s"]),
+    ("brake_delay_s = 0.010", "brake_delay_s = 2", ["[safety] brake_delay_s = 2", "[0, 1] s"]),
+    ("deadline_miss_streak = 3", "deadline_miss_streak = 101", ["[safety] deadline_miss_streak = 101", "[1, 100]"]),
     ("stride_s = 1.1", "stride_s = 0", ["[control] stride_s = 0", "[0.2, 10] s"]),
     ("stride_s = 1.1", "stride_s = 1e6", ["[control] stride_s = 1000000.0", "[0.2, 10] s"]),
     ("control = { base = 3500 }", "control = { base = -3500 }", ["[task_cycles] control: base = -3500",
