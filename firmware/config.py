@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,9 @@ TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "wat
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
 MAX_JOB_CYCLES = 10_000_000
 """Largest cost of one job, base + per_byte * 512 bytes (60 ms at 168 MHz: no task of ours comes near)."""
+MAX_CAN_ID = 127
+"""Largest [motor] can_id: the driver id is the low byte of a servo-mode CAN id and MIT mode's 11-bit id (PROTOCOLS.md
+section G); the firmware keeps to 0..127."""
 MAX_VELOCITY_RAD_S = 560 * 2 * math.pi / 60 / (14 / 3)
 """Largest ankle velocity limit: the AK60-6's no-load output speed, 560 rpm (maker, PROTOCOLS.md section C), through
 the 14:3 belt = 12.6 rad/s; the drive cannot go faster, so a higher limit would never act."""
@@ -97,7 +100,7 @@ class FirmwareConfig:
         for name in RATE_FIELDS:
             check_int_range(name, getattr(self, name), 1, 10_000)
         link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
-        check_int_range("motor_can_id", self.motor_can_id, 0, 127)
+        check_int_range("motor_can_id", self.motor_can_id, 0, MAX_CAN_ID)
         streak_max = max(1, int(TIMEOUT_MAX_S * self.control_hz))
         if self.safety.deadline_miss_streak > streak_max:
             raise ValueError(f"[safety] deadline_miss_streak = {self.safety.deadline_miss_streak} is not allowed: "
@@ -134,11 +137,17 @@ def _check_control(value: Callable[[str], Any], control_hz: int) -> None:
         raise ValueError(f"feedforward = {value('feedforward')!r} is not allowed: must be true or false")
 
 
-def _gains(table: dict[str, Any], where: str) -> PidGains:
-    try:
-        return PidGains(**table)
-    except TypeError as e:
-        raise ValueError(f"[{where}] has no such key ({e})") from None
+def _parameters(cls: Callable[..., Any], table: dict[str, Any]) -> Any:
+    """cls(**table) for a dataclass of parameters; ValueError naming an unknown or a missing key and the keys."""
+    keys = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+    required = [f.name for f in fields(cls) if f.default is MISSING]  # type: ignore[arg-type]
+    unknown = [k for k in table if k not in keys]
+    if unknown:
+        raise ValueError(f"has no key {unknown[0]!r}: the keys are {', '.join(keys)}")
+    missing = [k for k in required if k not in table]
+    if missing:
+        raise ValueError(f"needs {', '.join(missing)} (required; the keys are {', '.join(keys)})")
+    return cls(**table)
 
 
 def _rates(table: dict[str, Any]) -> dict[str, Any]:
@@ -237,6 +246,9 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file, the section and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
     doc = read_toml(p, "firmware profile")
+    if not doc:
+        raise ValueError(f"firmware profile {p} is empty: no section of {', '.join(f'[{n}]' for n in SECTIONS)} "
+                         "(start from the shipped profiles/firmware.toml)")
     unknown = sorted(set(doc) - set(SECTIONS))
     if unknown:
         raise ValueError(f"firmware profile {p}: unknown section [{unknown[0]}]: the sections are "
@@ -250,19 +262,13 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         control_hz = rates.get("control_hz", FirmwareConfig.control_hz)
         _control(ctl, control_hz if isinstance(control_hz, int) else FirmwareConfig.control_hz)
         section = "control.position"
-        position_gains = _gains(pos, section)
+        position_gains = _parameters(PidGains, pos)
         section = "control.velocity"
-        velocity_gains = _gains(vel, section)
+        velocity_gains = _parameters(PidGains, vel)
         section = "feedforward"
-        try:
-            feedforward_params = FeedforwardParams(**_section(doc, "feedforward"))
-        except TypeError as e:
-            raise ValueError(f"has no such key ({e})") from None
+        feedforward_params = _parameters(FeedforwardParams, _section(doc, "feedforward"))
         section = "safety"
-        try:
-            safety = SafetyLimits(**_safety(_section(doc, "safety")))
-        except TypeError as e:
-            raise ValueError(f"has no such key ({e})") from None
+        safety = SafetyLimits(**_safety(_section(doc, "safety")))
         section = "task_cycles"
         task_cycles = _task_cycles(_section(doc, "task_cycles"))
         section = "motor"
@@ -271,8 +277,10 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         if unknown:
             raise ValueError(f"has no key {unknown[0]!r}: its keys are link, can_id")
         links = {"motor_link": motor["link"]} if "link" in motor else {}
+        if "link" in motor:
+            link_entry(motor["link"], "link")  # ValueError naming the choices, blamed on [motor]
         if "can_id" in motor:
-            links["motor_can_id"] = motor["can_id"]
+            links["motor_can_id"] = check_int_range("can_id", motor["can_id"], 0, MAX_CAN_ID)
         section = "controller"
         controller = _controller(_section(doc, "controller"), p)
         section = "rates_hz"  # what is left: checks across sections, which name their keys

@@ -31,9 +31,29 @@ from host_tools.sweep_point import (
 from host_tools.sweep_spec import SpecError, SweepSpec
 from host_tools.sweep_table import ResultsTable
 
-__all__ = ["Progress", "SweepOutcome", "check_points", "columns_of", "dask_client", "run_sweep", "tasks_of"]
+__all__ = ["Progress", "SweepOutcome", "check_points", "check_scheduler", "columns_of", "dask_client", "run_sweep", "tasks_of"]
 
 PlantOptions = Callable[[int], dict[str, Any]]
+
+
+def check_scheduler(address: str) -> None:
+    """ValueError unless `address` is a scheduler file that exists (.json) or an address with a port.
+
+    >>> check_scheduler("tcp://10.0.0.2:8786")
+    >>> check_scheduler("nosuch.json")
+    Traceback (most recent call last):
+    ...
+    ValueError: --scheduler 'nosuch.json' is not allowed: no such file; give tcp://HOST:PORT or an existing scheduler file (.json)
+    """
+    allowed = "give tcp://HOST:PORT or an existing scheduler file (.json)"
+    if address.endswith(".json"):
+        if not Path(address).is_file():
+            raise ValueError(f"--scheduler {address!r} is not allowed: no such file; {allowed}")
+        return
+    scheme, _, rest = address.rpartition("://")
+    host, _, port = rest.rpartition(":")
+    if scheme != "inproc" and not (host and port.isdigit() and 0 < int(port) < 65536):
+        raise ValueError(f"--scheduler {address!r} is not allowed: no HOST:PORT (port 1..65535); {allowed}")
 
 
 @contextmanager
@@ -45,7 +65,8 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, proces
     for name in ("distributed", "tornado"):  # the cluster's chatter; errors still show
         logging.getLogger(name).setLevel(max(logging.WARNING, logging.getLogger(name).getEffectiveLevel()))
     if scheduler:
-        by_file = scheduler.endswith(".json") and Path(scheduler).is_file()  # `dask scheduler --scheduler-file`
+        check_scheduler(scheduler)
+        by_file = scheduler.endswith(".json")  # `dask scheduler --scheduler-file`
         client = Client(scheduler_file=scheduler, timeout="10s") if by_file else Client(scheduler, timeout="10s")
         try:
             yield client

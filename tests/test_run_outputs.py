@@ -62,6 +62,14 @@ def _profile(tmp_path: Path, old: str, new: str) -> Path:
      ["[task_cycles] task 'watchdgo' is not a firmware task", "watchdog"]),
     ("stride_s = 1.1", "stride_s = 1.1\nstrid_s = 1.1", ["[control] has no key 'strid_s'", "stride_s"]),
     ("control = 1000 ", "control = 0 ", ["[rates_hz] control = 0", "[1, 10000]"]),
+    # each message names the section and key as written in the profile, and the keys or range allowed
+    ('link = "uart"', 'link = "usb"', ["[motor] link 'usb' unknown", "'can-mit', 'can-servo', 'uart'"]),
+    ("can_id = 1", "can_id = 300", ["[motor] can_id = 300", "[0, 127]"]),
+    ("kp = 8.0", "kpp = 8.0", ["[control.position] has no key 'kpp'", "kp, ki, kd, derivative_tau_s"]),
+    ("kp = 8.0", "ki_ = 8.0", ["[control.position] has no key 'ki_'", "kp, ki, kd, derivative_tau_s"]),
+    ("kp = 0.2", "# kp = 0.2", ["[control.velocity] needs kp (required"]),
+    ("inertia_kg_m2 = 0.0495", "inertia = 0.0495", ["[feedforward] has no key 'inertia'", "inertia_kg_m2, mass_kg"]),
+    ("disagreement_deg = 6.0", "disagreement = 6.0", ["[safety] has no key 'disagreement'", "disagreement_deg"]),
 ])
 def test_a_bad_profile_value_is_one_line_naming_file_section_value_and_range(tmp_path, capsys, old, new, needles):
     profile = _profile(tmp_path, old, new)

@@ -7,6 +7,7 @@ import importlib
 import sys
 from pathlib import Path
 
+from host_tools.arguments import seed
 from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
@@ -19,7 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("test", choices=[*TESTS, "all"], help="which bench test to run, or all")
     parser.add_argument("--out", type=Path, default=None,
                         help="directory for the PNG, CSV, JSON and Markdown outputs (none written if omitted)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the trial variation (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the trial variation (default 0)")
     parser.add_argument("--quick", action="store_true", help="shorter runs and fewer trials")
 
 

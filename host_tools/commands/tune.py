@@ -8,13 +8,15 @@ import os
 import sys
 from pathlib import Path
 
+from host_tools.arguments import seed
+
 HELP = "automatic PID gain search on the emulator (differential evolution on Dask, seeded): writes a tuned profile"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp tune`."""
     parser.add_argument("--strides", type=int, default=2, help="gait strides per candidate run (default 2)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the candidate generator and the runs")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the candidate generator and the runs")
     parser.add_argument("--budget", type=int, default=48,
                         help="candidate runs in all, >= 5, spent in generations of 8 (default 48)")
     parser.add_argument("--out", type=Path, default=Path("runs") / "tune",
