@@ -31,7 +31,8 @@ from host_tools.sweep_point import (
 from host_tools.sweep_spec import SpecError, SweepSpec
 from host_tools.sweep_table import ResultsTable
 
-__all__ = ["Progress", "SweepOutcome", "check_points", "check_scheduler", "columns_of", "dask_client", "run_sweep", "tasks_of"]
+__all__ = ["Progress", "SweepOutcome", "check_points", "check_scheduler", "columns_of", "dask_client", "run_sweep",
+           "tasks_of"]
 
 PlantOptions = Callable[[int], dict[str, Any]]
 
@@ -40,10 +41,10 @@ def check_scheduler(address: str) -> None:
     """ValueError unless `address` is a scheduler file that exists (.json) or an address with a port.
 
     >>> check_scheduler("tcp://10.0.0.2:8786")
-    >>> check_scheduler("nosuch.json")
+    >>> check_scheduler("nosuch.json")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: --scheduler 'nosuch.json' is not allowed: no such file; give tcp://HOST:PORT or an existing scheduler file (.json)
+    ValueError: --scheduler 'nosuch.json' is not allowed: no such file; give tcp://HOST:PORT or ...
     """
     allowed = "give tcp://HOST:PORT or an existing scheduler file (.json)"
     if address.endswith(".json"):

@@ -64,7 +64,7 @@ def test_a_limit_that_is_no_number_is_refused(value):
 
 def test_the_miss_streak_is_held_to_the_longest_age_limit_at_the_control_rate():
     FirmwareConfig(control_hz=1000, safety=SafetyLimits(deadline_miss_streak=100))
-    with pytest.raises(ValueError, match=r"deadline_miss_streak = 101 is not allowed: must be an integer in \[1, 100\]"):
+    with pytest.raises(ValueError, match=r"deadline_miss_streak = 101 is not allowed: must be an integer in \[1, 100]"):
         FirmwareConfig(control_hz=1000, safety=SafetyLimits(deadline_miss_streak=101))
     FirmwareConfig(control_hz=200, imu_poll_hz=200, logger_hz=200, watchdog_kick_hz=100,
                    velocity_cutoff_hz=40.0, safety=SafetyLimits(deadline_miss_streak=20))

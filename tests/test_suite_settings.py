@@ -33,8 +33,8 @@ def test_every_test_has_a_generous_timeout_from_pytest_timeout():
 
 
 def test_a_hanging_test_fails_the_run_instead_of_stalling_it(tmp_path: Path):
-    (tmp_path / "test_hang.py").write_text("import time\n\ndef test_hangs():\n    while True:\n        time.sleep(0.05)\n",
-                                           encoding="utf-8")
+    hang = "import time\n\n\ndef test_hangs():\n    while True:\n        time.sleep(0.05)\n"
+    (tmp_path / "test_hang.py").write_text(hang, encoding="utf-8")
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--timeout", "2",
                         "--timeout-method", "thread", str(tmp_path / "test_hang.py")],
                        cwd=tmp_path, capture_output=True, text=True, timeout=120)

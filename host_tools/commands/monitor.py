@@ -27,7 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--csv", type=Path, default=None, metavar="OUT", help="write every record to this CSV")
     parser.add_argument("--plot", action="store_true", help="live angle/reference plot (needs a display)")
     parser.add_argument("--baud", type=int_in(1, 20_000_000), default=921600, help="port baud rate (default 921600)")
-    parser.add_argument("--duration", type=float_in(0.0, lo_open=True, unit="s"), default=None, metavar="S", help="stop after S seconds")
+    parser.add_argument("--duration", type=float_in(0.0, lo_open=True, unit="s"), default=None, metavar="S",
+                        help="stop after S seconds")
 
 
 def _has_display() -> bool:

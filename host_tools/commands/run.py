@@ -12,11 +12,11 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from host_tools.arguments import float_in, seed
+
 if TYPE_CHECKING:
     from host_tools.outdir import RunDir
     from host_tools.runner import RunConfig
-
-from host_tools.arguments import float_in, seed
 
 STRIDES = 10
 """A virtual run's length without --strides."""
@@ -279,7 +279,8 @@ def _run_serial(args: argparse.Namespace) -> int:
     telemetry_pty = None
     try:
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
-                              duration_s=DURATION_S if args.duration is None else args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
+                              duration_s=DURATION_S if args.duration is None else args.duration, baud=args.baud,
+                              imu_baud=args.imu_baud, seed=args.seed,
                               board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
