@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.pafp-installed
 ARGS ?=
 
-.PHONY: install test bench lint run clean
+.PHONY: install test fuzz bench lint run clean
 
 # The hot path is compiled with mypyc: an edit of any module listed in setup.py's COMPILED rebuilds it.
 # PAFP_PURE_PYTHON=1 make install gives the pure-Python package instead.
@@ -26,6 +26,10 @@ install: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q --ignore=tests/benchmarks
+
+# The property tests under the exploring Hypothesis profile (tests/conftest.py): random seeds, more examples.
+fuzz: $(STAMP)
+	$(PY) -m pytest -q --hypothesis-profile=fuzz $(shell grep -l hypothesis tests/test_*.py)
 
 bench: $(STAMP)
 	@mkdir -p runs/bench

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +13,7 @@ from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.safety import SafetyLimits
+from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S
 from hal.links import link_entry
 from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
@@ -28,15 +29,19 @@ TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "wat
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
 MAX_JOB_CYCLES = 10_000_000
 """Largest cost of one job, base + per_byte * 512 bytes (60 ms at 168 MHz: no task of ours comes near)."""
-MAX_CURRENT_A = 100.0
-"""Largest current command limit: above the AK60-6's 22.7 A peak, well inside the wire's int32 field."""
 HOST_WATCHDOG_RANGE_S = (0.03, 0.5)
 """[host_watchdog] timeout_s: above the 10 ms kick interval plus the 20 ms age limits, at most half the motor's
 own 1 s command timeout (docs/serial_mode.md, "The host watchdog")."""
+MAX_CAN_ID = 127
+"""Largest [motor] can_id: the driver id is the low byte of a servo-mode CAN id and MIT mode's 11-bit id (PROTOCOLS.md
+section G); the firmware keeps to 0..127."""
+MAX_VELOCITY_RAD_S = 560 * 2 * math.pi / 60 / (14 / 3)
+"""Largest ankle velocity limit: the AK60-6's no-load output speed, 560 rpm (maker, PROTOCOLS.md section C), through
+the 14:3 belt = 12.6 rad/s; the drive cannot go faster, so a higher limit would never act."""
 # [control] scalars: (lo, hi, lo_open, hi_open, unit); hi None = a bound from the rates, checked in FirmwareConfig
 CONTROL_RANGES: dict[str, tuple[float, float, bool, bool, str]] = {
-    "current_limit_a": (0.0, MAX_CURRENT_A, True, False, "A"),
-    "velocity_limit_rad_s": (0.0, 100.0, True, False, "rad/s"),
+    "current_limit_a": (0.0, PEAK_CURRENT_A, True, False, "A (the AK60-6's peak current)"),
+    "velocity_limit_rad_s": (0.0, MAX_VELOCITY_RAD_S, True, False, "rad/s (the AK60-6's no-load speed at the ankle)"),
     "imu_lowpass_hz": (0.0, RVC_RATE_HZ / 2, False, True, "Hz (0 = off; below the IMU's Nyquist)"),
     "estimator_offset_tau_s": (0.0, 1000.0, True, False, "s"),
     "velocity_cutoff_hz": (0.0, 5000.0, True, False, "Hz"),
@@ -102,7 +107,12 @@ class FirmwareConfig:
         for name in RATE_FIELDS:
             check_int_range(name, getattr(self, name), 1, 10_000)
         link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
-        check_int_range("motor_can_id", self.motor_can_id, 0, 127)
+        check_int_range("motor_can_id", self.motor_can_id, 0, MAX_CAN_ID)
+        streak_max = max(1, int(TIMEOUT_MAX_S * self.control_hz))
+        if self.safety.deadline_miss_streak > streak_max:
+            raise ValueError(f"[safety] deadline_miss_streak = {self.safety.deadline_miss_streak} is not allowed: "
+                             f"must be an integer in [1, {streak_max}] ({TIMEOUT_MAX_S:g} s of control periods "
+                             f"at {self.control_hz} Hz, the longest age limit)")
         if self.full_values_hz > self.control_hz:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
@@ -135,11 +145,17 @@ def _check_control(value: Callable[[str], Any], control_hz: int) -> None:
         raise ValueError(f"feedforward = {value('feedforward')!r} is not allowed: must be true or false")
 
 
-def _gains(table: dict[str, Any], where: str) -> PidGains:
-    try:
-        return PidGains(**table)
-    except TypeError as e:
-        raise ValueError(f"[{where}] has no such key ({e})") from None
+def _parameters(cls: Callable[..., Any], table: dict[str, Any]) -> Any:
+    """cls(**table) for a dataclass of parameters; ValueError naming an unknown or a missing key and the keys."""
+    keys = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+    required = [f.name for f in fields(cls) if f.default is MISSING]  # type: ignore[arg-type]
+    unknown = [k for k in table if k not in keys]
+    if unknown:
+        raise ValueError(f"has no key {unknown[0]!r}: the keys are {', '.join(keys)}")
+    missing = [k for k in required if k not in table]
+    if missing:
+        raise ValueError(f"needs {', '.join(missing)} (required; the keys are {', '.join(keys)})")
+    return cls(**table)
 
 
 def _rates(table: dict[str, Any]) -> dict[str, Any]:
@@ -155,17 +171,34 @@ def _rates(table: dict[str, Any]) -> dict[str, Any]:
 
 
 def _safety(table: dict[str, Any]) -> dict[str, Any]:
-    """[safety] keys as SafetyLimits fields (`*_deg` in degrees -> `*_rad`); ValueError names an unknown key."""
+    """[safety] keys as SafetyLimits fields (`*_deg` in degrees -> `*_rad`); ValueError names an unknown key.
+
+    The angles are checked here in the profile's degrees, so that a message names the key as written.
+    """
     known = {f.name for f in fields(SafetyLimits)}
     out = {}
     for key, value in table.items():
         degrees = key.endswith("_deg")
         name = key[:-len("_deg")] + "_rad" if degrees else key
         if name not in known:
-            raise ValueError(f"[safety] has no key {key!r}")
-        # a value that is no number goes on unconverted: SafetyLimits' check names it and its range
+            raise ValueError(f"[safety] has no key {key!r}: the keys are {', '.join(_safety_keys())}")
+        # a value that is no number goes on unconverted: the check names it and its range
         out[name] = math.radians(value) if degrees and is_number(value) else value
+    limit_deg = math.degrees(ANGLE_LIMIT_RAD)
+    for key in ("angle_min_deg", "angle_max_deg"):
+        if key in table:
+            check_range(key, table[key], -limit_deg, limit_deg, unit="deg (the foot along the shank)")
+    if "disagreement_deg" in table:
+        lo, hi = (table.get(k, math.degrees(getattr(SafetyLimits, k.replace("_deg", "_rad"))))
+                  for k in ("angle_min_deg", "angle_max_deg"))
+        check_range("disagreement_deg", table["disagreement_deg"], 0.0, hi - lo, lo_open=True,
+                    unit="deg (the span of the angle limits)")
     return out
+
+
+def _safety_keys() -> list[str]:
+    """The [safety] keys of a profile: SafetyLimits' fields, angles in degrees."""
+    return [f.name.removesuffix("_rad") + "_deg" if f.name.endswith("_rad") else f.name for f in fields(SafetyLimits)]
 
 
 def _control(table: dict[str, Any], control_hz: int) -> dict[str, Any]:
@@ -231,6 +264,9 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     """Read a firmware profile (default: profiles/firmware.toml); errors name the file, the section and the key."""
     p = Path(path) if path is not None else DEFAULT_PROFILE
     doc = read_toml(p, "firmware profile")
+    if not doc:
+        raise ValueError(f"firmware profile {p} is empty: no section of {', '.join(f'[{n}]' for n in SECTIONS)} "
+                         "(start from the shipped profiles/firmware.toml)")
     unknown = sorted(set(doc) - set(SECTIONS))
     if unknown:
         raise ValueError(f"firmware profile {p}: unknown section [{unknown[0]}]: the sections are "
@@ -244,19 +280,13 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         control_hz = rates.get("control_hz", FirmwareConfig.control_hz)
         _control(ctl, control_hz if isinstance(control_hz, int) else FirmwareConfig.control_hz)
         section = "control.position"
-        position_gains = _gains(pos, section)
+        position_gains = _parameters(PidGains, pos)
         section = "control.velocity"
-        velocity_gains = _gains(vel, section)
+        velocity_gains = _parameters(PidGains, vel)
         section = "feedforward"
-        try:
-            feedforward_params = FeedforwardParams(**_section(doc, "feedforward"))
-        except TypeError as e:
-            raise ValueError(f"has no such key ({e})") from None
+        feedforward_params = _parameters(FeedforwardParams, _section(doc, "feedforward"))
         section = "safety"
-        try:
-            safety = SafetyLimits(**_safety(_section(doc, "safety")))
-        except TypeError as e:
-            raise ValueError(f"has no such key ({e})") from None
+        safety = SafetyLimits(**_safety(_section(doc, "safety")))
         section = "task_cycles"
         task_cycles = _task_cycles(_section(doc, "task_cycles"))
         section = "motor"
@@ -265,8 +295,10 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         if unknown:
             raise ValueError(f"has no key {unknown[0]!r}: its keys are link, can_id")
         links = {"motor_link": motor["link"]} if "link" in motor else {}
+        if "link" in motor:
+            link_entry(motor["link"], "link")  # ValueError naming the choices, blamed on [motor]
         if "can_id" in motor:
-            links["motor_can_id"] = motor["can_id"]
+            links["motor_can_id"] = check_int_range("can_id", motor["can_id"], 0, MAX_CAN_ID)
         section = "controller"
         controller = _controller(_section(doc, "controller"), p)
         section = "ground_sensors"

@@ -10,9 +10,36 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from firmware.control.validation import is_number
+from firmware.control.validation import check_int_range, check_range
 
-__all__ = ["SafetyLimits"]
+__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "MISS_STREAK_MAX", "PEAK_CURRENT_A",
+           "STARTUP_GRACE_MAX_S", "TIMEOUT_MAX_S", "SafetyLimits"]
+
+# The hardware's bounds on every limit; a limit beyond them is no limit at all (or asks the motor for what it
+# cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C).
+PEAK_CURRENT_A = 22.7
+"""AK60-6 peak phase current (report Table B2; maker 22.7 A): the motor cannot carry more, so a current limit
+above it never trips and a command above it is not what the motor will do."""
+BRAKE_CURRENT_MAX_A = 6.5
+"""AK60-6 rated (continuous) current (maker, PROTOCOLS.md section C): the brake is held for as long as the
+device stays in SAFE, which may be minutes, so it must not ask more than the winding carries continuously."""
+ANGLE_LIMIT_RAD = math.pi / 2
+"""Angle limits lie within +-90 deg: 0 is the foot perpendicular to the shank (docs/plant.md), and at +-90 deg
+the foot would lie along the shank, further than any ankle or the frame's stops (-30/+36 deg) go."""
+TIMEOUT_MAX_S = 0.1
+"""Longest age limit of a command, of the motor's feedback and of an IMU frame. At the peak current the ankle
+gets Kt*I*N*eta = 0.078*22.7*28*0.855 = 42 N*m on about 0.05 kg*m^2 (report Table B2, the [feedforward]
+model): 860 rad/s^2, which swings the foot 1/2*860*0.1^2 = 4.3 rad, more than any range of motion, in 0.1 s.
+A longer limit would let a stale command run from stop to stop unsupervised (docs/serial_mode.md)."""
+STARTUP_GRACE_MAX_S = 5.0
+"""Longest start-up grace: until RUN the motor is told zero current, so the grace only delays the report of
+a sensor that never spoke; the serial start-up check gives a port 1 s (docs/serial_mode.md). [I] choice."""
+BRAKE_DELAY_MAX_S = 1.0
+"""Longest zero-current phase before the brake: the motor's own command timeout (VESC APPCONF_TIMEOUT_MSEC,
+1 s, PROTOCOLS.md B.2), after which it would let go on its own anyway."""
+MISS_STREAK_MAX = 1000
+"""Longest deadline-miss streak: TIMEOUT_MAX_S at the fastest control rate a profile may set (10 kHz); the
+firmware configuration also holds it to TIMEOUT_MAX_S at its own control rate."""
 
 
 @dataclass(frozen=True)
@@ -32,17 +59,25 @@ class SafetyLimits:
     brake_current_a: float = 2.0
 
     def __post_init__(self) -> None:
-        """Reject limits that cannot describe a working supervisor."""
+        """Reject limits that cannot describe a working supervisor or lie beyond the hardware (module constants)."""
+        for name in ("angle_min_rad", "angle_max_rad"):
+            check_range(name, getattr(self, name), -ANGLE_LIMIT_RAD, ANGLE_LIMIT_RAD, unit="rad (+-90 deg)")
         if not self.angle_min_rad < self.angle_max_rad:
             raise ValueError(
                 f"angle limits ({self.angle_min_rad}, {self.angle_max_rad}) rad: min must be below max"
             )
-        for name in ("current_limit_a", "motor_timeout_s", "command_timeout_s", "imu_timeout_s", "disagreement_rad",
-                     "startup_grace_s", "brake_current_a"):
-            value = getattr(self, name)
-            if not (is_number(value) and value > 0):
-                raise ValueError(f"{name} {value!r} out of range: a finite number > 0")
-        if not 0 <= self.brake_delay_s <= 1.0:
-            raise ValueError(f"brake_delay_s {self.brake_delay_s!r} out of range: 0..1 s")
-        if self.deadline_miss_streak < 1:
-            raise ValueError(f"deadline_miss_streak {self.deadline_miss_streak!r} out of range: >= 1")
+        span = self.angle_max_rad - self.angle_min_rad
+        check_range("disagreement_rad", self.disagreement_rad, 0.0, span, lo_open=True,
+                    unit="rad (at most the span of the angle limits: a wider one could not tell any two readings "
+                         "inside them apart)")
+        check_range("current_limit_a", self.current_limit_a, 0.0, PEAK_CURRENT_A, lo_open=True,
+                    unit="A (the AK60-6's peak current)")
+        check_range("brake_current_a", self.brake_current_a, 0.0, BRAKE_CURRENT_MAX_A, lo_open=True,
+                    unit="A (the AK60-6's rated continuous current)")
+        for name in ("motor_timeout_s", "command_timeout_s", "imu_timeout_s"):
+            check_range(name, getattr(self, name), 0.0, TIMEOUT_MAX_S, lo_open=True,
+                        unit="s (a stale peak-current command crosses any range of motion in 0.1 s)")
+        check_range("startup_grace_s", self.startup_grace_s, 0.0, STARTUP_GRACE_MAX_S, lo_open=True, unit="s")
+        check_range("brake_delay_s", self.brake_delay_s, 0.0, BRAKE_DELAY_MAX_S,
+                    unit="s (the motor's own command timeout)")
+        check_int_range("deadline_miss_streak", self.deadline_miss_streak, 1, MISS_STREAK_MAX)

@@ -7,6 +7,7 @@ import importlib
 import logging
 import os
 import sys
+from typing import NoReturn
 
 from host_tools.build_info import ROOT, describe, stale_sources, version
 
@@ -23,12 +24,20 @@ COMMANDS: dict[str, str] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (the option, the value, the range), not the usage first."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print `prog: message (prog --help: the options)` and exit 2."""
+        self.exit(2, f"{self.prog}: {message} (`{self.prog} --help` lists the options)\n")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand registered (or only the subcommand `only`).
 
     Registering a subcommand imports its module: `pafp run` need not import what `pafp bench` does.
     """
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="pafp",
         description="Emulator of the firmware of a powered ankle-foot prosthesis.",
     )

@@ -33,21 +33,44 @@ from host_tools.sweep_point import (
 from host_tools.sweep_spec import SpecError, SweepSpec
 from host_tools.sweep_table import ResultsTable
 
-__all__ = ["Progress", "SweepOutcome", "check_points", "columns_of", "dask_client", "run_sweep", "tasks_of"]
+__all__ = ["Progress", "SweepOutcome", "check_points", "check_scheduler", "columns_of", "dask_client", "run_sweep",
+           "tasks_of"]
 
 PlantOptions = Callable[[int], dict[str, Any]]
+
+
+def check_scheduler(address: str) -> None:
+    """ValueError unless `address` is a scheduler file that exists (.json) or an address with a port.
+
+    >>> check_scheduler("tcp://10.0.0.2:8786")
+    >>> check_scheduler("nosuch.json")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: --scheduler 'nosuch.json' is not allowed: no such file; give tcp://HOST:PORT or ...
+    """
+    allowed = "give tcp://HOST:PORT or an existing scheduler file (.json)"
+    if address.endswith(".json"):
+        if not Path(address).is_file():
+            raise ValueError(f"--scheduler {address!r} is not allowed: no such file; {allowed}")
+        return
+    scheme, _, rest = address.rpartition("://")
+    host, _, port = rest.rpartition(":")
+    if scheme != "inproc" and not (host and port.isdigit() and 0 < int(port) < 65536):
+        raise ValueError(f"--scheduler {address!r} is not allowed: no HOST:PORT (port 1..65535); {allowed}")
 
 
 @contextmanager
 def dask_client(workers: int | None = None, scheduler: str | None = None, processes: bool = True) -> Iterator[Any]:
     """A dask.distributed Client: on `scheduler` (an address or a scheduler file) if given, else on a LocalCluster
     of `workers` on 127.0.0.1."""
+    if scheduler:
+        check_scheduler(scheduler)  # before dask is imported: a bad address costs nothing
     from dask.distributed import Client, LocalCluster
 
     for name in ("distributed", "tornado"):  # the cluster's chatter; errors still show
         logging.getLogger(name).setLevel(max(logging.WARNING, logging.getLogger(name).getEffectiveLevel()))
     if scheduler:
-        by_file = scheduler.endswith(".json") and Path(scheduler).is_file()  # `dask scheduler --scheduler-file`
+        by_file = scheduler.endswith(".json")  # `dask scheduler --scheduler-file`
         client = Client(scheduler_file=scheduler, timeout="10s") if by_file else Client(scheduler, timeout="10s")
         try:
             yield client

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from fractions import Fraction
@@ -48,9 +49,9 @@ def _ticks(value: Any, what: str, per_unit: Fraction, unit: str, minimum: int) -
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ValueError(f"{what} must be a number (in {unit}), got {value!r}")
-    if value < 0 or (minimum > 0 and value == 0):
+    if not math.isfinite(value) or value < 0 or (minimum > 0 and value == 0):
         rule = "> 0" if minimum > 0 else ">= 0"
-        raise ValueError(f"{what} must be {rule} {unit}, got {value!r}")
+        raise ValueError(f"{what} must be a finite number {rule} {unit}, got {value!r}")
     ticks = (Fraction(repr(value)) if isinstance(value, float) else Fraction(value)) * per_unit  # decimal
     if ticks.denominator != 1:
         raise ValueError(f"{what} = {value!r} {unit} is not a whole number of ticks "

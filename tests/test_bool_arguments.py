@@ -70,5 +70,5 @@ def test_controller_and_safety_parameters_refuse_a_bool() -> None:
         PidGains(True)
     with pytest.raises(ValueError, match="inertia_kg_m2 = True"):
         FeedforwardParams(True, 1.0, 0.1, 0.1, 6.0, 0.9)
-    with pytest.raises(ValueError, match="current_limit_a True"):
+    with pytest.raises(ValueError, match="current_limit_a = True"):
         SafetyLimits(current_limit_a=True)

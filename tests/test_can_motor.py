@@ -133,7 +133,8 @@ def test_the_link_is_chosen_by_name_and_a_bad_name_is_one_line(tmp_path, capsys)
     assert 'link = "uart"' in profile
     bad = tmp_path / "p.toml"
     bad.write_text(profile.replace('link = "uart"', 'link = "rs485"'))
-    with pytest.raises(ValueError, match="motor_link 'rs485' unknown: one of \\['can-mit', 'can-servo', 'uart'\\]"):
+    with pytest.raises(ValueError,
+                       match="\\[motor\\] link 'rs485' unknown: one of \\['can-mit', 'can-servo', 'uart'\\]"):
         load_firmware_config(bad)
     bad.write_text(profile.replace('link = "uart"', 'speed = 1'))
     with pytest.raises(ValueError, match="\\[motor\\] has no key 'speed'"):

@@ -35,8 +35,23 @@ def _profile(tmp_path: Path, old: str, new: str) -> Path:
 
 
 @pytest.mark.parametrize(("old", "new", "needles"), [
-    ("current_limit_a = 12.0", "current_limit_a = -12.0", ["[control] current_limit_a = -12.0", "(0, 100] A"]),
-    ("current_limit_a = 12.0", "current_limit_a = 1e9", ["[control] current_limit_a = 1000000000.0", "(0, 100] A"]),
+    ("current_limit_a = 12.0", "current_limit_a = -12.0", ["[control] current_limit_a = -12.0", "(0, 22.7] A"]),
+    ("current_limit_a = 12.0", "current_limit_a = 1e9", ["[control] current_limit_a = 1000000000.0", "(0, 22.7] A"]),
+    ("current_limit_a = 12.0", "current_limit_a = 22.8", ["[control] current_limit_a = 22.8", "(0, 22.7] A"]),
+    ("velocity_limit_rad_s = 8.0", "velocity_limit_rad_s = 100", ["[control] velocity_limit_rad_s = 100",
+                                                                  "(0, 12.5664] rad/s"]),
+    # every [safety] limit is bounded by the hardware (firmware/safety_limits.py names the sources)
+    ("brake_current_a = 2.0", "brake_current_a = 500", ["[safety] brake_current_a = 500", "(0, 6.5] A"]),
+    ("current_limit_a = 20.0", "current_limit_a = 1e9", ["[safety] current_limit_a = 1000000000.0", "(0, 22.7] A"]),
+    ("angle_max_deg = 38.0", "angle_max_deg = 1000", ["[safety] angle_max_deg = 1000", "[-90, 90] deg"]),
+    ("angle_min_deg = -33.0", "angle_min_deg = -91", ["[safety] angle_min_deg = -91", "[-90, 90] deg"]),
+    ("disagreement_deg = 6.0", "disagreement_deg = 1e9", ["[safety] disagreement_deg = 1000000000.0", "(0, 71] deg"]),
+    ("command_timeout_s = 0.020", "command_timeout_s = 1e6", ["[safety] command_timeout_s = 1000000.0", "(0, 0.1] s"]),
+    ("motor_timeout_s = 0.020", "motor_timeout_s = 0.2", ["[safety] motor_timeout_s = 0.2", "(0, 0.1] s"]),
+    ("imu_timeout_s = 0.050", "imu_timeout_s = 10", ["[safety] imu_timeout_s = 10", "(0, 0.1] s"]),
+    ("startup_grace_s = 0.5", "startup_grace_s = 1e9", ["[safety] startup_grace_s = 1000000000.0", "(0, 5] s"]),
+    ("brake_delay_s = 0.010", "brake_delay_s = 2", ["[safety] brake_delay_s = 2", "[0, 1] s"]),
+    ("deadline_miss_streak = 3", "deadline_miss_streak = 101", ["[safety] deadline_miss_streak = 101", "[1, 100]"]),
     ("stride_s = 1.1", "stride_s = 0", ["[control] stride_s = 0", "[0.2, 10] s"]),
     ("stride_s = 1.1", "stride_s = 1e6", ["[control] stride_s = 1000000.0", "[0.2, 10] s"]),
     ("control = { base = 3500 }", "control = { base = -3500 }", ["[task_cycles] control: base = -3500",
@@ -47,6 +62,14 @@ def _profile(tmp_path: Path, old: str, new: str) -> Path:
      ["[task_cycles] task 'watchdgo' is not a firmware task", "watchdog"]),
     ("stride_s = 1.1", "stride_s = 1.1\nstrid_s = 1.1", ["[control] has no key 'strid_s'", "stride_s"]),
     ("control = 1000 ", "control = 0 ", ["[rates_hz] control = 0", "[1, 10000]"]),
+    # each message names the section and key as written in the profile, and the keys or range allowed
+    ('link = "uart"', 'link = "usb"', ["[motor] link 'usb' unknown", "'can-mit', 'can-servo', 'uart'"]),
+    ("can_id = 1", "can_id = 300", ["[motor] can_id = 300", "[0, 127]"]),
+    ("kp = 8.0", "kpp = 8.0", ["[control.position] has no key 'kpp'", "kp, ki, kd, derivative_tau_s"]),
+    ("kp = 8.0", "ki_ = 8.0", ["[control.position] has no key 'ki_'", "kp, ki, kd, derivative_tau_s"]),
+    ("kp = 0.2", "# kp = 0.2", ["[control.velocity] needs kp (required"]),
+    ("inertia_kg_m2 = 0.0495", "inertia = 0.0495", ["[feedforward] has no key 'inertia'", "inertia_kg_m2, mass_kg"]),
+    ("disagreement_deg = 6.0", "disagreement = 6.0", ["[safety] has no key 'disagreement'", "disagreement_deg"]),
 ])
 def test_a_bad_profile_value_is_one_line_naming_file_section_value_and_range(tmp_path, capsys, old, new, needles):
     profile = _profile(tmp_path, old, new)

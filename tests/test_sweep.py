@@ -106,7 +106,7 @@ def test_profile_values_are_checked_before_any_run(tmp_path, capsys):
     assert main(["sweep", str(spec), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
-    assert "safety.motor_timeout_s" in err and "-1.0" in err and "> 0" in err
+    assert "safety.motor_timeout_s" in err and "-1.0" in err and "(0, 0.1] s" in err
     assert not out.exists()  # nothing ran, nothing written
     # a combination that only fails together names the point
     spec = spec_file(tmp_path, "[[grid]]\nkey = 'rates_hz.control'\nvalues = [1000, 100]\n"

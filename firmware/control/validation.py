@@ -25,10 +25,19 @@ def check_range(name: str, value: float, lo: float, hi: float, *, lo_open: bool 
     if ok:
         ok = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
     if not ok:
-        interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
         suffix = f" {unit}" if unit else ""
-        raise ValueError(f"{name} = {value!r} is not allowed: must be a finite number in {interval}{suffix}")
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a finite number in "
+                         f"{interval(lo, hi, lo_open, hi_open)}{suffix}")
     return float(value)
+
+
+def interval(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> str:
+    """An interval as written in the messages.
+
+    >>> interval(0.0, 1.0, lo_open=True)
+    '(0, 1]'
+    """
+    return f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
 
 
 def check_int_range(name: str, value: int, lo: int, hi: int) -> int:

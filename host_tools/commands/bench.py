@@ -9,6 +9,7 @@ from pathlib import Path
 
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.readings import GEOMETRIES, geometry_of, with_geometry
+from host_tools.arguments import seed
 from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
@@ -23,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "geometries and both IMU readings: docs/bench.md)")
     parser.add_argument("--out", type=Path, default=None,
                         help="directory for the PNG, CSV, JSON and Markdown outputs (none written if omitted)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the trial variation (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the trial variation (default 0)")
     parser.add_argument("--quick", action="store_true", help="shorter runs and fewer trials")
     parser.add_argument("--geometry", choices=[*GEOMETRIES, "both"], default=None,
                         help="the gravity geometry the plant tests run under (docs/bench.md, 'Readings'): level-com "

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
+from host_tools.arguments import seed
 from host_tools.outdir import check_capture_dir
 from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.wire_capture import WireCapture
@@ -77,7 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="link baud: the motor's (default 921600), or the IMU's for `imu` or the Firmata "
                              "board's for `ground` (default 115200)")
     parser.add_argument("--fixture", default="suspended", choices=sorted(FIXTURES), help="bench fixture")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the IMU noise (default 0)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default: run until Ctrl-C or SIGTERM)")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",

@@ -15,6 +15,8 @@ import time
 from pathlib import Path
 from types import FrameType
 
+from host_tools.arguments import float_in, int_in
+
 HELP = "decode a live telemetry stream (port or file): latest values, rates, losses; --csv, --plot"
 REFRESH_S = 0.2
 
@@ -24,8 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("source", metavar="PORT|FILE", help="serial port / pyserial URL, or a telemetry capture file")
     parser.add_argument("--csv", type=Path, default=None, metavar="OUT", help="write every record to this CSV")
     parser.add_argument("--plot", action="store_true", help="live angle/reference plot (needs a display)")
-    parser.add_argument("--baud", type=int, default=921600, help="port baud rate (default 921600)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
+    parser.add_argument("--baud", type=int_in(1, 20_000_000), default=921600, help="port baud rate (default 921600)")
+    parser.add_argument("--duration", type=float_in(0.0, lo_open=True, unit="s"), default=None, metavar="S",
+                        help="stop after S seconds")
 
 
 def _has_display() -> bool:

@@ -12,16 +12,26 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from host_tools.arguments import float_in, seed
+
 if TYPE_CHECKING:
     from host_tools.outdir import RunDir
     from host_tools.runner import RunConfig
+
+STRIDES = 10
+"""A virtual run's length without --strides."""
+DURATION_S = 10.0
+"""Serial mode's run time without --duration."""
+BODY_MASS_KG = 80.0
+"""The walker's mass without --body-mass (the report's subject)."""
 
 HELP = "run the firmware on the virtual bench, or on serial ports (--motor/--imu): tracking, deadlines, report"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp run`."""
-    parser.add_argument("--strides", type=int, default=10, help="gait strides to run (default 10)")
+    parser.add_argument("--strides", type=int, default=None,
+                        help=f"gait strides to run on the virtual bench (default {STRIDES})")
     parser.add_argument("--baud", type=int, default=921600, help="motor UART baud rate (default 921600)")
     parser.add_argument("--motor-link", default=None, metavar="NAME",
                         help="motor link on the virtual bench: uart, can-servo or can-mit (CAN at 1 Mbit/s; "
@@ -31,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--board", default="stm32f4", help="board profile name (profiles/board_<name>.toml)")
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     parser.add_argument("--plant-seed", type=int, default=None, metavar="N",
                         help="draw the plant's parameters from their tolerances (profiles/plant_tolerances.toml) "
                              "with seed N; default: the nominal plant. The firmware keeps its nominal model")
@@ -52,8 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     walk.add_argument("--scenario", choices=("suspended", "walk"), default="suspended",
                       help="suspended foot (default) or walk: the ground's moment in stance, scaled to --body-mass "
                            "(docs/plant.md, 'Walking'); walk adds the actuator design check to summary.json")
-    walk.add_argument("--body-mass", type=float, default=80.0, metavar="KG",
-                      help="walk: body mass in kg, 20..200 (default 80, the report's subject)")
+    walk.add_argument("--body-mass", type=float, default=None, metavar="KG",
+                      help=f"walk: body mass in kg, 20..200 (default {BODY_MASS_KG:g}, the report's subject)")
     walk.add_argument("--moment", type=Path, default=None, metavar="CSV",
                       help="walk: ankle moment per kg (columns percent_gait, ankle_moment_nm_per_kg_mean; "
                            "default: the packaged normative curve)")
@@ -78,7 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     serial.add_argument("--ground", metavar="PORT", default=None,
                         help="the ground sensors' Firmata board (load cell, heel/toe FSRs on A0..A3; docs/hardware.md, "
                              "'Ground sensors'): device path, pyserial URL or sim://ground-sensors")
-    serial.add_argument("--duration", type=float, default=10.0, metavar="S", help="run time in s (default 10)")
+    serial.add_argument("--duration", type=float_in(0.0, lo_open=True, unit="s"), default=None, metavar="S",
+                        help=f"run time in s (default {DURATION_S:g})")
     serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
     serial.add_argument("--reconnect", action="store_true",
                         help="after a lost port, wait for it and resume in the safe state instead of exiting")
@@ -124,8 +135,14 @@ def run(args: argparse.Namespace) -> int:
     beside --out and put in place whole (host_tools/outdir.py). SIGINT, SIGTERM or SIGHUP ends a virtual run at
     the next segment: what it has is written, marked ``"complete": false``, exit 128 + the signal's number.
     """
+    ignored = _ignored_option(args)
+    if ignored:
+        print(f"pafp run: {ignored}", file=sys.stderr)
+        return 2
     if args.motor or args.imu:
         return _run_serial(args)
+    args.strides = STRIDES if args.strides is None else args.strides
+    args.body_mass = BODY_MASS_KG if args.body_mass is None else args.body_mass
     from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, check_capture_dir, write_failed
     from host_tools.runner import RunConfig, board_profile
 
@@ -168,6 +185,23 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_WRITE_FAILED
     finally:
         run_dir.discard()  # nothing left once published; everything staged if not
+
+
+def _ignored_option(args: argparse.Namespace) -> str | None:
+    """The message for an option given where it has no effect (None if there is none): the run it belongs to."""
+    if args.motor or args.imu:
+        if args.strides is not None:
+            return (f"--strides {args.strides} is not allowed in serial mode (--motor/--imu): a serial run lasts "
+                    f"--duration S, a number of seconds > 0 (default {DURATION_S:g})")
+    elif args.duration is not None:
+        return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
+                f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")
+    if args.scenario != "walk":
+        for option, value in (("--body-mass", args.body_mass), ("--moment", args.moment)):
+            if value is not None:
+                return (f"{option} {value} is not allowed without --scenario walk: it sets the walking load, "
+                        f"and the foot is {args.scenario}")
+    return None
 
 
 def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> int:
@@ -274,7 +308,8 @@ def _run_serial(args: argparse.Namespace) -> int:
     telemetry_pty = None
     try:
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
-                              duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
+                              duration_s=DURATION_S if args.duration is None else args.duration, baud=args.baud,
+                              imu_baud=args.imu_baud, seed=args.seed,
                               board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings(),

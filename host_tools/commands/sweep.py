@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from host_tools.interrupt import Interrupted, interrupting
     from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
-    from host_tools.sweep_engine import check_points, dask_client, run_sweep
+    from host_tools.sweep_engine import check_points, check_scheduler, dask_client, run_sweep
     from host_tools.sweep_report import write_report
     from host_tools.sweep_spec import load_spec
     from host_tools.sweep_table import check_out, read_rows
@@ -72,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+        if args.scheduler is not None:
+            check_scheduler(args.scheduler)
         spec = load_spec(args.spec)
         out: Path = args.out or Path("runs") / f"sweep-{spec.path.stem}"
         if args.point is not None:

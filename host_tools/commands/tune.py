@@ -8,13 +8,15 @@ import os
 import sys
 from pathlib import Path
 
+from host_tools.arguments import seed
+
 HELP = "automatic PID gain search on the emulator (differential evolution on Dask, seeded): writes a tuned profile"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp tune`."""
     parser.add_argument("--strides", type=int, default=2, help="gait strides per candidate run (default 2)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the candidate generator and the runs")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the candidate generator and the runs")
     parser.add_argument("--budget", type=int, default=48,
                         help="candidate runs in all, >= 5, spent in generations of 8 (default 48)")
     parser.add_argument("--out", type=Path, default=Path("runs") / "tune",
@@ -76,6 +78,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"strides {args.strides!r} out of range: an int in 1..100")
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+        if args.scheduler is not None:
+            from host_tools.sweep_engine import check_scheduler
+
+            check_scheduler(args.scheduler)
         tuning.check_budget(args.budget)
         check_writable(args.out)
         workers = args.workers or os.cpu_count() or 1
