@@ -282,7 +282,7 @@ def test_bench_on_a_disk_that_fills_leaves_no_empty_png_and_exits_74(tmp_path):
     r = _pafp_limited(50_000, "bench", "uncontrolled", "--quick", "--out", str(out))
     assert r.returncode == EXIT_WRITE_FAILED, r.stderr
     assert "uncontrolled.png" in _one_line(r.stderr)
-    assert "| uncontrolled |" in r.stdout  # the comparison table is printed all the same
+    assert "| uncontrolled [level-com] |" in r.stdout  # the comparison table is printed all the same
     assert [p.name for p in out.iterdir()] == []  # no 0-byte PNG, no temporary
 
 
