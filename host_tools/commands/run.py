@@ -48,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
+    parser.add_argument("--record", action="store_true",
+                        help="virtual bench: record every input the firmware saw into record.bin for `pafp replay` "
+                             "(serial runs always record; docs/calibration.md)")
     walk = parser.add_argument_group("scenario (virtual bench)")
     walk.add_argument("--scenario", choices=("suspended", "walk"), default="suspended",
                       help="suspended foot (default) or walk: the ground's moment in stance, scaled to --body-mass "
@@ -73,6 +76,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
     serial.add_argument("--reconnect", action="store_true",
                         help="after a lost port, wait for it and resume in the safe state instead of exiting")
+    serial.add_argument("--no-record", action="store_true",
+                        help="do not write record.bin (the inputs for `pafp replay`; recorded by default)")
     serial.add_argument("--no-realtime", action="store_true",
                         help="ask the OS for nothing (no GC freeze, core pinning, SCHED_FIFO, mlockall, spin)")
 
@@ -168,7 +173,8 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
-    cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity)
+    cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=0 if args.no_trace else cfg.trace_capacity,
+                  record_to=run_dir.path if getattr(args, "record", False) else None)
     bar = _Progress(not args.quiet)
     with StopSignals() as stop:  # the run ends at its next segment; a second signal interrupts
         result = run_virtual(cfg, progress=bar, should_stop=lambda: stop.name is not None)
@@ -248,6 +254,7 @@ def _run_serial(args: argparse.Namespace) -> int:
                               duration_s=args.duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
                               board=args.board, firmware=_firmware_config(args),
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
+                              record=not args.no_record,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings())
         if args.capture is not None and (args.capture / "index.csv").exists():
             raise ValueError(f"--capture {str(args.capture)!r} already holds a capture (index.csv): give a new "
