@@ -102,7 +102,7 @@ def _item_bytes(key: int, item: Any) -> bytes:
     kind = key >> 2
     if kind == Kind.WRITE:
         accepted, data = item
-        return data[:accepted]
+        return data if accepted == len(data) else data[:accepted]
     if kind == Kind.CAN_TX:
         ok, frame = item
         return bytes([ok, frame.extended]) + frame.arbitration_id.to_bytes(4, "little") + frame.data
@@ -181,26 +181,31 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
     last = 0
     wall0 = time.perf_counter()
 
+    telemetry_key = Kind.WRITE << 2 | 2
+
+    def stream(key: int) -> _Stream:
+        s = streams.get(port_name(key))
+        if s is None:
+            s = streams[port_name(key)] = _Stream()
+        return s
+
     def account(section: Section, diff: dict) -> None:
         nonlocal first, diverging
-        for key, items in section.outputs.items():
-            s = streams.get(port_name(key))
-            if s is None:
-                s = streams[port_name(key)] = _Stream()
-            for item in items:
-                s.expected.update(_item_bytes(key, item))
-                s.expected_n += 1
         for key, items in replay.produced.items():
-            s = streams.get(port_name(key))
-            if s is None:
-                s = streams[port_name(key)] = _Stream()
-            for item in items:
-                b = _item_bytes(key, item)
-                s.produced.update(b)
-                s.produced_n += 1
-                if telemetry_out is not None and key == (Kind.WRITE << 2 | 2):
-                    telemetry_out.write(b)
+            s = stream(key)
+            data = b"".join([_item_bytes(key, item) for item in items])
+            s.produced.update(data)
+            s.produced_n += len(items)
+            if not diff:  # the same items were recorded
+                s.expected.update(data)
+                s.expected_n += len(items)
+            if telemetry_out is not None and key == telemetry_key:
+                telemetry_out.write(data)
         if diff:
+            for key, items in section.outputs.items():
+                s = stream(key)
+                s.expected.update(b"".join([_item_bytes(key, item) for item in items]))
+                s.expected_n += len(items)
             diverging += 1
             if first is None:
                 first = _divergence(section, diff, f_cpu, extra)

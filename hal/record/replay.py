@@ -20,7 +20,7 @@ from typing import Any
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart, UartErrors, Watchdog
-from hal.record.format import FIXED, LENGTH, VARIABLE, Kind, RecordError, read_chunks, read_header
+from hal.record.format import FIXED, VARIABLE, Kind, RecordError, read_chunks, read_header
 from hal.record.recorder import PORTS
 
 __all__ = ["OUTPUT_KINDS", "RecordReader", "ReplayBoard", "Section", "port_name"]
@@ -86,24 +86,20 @@ class RecordReader:
         """The sections a chunk holds (a chunk starts with a job: the recorder cuts chunks there)."""
         pos, n = 0, len(raw)
         section: Section | None = None
+        layouts = _LAYOUTS
         try:
             while pos < n:
                 tag = raw[pos]
-                kind, port = tag >> 2, tag & 3
                 pos += 1
-                fixed = FIXED.get(kind)
-                data = b""
-                if fixed is not None:
-                    vals = fixed.unpack_from(raw, pos)
-                    pos += fixed.size
-                else:
-                    head = VARIABLE.get(kind)
-                    if head is None:
-                        raise RecordError(f"record {self.path}: unknown event kind {kind} in the chunk at byte "
-                                          f"offset {offset} (event byte {pos - 1})")
-                    vals = head.unpack_from(raw, pos)
-                    pos += head.size
-                    (length,) = LENGTH.unpack_from(raw, pos)
+                layout = layouts.get(tag >> 2)
+                if layout is None:
+                    raise RecordError(f"record {self.path}: unknown event kind {tag >> 2} in the chunk at byte "
+                                      f"offset {offset} (event byte {pos - 1})")
+                kind, st, variable, output = layout
+                vals = st.unpack_from(raw, pos)
+                pos += st.size
+                if variable:
+                    length = raw[pos] | raw[pos + 1] << 8
                     pos += 2
                     if pos + length > n:
                         raise struct.error("short data")
@@ -112,41 +108,51 @@ class RecordReader:
                 if kind == Kind.JOB:
                     if section is not None:
                         yield section
-                    section = Section(vals[0], vals[1], vals[2])
+                    section = Section(vals[0], vals[1], vals[2], {}, {})
                     continue
                 if section is None:
                     raise RecordError(f"record {self.path}: the chunk at byte offset {offset} does not start "
                                       "with a job")
                 key = tag
                 value: Any
-                if kind == Kind.RAISE:
-                    key, value = vals[0] << 2 | port, HalError(data.decode("utf-8", "replace"))
-                elif kind == Kind.READ:
+                if kind == Kind.READ:
                     value = data
                 elif kind == Kind.WRITE:
                     value = (vals[0], data)
+                elif kind == Kind.RAISE:
+                    key, value = vals[0] << 2 | tag & 3, HalError(data.decode("utf-8", "replace"))
                 elif kind == Kind.CAN_RX:
                     value = CanFrame(vals[1], data, bool(vals[0] & 2)) if vals[0] & 1 else None
                 elif kind == Kind.CAN_TX:
                     value = (vals[0], CanFrame(vals[2], data, bool(vals[1])))
-                elif kind in (Kind.ERRORS, Kind.HEALTH):
+                elif kind == Kind.ERRORS or kind == Kind.HEALTH:
                     value = vals
                 elif kind == Kind.KICK:
                     value = None
                 else:
                     value = vals[0]
-                if kind in OUTPUT_KINDS:
-                    section.outputs.setdefault(key, []).append(value)
+                if output:
+                    out = section.outputs.get(key)
+                    if out is None:
+                        section.outputs[key] = [value]
+                    else:
+                        out.append(value)
                 else:
                     q = section.inputs.get(key)
                     if q is None:
-                        q = section.inputs[key] = deque()
-                    q.append(value)
-        except struct.error:
+                        section.inputs[key] = deque((value,))
+                    else:
+                        q.append(value)
+        except (struct.error, IndexError):
             raise RecordError(f"record {self.path}: the chunk at byte offset {offset} ends inside an event "
                               f"(event byte {pos})") from None
         if section is not None:
             yield section
+
+
+# kind -> (kind, fixed part, followed by <H length + bytes, an output)
+_LAYOUTS = {**{k: (k, st, False, k in OUTPUT_KINDS) for k, st in FIXED.items()},
+            **{k: (k, st, True, k in OUTPUT_KINDS) for k, st in VARIABLE.items()}}
 
 
 class ReplayBoard:
@@ -179,7 +185,11 @@ class ReplayBoard:
     def finish(self) -> dict[int, tuple[list, list]]:
         """After the job: the outputs that differ from the record, by key: (expected, produced)."""
         s = self.section
-        self.unused += sum(len(q) for q in s.inputs.values())
+        for q in s.inputs.values():
+            if q:
+                self.unused += len(q)
+        if s.outputs == self.produced:
+            return {}
         diff = {}
         for key in s.outputs.keys() | self.produced.keys():
             expected, produced = s.outputs.get(key, []), self.produced.get(key, [])
