@@ -92,6 +92,7 @@ class RunConfig:
     record_to: Path | None = None  # record.bin there: every input the firmware saw, for `pafp replay`
     # the plant drawn from its tolerances with this seed (hal.virtual.plant.draw); None: the nominal plant
     plant_seed: int | None = None
+    plant_file: Path | None = None  # a plant profile (e.g. one `pafp fit` wrote) instead of the packaged one
     # the bench's imperfections (None: profiles/bench_imperfections.toml, the real device) and those off
     imperfections: Imperfections | None = None
     ideal: tuple[str, ...] = ()
@@ -121,11 +122,12 @@ class RunConfig:
         Arguments given in bench_options win over both.
         """
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
-        nominal = load_plant_params()
+        nominal = load_plant_params(self.plant_file)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
         options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
         params = options["plant_params"]
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
+                            "file": None if self.plant_file is None else str(self.plant_file),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
                             "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
                   "imperfections": {**imp.as_dict(), "encoder_offset_rad": options.get("initial_angle_rad", 0.0)}}
