@@ -80,12 +80,13 @@ def test_same_seed_same_prbs():
 def test_experiment_run_records_and_stays_in_run(tmp_path):
     out = tmp_path / "sysid"
     profile = tmp_path / "short.toml"
-    profile.write_text((ROOT / "profiles" / "firmware.toml").read_text().replace(
-        '[controller]', '[controller]\nhold_s = 0.3\nsweep_deg = 5.0\nsweep_deg_s = 20.0\nchirp_s = 0.5\nprbs_s = 0.3', 1))
+    profile.write_text((ROOT / "profiles" / "firmware.toml").read_text() + '\n[controller]\nname = "sysid"\n'
+                       'hold_s = 0.3\nsweep_deg = 5.0\nsweep_deg_s = 20.0\nchirp_s = 0.5\nprbs_s = 0.3\n')
     assert main(["run", "--experiment", "sysid", "--profile", str(profile), "--quiet", "--no-plot", "--no-trace",
                  "--out", str(out)]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert s["faults"] == [] and (out / "record.bin").stat().st_size > 0
+    assert s["sim_time_s"] < 5.0  # the profile's short experiment, not the default 29 s
     assert "sysid_segment" in (out / "telemetry.csv").read_text().splitlines()[0]
 
 
