@@ -21,6 +21,7 @@ COMMANDS: dict[str, str] = {
     "tune": "tune",
     "sweep": "sweep",
     "replay": "replay",
+    "fit": "fit",
 }
 
 
