@@ -12,6 +12,7 @@ compresses and writes them (hal/record/format.py), so the firmware's loop never 
 from __future__ import annotations
 
 import queue
+import struct
 import threading
 from collections.abc import Callable
 from dataclasses import replace
@@ -20,12 +21,16 @@ from pathlib import Path
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart, Watchdog
-from hal.record.format import CHUNK_BYTES, FIXED, LENGTH, VARIABLE, Kind, pack_chunk, pack_end, write_header
+from hal.record.format import CHUNK_BYTES, FIXED, VARIABLE, Kind, pack_chunk, pack_end, write_header
 
 __all__ = ["PORTS", "Recorder"]
 
 PORTS = {"motor": 0, "imu": 1, "telemetry": 2, "can": 3}
 _QUEUE_CHUNKS = 16  # chunks waiting for the writer at most (bounded memory); the loop blocks beyond that
+# per kind, one packer of the tag byte and the fixed part (and, variable kinds, the length): one call per event
+_FIXED_PACK = {k: struct.Struct("<B" + st.format.lstrip("<")).pack for k, st in FIXED.items()}
+_VAR_PACK = {k: struct.Struct("<B" + st.format.lstrip("<") + "H").pack for k, st in VARIABLE.items()}
+_JOB_PACK = _FIXED_PACK[Kind.JOB]
 
 
 class Recorder:
@@ -66,22 +71,21 @@ class Recorder:
     # Events --------------------------------------------------------------------------------------
     def emit(self, kind: int, port: int, *fixed: int, data: bytes | None = None) -> None:
         """Append one event: the tag, the fixed fields, and (variable kinds) the length and the bytes."""
-        buf = self._buf
-        buf.append(kind << 2 | port)
         if data is None:
-            buf += FIXED[kind].pack(*fixed)
+            self._buf += _FIXED_PACK[kind](kind << 2 | port, *fixed)
         else:
-            buf += VARIABLE[kind].pack(*fixed)
-            buf += LENGTH.pack(len(data))
-            buf += data
+            self._buf += _VAR_PACK[kind](kind << 2 | port, *fixed, len(data))
+            self._buf += data
         self.events += 1
 
     def job(self, task_id: int, start_cycles: int, index: int) -> None:
         """A new section: the events after this belong to job `index` of task `task_id`, started at `start_cycles`."""
-        if len(self._buf) >= CHUNK_BYTES:
+        buf = self._buf
+        if len(buf) >= CHUNK_BYTES:
             self._hand_over()  # chunks end on a section boundary
         self.jobs += 1
-        self.emit(Kind.JOB, 0, task_id, start_cycles, index)
+        self.events += 1
+        buf += _JOB_PACK(0, task_id, start_cycles, index)
 
     def raised(self, kind: int, port: int, exc: HalError) -> None:
         """The call of `kind` on `port` raised `exc` (the replay raises it again there)."""
