@@ -98,8 +98,9 @@ def run_config_of(task: PointTask, plant_options: Callable[[int], dict[str, Any]
     fw = firmware_config_of(task.profile_text, {k: v for k, v in params.items() if not k.startswith("run.")},
                             task.profile_name)
     extra = plant_options(task.plant_seed) if task.plant_seed is not None else {}
+    plant_file = Path(run["plant_file"]) if run.get("plant_file") else None
     return RunConfig(strides=run["strides"], baud=run["baud"], seed=run["seed"], board=run["board"],
-                     settle_s=run["settle_s"], firmware=fw, trace_capacity=0, **extra)
+                     settle_s=run["settle_s"], firmware=fw, trace_capacity=0, plant_file=plant_file, **extra)
 
 
 class _PointTimeout(Exception):

@@ -118,3 +118,22 @@ def test_emulate_has_the_bench_imperfections_and_the_plant(tmp_path):
     assert o["backlash_rad"] > 0 and o["imu_config"].bias_sigma_rad > 0 and o["initial_angle_rad"] != 0.0
     ideal = _bench_options(argparse.Namespace(seed=3, plant=None, plant_seed=None, ideal=["all"]))
     assert ideal["backlash_rad"] == 0 and ideal["imu_config"].bias_sigma_rad == 0 and ideal["initial_angle_rad"] == 0
+
+
+def test_sweep_spec_runs_a_plant_file(tmp_path):
+    from host_tools.sweep_engine import tasks_of
+    from host_tools.sweep_point import plant_seed_run_options, run_config_of
+    from host_tools.sweep_spec import SpecError, load_spec
+
+    plant = _plant_file(tmp_path, coulomb_friction_nm=0.3)
+    spec = tmp_path / "spec.toml"
+    spec.write_text('[base]\nplant = "plant.toml"\nstrides = 1\n\n[[grid]]\nkey = "run.seed"\nvalues = [0, 1]\n\n'
+                    '[monte_carlo]\nsamples = 2\nseed = 1\n')
+    tasks = tasks_of(load_spec(spec))
+    cfg = run_config_of(tasks[0], plant_seed_run_options)
+    assert cfg.plant_file == plant and cfg.plant_seed is not None
+    options, _ = cfg.bench_setup()
+    assert options["plant_params"] != load_plant_params(plant)  # drawn around the file
+    (tmp_path / "plant.toml").write_text(PLANT.read_text().replace("foot_mass_kg = ", "foot_mass_kg = -", 1))
+    with pytest.raises(SpecError, match="foot_mass_kg"):
+        load_spec(spec)
