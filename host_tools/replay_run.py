@@ -52,10 +52,12 @@ class Divergence:
     produced_hex: str
     expected: list[dict]
     produced: list[dict]
+    control_t_s: float | None = None  # the control job of that period (whose command the motor task sends)
 
     def as_dict(self) -> dict:
         """For divergence.json."""
         return {"t_s": round(self.t_s, 9), "task": self.task, "job_index": self.job_index, "port": self.port,
+                "control_job_t_s": None if self.control_t_s is None else round(self.control_t_s, 9),
                 "expected_hex": self.expected_hex, "produced_hex": self.produced_hex,
                 "expected": self.expected, "produced": self.produced}
 
@@ -209,11 +211,16 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
             diverging += 1
             if first is None:
                 first = _divergence(section, diff, f_cpu, extra)
+                first.control_t_s = None if last_control is None else last_control / f_cpu
 
+    control_id = names.index("control")
+    last_control: int | None = None
     account(first_section, replay.finish())
     for section in sections:
         replay.begin(section)
         tid = section.task_id
+        if tid == control_id:
+            last_control = section.start
         if tid == STOP_TASK:
             fw.stop(section.start / f_cpu, 0.5)
         else:

@@ -80,7 +80,12 @@ def test_changed_gain_diverges_at_the_first_command_in_run(recorded, tmp_path):
     assert isinstance(exp[0], SetCurrent) and isinstance(got[0], SetCurrent)
     assert exp[0].current_a != got[0].current_a
     assert d.expected[0]["type"] == "SetCurrent"
-    # the first control job in RUN: the supervisor's state in the telemetry before it is INIT
+    # the first control job in RUN where kp acts: the first one starts the trajectory at the measured angle
+    # (zero error, the same command whatever kp), so the commands part one period later
+    rows = [line.split(",") for line in (recorded / "telemetry.csv").read_text().splitlines()]
+    col = rows[0].index("supervisor_state_name")
+    t_run = next(float(r[2]) for r in rows[1:] if r[col] == "RUN")
+    assert d.control_t_s is not None and t_run - 0.002 < d.control_t_s <= t_run + 0.0015
     same = replay_record(recorded / RECORD_NAME)
     assert same.identical
     assert r.diverging_jobs > 100

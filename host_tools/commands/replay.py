@@ -108,7 +108,9 @@ def run(args: argparse.Namespace) -> int:
         print("  byte-identical: every output of every job matches the record")
         return 0
     d = r.first
-    print(f"  first divergence at {d.t_s:.6f} s, task {d.task} (job {d.job_index}), port {d.port}:")
+    print(f"  first divergence at {d.t_s:.6f} s, task {d.task} (job {d.job_index}), port {d.port}"
+          + (f" (the command of the control job at {d.control_t_s:.6f} s)" if d.control_t_s is not None else "")
+          + ":")
     print(f"    recorded: {_message_line(d.expected)}")
     print(f"    replayed: {_message_line(d.produced)}")
     print(f"  {r.diverging_jobs} jobs diverged; the replay went on open-loop on the recorded inputs")
