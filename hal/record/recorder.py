@@ -17,6 +17,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
@@ -134,6 +135,15 @@ class Recorder:
         return recorded
 
 
+def _guarded(rec: Recorder, kind: int, port: int, call: Callable[..., Any], *args: Any) -> Any:
+    """call(*args); a HalError it raises is recorded as the result of this kind of call on this port, then re-raised."""
+    try:
+        return call(*args)
+    except HalError as e:
+        rec.raised(kind, port, e)
+        raise
+
+
 class RecordingUart(Uart):
     """Forwards to `inner`; records each call's result (reads' bytes, counts, errors) and each write."""
 
@@ -143,47 +153,27 @@ class RecordingUart(Uart):
         self.inner, self.rec, self.port = inner, rec, port
 
     def _send(self, data: bytes) -> int:
-        try:
-            n = self.inner.write(data)
-        except HalError as e:
-            self.rec.raised(Kind.WRITE, self.port, e)
-            raise
+        n = _guarded(self.rec, Kind.WRITE, self.port, self.inner.write, data)
         self.rec.emit(Kind.WRITE, self.port, n, data=data)
         return n
 
     def _receive(self, max_bytes: int) -> bytes:
-        try:
-            data = self.inner.read(max_bytes)
-        except HalError as e:
-            self.rec.raised(Kind.READ, self.port, e)
-            raise
+        data = _guarded(self.rec, Kind.READ, self.port, self.inner.read, max_bytes)
         self.rec.emit(Kind.READ, self.port, data=data)
         return data
 
     def _rx_count(self) -> int:
-        try:
-            n = self.inner.in_waiting()
-        except HalError as e:
-            self.rec.raised(Kind.IN_WAITING, self.port, e)
-            raise
+        n = _guarded(self.rec, Kind.IN_WAITING, self.port, self.inner.in_waiting)
         self.rec.emit(Kind.IN_WAITING, self.port, n)
         return n
 
     def _tx_space(self) -> int:
-        try:
-            n = self.inner.tx_free()
-        except HalError as e:
-            self.rec.raised(Kind.TX_FREE, self.port, e)
-            raise
+        n = _guarded(self.rec, Kind.TX_FREE, self.port, self.inner.tx_free)
         self.rec.emit(Kind.TX_FREE, self.port, n)
         return n
 
     def _drain(self, timeout_s: float) -> bool:
-        try:
-            ok = self.inner.flush(timeout_s)
-        except HalError as e:
-            self.rec.raised(Kind.FLUSH, self.port, e)
-            raise
+        ok = _guarded(self.rec, Kind.FLUSH, self.port, self.inner.flush, timeout_s)
         self.rec.emit(Kind.FLUSH, self.port, ok)
         return ok
 
@@ -278,20 +268,12 @@ class RecordingCan(CanPort):
         self._port = PORTS["can"]
 
     def _send(self, frame: CanFrame) -> bool:
-        try:
-            ok = self.inner.send(frame)
-        except HalError as e:
-            self.rec.raised(Kind.CAN_TX, self._port, e)
-            raise
+        ok = _guarded(self.rec, Kind.CAN_TX, self._port, self.inner.send, frame)
         self.rec.emit(Kind.CAN_TX, self._port, ok, frame.extended, frame.arbitration_id, data=frame.data)
         return ok
 
     def _receive(self) -> CanFrame | None:
-        try:
-            frame = self.inner.receive()
-        except HalError as e:
-            self.rec.raised(Kind.CAN_RX, self._port, e)
-            raise
+        frame = _guarded(self.rec, Kind.CAN_RX, self._port, self.inner.receive)
         flags, ident, data = _frame_fields(frame)
         self.rec.emit(Kind.CAN_RX, self._port, flags, ident, data=data)
         return frame
