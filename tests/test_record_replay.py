@@ -135,3 +135,13 @@ def test_serial_run_records_and_replays_with_its_stop_path(tmp_path):
     with tel.open("wb") as f:
         replay_record(out / RECORD_NAME, telemetry_out=f)
     assert tel.read_bytes() == (out / "telemetry.bin").read_bytes()
+
+
+@pytest.mark.parametrize("link", ["can-servo", "can-mit"])
+def test_can_motor_link_replays_byte_identical(link, tmp_path):
+    out = tmp_path / link
+    assert main(["run", "--strides", "1", "--motor-link", link, "--record", "--quiet", "--no-plot", "--no-trace",
+                 "--out", str(out)]) == 0
+    r = replay_record(out / RECORD_NAME)
+    assert r.identical, r.first
+    assert r.streams["can"]["replayed_items"] > 1000 and r.starved == 0
