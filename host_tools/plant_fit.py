@@ -33,6 +33,9 @@ __all__ = ["PARAMS", "Experiment", "FitParam", "fit_percentage", "load_experimen
 
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 SKIP_S = 0.01  # residuals skip the first samples of a window (the current state starts at the command)
+# below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
+# starts at rest, so a foot held by static friction starts stuck, not sliding on a velocity made of count noise
+REST_RAD_S = 0.03
 SIGMA = {"angle": math.radians(0.1), "current": 0.1, "imu": math.radians(0.3)}  # residual scales (rad, A, rad)
 
 
@@ -219,8 +222,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment,
         t0 = float(exp.t[k])
         end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
         start_angle = min(hi, max(lo, exp.angle[k] + offset))
-        plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=float(vel[k]),
-                      start_time_s=t0, backlash_rad=backlash)
+        v0 = float(vel[k])
+        plant = Plant(params, fixture, initial_angle_rad=start_angle,
+                      initial_velocity_rad_s=0.0 if abs(v0) < REST_RAD_S else v0, start_time_s=t0,
+                      backlash_rad=backlash, initial_current_a=float(exp.current[k]))
         c = int(np.searchsorted(t_cmd, t0, side="right")) - 1
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
