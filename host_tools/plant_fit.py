@@ -31,6 +31,7 @@ from host_tools.recording import RECORD_NAME
 
 __all__ = ["PARAMS", "Experiment", "FitParam", "fit_percentage", "load_experiment", "plant_with", "simulate"]
 
+BACKLASH_DEG = 0.55  # the maker's figure (profiles/bench_imperfections.toml [gearbox_backlash]) unless fitted
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 SKIP_S = 0.01  # residuals skip the first samples of a window (the current state starts at the command)
 # below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
@@ -63,16 +64,17 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("imu_bias_deg", "deg", -6.0, 6.0, "IMU pitch bias"),
     FitParam("encoder_offset_deg", "deg", -4.0, 4.0, "true angle minus the encoder's at power-up"),
 )}
+# backlash is not fitted by default: its effect (a dead time at each reversal of the command) moves the
+# residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope (docs/calibration.md)
 DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
-               "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
-               "encoder_offset_deg")
+               "gravity_moment_nm", "current_time_constant_s", "imu_lag_s", "imu_bias_deg", "encoder_offset_deg")
 
 
 def base_values(p: PlantParams) -> dict[str, float]:
     """The fit parameters' values of a plant profile (the start of the search; measurement ones at 0)."""
     return {"output_inertia_kg_m2": p.output_inertia_kg_m2, "foot_damping_nm_s_per_rad": p.foot_damping_nm_s_per_rad,
             "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
-            "gravity_moment_nm": p.gravity_moment_nm, "backlash_deg": 0.3, "torque_constant_scale": 1.0,
+            "gravity_moment_nm": p.gravity_moment_nm, "backlash_deg": BACKLASH_DEG, "torque_constant_scale": 1.0,
             "current_time_constant_s": p.current_time_constant_s, "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
             "encoder_offset_deg": 0.0}
 
