@@ -18,7 +18,7 @@ from hal.virtual.plant import PlantParams
 from host_tools.outdir import write_atomic
 from host_tools.plant_fit import PARAMS, Experiment, FitResult, fit_percentage, plant_with, simulate
 
-__all__ = ["fit_json", "validate", "write_fit_outputs"]
+__all__ = ["figure", "fit_json", "validate", "write_fit_outputs"]
 
 # fit parameter -> the profile keys it sets
 _KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per_rad": ("foot_damping_nm_s_per_rad",),
@@ -40,7 +40,7 @@ def profile_text(base_text: str, base: PlantParams, r: FitResult, run_dir: str) 
     for name, keys in _KEYS.items():
         if name not in r.names:
             continue
-        verdict = (f"{name} {r.values[name]:.6g} ± {r.ci95[name]:.3g} (95 %)" if r.identifiable[name]
+        verdict = (f"{name} {r.values[name]:.6g} ± {r.ci95[name]:.3g} (95 %)" if r.identifiable.get(name, False)
                    else f"{name} not identifiable (kept)")
         for key in keys:
             notes.setdefault(key, []).append(verdict)
@@ -130,14 +130,22 @@ def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
     tmp.replace(out / "correlations.png")
 
 
+def figure(value: float | None, spec: str) -> str:
+    """A figure, or n/a for one that is not a number (a signal that never moved has no fit percentage)."""
+    return "n/a" if value is None else format(value, spec)
+
+
+_g = figure
+
+
 def _markdown(s: dict) -> str:
     lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
              f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
              "| parameter | value | 95 % ± | collinearity | verdict |", "|---|---|---|---|---|"]
     for n, p in s["params"].items():
         verdict = "identified" if p["identifiable"] else "**not identifiable** (base value kept)"
-        lines.append(f"| {n} ({p['unit']}) | {p['value']:.6g} | {p['ci95_half_width']:.3g} | "
-                     f"{p['collinearity']:.2f} | {verdict} |")
+        lines.append(f"| {n} ({p['unit']}) | {_g(p['value'], '.6g')} | {_g(p['ci95_half_width'], '.3g')} | "
+                     f"{_g(p['collinearity'], '.2f')} | {verdict} |")
     for n, p in s["fixed"].items():
         lines.append(f"| {n} | fixed | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
     lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
@@ -151,11 +159,14 @@ def _markdown(s: dict) -> str:
 
 def write_fit_outputs(out: Path, base: PlantParams, base_text: str, r: FitResult, exp: Experiment,
                       extra: dict | None = None, plot: bool = True) -> dict:
-    """Write plant_fitted.toml, fit.json, fit.md and (plot) fit.png and correlations.png into out."""
+    """Write plant_fitted.toml, fit.json, fit.md, summary.json and (plot) fit.png and correlations.png into out."""
     s = fit_json(r, exp, extra)
     write_atomic(out / "plant_fitted.toml", profile_text(base_text, base, r, exp.source))
     write_atomic(out / "fit.json", json.dumps(s, indent=2) + "\n")
     write_atomic(out / "fit.md", _markdown(s))
+    # the short summary every pafp output directory has (and by which --out knows it may be replaced)
+    write_atomic(out / "summary.json", json.dumps({"command": "fit", "run": exp.source, "details": "fit.json",
+                                                   "fit_percent": s["fit_percent"]}, indent=2) + "\n")
     if plot:
         _plots(out, base, r, exp)
     return s

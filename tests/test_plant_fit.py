@@ -94,3 +94,20 @@ def test_fit_percentage_is_matlab_compare():
     assert fit_percentage(y, y) == 100.0
     assert fit_percentage(y, np.full(4, y.mean())) == pytest.approx(0.0)
     assert fit_percentage(y, y + 10) < 0
+
+
+def test_too_little_excitation_is_not_identifiable(tmp_path):
+    """Holds only (no sweep to speak of, no chirp, no PRBS): the dynamics are not given a confident number."""
+    (tmp_path / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + (
+        '\n[controller]\nname = "sysid"\nhold_s = 1.5\nsweep_deg = 1.0\nsweep_deg_s = 60.0\nchirp_s = 0.0\n'
+        'prbs_s = 0.0\n'))
+    run = tmp_path / "run"
+    assert main(["run", "--experiment", "sysid", "--profile", str(tmp_path / "fw.toml"), "--quiet", "--no-plot",
+                 "--no-trace", "--out", str(run)]) == 0
+    assert main(["fit", str(run), "--no-plot"]) == 0
+    p = json.loads((run / "fit" / "fit.json").read_text())["params"]
+    for name in ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "current_time_constant_s"):
+        assert not p[name]["identifiable"], (name, p[name])
+    text = (run / "fit" / "plant_fitted.toml").read_text()
+    assert "output_inertia_kg_m2 not identifiable (kept)" in text
+    assert main(["fit", str(run), "--no-plot"]) == 0  # a second fit replaces the first one's directory

@@ -30,6 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check the inputs, fit, write the outputs, print the table."""
+    from host_tools.fit_report import figure as _g
     from host_tools.fit_report import validate, write_fit_outputs
     from host_tools.outdir import OutDirError, RunDir
     from host_tools.plant_fit import DEFAULT_FIT, PARAMS, fit_plant, load_base, load_experiment
@@ -65,14 +66,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"  {r.nfev} simulations in {r.wall_s:.1f} s ({r.message})")
     print(f"  {'parameter':<28}{'value':>12}{'95 % ±':>12}  verdict")
     for n, p in s["params"].items():
-        print(f"  {n:<28}{p['value']:>12.5g}{p['ci95_half_width']:>12.3g}  "
+        print(f"  {n:<28}{_g(p['value'], '.5g'):>12}{_g(p['ci95_half_width'], '.3g'):>12}  "
               f"{'identified' if p['identifiable'] else 'NOT IDENTIFIABLE (base value kept)'}")
     for n in s["fixed"]:
         print(f"  {n:<28}{'fixed':>12}{'':>12}  NOT IDENTIFIABLE (fixed: see fit.md)")
     for seg, d in s["fit_percent"].items():
-        print(f"  fit % on the {seg.replace('_', '-')} part: angle {d['angle']:.1f}, current {d['current']:.1f}, "
-              f"IMU {d['imu']:.1f}")
+        print(f"  fit % on the {seg.replace('_', '-')} part: angle {_g(d['angle'], '.1f')}, current "
+              f"{_g(d['current'], '.1f')}, IMU {_g(d['imu'], '.1f')}")
     if other is not None:
         v = s["validation"]["fit_percent"]
-        print(f"  fit % on {args.validate}: angle {v['angle']:.1f}, current {v['current']:.1f}, IMU {v['imu']:.1f}")
+        print(f"  fit % on {args.validate}: angle {_g(v['angle'], '.1f')}, current {_g(v['current'], '.1f')}, "
+              f"IMU {_g(v['imu'], '.1f')}")
     return 0
