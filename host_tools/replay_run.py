@@ -93,6 +93,7 @@ class ReplayResult:
     sim_time_s: float
     wall_time_s: float
     changed: dict
+    cpu_time_s: float = 0.0  # this process's CPU time over the replay loop (the wall time less a busy host's share)
 
     @property
     def identical(self) -> bool:
@@ -181,7 +182,7 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
     first: Divergence | None = None
     diverging = jobs = 0
     last = 0
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
 
     telemetry_key = Kind.WRITE << 2 | 2
 
@@ -233,7 +234,7 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
         last = section.start
         if progress is not None and jobs % 8192 == 0:
             progress(last / f_cpu)
-    wall = time.perf_counter() - wall0
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     return ReplayResult(header, reader.footer, fw, jobs, diverging, first,
                         {k: v.as_dict() for k, v in sorted(streams.items())}, replay.starved, replay.unused,
-                        last / f_cpu, wall, changed)
+                        last / f_cpu, wall, changed, cpu)
