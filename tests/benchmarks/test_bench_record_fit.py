@@ -3,7 +3,7 @@
 - ``replay``: `pafp replay` of the default identification experiment recorded on the virtual bench
   (29 s of firmware time): the realtime factor of the replay loop on the wall clock and per CPU second of
   this process (what the loop gets on a core of its own), best of three, with the host's load average.
-  Goal >= 20 on the wall clock.
+  Goal >= 20 on the wall clock. Also the record's size (``record_mb``).
 - ``fit``: `fit_plant` on the same recording (10 parameters, least squares), best of two. Goal < 60 s.
 - ``record overhead``: serial mode on in-process sim:// devices, 3 s runs with and without the record,
   interleaved (with, without, with, ...) five times each: the median of each side's control release jitter
@@ -58,6 +58,7 @@ def test_replay_and_fit(benchmark, tmp_path: Path) -> None:  # type: ignore[no-u
         return {"replay_realtime_factor": round(max(factors), 2),
                 "replay_cpu_realtime_factor": round(max(cpu_factors), 2),
                 "load_average_1min": round(os.getloadavg()[0], 2), "firmware_time_s": round(r.sim_time_s, 3),
+                "record_mb": round((run / RECORD_NAME).stat().st_size / 1e6, 2),
                 "fit_wall_s": round(min(walls), 2), "experiment_s": round(float(exp.t[-1] - exp.t[0]), 2)}
 
     figures = benchmark.pedantic(measure, rounds=1, iterations=1)
