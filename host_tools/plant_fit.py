@@ -266,6 +266,24 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment,
     return angle, current, imu, mask
 
 
+def window_ids(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
+    """The simulation window of each used sample (as `simulate` cuts them), in the order `residuals` lists them."""
+    ids = np.zeros(len(exp.t), dtype=int)
+    k, w = 0, 0
+    while k < len(exp.t):
+        end = max(int(np.searchsorted(exp.t, exp.t[k] + window_s)), k + 1)
+        ids[k:end] = w
+        k, w = end, w + 1
+    mask = exp.t - exp.t[ids_start(ids)] >= SKIP_S
+    return ids[mask]
+
+
+def ids_start(ids: np.ndarray) -> np.ndarray:
+    """For each sample, the index of its window's first sample."""
+    first = np.r_[0, np.flatnonzero(np.diff(ids)) + 1]
+    return first[ids]
+
+
 def residuals(base: PlantParams, v: dict[str, float], exp: Experiment) -> np.ndarray:
     """The scaled simulation errors: encoder angle, measured current and IMU pitch, on the used samples."""
     angle, current, imu, mask = simulate(base, v, exp)
@@ -366,7 +384,16 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     r = np.asarray(res.fun)
     rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
     inflation = (1.0 + rho) / (1.0 - rho)  # AR(1) residuals: m samples carry m (1 - rho) / (1 + rho) of information
-    cov = inflation * s2 * np.linalg.pinv(jac.T @ jac)
+    bread = np.linalg.pinv(jac.T @ jac)
+    # cluster-robust ("sandwich") covariance with each simulation window as a cluster: the errors within a
+    # window are one trajectory's, correlated, whatever their shape; the larger of the two is reported
+    clusters = np.tile(window_ids(fit_part), 3)
+    scores = jac * r[:, None]
+    meat = np.zeros((n, n))
+    for c in np.unique(clusters):
+        g = scores[clusters == c].sum(axis=0)
+        meat += np.outer(g, g)
+    cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
     v = values(res.x)
