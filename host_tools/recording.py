@@ -61,7 +61,7 @@ class RunRecording:
                  start_cycles: int, extra: dict | None = None) -> None:
         """Write the header and open the ``init`` section (at `start_cycles`), before the firmware is built."""
         header = {"mode": mode, "firmware": config_dict(fw_cfg), "reference": reference, "tasks": list(TASK_NAMES),
-                  "pafp": {"version": version(), "build": describe()}, **_board_header(board), **(extra or {})}
+                  **_board_header(board), **(extra or {})}
         self.path = directory / RECORD_NAME
         self.recorder = Recorder(self.path, header)
         self.board = self.recorder.board(board)
@@ -91,8 +91,9 @@ class RunRecording:
         self.recorder.job(STOP_TASK, t_cycles, 0)
 
     def close(self, footer: dict | None = None) -> dict:
-        """End the record; returns what summary.json says of it."""
-        self.recorder.close(footer or {})
+        """End the record (the footer names the pafp that wrote it: asked here, after the run, not before it,
+        so the start-up costs nothing more); returns what summary.json says of it."""
+        self.recorder.close({**(footer or {}), "pafp": {"version": version(), "build": describe()}})
         r = self.recorder
         return {"file": RECORD_NAME, "jobs": r.jobs, "events": r.events, "raw_bytes": r.raw_bytes,
                 "bytes": self.path.stat().st_size}

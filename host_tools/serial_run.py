@@ -42,7 +42,8 @@ from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.jitter import TaskTimings, instrument
 from host_tools.link_watch import LinkEvent, LinkWatch
 from host_tools.realtime import RealtimeSection, RealtimeSettings
-from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health
+from host_tools.recording import RunRecording
+from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health, reference_record
 from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
 from host_tools.serial_io import CaptureUart
 from host_tools.stop_signals import StopSignals
@@ -369,9 +370,6 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                   now_cycles=now, f_cpu_hz=f_cpu, can=ports.can)
     recording = None
     if cfg.record and out is not None:
-        from host_tools.recording import RunRecording
-        from host_tools.runner import reference_record
-
         recording = RunRecording(out, board, fw_cfg, "serial", reference_record(cfg.reference_csv, None), 0,
                                  {"seed": cfg.seed, "bindings": {"motor": cfg.motor, "imu": cfg.imu}})
         board = recording.board
