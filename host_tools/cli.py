@@ -21,6 +21,8 @@ COMMANDS: dict[str, str] = {
     "rta": "rta",
     "tune": "tune",
     "sweep": "sweep",
+    "replay": "replay",
+    "fit": "fit",
 }
 
 

@@ -40,13 +40,29 @@ from rtos.analysis import TaskBound, response_time_bounds
 from rtos.scheduler import SchedulerNow
 from rtos.stats import DeadlineHealth
 
-__all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "kernel_health", "run_virtual"]
+__all__ = ["Probe", "RunConfig", "RunResult", "board_profile", "gait_reference", "kernel_health", "reference_record",
+           "run_virtual"]
 
 SENSOR_FAULTS = {"fsr_heel": ("open", "short"), "fsr_toe": ("open", "short"), "load_cell": ("open", "stuck_high")}
 """The ground sensors' faults a run can start with (hal/virtual/devices/fsr.py, load_cell.py)."""
 PROBE_HZ = 500
 SEGMENT_S = 1  # simulated seconds between two hand-overs to the files (and two checks of should_stop)
 WATCHDOG_TIMEOUT_S = 0.050
+
+
+def reference_record(csv: Path | None, speed: str | None) -> dict:
+    """What a record's header says of the gait reference (`gait_reference` builds it back)."""
+    return {"csv": None if csv is None else str(Path(csv).resolve()), "speed": speed}
+
+
+def gait_reference(reference: dict, stride_s: float) -> GaitReference:
+    """The gait reference of a run: a CSV, a speed group of the packaged data, or the normative curve."""
+    csv, speed = reference.get("csv"), reference.get("speed")
+    if csv:
+        return GaitReference.from_csv(Path(csv), stride_s=stride_s)
+    if speed:
+        return GaitReference.from_csv(all_speeds_path(), stride_s=stride_s, select={"speed_category": SPEEDS[speed]})
+    return GaitReference.normative(stride_s=stride_s)
 
 
 def board_profile(name: str = "stm32f4") -> dict:
@@ -77,8 +93,10 @@ class RunConfig:
     # that must happen at their time (bytes on a line, a pressed switch), not at set-up
     actions: list[tuple[float, Action]] = field(default_factory=list)
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
+    record_to: Path | None = None  # record.bin there: every input the firmware saw, for `pafp replay`
     # the plant drawn from its tolerances with this seed (hal.virtual.plant.draw); None: the nominal plant
     plant_seed: int | None = None
+    plant_file: Path | None = None  # a plant profile (e.g. one `pafp fit` wrote) instead of the packaged one
     # the bench's imperfections (None: profiles/bench_imperfections.toml, the real device) and those off
     imperfections: Imperfections | None = None
     ideal: tuple[str, ...] = ()
@@ -122,11 +140,12 @@ class RunConfig:
         Arguments given in bench_options win over both.
         """
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
-        nominal = load_plant_params()
+        nominal = load_plant_params(self.plant_file)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
         options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
         params = options["plant_params"]
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
+                            "file": None if self.plant_file is None else str(self.plant_file),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
                             "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
                   # the readings of the report the bench ran under (hal.virtual.plant.readings, docs/bench.md)
@@ -182,10 +201,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     f_cpu = int(board_cfg["f_cpu_hz"])
     isr = dict(board_cfg.get("isr_cycles", {}))
     fw_cfg = cfg.firmware or load_firmware_config()
-    reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv
-                 else GaitReference.from_csv(all_speeds_path(), stride_s=fw_cfg.stride_s,
-                                             select={"speed_category": SPEEDS[cfg.speed]}) if cfg.speed
-                 else GaitReference.normative(stride_s=fw_cfg.stride_s))
+    reference = gait_reference(reference_record(cfg.reference_csv, cfg.speed), fw_cfg.stride_s)
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
     load = (walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv, cfg.speed) if cfg.scenario == "walk"
@@ -207,8 +223,15 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
         assert bench.ground_sensors is not None  # RunConfig checked
         bench.ground_sensors.set_fault(part, mode)
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
-    fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
-                  controller=cfg.controller)
+    board = bench.board if wire is None else wire.tap_board(bench.board)
+    recording = None
+    if cfg.record_to is not None:
+        from host_tools.recording import RunRecording
+
+        recording = RunRecording(cfg.record_to, board, fw_cfg, "virtual",
+                                 reference_record(cfg.reference_csv, cfg.speed), 0, {"seed": cfg.seed})
+        board = recording.board
+    fw = Firmware(board, fw_cfg, reference=reference, controller=cfg.controller)
     if load is not None:
         load.bind(lambda: fw.gait_start_s)  # the walker's strides on the firmware's gait clock
     probe = Probe()
@@ -217,10 +240,13 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
     interrupts = bench.interrupt_sources(isr)
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
-    sched = Scheduler([*fw.tasks, probe_task], clock, interrupts=interrupts, trace=trace,
+    tasks = fw.tasks if recording is None else recording.tasks(fw.tasks)
+    sched = Scheduler([*tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
     now.bind(sched)
     fw.kernel_health = kernel_health(sched, fw)
+    if recording is not None:
+        fw.kernel_health = recording.health(fw.kernel_health)
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu), on_reset=fw.on_watchdog_reset)
     sched.add_watchdog(wd)
     bench.attach_watchdog(wd)
@@ -266,6 +292,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     finally:
         if wire is not None:
             wire.close()
+        if recording is not None:
+            bench_record["record"] = recording.close({"complete": complete, "end_cycles": sched.now})
     if files is not None:
         files.close()
     bench_record["imperfections"]["backlash_crossings"] = bench.plant.raw.gap_crossings

@@ -45,7 +45,8 @@ from host_tools.host_watchdog import HostWatchdog, WatchdogRecord, arm_watchdog
 from host_tools.jitter import TaskTimings, instrument
 from host_tools.link_watch import LinkEvent, LinkWatch
 from host_tools.realtime import RealtimeSection, RealtimeSettings
-from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health
+from host_tools.recording import RunRecording
+from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health, reference_record
 from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
 from host_tools.serial_io import CaptureUart
 from host_tools.stop_signals import StopSignals
@@ -85,6 +86,7 @@ class SerialRunConfig:
     trace_capacity: int = 200_000
     fixture: str = "suspended"
     capture_dir: Path | None = None  # raw bytes of every port, both directions (host_tools/wire_capture.py)
+    record: bool = True  # record.bin in the run directory: every input the firmware saw (`pafp replay`)
     realtime: RealtimeSettings = field(default_factory=RealtimeSettings)
     strides: int = 0  # whole gait strides run in RUN (filled in after the run)
     ground: str | None = None  # the ground sensors' Firmata board (hal/serial/firmata_adc.py): a port or sim://
@@ -361,7 +363,7 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     out.mkdir(parents=True, exist_ok=True)
     capture = CaptureUart(out / "telemetry.bin", cfg.telemetry_baud, inner=ports.telemetry)
     try:
-        result = _run(cfg, ports, capture, wire, f_cpu, fw_cfg, reference, seen, progress, signals)
+        result = _run(cfg, ports, capture, wire, f_cpu, fw_cfg, reference, seen, progress, signals, out)
     finally:  # the stop path has run inside _run: the safe frames have left before any port closes
         capture.close()
         ports.close()
@@ -381,7 +383,7 @@ def _since_start() -> Callable[[], float]:
 
 def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCapture | None, f_cpu: int,
          fw_cfg: FirmwareConfig, reference: GaitReference, seen: dict[str, int],
-         progress: Callable[[float], None] | None, signals: StopSignals) -> SerialRunResult:
+         progress: Callable[[float], None] | None, signals: StopSignals, out: Path | None = None) -> SerialRunResult:
     """Build the board, the firmware and the wall-clock RTOS on opened ports, run, stop safely, collect."""
     clock = WallClock(f_cpu, spin_s=cfg.realtime.spin_s)
     now = SchedulerNow()  # the board is built before the scheduler: bound to it below
@@ -404,6 +406,11 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
                   encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=kernel_wd,
                   now_cycles=now, f_cpu_hz=f_cpu, can=ports.can, adc=adc)
+    recording = None
+    if cfg.record and out is not None:
+        recording = RunRecording(out, board, fw_cfg, "serial", reference_record(cfg.reference_csv, None), 0,
+                                 {"seed": cfg.seed, "bindings": {"motor": cfg.motor, "imu": cfg.imu}})
+        board = recording.board
     fw = Firmware(board, fw_cfg, reference=reference)
     fw.supervisor.latch_deadline_misses = False  # on the wall clock a late job is the host's (see module doc)
     warnings = HostWarnings()
@@ -423,13 +430,15 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         if job.index % GC_EVERY_TICKS == 0:
             section.collect_young()  # young objects only: tens of µs, never a full scan in the loop
 
-    tasks = [instrument(t, timings) for t in fw.tasks]
+    tasks = [instrument(t, timings) for t in (fw.tasks if recording is None else recording.tasks(fw.tasks))]
     tasks.append(Task("serial_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body))
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     now.bind(sched)
     fw.kernel_health = kernel_health(sched, fw)
+    if recording is not None:
+        fw.kernel_health = recording.health(fw.kernel_health)
     sched.add_watchdog(wd)
     signals.on_stop = sched.request_stop
     armed = arm_watchdog(ports.untapped_motor or ports.motor, cfg.motor, board, fw_cfg, sched.request_stop,
@@ -460,10 +469,14 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         if watch.fired_at_s is not None:
             fw.on_watchdog_reset(sched.now)  # the IWDG's job done from outside: the safe state latched
         stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s, watch)
+        if recording is not None:
+            recording.stop_section(sched.now)
         stop.safe = fw.stop(run_s, STOP_DRAIN_TIMEOUT_S)  # the stop path: on the wire before any port closes
         done_ns = time.perf_counter_ns()
         if host_wd is not None:
             host_wd.close()  # its thread and its handle
+        if recording is not None:
+            recording.close({"complete": stop.reason == "duration", "stop": stop.reason, "end_cycles": sched.now})
         wall = (done_ns - wall0_ns) / 1e9
     period_s = fw.ts_s
     wire_s = (len(stop.safe.frames) * 10 / ports.motor.baud if ports.can is None

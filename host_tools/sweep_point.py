@@ -101,8 +101,9 @@ def run_config_of(task: PointTask, plant_options: Callable[[int], dict[str, Any]
                             task.profile_name)
     extra = plant_options(task.plant_seed) if task.plant_seed is not None else {}
     traced = {} if trace else {"trace_capacity": 0}  # with it: RunConfig's default, as `pafp run`
+    plant_file = Path(run["plant_file"]) if run.get("plant_file") else None
     return RunConfig(strides=run["strides"], baud=run["baud"], seed=run["seed"], board=run["board"],
-                     settle_s=run["settle_s"], firmware=fw, **traced, **extra)
+                     settle_s=run["settle_s"], firmware=fw, plant_file=plant_file, **traced, **extra)
 
 
 class _PointTimeout(Exception):

@@ -49,7 +49,7 @@ RUN_KEYS: dict[str, tuple[type, float | None, float | None]] = {
     "strides": (int, 1, 100), "baud": (int, 9600, 3_000_000), "seed": (int, 0, 2**32 - 1),
     "board": (str, None, None), "settle_s": (float, 0.0, 10.0),
 }
-BASE_KEYS = ("profile", "scenario", "controller", "timeout_s", *RUN_KEYS)
+BASE_KEYS = ("profile", "plant", "scenario", "controller", "timeout_s", *RUN_KEYS)
 BASE_DEFAULTS: dict[str, Any] = {"strides": 2, "baud": 921600, "seed": 0, "board": "stm32f4", "settle_s": 1.0}
 MAX_POINTS = 100_000
 MAX_AXIS_VALUES = 10_000
@@ -248,6 +248,20 @@ def load_spec(path: str | Path) -> SweepSpec:
     except tomllib.TOMLDecodeError as e:
         raise err(f"[base] profile = {prof!r}: {profile} is not valid TOML: {e}") from None
     run = {k: _check_run_value(err, f"[base] {k}", k, base.get(k, d)) for k, d in BASE_DEFAULTS.items()}
+    plant = base.get("plant")
+    if plant is not None:  # a plant profile (e.g. `pafp fit`'s) every point runs; Monte Carlo draws around it
+        if not isinstance(plant, str):
+            raise err(f"[base] plant = {plant!r} is not a path string")
+        plant_path = (path.parent / plant).resolve()
+        try:
+            from hal.virtual.plant import load_plant_params
+
+            load_plant_params(plant_path)
+        except OSError as e:
+            raise err(f"[base] plant = {plant!r}: cannot read {plant_path}: {e.strerror or e}") from None
+        except ValueError as e:
+            raise err(f"[base] plant = {plant!r}: {e}") from None
+        run["plant_file"] = str(plant_path)
     timeout = base.get("timeout_s", 600.0)
     if not _number(timeout) or not TIMEOUT_RANGE[0] < timeout <= TIMEOUT_RANGE[1]:
         raise err(f"[base] timeout_s = {timeout!r} out of range: a number of seconds in (0, {TIMEOUT_RANGE[1]:g}]")

@@ -152,7 +152,7 @@ def test_a_brake_command_object_reaches_the_motor(user_file):
 @pytest.mark.parametrize("spec, needle", [
     ("nope.py:X", "controller file 'nope.py' not found"),
     ("{file}:Missing", "has no class 'Missing'"),
-    ("fancy", "is neither one of ['cascade', 'impedance'] nor FILE.py:CLASS"),
+    ("fancy", "is neither one of ['cascade', 'impedance', 'sysid'] nor FILE.py:CLASS"),
 ])
 def test_bad_controller_names_are_one_line_and_exit_2(user_file, tmp_path, capsys, spec, needle):
     out = tmp_path / "out"

@@ -285,3 +285,17 @@ def test_query_between_grid_points_matches_an_exact_partial_step(fixture: object
         worst_current = max(worst_current, abs(a.current_q_a - b.current_q_a))
     assert worst_angle < 1e-7  # the encoder resolves 1.6e-3 rad
     assert worst_velocity < 1e-4 and worst_current < 1e-9
+
+
+def test_initial_current_holds_a_stuck_foot():
+    """A plant started mid-run with the current that holds it (within static friction) stays; from 0 A it falls."""
+    from hal.virtual.plant import Plant, load_plant_params
+
+    p = load_plant_params()
+    hold_a = 0.9 * p.gravity_moment_nm / p.output_torque_per_amp_nm  # 10 % short: friction makes up the rest
+    held = Plant(p, initial_angle_rad=0.0, initial_current_a=hold_a)
+    held.set_current_command(hold_a, 0.0)
+    dropped = Plant(p, initial_angle_rad=0.0)
+    dropped.set_current_command(hold_a, 0.0)
+    assert held.output_angle_rad(0.2) == 0.0
+    assert dropped.output_angle_rad(0.2) < -0.01

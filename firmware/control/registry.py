@@ -37,9 +37,16 @@ def _impedance(config: FirmwareConfig, params: dict[str, Any]) -> object:
     return impedance_from_config(config, params)
 
 
+def _sysid(config: FirmwareConfig, params: dict[str, Any]) -> object:
+    from firmware.control.sysid import sysid_from_config
+
+    return sysid_from_config(config, params)
+
+
 CONTROLLERS: dict[str, Callable[[FirmwareConfig, dict[str, Any]], object]] = {
     "cascade": _cascade,
     "impedance": _impedance,
+    "sysid": _sysid,
 }
 """Shipped controllers: name -> factory(config, params)."""
 

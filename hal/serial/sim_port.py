@@ -18,9 +18,9 @@ from urllib.parse import parse_qs, urlsplit
 
 from hal.virtual.bench import fixture_by_name
 from hal.virtual.devices.ak60 import Ak60
-from hal.virtual.devices.bno08x import Bno08x
+from hal.virtual.devices.bno08x import Bno08x, Bno08xConfig
 from hal.virtual.devices.world import World
-from hal.virtual.plant import Fixture, Plant
+from hal.virtual.plant import Fixture, Plant, PlantParams
 from hal.virtual.uart import VirtualUart
 
 if TYPE_CHECKING:  # the ground sensors are imported when served: a sim:// port of another device stays quick to open
@@ -118,14 +118,23 @@ class WallDevices:
         clock_ns: Callable[[], int] | None = None,
         rx_buffer_size: int = 65_536,
         tx_queue_size: int = 65_536,
+        plant_params: PlantParams | None = None,
+        imu_config: Bno08xConfig | None = None,
+        initial_angle_rad: float = 0.0,
+        backlash_rad: float = 0.0,
     ) -> None:
-        """Start the plant and the devices now; clock_ns (default: perf_counter_ns since now) gives ticks."""
+        """Start the plant and the devices now; clock_ns (default: perf_counter_ns since now) gives ticks.
+
+        plant_params (default: the packaged profile), imu_config, initial_angle_rad and backlash_rad as
+        for the virtual bench (`hal.virtual.bench.VirtualBench`): the real bench's imperfections.
+        """
         if clock_ns is None:
             t0 = time.perf_counter_ns()
             clock_ns = lambda: time.perf_counter_ns() - t0  # noqa: E731
         self.now: Callable[[], int] = clock_ns
         fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
-        self.world = World(Plant(None, fx), NS_PER_S)
+        self.world = World(Plant(plant_params, fx, initial_angle_rad=initial_angle_rad, backlash_rad=backlash_rad),
+                           NS_PER_S)
         self.uarts: dict[str, VirtualUart] = {}
         self.motor: Ak60 | None = None
         self.imu: Bno08x | None = None
@@ -141,7 +150,7 @@ class WallDevices:
             if role == "motor":
                 device = self.motor = Ak60(self.world, link=uart)
             elif role == "imu":
-                device = self.imu = Bno08x(self.world, seed=seed, link=uart)
+                device = self.imu = Bno08x(self.world, imu_config, seed=seed, link=uart)
             else:
                 from hal.virtual.devices.firmata_board import FirmataBoard
                 from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, wire_ground_sensors

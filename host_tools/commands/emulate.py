@@ -78,7 +78,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="link baud: the motor's (default 921600), or the IMU's for `imu` or the Firmata "
                              "board's for `ground` (default 115200)")
     parser.add_argument("--fixture", default="suspended", choices=sorted(FIXTURES), help="bench fixture")
-    parser.add_argument("--seed", type=seed, default=0, help="seed of the IMU noise (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the IMU noise and the imperfections (default 0)")
+    parser.add_argument("--plant", type=Path, default=None, metavar="FILE",
+                        help="plant profile TOML instead of the packaged one (e.g. one `pafp fit` wrote)")
+    parser.add_argument("--plant-seed", type=seed, default=None, metavar="N",
+                        help="draw the plant from its tolerances around the profile with seed N")
+    parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
+                        help="switch one imperfection of the real bench off (as `pafp run --ideal`), or all")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default: run until Ctrl-C or SIGTERM)")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
@@ -219,6 +225,16 @@ def _run_can(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_options(args: argparse.Namespace) -> dict:
+    """The plant (--plant, --plant-seed) and the real bench's imperfections (--ideal), as `pafp run` builds them."""
+    from host_tools.runner import RunConfig
+
+    options, _ = RunConfig(seed=args.seed, plant_seed=getattr(args, "plant_seed", None),
+                           plant_file=getattr(args, "plant", None),
+                           ideal=tuple(getattr(args, "ideal", ()))).bench_setup()
+    return {k: options[k] for k in ("plant_params", "imu_config", "initial_angle_rad", "backlash_rad")}
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve until stopped; print the paths first and a summary line last; 2 on bad options or ports."""
     if getattr(args, "can", None):
@@ -226,7 +242,8 @@ def run(args: argparse.Namespace) -> int:
     capture = None
     try:
         _check(args)
-        devices = WallDevices(_ROLES[args.device], bauds=_bauds(args), fixture=args.fixture, seed=args.seed)
+        devices = WallDevices(_ROLES[args.device], bauds=_bauds(args), fixture=args.fixture, seed=args.seed,
+                              **_bench_options(args))
         if args.capture is not None:
             check_capture_dir(args.capture)
             capture = WireCapture(args.capture, lambda: devices.now() / 1e9, side="device")

@@ -42,9 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
     parser.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
-    parser.add_argument("--plant-seed", type=int, default=None, metavar="N",
+    parser.add_argument("--plant-seed", type=seed, default=None, metavar="N",
                         help="draw the plant's parameters from their tolerances (profiles/plant_tolerances.toml) "
                              "with seed N; default: the nominal plant. The firmware keeps its nominal model")
+    parser.add_argument("--plant", type=Path, default=None, metavar="FILE",
+                        help="plant profile TOML (keys of profiles/plant_ak60_6.toml, e.g. one `pafp fit` wrote) "
+                             "instead of the packaged one; --plant-seed draws around it")
     parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
                         help="switch one imperfection of the real bench off (profiles/bench_imperfections.toml: "
                              "imu_bias, imu_drift, imu_noise, encoder_offset, ...), or all; repeatable")
@@ -53,11 +56,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
                         help="the control law: cascade or impedance (shipped), or a class in a Python file "
                              "(README: 'Your own controller'); default: the profile's [controller], else cascade")
+    parser.add_argument("--experiment", choices=("sysid",), default=None,
+                        help="run the identification experiment (the shipped controller sysid, its [controller] "
+                             "parameters from the profile when it names sysid) for its whole length instead of "
+                             "gait strides; record.bin is written for `pafp fit` (docs/calibration.md)")
     parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
     parser.add_argument("--no-trace", action="store_true", help="do not write trace.json")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
+    parser.add_argument("--record", action="store_true",
+                        help="virtual bench: record every input the firmware saw into record.bin for `pafp replay` "
+                             "(serial runs always record; docs/calibration.md)")
     walk = parser.add_argument_group("scenario (virtual bench)")
     walk.add_argument("--scenario", choices=("suspended", "walk"), default="suspended",
                       help="suspended foot (default) or walk: the ground's moment in stance, scaled to --body-mass "
@@ -89,10 +99,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the ground sensors' Firmata board (load cell, heel/toe FSRs on A0..A3; docs/hardware.md, "
                              "'Ground sensors'): device path, pyserial URL or sim://ground-sensors")
     serial.add_argument("--duration", type=float_in(0.0, lo_open=True, unit="s"), default=None, metavar="S",
-                        help=f"run time in s (default {DURATION_S:g})")
+                        help=f"run time in s (default {DURATION_S:g}; with --experiment: the experiment's length "
+                             "plus 2 s)")
     serial.add_argument("--imu-baud", type=int, default=115200, help="IMU baud rate (default 115200)")
     serial.add_argument("--reconnect", action="store_true",
                         help="after a lost port, wait for it and resume in the safe state instead of exiting")
+    serial.add_argument("--no-record", action="store_true",
+                        help="do not write record.bin (the inputs for `pafp replay`; recorded by default)")
     serial.add_argument("--no-realtime", action="store_true",
                         help="ask the OS for nothing (no GC freeze, core pinning, SCHED_FIFO, mlockall, spin)")
 
@@ -149,9 +162,12 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
         fw_cfg = _firmware_config(args)
+        if args.experiment is not None:  # the experiment's length, in whole strides of the run's clock
+            args.strides = _experiment_strides(fw_cfg, _controller(fw_cfg, args))
+            args.record = True
         cfg = RunConfig(strides=args.strides, baud=args.baud, seed=args.seed, board=args.board,
                         firmware=fw_cfg, reference_csv=args.reference, capture_dir=args.capture,
-                        plant_seed=args.plant_seed, ideal=tuple(args.ideal),
+                        plant_seed=args.plant_seed, plant_file=args.plant, ideal=tuple(args.ideal),
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
                         body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
@@ -206,6 +222,8 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
 
 def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> int:
     """The virtual run proper, streaming into run_dir, which is published at the end."""
+    from dataclasses import replace
+
     from host_tools.report import readings_text, run_into, tracking_text
     from host_tools.stop_signals import StopSignals
 
@@ -213,10 +231,14 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     assert fw_cfg is not None
     out = run_dir.out
     plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
+    if cfg.plant_file is not None:
+        plant = plant.replace("plant", f"plant {cfg.plant_file}", 1)
     ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
     walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
     _warn_link_budget(cfg.baud, fw_cfg.control_hz, fw_cfg.full_values_hz)
+    if getattr(args, "record", False):  # record.bin beside the outputs, staged with them (`pafp replay`)
+        cfg = replace(cfg, record_to=run_dir.path)
     bar = _Progress(not args.quiet)
     with StopSignals() as stop:  # the run ends at its next segment; a second signal interrupts
         result, s = run_into(cfg, run_dir, plot=not args.no_plot, trace=not args.no_trace, progress=bar,
@@ -250,11 +272,22 @@ def _say_controller_error(error: str) -> None:
               "written", file=sys.stderr)
 
 
+def _experiment_strides(fw_cfg, controller: object) -> int:  # FirmwareConfig, SysidExperiment
+    """Strides of the run's clock that cover the experiment once the supervisor is in RUN."""
+    import math
+
+    return max(1, math.ceil((getattr(controller, "duration_s") + 0.5) / fw_cfg.stride_s))  # noqa: B009
+
+
 def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
-    """The profile, with --controller replacing its controller (the profile's parameters go with its own name)."""
+    """The profile, with --controller (or --experiment) replacing its controller (the profile's parameters go
+    with its own name)."""
     from firmware.config import load_firmware_config
 
     fw_cfg = load_firmware_config(args.profile)
+    experiment = getattr(args, "experiment", None)
+    if experiment is not None:
+        args.controller = experiment
     if getattr(args, "motor_link", None) is not None:
         from hal.links import link_entry
 
@@ -307,11 +340,16 @@ def _run_serial(args: argparse.Namespace) -> int:
         return 2
     telemetry_pty = None
     try:
+        fw_cfg = _firmware_config(args)
+        duration = args.duration
+        if duration is None:
+            duration = (getattr(_controller(fw_cfg, args), "duration_s") + 2.0  # noqa: B009
+                        if args.experiment is not None else DURATION_S)
         cfg = SerialRunConfig(motor=args.motor, imu=args.imu, telemetry=args.telemetry, encoder=args.encoder,
-                              duration_s=DURATION_S if args.duration is None else args.duration, baud=args.baud,
-                              imu_baud=args.imu_baud, seed=args.seed,
-                              board=args.board, firmware=_firmware_config(args),
+                              duration_s=duration, baud=args.baud, imu_baud=args.imu_baud, seed=args.seed,
+                              board=args.board, firmware=fw_cfg,
                               reference_csv=args.reference, reconnect=args.reconnect, capture_dir=args.capture,
+                              record=not args.no_record,
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings(),
                               ground=args.ground)
         if args.telemetry == "pty":

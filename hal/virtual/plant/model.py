@@ -83,7 +83,7 @@ class Plant:
                  initial_angle_rad: float = 0.0, initial_velocity_rad_s: float = 0.0,
                  start_time_s: float = 0.0, step_s: float = MAX_STEP_S,
                  motor_angle_offset_rad: float = 0.0, backlash_rad: float = 0.0,
-                 driver: str = "current-lag") -> None:
+                 driver: str = "current-lag", initial_current_a: float = 0.0) -> None:
         """Build the plant at rest-state values given; the fixture defaults to SUSPENDED.
 
         backlash_rad is the gearbox's free play at its (6:1) output; 0 = none (see set_current_command).
@@ -91,6 +91,7 @@ class Plant:
         current follows the command with current_time_constant_s) or "voltage-amplifier" (set_voltage_command:
         the PID's +-1 as +-V_bus, the current towards (V - K_e N w)/R with one lag of the amplifier's time
         constant plus the winding's L/R, the two in series taken as one of the same mean delay).
+        initial_current_a is the q current at the start (a simulation started mid-run, e.g. by `pafp fit`).
         """
         self.params = params if params is not None else load_plant_params()
         self.fixture = fixture if fixture is not None else suspended()
@@ -101,7 +102,8 @@ class Plant:
             raise ValueError(f"initial_angle_rad = {initial_angle_rad!r} outside the range of motion "
                              f"[{p.stop_min_rad}, {p.stop_max_rad}]")
         finite_args = {"initial_velocity_rad_s": initial_velocity_rad_s, "start_time_s": start_time_s,
-                       "motor_angle_offset_rad": motor_angle_offset_rad, "backlash_rad": backlash_rad}
+                       "motor_angle_offset_rad": motor_angle_offset_rad, "backlash_rad": backlash_rad,
+                       "initial_current_a": initial_current_a}
         for name, value in finite_args.items():
             _check_finite(name, value)
         if backlash_rad < 0.0:
@@ -151,7 +153,7 @@ class Plant:
         self._t = start_time_s
         self._latest = start_time_s
         w0 = initial_velocity_rad_s
-        self._x: State = (initial_angle_rad, w0, 0.0, (w0 > 0) - (w0 < 0))
+        self._x: State = (initial_angle_rad, w0, initial_current_a, (w0 > 0) - (w0 < 0))
         self._powered = fx.powered
         self._command_a = 0.0
         self._brake_a = 0.0

@@ -1,0 +1,172 @@
+"""`pafp fit`'s outputs: the fitted plant profile (TOML), fit.json, fit.md and the plots.
+
+The TOML is the base profile's text with each fitted key's line replaced by its value, the 95 % interval
+and the run it was fitted from (every other key, and any key another tool adds, passes through as it was).
+Parameters judged not identifiable keep the base value, with a comment saying so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from hal.virtual.plant import PlantParams
+from host_tools.outdir import write_atomic
+from host_tools.plant_fit import PARAMS, Experiment, FitResult, fit_percentage, plant_with, simulate
+
+__all__ = ["figure", "fit_json", "validate", "write_fit_outputs"]
+
+# fit parameter -> the profile keys it sets
+_KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per_rad": ("foot_damping_nm_s_per_rad",),
+         "coulomb_friction_nm": ("coulomb_friction_nm",), "static_friction_nm": ("actuator_backdrive_torque_nm",),
+         "gravity_moment_nm": ("foot_com_distance_m", "foot_inertia_kg_m2"),
+         "torque_constant_scale": ("kt_nm_per_a", "ke_v_s_per_rad"),
+         "current_time_constant_s": ("current_time_constant_s",)}
+
+
+def used_values(r: FitResult) -> dict[str, float]:
+    """The values that go into the profile: fitted where identifiable, the start value elsewhere."""
+    return {n: (r.values[n] if r.identifiable.get(n, False) else r.start[n]) for n in r.values}
+
+
+def profile_text(base_text: str, base: PlantParams, r: FitResult, run_dir: str) -> str:
+    """The base profile's text with the fitted keys' lines replaced (values, intervals, source)."""
+    fitted = plant_with(base, used_values(r))
+    notes: dict[str, list[str]] = {}
+    for name, keys in _KEYS.items():
+        if name not in r.names:
+            continue
+        verdict = (f"{name} {r.values[name]:.6g} ± {r.ci95[name]:.3g} (95 %)" if r.identifiable.get(name, False)
+                   else f"{name} not identifiable (kept)")
+        for key in keys:
+            notes.setdefault(key, []).append(verdict)
+    text = base_text
+    for key, verdicts in notes.items():
+        value = getattr(fitted, key)
+        line = f"{key} = {value!r}  # fitted from {run_dir}: {'; '.join(verdicts)}"
+        text, n = re.subn(rf"^{re.escape(key)}\s*=[^\n]*", line.replace("\\", "\\\\"), text, count=1, flags=re.M)
+        if n != 1:
+            raise ValueError(f"base plant profile has no line for {key}")
+    extra = [f"# {n} = {r.values[n]:.6g} ± {r.ci95[n]:.3g} ({PARAMS[n].meaning}; not a plant-profile key)"
+             if r.identifiable[n] else f"# {n}: not identifiable from this recording"
+             for n in r.names if n not in _KEYS]
+    return f"# Plant fitted by `pafp fit` from {run_dir} (fit.json beside this file has the details).\n" + \
+        "\n".join(extra) + "\n" + text
+
+
+def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
+    """Every figure of the fit, JSON-ready (non-finite numbers as null)."""
+    def num(x: float) -> float | None:
+        return round(x, 9) if math.isfinite(x) else None
+
+    params = {n: {"value": num(r.values[n]), "ci95_half_width": num(r.ci95[n]), "start": num(r.start[n]),
+                  "collinearity": num(r.collinearity[n]), "identifiable": r.identifiable[n],
+                  "unit": PARAMS[n].unit, "meaning": PARAMS[n].meaning, "bounds": [PARAMS[n].lo, PARAMS[n].hi]}
+              for n in r.names}
+    fixed = {n: {"collinearity_if_fitted": num(c), "identifiable": False,
+                 "why": "its column is a near-combination of the fitted ones: the current is the only torque "
+                        "measure, so a torque scale moves inertia, damping, friction and gravity together"}
+             for n, c in r.fixed_checks.items()}
+    return {"run": exp.source, "params": params, "fixed": fixed,
+            "fit_percent": {k: {s: num(v) for s, v in d.items()} for k, d in r.fit_pct.items()},
+            "span_s": [num(r.span_s[0]), num(r.span_s[1])], "samples": len(exp.t), "commands": len(exp.t_cmd),
+            "evaluations": r.nfev, "cost": num(r.cost), "wall_time_s": round(r.wall_s, 3), "solver": r.message,
+            **(extra or {})}
+
+
+def validate(base: PlantParams, r: FitResult, other: Experiment) -> dict[str, float]:
+    """Fit percentages of the fitted plant on another recording (windowed simulation, as the fit)."""
+    a, c, i, mask = simulate(base, used_values(r), other)
+    return {"angle": fit_percentage(other.angle[mask], a[mask]),
+            "current": fit_percentage(other.current[mask], c[mask]), "imu": fit_percentage(other.imu[mask], i[mask])}
+
+
+def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fit_part, held = exp.interleave(4)
+    fig, axes = plt.subplots(3, 2, figsize=(13, 9), sharex="col")
+    for col, (label, part) in enumerate((("fitting", fit_part), ("held out", held))):
+        a, c, _, mask = simulate(base, r.values, part)
+        t = part.t
+        ax = axes[0, col]
+        ax.plot(t, np.degrees(part.angle), ".", ms=1, label="encoder (measured)")
+        ax.plot(t[mask], np.degrees(a[mask]), ".", ms=1, label="simulated")
+        ax.set_ylabel("angle (deg)")
+        ax.set_title(f"{label}: angle fit {r.fit_pct['fit' if col == 0 else 'held_out']['angle']:.1f} %")
+        ax.legend(markerscale=8, fontsize=8)
+        ax = axes[1, col]
+        ax.plot(t, part.current, ".", ms=1, label="motor reply (measured)")
+        ax.plot(t[mask], c[mask], ".", ms=1, label="simulated")
+        ax.set_ylabel("current (A)")
+        ax.legend(markerscale=8, fontsize=8)
+        ax = axes[2, col]
+        ax.plot(t[mask], np.degrees(part.angle - a)[mask], ".", ms=1, label="angle residual (deg)")
+        ax.plot(t[mask], (part.current - c)[mask], ".", ms=1, label="current residual (A)")
+        ax.set_xlabel("time (s)")
+        ax.legend(markerscale=8, fontsize=8)
+    fig.tight_layout()
+    tmp = out / ".fit.tmp.png"
+    fig.savefig(tmp, dpi=90)
+    plt.close(fig)
+    tmp.replace(out / "fit.png")
+    fig, ax = plt.subplots(figsize=(7, 6))
+    im = ax.imshow(r.correlations, vmin=-1, vmax=1, cmap="coolwarm")
+    ax.set_xticks(range(len(r.names)), r.names, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(r.names)), r.names, fontsize=7)
+    ax.set_title("parameter correlations (normalised Jacobian)")
+    fig.colorbar(im)
+    fig.tight_layout()
+    tmp = out / ".correlations.tmp.png"
+    fig.savefig(tmp, dpi=90)
+    plt.close(fig)
+    tmp.replace(out / "correlations.png")
+
+
+def figure(value: float | None, spec: str) -> str:
+    """A figure, or n/a for one that is not a number (a signal that never moved has no fit percentage)."""
+    return "n/a" if value is None else format(value, spec)
+
+
+_g = figure
+
+
+def _markdown(s: dict) -> str:
+    lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
+             f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
+             "| parameter | value | 95 % ± | collinearity | verdict |", "|---|---|---|---|---|"]
+    for n, p in s["params"].items():
+        verdict = "identified" if p["identifiable"] else "**not identifiable** (base value kept)"
+        lines.append(f"| {n} ({p['unit']}) | {_g(p['value'], '.6g')} | {_g(p['ci95_half_width'], '.3g')} | "
+                     f"{_g(p['collinearity'], '.2f')} | {verdict} |")
+    for n, p in s["fixed"].items():
+        lines.append(f"| {n} | fixed | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
+    lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
+              "| segment | angle | current | IMU |", "|---|---|---|---|"]
+    for seg, d in s["fit_percent"].items():
+        lines.append(f"| {seg} | {d['angle']} | {d['current']} | {d['imu']} |")
+    lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals), "
+              "`correlations.png`. The fitted profile is `plant_fitted.toml`: `pafp run --plant` takes it."]
+    return "\n".join(lines) + "\n"
+
+
+def write_fit_outputs(out: Path, base: PlantParams, base_text: str, r: FitResult, exp: Experiment,
+                      extra: dict | None = None, plot: bool = True) -> dict:
+    """Write plant_fitted.toml, fit.json, fit.md, summary.json and (plot) fit.png and correlations.png into out."""
+    s = fit_json(r, exp, extra)
+    write_atomic(out / "plant_fitted.toml", profile_text(base_text, base, r, exp.source))
+    write_atomic(out / "fit.json", json.dumps(s, indent=2) + "\n")
+    write_atomic(out / "fit.md", _markdown(s))
+    # the short summary every pafp output directory has (and by which --out knows it may be replaced)
+    write_atomic(out / "summary.json", json.dumps({"command": "fit", "run": exp.source, "details": "fit.json",
+                                                   "fit_percent": s["fit_percent"]}, indent=2) + "\n")
+    if plot:
+        _plots(out, base, r, exp)
+    return s

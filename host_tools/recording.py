@@ -1,0 +1,99 @@
+"""Recording a run's inputs for `pafp replay`: the header that says what ran, the board and tasks wrapped.
+
+The composition roots (runner.py for the virtual bench, serial_run.py for real ports) call
+`start_recording` before they build the firmware (its constructor's calls are the ``init`` section), hand
+the firmware the recording board, run `RunRecording.tasks` instead of the firmware's own task list, and
+call `stop_section` before the stop path and `close` at the end. The record is ``record.bin`` in the run
+directory (hal/record/format.py); docs/calibration.md says what a replay can and cannot reproduce.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+from firmware.config import TASK_NAMES, CostModel, FirmwareConfig
+from firmware.control.pid import FeedforwardParams, PidGains
+from firmware.safety import SafetyLimits
+from hal.interfaces import Board
+from hal.record.recorder import Recorder
+from host_tools.build_info import describe, version
+from rtos import Job, Task
+
+__all__ = ["INIT_TASK", "RECORD_NAME", "STOP_TASK", "RunRecording", "config_dict", "config_from_dict"]
+
+RECORD_NAME = "record.bin"
+INIT_TASK = 254  # the section of the firmware's constructor
+STOP_TASK = 255  # the section of the stop path (zero current, then the brake)
+
+
+def config_dict(cfg: FirmwareConfig) -> dict:
+    """The firmware configuration as JSON-ready values (`config_from_dict` builds it back, equal)."""
+    d = dataclasses.asdict(cfg)
+    d["task_cycles"] = {k: dataclasses.asdict(v) if isinstance(v, CostModel) else {"base": 500, "per_byte": 0}
+                        for k, v in cfg.task_cycles.items()}
+    return d
+
+
+def config_from_dict(d: dict) -> FirmwareConfig:
+    """The firmware configuration a record's header holds (ValueError naming a bad value, as the profile's)."""
+    d = dict(d)
+    return FirmwareConfig(**{**d, "position_gains": PidGains(**d["position_gains"]),
+                             "velocity_gains": PidGains(**d["velocity_gains"]),
+                             "feedforward_params": FeedforwardParams(**d["feedforward_params"]),
+                             "safety": SafetyLimits(**d["safety"]),
+                             "task_cycles": {k: CostModel(**v) for k, v in d["task_cycles"].items()}})
+
+
+def _board_header(board: Board) -> dict:
+    ports = {role: {"baud": u.baud, "name": u.name} for role, u in board.uarts().items()}
+    return {"ports": ports, "encoder": {"bits": board.encoder.bits, "arr": board.encoder.arr},
+            "can_bitrate": board.can.bitrate if board.can is not None else None, "led": board.led.level,
+            "f_cpu_hz": board.f_cpu_hz}
+
+
+class RunRecording:
+    """A run being recorded into `directory`/record.bin: the board to hand the firmware, the tasks to run."""
+
+    def __init__(self, directory: Path, board: Board, fw_cfg: FirmwareConfig, mode: str, reference: dict,
+                 start_cycles: int, extra: dict | None = None) -> None:
+        """Write the header and open the ``init`` section (at `start_cycles`), before the firmware is built."""
+        header = {"mode": mode, "firmware": config_dict(fw_cfg), "reference": reference, "tasks": list(TASK_NAMES),
+                  **_board_header(board), **(extra or {})}
+        self.path = directory / RECORD_NAME
+        self.recorder = Recorder(self.path, header)
+        self.board = self.recorder.board(board)
+        self._ids = {name: i for i, name in enumerate(TASK_NAMES)}
+        self.recorder.job(INIT_TASK, start_cycles, 0)
+
+    def tasks(self, tasks: list[Task]) -> list[Task]:
+        """The firmware's tasks, each body opening its job's section first."""
+        return [replace(t, body=self._wrap(self._ids[t.name], t.body)) for t in tasks]
+
+    def _wrap(self, task_id: int, body: Callable[[Job], object] | None) -> Callable[[Job], object]:
+        assert body is not None
+        job_section = self.recorder.job
+
+        def recorded(job: Job) -> object:
+            job_section(task_id, job.start, job.index)
+            return body(job)
+
+        return recorded
+
+    def health(self, kernel_health: Callable[[], tuple[int, int]]) -> Callable[[], tuple[int, int]]:
+        """The kernel's deadline health as the firmware reads it, recorded."""
+        return self.recorder.health(kernel_health)
+
+    def stop_section(self, t_cycles: int) -> None:
+        """The stop path begins at t_cycles: its calls form the last section."""
+        self.recorder.job(STOP_TASK, t_cycles, 0)
+
+    def close(self, footer: dict | None = None) -> dict:
+        """End the record (the footer names the pafp that wrote it: asked here, after the run, not before it,
+        so the start-up costs nothing more); returns what summary.json says of it."""
+        self.recorder.close({**(footer or {}), "pafp": {"version": version(), "build": describe()}})
+        r = self.recorder
+        return {"file": RECORD_NAME, "jobs": r.jobs, "events": r.events, "raw_bytes": r.raw_bytes,
+                "bytes": self.path.stat().st_size}
