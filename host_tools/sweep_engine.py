@@ -61,12 +61,13 @@ def check_scheduler(address: str) -> None:
 def dask_client(workers: int | None = None, scheduler: str | None = None, processes: bool = True) -> Iterator[Any]:
     """A dask.distributed Client: on `scheduler` (an address or a scheduler file) if given, else on a LocalCluster
     of `workers` on 127.0.0.1."""
+    if scheduler:
+        check_scheduler(scheduler)  # before dask is imported: a bad address costs nothing
     from dask.distributed import Client, LocalCluster
 
     for name in ("distributed", "tornado"):  # the cluster's chatter; errors still show
         logging.getLogger(name).setLevel(max(logging.WARNING, logging.getLogger(name).getEffectiveLevel()))
     if scheduler:
-        check_scheduler(scheduler)
         by_file = scheduler.endswith(".json")  # `dask scheduler --scheduler-file`
         client = Client(scheduler_file=scheduler, timeout="10s") if by_file else Client(scheduler, timeout="10s")
         try:

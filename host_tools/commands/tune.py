@@ -70,6 +70,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"strides {args.strides!r} out of range: an int in 1..100")
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+        if args.scheduler is not None:
+            from host_tools.sweep_engine import check_scheduler
+
+            check_scheduler(args.scheduler)
         tuning.check_budget(args.budget)
         workers = args.workers or os.cpu_count() or 1
         where = f"scheduler {args.scheduler}" if args.scheduler else f"{workers} workers"
