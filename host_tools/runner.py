@@ -22,6 +22,7 @@ from pathlib import Path
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
+from firmware.control.registry import build_controller
 from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
@@ -83,6 +84,9 @@ class RunConfig:
     body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
     moment_csv: Path | None = None  # walk: the ankle moment per kg (default: the packaged normative curve)
     speed: str | None = None  # a speed group of the packaged data (host_tools/walk.py SPEEDS): reference and moment
+    # fault injectors and instruments (hal/virtual/faults), armed on the bench, the controller and the task costs
+    faults: tuple = ()
+    duration_s: float | None = None  # simulated time to run (None: settle + ramp + strides x stride + 50 ms)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -94,6 +98,9 @@ class RunConfig:
             raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
         if self.scenario not in SCENARIOS:
             raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
+        if self.duration_s is not None and not (isinstance(self.duration_s, (int, float)) and
+                                                0.0 < self.duration_s <= 86_400.0):
+            raise ValueError(f"duration_s {self.duration_s!r} out of range: a number in (0, 86400] s")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
@@ -175,8 +182,19 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
                          can_id=fw_cfg.motor_can_id, **bench_options)
     bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
     wire = WireCapture(cfg.capture_dir, lambda: now() / f_cpu) if cfg.capture_dir is not None else None
+    controller, rig = cfg.controller, None
+    if cfg.faults:
+        from hal.virtual.faults.base import FaultRig
+
+        rig = FaultRig(bench, f_cpu, controller if controller is not None else
+                       build_controller(fw_cfg.controller, fw_cfg, fw_cfg.controller_params))
+        for fault in cfg.faults:
+            fault.arm(rig)
+        controller = rig.controller
     fw = Firmware(bench.board if wire is None else wire.tap_board(bench.board), fw_cfg, reference=reference,
-                  controller=cfg.controller)
+                  controller=controller)
+    if rig is not None:
+        fw.tasks = rig.tasks(fw.tasks)
     if load is not None:
         load.bind(lambda: fw.gait_start_s)  # the walker's strides on the firmware's gait clock
     probe = Probe()
@@ -206,7 +224,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     if cfg.setup:
         cfg.setup(bench, fw)
 
-    sim_s = cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05
+    sim_s = (cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05 if cfg.duration_s is None
+             else cfg.duration_s)
     t_end = int(sim_s * f_cpu)
     files = None
     if cfg.stream_to is not None:
