@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "rta": "rta",
     "tune": "tune",
     "sweep": "sweep",
+    "faults": "faults",
 }
 
 
