@@ -100,7 +100,7 @@ class Injector:
     HAZARD: ClassVar[str] = ""  # what it endangers, for the hazard table
     WHERE: ClassVar[str] = ""  # where it acts (device, wire, bus, supply, plant, CPU, controller)
     LINKS: ClassVar[tuple[str, ...]] = ()  # the motor links it applies to (empty: every link)
-    DANGEROUS: ClassVar[bool] = False  # refused on a real bench without --allow-dangerous-faults
+    DANGEROUS: ClassVar[bool] = False  # refused on a real port (fault://) without allow_dangerous=1
     PARAMS: ClassVar[dict[str, tuple[Any, ...]]] = {}  # key -> (default, lowest, highest) or (default, choices)
 
     def __init__(self, onset_s: float, duration_s: float = math.inf, seed: int = 0, **params: Any) -> None:

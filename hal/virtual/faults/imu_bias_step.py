@@ -18,6 +18,7 @@ class ImuBiasStep(ByteFault):
     HAZARD = "the fused angle drifts by the step: the foot is driven off the reference"
     WHERE = "IMU output (frames rewritten on the IMU -> MCU wire)"
     WIRE = "imu_rx"
+    DANGEROUS = True  # a plausible false angle: the controller drives the foot by it
     PARAMS = {"step_deg": (10.0, -90.0, 90.0)}
 
     def change(self, data: bytes, t_s: float) -> bytes:

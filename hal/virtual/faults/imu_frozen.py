@@ -16,6 +16,7 @@ class ImuFrozen(ByteFault):
     HAZARD = "the fused angle is pulled towards a stale pitch: the foot drifts while every source looks alive"
     WHERE = "IMU output (frames rewritten on the IMU -> MCU wire)"
     WIRE = "imu_rx"
+    DANGEROUS = True  # a plausible false angle: the controller drives the foot by it
 
     def __init__(self, *args: object, **kwargs: object) -> None:
         """See Injector."""
