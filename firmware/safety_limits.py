@@ -30,6 +30,9 @@ class SafetyLimits:
     startup_grace_s: float = 0.5
     brake_delay_s: float = 0.010
     brake_current_a: float = 2.0
+    # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
+    motor_encoder_gap_rad: float = math.radians(3.0)
+    belt_ratio: float = 89.127 / 19.1
 
     def __post_init__(self) -> None:
         """Reject limits that cannot describe a working supervisor."""
@@ -38,7 +41,7 @@ class SafetyLimits:
                 f"angle limits ({self.angle_min_rad}, {self.angle_max_rad}) rad: min must be below max"
             )
         for name in ("current_limit_a", "motor_timeout_s", "command_timeout_s", "imu_timeout_s", "disagreement_rad",
-                     "startup_grace_s", "brake_current_a"):
+                     "startup_grace_s", "brake_current_a", "motor_encoder_gap_rad", "belt_ratio"):
             value = getattr(self, name)
             if not (is_number(value) and value > 0):
                 raise ValueError(f"{name} {value!r} out of range: a finite number > 0")

@@ -32,17 +32,18 @@ name = "suspended"
 [[fault]]
 name = "motor_replies_lost"
 [[fault]]
-name = "encoder_glitch"
-counts = {counts}
+name = "{second}"
+{params}
 """
 
 
-def spec_file(tmp_path: Path, extra: str = "", counts: int = 40, criteria: str | None = None) -> Path:
+def spec_file(tmp_path: Path, extra: str = "", second: str = "motor_stall", params: str = "",
+              criteria: str | None = None) -> Path:
     if criteria is not None:
         (tmp_path / "criteria.toml").write_text(criteria, encoding="utf-8")
         extra += '\ncriteria = "criteria.toml"'
     p = tmp_path / "spec.toml"
-    p.write_text(SPEC.format(extra=extra, counts=counts), encoding="utf-8")
+    p.write_text(SPEC.format(extra=extra, second=second, params=params), encoding="utf-8")
     return p
 
 
@@ -99,19 +100,21 @@ def test_bad_criteria_are_refused(tmp_path):
 
 def test_a_point_is_paired_with_its_fault_free_run(tmp_path):
     spec = load_fault_spec(spec_file(tmp_path))
-    lost, glitch = spec.points()[0], spec.points()[2]
+    lost, stall = spec.points()[0], spec.points()[2]
     row = run_fault_point(lost)
     assert row["status"] == "ok" and row["fired"] and row["reason"] == "MOTOR_TIMEOUT"
     assert 20.0 <= row["detect_ms"] <= 23.0 and row["detect_ms"] < row["safe_ms"] < row["detect_ms"] + 1.0
     assert row["excursion_deg"] < 1.0 and row["fired_first_s"] >= row["onset_s"]
-    g = run_fault_point(glitch)
+    g = run_fault_point(stall)  # a jam: encoder and motor agree, no check catches it
     assert g["status"] == "ok" and not g["detected"] and math.isnan(g["safe_ms"])
-    assert 1.0 < g["excursion_deg"] < 10.0  # a 3.6 deg jump of the count moves the foot by about that
-    assert g["cmd_peak_a"] > 0
+    assert g["excursion_deg"] > 1.0 and g["torque_nm"] > 5.0 and g["cmd_peak_a"] > 0
+    glitch = load_fault_spec(spec_file(tmp_path, second="encoder_glitch", params="counts = 40")).points()[2]
+    e = run_fault_point(glitch)  # a 3.6 deg jump of the count: caught by the encoder's plausibility check
+    assert e["reason"] == "MOTOR_ENCODER_DISAGREEMENT" and e["detect_ms"] < 2.0 and e["excursion_deg"] < 1.0
 
 
 def test_a_fault_that_never_fires_is_an_error_not_a_pass(tmp_path):
-    spec = load_fault_spec(spec_file(tmp_path, counts=0))  # a glitch of 0 counts changes nothing
+    spec = load_fault_spec(spec_file(tmp_path, second="encoder_glitch", params="counts = 0"))  # changes nothing
     row = run_fault_point(spec.points()[2])
     assert row["status"] == "not_fired" and "never fired" in row["error"]
 
@@ -138,13 +141,13 @@ def test_criteria_and_hazard_table(tmp_path):
     strict = {name: {"excursion_deg": 0.5, "time_to_safe_ms": 10.0} for name in load_criteria(spec.criteria)}
     fails = check_criteria(rows, strict)
     assert {(f.fault, f.criterion) for f in fails} == {("motor_replies_lost", "time_to_safe_ms"),
-                                                       ("encoder_glitch", "excursion_deg")}
+                                                       ("motor_stall", "excursion_deg")}
     lenient = {name: {"excursion_deg": 90.0, "time_to_safe_ms": 100.0} for name in strict}
     assert check_criteria(rows, lenient) == []
     table = {h["fault"]: h for h in hazard_rows(rows)}
     assert table["motor_replies_lost"]["detection"] == "MOTOR_TIMEOUT 2/2"
-    assert table["encoder_glitch"]["detection"] == "undetected 2/2"
-    assert table["encoder_glitch"]["control"].startswith("none")
+    assert table["motor_stall"]["detection"] == "undetected 2/2"
+    assert table["motor_stall"]["control"].startswith("none")
 
 
 def test_the_command_writes_the_table_and_report_and_exits_1_per_failed_criterion(tmp_path, capsys):
@@ -153,9 +156,9 @@ def test_the_command_writes_the_table_and_report_and_exits_1_per_failed_criterio
     out = tmp_path / "out"
     assert main(["faults", str(spec), "--out", str(out), "--workers", "1", "--quiet"]) == 1
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("pafp faults: criterion")]
-    assert len(err) == 1 and "excursion_deg <= 0.5 deg not met by encoder_glitch" in err[0] and "--point" in err[0]
+    assert len(err) == 1 and "excursion_deg <= 0.5 deg not met by motor_stall" in err[0] and "--point" in err[0]
     report = (out / "report.md").read_text(encoding="utf-8")
-    assert "## Hazard table" in report and "| encoder_glitch |" in report
+    assert "## Hazard table" in report and "| motor_stall |" in report
     assert (out / "plots" / "heatmap.png").stat().st_size > 1000 and (out / "results.parquet").is_file()
     assert len(list((out / "plots").glob("trace_point_*.png"))) == 3
     assert main(["faults", str(spec), "--out", str(out), "--workers", "1", "--quiet"]) == 2  # rows, no --resume

@@ -21,8 +21,8 @@ ONSET_S, DURATION_S, RUN_S = 1.6, 0.2, 2.0
 # the supervisor's reason each fault must trip on the UART link (None: no check catches it in this window)
 EXPECTED = {
     "imu_frozen": None, "imu_silent": "IMU_TIMEOUT", "imu_bias_step": "SENSOR_DISAGREEMENT",
-    "imu_corrupt": "IMU_TIMEOUT", "encoder_glitch": None, "encoder_stuck": "SENSOR_DISAGREEMENT",
-    "encoder_reversed": "SENSOR_DISAGREEMENT", "motor_replies_lost": "MOTOR_TIMEOUT",
+    "imu_corrupt": "IMU_TIMEOUT", "encoder_glitch": "MOTOR_ENCODER_DISAGREEMENT",
+    "encoder_stuck": "MOTOR_ENCODER_DISAGREEMENT", "encoder_reversed": "MOTOR_ENCODER_DISAGREEMENT", "motor_replies_lost": "MOTOR_TIMEOUT",
     "motor_frames_corrupt": "MOTOR_TIMEOUT", "motor_over_temp": "MOTOR_FAULT", "motor_fault_code": "MOTOR_FAULT",
     "motor_stall": None, "supply_sag": "MOTOR_FAULT", "task_overrun": "DEADLINE_MISSES",
     "controller_raise": "CONTROLLER_ERROR", "controller_nan": "CONTROLLER_ERROR",
