@@ -32,12 +32,13 @@ import numpy as np
 
 from host_tools.fault_spec import FaultPoint
 
-__all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "point_run_config", "run_fault_point"]
+__all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "fault_free_arrays", "faulted_run", "figures", "onset_of",
+           "point_run_config", "run_fault_point"]
 
 GAIT_START_MAX_S = 1.5  # the fault-free run covers a gait start up to this late (sensors up, start-up ramp)
 FIGURES = ("onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "detected", "reason", "detect_ms",
-           "safe_ms", "excursion_deg", "velocity_dps", "torque_nm", "settle_excursion_deg", "stop_hit", "impact_dps", "cmd_peak_a",
-           "cmd_last_a", "sim_time_s", "wall_time_s")
+           "safe_ms", "excursion_deg", "velocity_dps", "torque_nm", "settle_excursion_deg", "stop_hit", "impact_dps",
+           "cmd_peak_a", "cmd_last_a", "sim_time_s", "wall_time_s")
 
 
 def _base_row(p: FaultPoint) -> dict[str, Any]:
@@ -154,6 +155,12 @@ def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, flo
     fault, obs = make_injector(p.fault, onset_s, p.duration_s, p.seed, **dict(p.params)), Observer()
     cfg = point_run_config(p, (obs, fault), onset_s + p.duration_s + p.settle_s)
     return run_virtual(cfg, progress=progress), fault, obs, onset_s
+
+
+def fault_free_arrays(p: FaultPoint) -> dict[str, np.ndarray]:
+    """The observer's arrays of the point's fault-free run (from the worker's cache)."""
+    _, base_s = onset_of(p)
+    return _fault_free(_key(p), base_s)[2]
 
 
 def run_fault_point(p: FaultPoint) -> dict[str, Any]:

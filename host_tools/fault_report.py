@@ -46,6 +46,7 @@ CONTROLS: dict[str, str] = {
     "LINK_LOST": "a port failed",
     "WATCHDOG": "the watchdog was starved",
     "TASK_OVERRUN": "a task overran its budget",
+    "MOTOR_ENCODER_DISAGREEMENT": "implausible encoder: its motion against the motor's position through the belt",
     "ESTOP": "the e-stop",
 }
 HEAT_FIGURE = "excursion_deg"
@@ -208,13 +209,12 @@ def _trace(path: Path, spec: FaultSpec, index: int) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from host_tools.fault_point import _fault_free, _key, faulted_run, onset_of
+    from host_tools.fault_point import fault_free_arrays, faulted_run
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)  # the trip is in the plot, not on the console
     p = spec.points()[index]
     r, fault, obs, onset_s = faulted_run(p)
-    _, base_s = onset_of(p)
-    base = _fault_free(_key(p), base_s)[2]
+    base = fault_free_arrays(p)
     a = obs.arrays()
     n = min(len(a["t_s"]), len(base["t_s"]))
     t = a["t_s"][:n]

@@ -32,7 +32,8 @@ from host_tools.sweep_point import (
 from host_tools.sweep_spec import SpecError, SweepSpec
 from host_tools.sweep_table import ResultsTable
 
-__all__ = ["Progress", "SweepOutcome", "check_points", "columns_of", "dask_client", "run_sweep", "run_tasks", "tasks_of"]
+__all__ = ["Progress", "SweepOutcome", "check_points", "columns_of", "dask_client", "run_sweep", "run_tasks",
+           "tasks_of"]
 
 PlantOptions = Callable[[int], dict[str, Any]]
 

@@ -22,10 +22,10 @@ ONSET_S, DURATION_S, RUN_S = 1.6, 0.2, 2.0
 EXPECTED = {
     "imu_frozen": None, "imu_silent": "IMU_TIMEOUT", "imu_bias_step": "SENSOR_DISAGREEMENT",
     "imu_corrupt": "IMU_TIMEOUT", "encoder_glitch": "MOTOR_ENCODER_DISAGREEMENT",
-    "encoder_stuck": "MOTOR_ENCODER_DISAGREEMENT", "encoder_reversed": "MOTOR_ENCODER_DISAGREEMENT", "motor_replies_lost": "MOTOR_TIMEOUT",
-    "motor_frames_corrupt": "MOTOR_TIMEOUT", "motor_over_temp": "MOTOR_FAULT", "motor_fault_code": "MOTOR_FAULT",
-    "motor_stall": None, "supply_sag": "MOTOR_FAULT", "task_overrun": "DEADLINE_MISSES",
-    "controller_raise": "CONTROLLER_ERROR", "controller_nan": "CONTROLLER_ERROR",
+    "encoder_stuck": "MOTOR_ENCODER_DISAGREEMENT", "encoder_reversed": "MOTOR_ENCODER_DISAGREEMENT",
+    "motor_replies_lost": "MOTOR_TIMEOUT", "motor_frames_corrupt": "MOTOR_TIMEOUT", "motor_over_temp": "MOTOR_FAULT",
+    "motor_fault_code": "MOTOR_FAULT", "motor_stall": None, "supply_sag": "MOTOR_FAULT",
+    "task_overrun": "DEADLINE_MISSES", "controller_raise": "CONTROLLER_ERROR", "controller_nan": "CONTROLLER_ERROR",
     "can_bus_off": "MOTOR_TIMEOUT", "can_error_passive": None,
 }
 

@@ -13,7 +13,8 @@ HELP = ("run a fault-injection campaign (faults x onsets x durations x scenarios
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp faults`."""
-    parser.add_argument("spec", type=Path, help="campaign spec TOML (docs/safety.md), e.g. profiles/faults/default.toml")
+    parser.add_argument("spec", type=Path, help="campaign spec TOML (docs/safety.md), e.g. "
+                        "profiles/faults/default.toml")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/faults-<spec name>)")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,

@@ -10,7 +10,8 @@ from hal.virtual.faults.can_fault import CanFault
 
 __all__ = ["CanErrorPassive"]
 
-ERROR_FRAME_BITS = 25  # passive error flag 6 + error delimiter 8 + intermission 3 + suspend transmission 8 (ISO 11898-1)
+# passive error flag 6 + error delimiter 8 + intermission 3 + suspend transmission 8 bits (ISO 11898-1)
+ERROR_FRAME_BITS = 25
 
 
 class CanErrorPassive(CanFault):

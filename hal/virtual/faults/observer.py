@@ -38,7 +38,8 @@ class _Sampler(EventDevice):
         t = self.next_event
         t_s = t / self.world.f_hz
         p = self.plant
-        self.out.append((t_s, p.output_angle_rad(t_s), p.output_velocity_rad_s(t_s), p.current_q_a(t_s) * self.nm_per_a))
+        self.out.append((t_s, p.output_angle_rad(t_s), p.output_velocity_rad_s(t_s),
+                         p.current_q_a(t_s) * self.nm_per_a))
         self.next_event = t + self.period
 
 
