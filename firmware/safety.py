@@ -171,26 +171,33 @@ class MotorEncoderGap:
     """Plausibility of the output encoder: its motion against the motor's own position seen through the belt.
 
     The AK60-6 reports the planetary's output angle with its replies; divided by the belt ratio it is a second,
-    independent measure of the ankle's motion. Both are zeroed at the first reply (the encoder is incremental);
-    ``update`` returns how far they have parted since. A stuck, glitching or reversed encoder parts them within
-    a few degrees of motion, long before the IMU (lagged, 100 Hz, biased) can tell (docs/safety.md, "Mends").
+    independent measure of the ankle's motion. Both are zeroed at the first reply; ``update`` returns how far they
+    have parted. Only a new reply at most ``fresh_s`` old is compared (the encoder is read now): stale feedback is
+    the stale-data check's hazard (MOTOR_TIMEOUT), so without a fresh reply the last gap is kept. A stuck,
+    glitching or reversed encoder parts them within a few degrees of motion, long before the IMU (lagged, 100 Hz,
+    biased) can tell (docs/safety.md, "Mends").
     """
 
-    def __init__(self, belt_ratio: float) -> None:
+    def __init__(self, belt_ratio: float, fresh_s: float = 0.002) -> None:
         """Nothing seen yet."""
         self.belt_ratio = belt_ratio
+        self.fresh_s = fresh_s
+        self.gap_rad = 0.0
         self._seeded = False
         self._encoder0 = 0.0
         self._motor0 = 0.0
+        self._reply_s = -1.0
 
-    def update(self, encoder_rad: float, motor_position_rad: float, replied: bool) -> float:
-        """|encoder motion - motor motion / belt ratio| since the first reply (0.0 before it)."""
-        if not replied:
-            return 0.0
+    def update(self, encoder_rad: float, motor_position_rad: float, reply_s: float | None, now_s: float) -> float:
+        """|encoder motion - motor motion / belt ratio| at the newest fresh reply (0.0 before the first one)."""
+        if reply_s is None or reply_s == self._reply_s or now_s - reply_s > self.fresh_s:
+            return self.gap_rad
+        self._reply_s = reply_s
         if not self._seeded:
             self._seeded = True
             self._encoder0, self._motor0 = encoder_rad, motor_position_rad
-        return abs((encoder_rad - self._encoder0) - (motor_position_rad - self._motor0) / self.belt_ratio)
+        self.gap_rad = abs((encoder_rad - self._encoder0) - (motor_position_rad - self._motor0) / self.belt_ratio)
+        return self.gap_rad
 
 
 # Enum members as module constants: the per-period checks compare against them without the enum's

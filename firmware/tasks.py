@@ -138,7 +138,7 @@ class FirmwareTasks:
         x.last_imu_frame_s = self.imu.last_frame_s
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
-                                                                feedback.received_s is not None)
+                                                                feedback.received_s, x.now_s)
         x.motor_fault_code = feedback.fault
         x.estop_pressed = self.board.estop.read()
         x.link_lost = link_lost = self.motor.link_lost or self.imu.link_lost

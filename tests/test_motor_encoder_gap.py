@@ -10,12 +10,21 @@ from firmware.safety import FaultReason, MotorEncoderGap, SafetyInputs, SafetyLi
 
 
 def test_the_gap_is_zero_before_the_first_reply_and_relative_after():
-    gap = MotorEncoderGap(4.0)
-    assert gap.update(0.3, 9.0, replied=False) == 0.0
-    assert gap.update(0.3, 9.0, replied=True) == 0.0  # both zeroed at the first reply
-    assert gap.update(0.4, 9.4, replied=True) == pytest.approx(0.0)  # moved together through the belt
-    assert gap.update(0.4, 9.0, replied=True) == pytest.approx(0.1)  # encoder moved, motor did not
-    assert gap.update(0.2, 9.8, replied=True) == pytest.approx(0.3)  # encoder back 0.1, motor forward 0.2
+    gap = MotorEncoderGap(4.0, fresh_s=0.002)
+    assert gap.update(0.3, 9.0, None, 0.0) == 0.0
+    assert gap.update(0.3, 9.0, 0.010, 0.0105) == 0.0  # both zeroed at the first reply
+    assert gap.update(0.4, 9.4, 0.011, 0.0115) == pytest.approx(0.0)  # moved together through the belt
+    assert gap.update(0.4, 9.0, 0.012, 0.0125) == pytest.approx(0.1)  # encoder moved, motor did not
+    assert gap.update(0.2, 9.8, 0.013, 0.0135) == pytest.approx(0.3)  # encoder back 0.1, motor forward 0.2
+
+
+def test_stale_feedback_is_not_compared():
+    """A reply seen before, or older than fresh_s, keeps the last gap: stale feedback is MOTOR_TIMEOUT's hazard."""
+    gap = MotorEncoderGap(4.0, fresh_s=0.002)
+    gap.update(0.0, 0.0, 0.010, 0.0105)
+    assert gap.update(0.5, 0.0, 0.010, 0.0115) == 0.0  # the same reply again: the foot moved since
+    assert gap.update(0.5, 0.0, 0.011, 0.0140) == 0.0  # a reply 3 ms old
+    assert gap.update(0.5, 0.0, 0.013, 0.0140) == pytest.approx(0.5)  # a fresh one
 
 
 def _supervisor_at(gap_rad: float) -> Supervisor:
