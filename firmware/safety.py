@@ -17,7 +17,8 @@ from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FaultReason", "SafetyInputs", "SafetyLimits", "SafeCommand", "Supervisor", "SupervisorState"]
+__all__ = ["FaultReason", "MotorEncoderGap", "SafetyInputs", "SafetyLimits", "SafeCommand", "Supervisor",
+           "SupervisorState"]
 
 
 @dataclass
@@ -35,6 +36,7 @@ class SafetyInputs:
     deadline_miss_streak: int = 0
     estop_pressed: bool = False
     link_lost: bool = False
+    motor_encoder_gap_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,9 @@ class Supervisor:
         if reason is FaultReason.SENSOR_DISAGREEMENT:
             return f"encoder/IMU disagreement {math.degrees(x.disagreement_rad):.2f} deg > " \
                    f"{math.degrees(lim.disagreement_rad):.2f} deg"
+        if reason is FaultReason.MOTOR_ENCODER_DISAGREEMENT:
+            return f"encoder/motor-position disagreement {math.degrees(x.motor_encoder_gap_rad):.2f} deg > " \
+                   f"{math.degrees(lim.motor_encoder_gap_rad):.2f} deg"
         if reason is FaultReason.ANGLE_LIMIT:
             return f"angle {math.degrees(x.angle_rad):.2f} deg outside " \
                    f"{math.degrees(lim.angle_min_rad):.1f}..{math.degrees(lim.angle_max_rad):.1f} deg"
@@ -157,7 +162,42 @@ class Supervisor:
                 return FaultReason.CURRENT_LIMIT
             if x.disagreement_rad > lim.disagreement_rad:
                 return FaultReason.SENSOR_DISAGREEMENT
+            if x.motor_encoder_gap_rad > lim.motor_encoder_gap_rad:
+                return FaultReason.MOTOR_ENCODER_DISAGREEMENT
         return _NONE
+
+
+class MotorEncoderGap:
+    """Plausibility of the output encoder: its motion against the motor's own position seen through the belt.
+
+    The AK60-6 reports the planetary's output angle with its replies; divided by the belt ratio it is a second,
+    independent measure of the ankle's motion. Both are zeroed at the first reply; ``update`` returns how far they
+    have parted. Only a new reply at most ``fresh_s`` old is compared (the encoder is read now): stale feedback is
+    the stale-data check's hazard (MOTOR_TIMEOUT), so without a fresh reply the last gap is kept. A stuck,
+    glitching or reversed encoder parts them within a few degrees of motion, long before the IMU (lagged, 100 Hz,
+    biased) can tell (docs/safety.md, "Mends").
+    """
+
+    def __init__(self, belt_ratio: float, fresh_s: float = 0.002) -> None:
+        """Nothing seen yet."""
+        self.belt_ratio = belt_ratio
+        self.fresh_s = fresh_s
+        self.gap_rad = 0.0
+        self._seeded = False
+        self._encoder0 = 0.0
+        self._motor0 = 0.0
+        self._reply_s = -1.0
+
+    def update(self, encoder_rad: float, motor_position_rad: float, reply_s: float | None, now_s: float) -> float:
+        """|encoder motion - motor motion / belt ratio| at the newest fresh reply (0.0 before the first one)."""
+        if reply_s is None or reply_s == self._reply_s or now_s - reply_s > self.fresh_s:
+            return self.gap_rad
+        self._reply_s = reply_s
+        if not self._seeded:
+            self._seeded = True
+            self._encoder0, self._motor0 = encoder_rad, motor_position_rad
+        self.gap_rad = abs((encoder_rad - self._encoder0) - (motor_position_rad - self._motor0) / self.belt_ratio)
+        return self.gap_rad
 
 
 # Enum members as module constants: the per-period checks compare against them without the enum's

@@ -57,6 +57,9 @@ class SafetyLimits:
     startup_grace_s: float = 0.5
     brake_delay_s: float = 0.010
     brake_current_a: float = 2.0
+    # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
+    motor_encoder_gap_rad: float = math.radians(3.0)
+    belt_ratio: float = 89.127 / 19.1
 
     def __post_init__(self) -> None:
         """Reject limits that cannot describe a working supervisor or lie beyond the hardware (module constants)."""
@@ -81,3 +84,6 @@ class SafetyLimits:
         check_range("brake_delay_s", self.brake_delay_s, 0.0, BRAKE_DELAY_MAX_S,
                     unit="s (the motor's own command timeout)")
         check_int_range("deadline_miss_streak", self.deadline_miss_streak, 1, MISS_STREAK_MAX)
+        check_range("motor_encoder_gap_rad", self.motor_encoder_gap_rad, 0.0, span, lo_open=True,
+                    unit="rad (at most the span of the angle limits)")
+        check_range("belt_ratio", self.belt_ratio, 0.0, 100.0, lo_open=True, unit="(output over input pulley)")

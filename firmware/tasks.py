@@ -29,7 +29,7 @@ from firmware.drivers.ground_sensors import GroundSensorDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor_links import make_motor_driver
 from firmware.logger import TelemetryLogger
-from firmware.safety import FaultReason, SafetyInputs, Supervisor, SupervisorState
+from firmware.safety import FaultReason, MotorEncoderGap, SafetyInputs, Supervisor, SupervisorState
 from hal.interfaces import Board
 from protocol.rvc import RVC_RATE_HZ
 from rtos import Job
@@ -75,6 +75,7 @@ class FirmwareTasks:
         self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (hal.links)
         self.logger = TelemetryLogger(board.telemetry_uart)
         self.supervisor = Supervisor(c.safety)
+        self.motor_encoder_gap = MotorEncoderGap(c.safety.belt_ratio)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
         self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
                            if c.imu_lowpass_hz > 0 else None)
@@ -141,6 +142,8 @@ class FirmwareTasks:
         x.last_command_s = self.motor.last_command_s
         x.last_imu_frame_s = self.imu.last_frame_s
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
+        x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
+                                                                feedback.received_s, x.now_s)
         x.motor_fault_code = feedback.fault
         x.estop_pressed = self.board.estop.read()
         x.link_lost = link_lost = self.motor.link_lost or self.imu.link_lost

@@ -189,6 +189,11 @@ def backends() -> tuple[str, ...]:
 def _pyserial_knows(scheme: str) -> bool:
     import serial
 
+    if scheme == "fault":  # our fault-injecting wrapper: its package is listed when first asked for
+        from hal.serial.protocol_fault import register_fault_handler
+
+        register_fault_handler()
+
     for package in serial.protocol_handler_packages:
         try:
             if importlib.util.find_spec(f"{package}.protocol_{scheme}") is not None:

@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "sweep": "sweep",
     "replay": "replay",
     "fit": "fit",
+    "faults": "faults",
 }
 
 

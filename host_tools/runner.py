@@ -22,6 +22,7 @@ from pathlib import Path
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
+from firmware.control.registry import build_controller
 from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.devices.bno08x_config import imu_reading_of
 from hal.virtual.imperfections import Imperfections, load_imperfections
@@ -108,6 +109,9 @@ class RunConfig:
     # the load cell and heel/toe FSRs on the ADC (hal/virtual/ground_sensors.py); None: fitted when walking
     ground_sensors: bool | None = None
     sensor_faults: tuple[str, ...] = ()  # "PART:MODE" from the start, e.g. "fsr_heel:open" (SENSOR_FAULTS)
+    # fault injectors and instruments (hal/virtual/faults), armed on the bench, the controller and the task costs
+    faults: tuple = ()
+    duration_s: float | None = None  # simulated time to run (None: settle + ramp + strides x stride + 50 ms)
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -126,6 +130,9 @@ class RunConfig:
                                  f"{[f'{p}:{m}' for p, ms in SENSOR_FAULTS.items() for m in ms]}")
         if self.sensor_faults and not self.sensors_fitted():
             raise ValueError("sensor faults need the ground sensors: walk, or fit them (ground_sensors)")
+        if self.duration_s is not None and not (isinstance(self.duration_s, (int, float)) and
+                                                0.0 < self.duration_s <= 86_400.0):
+            raise ValueError(f"duration_s {self.duration_s!r} out of range: a number in (0, 86400] s")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
@@ -231,7 +238,18 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
         recording = RunRecording(cfg.record_to, board, fw_cfg, "virtual",
                                  reference_record(cfg.reference_csv, cfg.speed), 0, {"seed": cfg.seed})
         board = recording.board
-    fw = Firmware(board, fw_cfg, reference=reference, controller=cfg.controller)
+    controller, rig = cfg.controller, None
+    if cfg.faults:
+        from hal.virtual.faults.base import FaultRig
+
+        rig = FaultRig(bench, f_cpu, controller if controller is not None else
+                       build_controller(fw_cfg.controller, fw_cfg, fw_cfg.controller_params))
+        for fault in cfg.faults:
+            fault.arm(rig)
+        controller = rig.controller
+    fw = Firmware(board, fw_cfg, reference=reference, controller=controller)
+    if rig is not None:
+        fw.tasks = rig.tasks(fw.tasks)
     if load is not None:
         load.bind(lambda: fw.gait_start_s)  # the walker's strides on the firmware's gait clock
     probe = Probe()
@@ -264,7 +282,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     if cfg.setup:
         cfg.setup(bench, fw)
 
-    sim_s = cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05
+    sim_s = (cfg.settle_s + fw_cfg.startup_ramp_s + cfg.strides * fw_cfg.stride_s + 0.05 if cfg.duration_s is None
+             else cfg.duration_s)
     t_end = int(sim_s * f_cpu)
     files = None
     if cfg.stream_to is not None:

@@ -9,6 +9,7 @@ table is the same whatever the number of workers or the order in which they fini
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import signal
@@ -34,7 +35,7 @@ from host_tools.sweep_spec import SpecError, SweepSpec
 from host_tools.sweep_table import ResultsTable
 
 __all__ = ["Progress", "SweepOutcome", "check_points", "check_scheduler", "columns_of", "dask_client", "run_sweep",
-           "tasks_of"]
+           "run_tasks", "tasks_of"]
 
 PlantOptions = Callable[[int], dict[str, Any]]
 
@@ -207,6 +208,17 @@ def run_sweep(spec: SweepSpec, out: Path, client: Any, *, resume: bool = False,
               plant_options: PlantOptions = plant_seed_run_options, progress: bool = True,
               stream: TextIO | None = None) -> SweepOutcome:
     """Run every point of `spec` not already finished in `out` on the Dask `client`; write the tables as they go."""
+    return run_tasks(tasks_of(spec), functools.partial(run_point, plant_options=plant_options), out, client,
+                     columns=columns_of(spec), digest=spec.digest, error_row=error_row, resume=resume,
+                     progress=progress, stream=stream)
+
+
+def run_tasks(tasks: list[Any], run: Callable[[Any], dict[str, Any]], out: Path, client: Any, *,
+              columns: list[str], digest: str, error_row: Callable[[Any, str, str], dict[str, Any]],
+              resume: bool = False, progress: bool = True, stream: TextIO | None = None,
+              ok: Callable[[dict[str, Any]], bool] = lambda row: row["status"] == "ok") -> SweepOutcome:
+    """Run `run(task)` for every task (each with an ``index``) not already finished in `out` on the Dask `client`,
+    journalling each row as it comes (host_tools/sweep_table.py); a lost worker is that task's ``error_row``."""
     from dask.distributed import as_completed
 
     try:  # every worker imports pafp now: a worker without it fails here, not once per point
@@ -216,13 +228,11 @@ def run_sweep(spec: SweepSpec, out: Path, client: Any, *, resume: bool = False,
                          "every worker's environment (docs/sweeps.md)") from None
     logging.getLogger(__name__).info("workers: %s", builds)
     t0 = time.perf_counter()
-    tasks = tasks_of(spec)
-    table = ResultsTable(out, columns_of(spec), spec.digest, len(tasks), resume)
+    table = ResultsTable(out, columns, digest, len(tasks), resume)
     todo = [t for t in tasks if t.index not in table.rows]
     bar = Progress(len(todo), progress, stream)
     try:
-        futures = {client.submit(run_point, t, plant_options, key=f"pafp-point-{spec.digest[:12]}-{t.index}",
-                                 pure=False): t for t in todo}
+        futures = {client.submit(run, t, key=f"pafp-point-{digest[:12]}-{t.index}", pure=False): t for t in todo}
         for fut in as_completed(futures):
             t = futures[fut]
             try:
@@ -230,7 +240,7 @@ def run_sweep(spec: SweepSpec, out: Path, client: Any, *, resume: bool = False,
             except Exception as e:  # noqa: BLE001 - a lost worker (KilledWorker, ...) is this point's error
                 row = error_row(t, "error", f"{type(e).__name__}: {e}".replace("\n", " "))
             table.add(row)
-            bar.step(row["status"] != "ok")
+            bar.step(not ok(row))
             fut.release()
     finally:
         table.close()

@@ -62,6 +62,7 @@ class FaultReason(IntEnum):
     LINK_LOST = 11
     COMMAND_STALE = 12
     CONTROLLER_ERROR = 13
+    MOTOR_ENCODER_DISAGREEMENT = 14
 
 
 def _wire(fmt: str, default: Any = MISSING) -> Any:

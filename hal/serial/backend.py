@@ -61,6 +61,10 @@ class SerialUart(Uart):
         self.url = url
         blocking = url_scheme(url) in _BLOCKING_WRITE_SCHEMES
         factory = port_factory or serial.serial_for_url
+        if url_scheme(url) == "fault":  # our fault-injecting wrapper (hal/serial/protocol_fault.py)
+            from hal.serial.protocol_fault import register_fault_handler
+
+            register_fault_handler()
         try:
             self._port = factory(
                 url, baudrate=baud, timeout=0, write_timeout=None if blocking else 0, **serial_options

@@ -299,13 +299,18 @@ def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
 
 
 def _controller(fw_cfg, args: argparse.Namespace) -> object:  # FirmwareConfig -> the built controller
-    """Build the configured controller now, so a bad name, file, class or parameter stops before the run
-    (walking with the shipped impedance controller: tuned for --body-mass unless the profile says otherwise)."""
+    """Build the configured controller now, so a bad name, file, class or parameter stops before the run."""
+    return controller_for(fw_cfg, args.scenario, args.body_mass)
+
+
+def controller_for(fw_cfg, scenario: str, body_mass_kg: float) -> object:  # FirmwareConfig -> the controller
+    """The profile's controller for a scenario (walking with the shipped impedance controller: tuned for the
+    body mass unless the profile says otherwise)."""
     from firmware.control.registry import build_controller
 
     params = dict(fw_cfg.controller_params)
-    if fw_cfg.controller == "impedance" and args.scenario == "walk":
-        params.setdefault("body_mass_kg", args.body_mass)
+    if fw_cfg.controller == "impedance" and scenario == "walk":
+        params.setdefault("body_mass_kg", body_mass_kg)
     return build_controller(fw_cfg.controller, fw_cfg, params)
 
 

@@ -1,0 +1,165 @@
+"""pyserial URL handler ``fault://``: any port, with one of pafp's byte fault injectors between it and the reader.
+
+In the manner of pyserial's ``spy://``, it wraps another port, here to inject a fault into what the firmware
+reads from it, on a real bench as on the virtual one: the same injector classes (hal/virtual/faults, the
+:class:`~hal.virtual.faults.base.ByteFault` ones) act on the bytes read. The URL::
+
+    fault://PORT?fault=NAME&at=SECONDS[&duration=SECONDS][&PARAM=VALUE...][&allow_dangerous=1]
+
+PORT is a device path or a pyserial URL without a query of its own (``/dev/ttyUSB0``, ``/dev/pts/7``,
+``socket://host:port``); ``at`` counts from the moment the port opens; ``duration`` defaults to the rest of
+the run. A fault marked dangerous (it feeds the controller a plausible but false angle, so the foot is driven
+by it: ``imu_frozen``, ``imu_bias_step``) is refused unless ``allow_dangerous=1`` is given: docs/hardware.md,
+"Faults on a real bench". Faults that act elsewhere than on a wire (encoder, CPU, supply, plant, controller)
+are refused: they exist on the virtual bench only. When the fault first acts and when the port closes, the
+record (when, how often, what it changed) is logged at WARNING.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import urllib.parse
+from typing import Any
+
+import serial
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+
+__all__ = ["Serial", "parse_fault_url", "register_fault_handler"]
+
+log = logging.getLogger(__name__)
+
+_OWN_KEYS = ("fault", "at", "duration", "allow_dangerous", "seed")
+
+
+def register_fault_handler() -> None:
+    """Let ``serial.serial_for_url`` open ``fault://`` URLs (lists ``hal.serial`` among the handler packages)."""
+    if "hal.serial" not in serial.protocol_handler_packages:
+        serial.protocol_handler_packages.append("hal.serial")
+
+
+def _number(url: str, key: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SerialException(f"{url}: {key}={text!r} is not a number") from None
+    return value
+
+
+def parse_fault_url(url: str) -> tuple[str, Any]:
+    """(the wrapped port, the armed injector) of a fault:// URL; SerialException naming the bad part."""
+    from hal.virtual.faults import make_injector
+    from hal.virtual.faults.base import ByteFault
+
+    parts = urllib.parse.urlsplit(url)
+    if parts.scheme != "fault":
+        raise SerialException(f"{url}: not a fault:// URL")
+    inner = url[len("fault://"):].split("?", 1)[0]
+    if not inner:
+        raise SerialException(f"{url}: name the port to wrap: fault://PORT?fault=NAME&at=SECONDS")
+    query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
+    options = {k: v[-1] for k, v in query.items()}
+    name = options.get("fault")
+    if not name or "at" not in options:
+        raise SerialException(f"{url}: fault=NAME and at=SECONDS are required")
+    at = _number(url, "at", options["at"])
+    duration = _number(url, "duration", options["duration"]) if "duration" in options else math.inf
+    params: dict[str, Any] = {}
+    for k, v in options.items():
+        if k not in _OWN_KEYS:
+            try:
+                params[k] = _number(url, k, v)
+            except SerialException:
+                params[k] = v  # a named choice
+    try:
+        fault = make_injector(name, at, duration, int(_number(url, "seed", options.get("seed", "0"))), **params)
+    except ValueError as e:
+        raise SerialException(f"{url}: {e}") from None
+    if not isinstance(fault, ByteFault):
+        raise SerialException(f"{url}: fault {name} acts on the {fault.WHERE}, not on a serial line: it exists on "
+                              "the virtual bench only (pafp faults)")
+    if fault.DANGEROUS and options.get("allow_dangerous") != "1":
+        raise SerialException(f"{url}: fault {name} is refused on a real port: {fault.HAZARD}; add "
+                              "allow_dangerous=1 only with the foot free of any person (docs/hardware.md)")
+    return inner, fault
+
+
+class Serial(SerialBase):
+    """A port whose reads pass through a byte fault injector (see the module docstring)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """As pyserial's SerialBase; the wrapped port opens when this one does."""
+        self.inner: Any = None
+        self.fault: Any = None
+        self._t0 = 0.0
+        self._reported = False
+        super().__init__(*args, **kwargs)
+
+    def open(self) -> None:
+        """Open the wrapped port with this port's settings and arm the fault from now."""
+        if self._port is None:
+            raise SerialException("Port must be configured before it can be used.")
+        inner, self.fault = parse_fault_url(self._port)
+        self.inner = serial.serial_for_url(inner, baudrate=self._baudrate, timeout=self._timeout,
+                                           write_timeout=self._write_timeout)
+        self._t0 = time.monotonic()
+        self.is_open = True
+
+    def close(self) -> None:
+        """Close the wrapped port; log what the fault did."""
+        if self.inner is not None:
+            self.inner.close()
+            self.inner = None
+            rec = self.fault.record
+            log.warning("fault://: %s: fired %d times, first at %s s after open (%s)", self.fault.describe(),
+                        rec.count, None if rec.first_s is None else round(rec.first_s, 4), rec.what or "nothing")
+        self.is_open = False
+
+    def _reconfigure_port(self, force_update: bool = False) -> None:
+        if self.inner is not None:
+            self.inner.baudrate = self._baudrate
+
+    def _open_inner(self) -> Any:
+        if not self.is_open or self.inner is None:
+            raise PortNotOpenError()
+        return self.inner
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes the wrapped port holds (the fault may remove some of them when read)."""
+        return int(self._open_inner().in_waiting)
+
+    def read(self, size: int = 1) -> bytes:
+        """Read from the wrapped port; the fault acts on what came."""
+        data = bytes(self._open_inner().read(size))
+        out = self.fault.filter(data, time.monotonic() - self._t0)
+        if out != data and not self._reported:
+            self._reported = True
+            log.warning("fault://: %s acts from %.4f s after open", self.fault.NAME, self.fault.record.first_s)
+        return out
+
+    def write(self, data: bytes) -> int | None:
+        """Write to the wrapped port unchanged."""
+        return self._open_inner().write(data)
+
+    def flush(self) -> None:
+        """Wait for the wrapped port's output."""
+        self._open_inner().flush()
+
+    def reset_input_buffer(self) -> None:
+        """Drop the wrapped port's input."""
+        self._open_inner().reset_input_buffer()
+
+    def reset_output_buffer(self) -> None:
+        """Drop the wrapped port's output."""
+        self._open_inner().reset_output_buffer()
+
+    @property
+    def out_waiting(self) -> int:
+        """Bytes the wrapped port still has to send."""
+        return int(getattr(self._open_inner(), "out_waiting", 0))
+
+    def fileno(self) -> int:
+        """The wrapped port's descriptor (for the driver's error counters)."""
+        return int(self._open_inner().fileno())

@@ -1,0 +1,207 @@
+"""The spec of a fault campaign (`pafp faults SPEC.toml`): faults x onsets x durations x scenarios x controllers x
+motor links, checked whole before any run (docs/safety.md)::
+
+    [campaign]
+    profile = "../firmware.toml"     # firmware profile, relative to the spec (default profiles/firmware.toml)
+    criteria = "criteria.toml"       # acceptance criteria, relative to the spec (default profiles/faults/criteria.toml)
+    seed = 0                         # run seed (sensor noise, jitter) and injector seed: 0..2^32-1
+    onsets = [0.0, 0.125, 0.25]      # gait phase of the onset in the first whole stride, 0 <= phase < 1
+    durations_s = [0.05, 0.2]        # how long each fault acts, (0, 10] s
+    controllers = ["cascade"]        # shipped controllers
+    links = ["uart", "can-servo"]    # motor links (hal.links)
+    settle_s = 0.3                   # simulated time kept after the fault's end, (0, 5] s
+    timeout_s = 120                  # wall seconds per point
+
+    [[scenario]]
+    name = "suspended"               # the foot hangs free (as `pafp run`)
+    [[scenario]]
+    name = "walk"                    # the ground's moment in stance for a walker of body_mass_kg
+    body_mass_kg = 20
+
+    [[fault]]
+    name = "task_overrun"            # a name of hal.virtual.faults.INJECTORS; its parameters beside it
+    factor = 50
+
+Points are the product fault (outermost) x scenario x controller x link x duration x onset (innermost), numbered
+from 0; a fault that names its links (the CAN bus faults) is paired only with those links.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from firmware.config import DEFAULT_PROFILE
+from hal.links import MOTOR_LINKS
+from hal.virtual.faults import INJECTORS, injector_class, make_injector
+from host_tools.sweep_spec import SpecError
+from profiles import profile_path
+
+__all__ = ["DEFAULT_CRITERIA", "FaultPoint", "FaultSpec", "load_fault_spec"]
+
+DEFAULT_CRITERIA = profile_path("faults/criteria.toml")
+CAMPAIGN_KEYS = ("profile", "criteria", "seed", "onsets", "durations_s", "controllers", "links", "settle_s",
+                 "timeout_s")
+SCENARIOS = {"suspended": (), "walk": ("body_mass_kg",)}
+MAX_POINTS = 100_000
+
+
+@dataclass(frozen=True)
+class FaultPoint:
+    """One campaign point: everything a worker needs (picklable; the profile's text travels with it)."""
+
+    index: int
+    fault: str
+    params: tuple[tuple[str, Any], ...]
+    scenario: str
+    body_mass_kg: float
+    controller: str
+    link: str
+    onset_phase: float
+    duration_s: float
+    seed: int
+    settle_s: float
+    timeout_s: float
+    profile_name: str
+    profile_text: str
+
+    def label(self) -> str:
+        """A short description for tables."""
+        where = self.scenario if self.scenario == "suspended" else f"walk {self.body_mass_kg:g} kg"
+        return (f"{self.fault} at phase {self.onset_phase:g} for {self.duration_s * 1e3:g} ms, {where}, "
+                f"{self.controller}, {self.link}")
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """A checked campaign spec."""
+
+    path: Path
+    profile: Path
+    profile_text: str
+    criteria: Path
+    seed: int
+    onsets: tuple[float, ...]
+    durations_s: tuple[float, ...]
+    controllers: tuple[str, ...]
+    links: tuple[str, ...]
+    scenarios: tuple[tuple[str, float], ...]
+    faults: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...]
+    settle_s: float
+    timeout_s: float
+    digest: str
+
+    def points(self) -> list[FaultPoint]:
+        """Every point, in index order."""
+        out: list[FaultPoint] = []
+        for (name, params), (scen, mass), ctrl, link, dur, onset in itertools.product(
+                self.faults, self.scenarios, self.controllers, self.links, self.durations_s, self.onsets):
+            links = injector_class(name).LINKS
+            if links and link not in links:
+                continue
+            out.append(FaultPoint(len(out), name, params, scen, mass, ctrl, link, onset, dur, self.seed,
+                                  self.settle_s, self.timeout_s, str(self.profile), self.profile_text))
+        return out
+
+    @property
+    def n_points(self) -> int:
+        """How many points."""
+        return len(self.points())
+
+
+def _err(path: Path, where: str, value: object, allowed: str) -> SpecError:
+    return SpecError(f"fault spec {path}: {where} = {value!r} out of range: {allowed}")
+
+
+def _number(path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
+    ok = not isinstance(v, bool) and isinstance(v, (int, float)) and (lo < v if low_open else lo <= v) and v <= hi
+    if not ok:
+        raise _err(path, where, v, f"a number in {'(' if low_open else '['}{lo:g}, {hi:g}]")
+    return float(v)  # type: ignore[arg-type]
+
+
+def _list(path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
+    v = doc.get(key, default)
+    if not isinstance(v, list) or not v:
+        raise _err(path, f"[campaign] {key}", v, "a non-empty list")
+    if len(set(map(repr, v))) != len(v):
+        raise _err(path, f"[campaign] {key}", v, "a list without repeats")
+    return v
+
+
+def load_fault_spec(path: Path) -> FaultSpec:
+    """Read and check a campaign spec; SpecError (one line naming the value, the key and the range) otherwise."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+        doc = tomllib.loads(text)
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise SpecError(f"fault spec {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
+    unknown = sorted(set(doc) - {"campaign", "scenario", "fault"})
+    if unknown:
+        raise SpecError(f"fault spec {path}: table {unknown[0]!r} unknown: [campaign], [[scenario]], [[fault]]")
+    camp = doc.get("campaign", {})
+    bad = sorted(set(camp) - set(CAMPAIGN_KEYS))
+    if bad:
+        raise SpecError(f"fault spec {path}: [campaign] key {bad[0]!r} unknown: one of {', '.join(CAMPAIGN_KEYS)}")
+    base = path.parent
+    profile = (base / camp["profile"]).resolve() if "profile" in camp else DEFAULT_PROFILE
+    criteria = (base / camp["criteria"]).resolve() if "criteria" in camp else DEFAULT_CRITERIA
+    for what, p in (("profile", profile), ("criteria", criteria)):
+        if not Path(p).is_file():
+            raise _err(path, f"[campaign] {what}", str(p), "an existing file")
+    seed = camp.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise _err(path, "[campaign] seed", seed, f"an int in 0..{2**32 - 1}")
+    onsets = tuple(_number(path, "[campaign] onsets", v, 0.0, 0.999999) for v in _list(path, camp, "onsets", [0.0]))
+    durations = tuple(_number(path, "[campaign] durations_s", v, 0.0, 10.0, True)
+                      for v in _list(path, camp, "durations_s", [0.1]))
+    controllers = tuple(_list(path, camp, "controllers", ["cascade"]))
+    from firmware.control.registry import CONTROLLERS
+
+    for c in controllers:
+        if c not in CONTROLLERS:
+            raise _err(path, "[campaign] controllers", c, f"one of {', '.join(CONTROLLERS)}")
+    links = tuple(_list(path, camp, "links", ["uart"]))
+    for link in links:
+        if link not in MOTOR_LINKS:
+            raise _err(path, "[campaign] links", link, f"one of {', '.join(MOTOR_LINKS)}")
+    settle = _number(path, "[campaign] settle_s", camp.get("settle_s", 0.3), 0.0, 5.0, True)
+    timeout = _number(path, "[campaign] timeout_s", camp.get("timeout_s", 120.0), 0.0, 86_400.0, True)
+    scenarios = []
+    for k, s in enumerate(doc.get("scenario", [{"name": "suspended"}])):
+        name = s.get("name")
+        if name not in SCENARIOS:
+            raise _err(path, f"[[scenario]] {k} name", name, f"one of {', '.join(SCENARIOS)}")
+        extra = sorted(set(s) - {"name", *SCENARIOS[name]})
+        if extra:
+            raise SpecError(f"fault spec {path}: [[scenario]] {k} ({name}) key {extra[0]!r} unknown")
+        mass = _number(path, f"[[scenario]] {k} body_mass_kg", s.get("body_mass_kg", 80.0), 1.0, 300.0)
+        scenarios.append((name, mass))
+    faults = []
+    for k, f in enumerate(doc.get("fault", [])):
+        name = f.get("name")
+        if name not in INJECTORS:
+            raise _err(path, f"[[fault]] {k} name", name, f"one of {', '.join(INJECTORS)}")
+        params = tuple(sorted((key, v) for key, v in f.items() if key != "name"))
+        try:
+            make_injector(name, 0.0, 1.0, seed, **dict(params))
+        except ValueError as e:
+            raise SpecError(f"fault spec {path}: [[fault]] {k}: {e}") from None
+        faults.append((name, params))
+    if not faults:
+        raise SpecError(f"fault spec {path}: no [[fault]]: name at least one of {', '.join(INJECTORS)}")
+    profile_text = Path(profile).read_text(encoding="utf-8")
+    digest = hashlib.sha256("\0".join([text, profile_text, Path(criteria).read_text(encoding="utf-8")])
+                            .encode()).hexdigest()
+    spec = FaultSpec(path, Path(profile), profile_text, Path(criteria), seed, onsets, durations, controllers, links,
+                     tuple(scenarios), tuple(faults), settle, timeout, digest)
+    n = spec.n_points
+    if not 1 <= n <= MAX_POINTS:
+        raise SpecError(f"fault spec {path}: {n} points out of range: 1..{MAX_POINTS} (no fault applies to the "
+                        "links given?)" if n == 0 else f"fault spec {path}: {n} points out of range: 1..{MAX_POINTS}")
+    return spec
