@@ -42,6 +42,8 @@ def test_catalogue_values_are_self_consistent(name: str) -> None:
     # No-load output speed against the speed constant: Kv * V / ratio, within a factor of two.
     assert 0.5 < m.no_load_speed_rpm / (m.kv_rpm_per_v * m.supply_voltage_v / m.gear_ratio) < 2.0
     assert m.rated_current_a <= m.peak_current_a
+    # The maker's motor constant is Kt / sqrt(R_ll): copper loss (Kt I / Km)^2 = R_ll I^2 (thermal.py).
+    assert m.kt_nm_per_a / math.sqrt(m.phase_resistance_ohm) == pytest.approx(m.km_nm_per_sqrt_w, rel=0.05)
     assert m.thermal_resistance_k_per_w == pytest.approx(
         m.winding_to_housing_k_per_w + m.housing_to_ambient_k_per_w)
 

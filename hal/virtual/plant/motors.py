@@ -32,6 +32,7 @@ SPEC: dict[str, dict[str, tuple[float, float]]] = {
         "kt_nm_per_a": (0.005, 2.0),
         "phase_resistance_ohm": (0.005, 20.0),
         "phase_inductance_h": (1e-6, 0.05),
+        "km_nm_per_sqrt_w": (0.005, 5.0),
         "pole_pairs": (1.0, 60.0),
         "rated_current_a": (0.1, 200.0),
         "peak_current_a": (0.1, 500.0),
@@ -74,6 +75,7 @@ class MotorSpec:
     kt_nm_per_a: float
     phase_resistance_ohm: float
     phase_inductance_h: float
+    km_nm_per_sqrt_w: float
     pole_pairs: int
     rated_current_a: float
     peak_current_a: float

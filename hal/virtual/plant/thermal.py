@@ -5,10 +5,11 @@
     P_cu = k I^2 R(T_w),   R(T) = R_ref (1 + alpha (T - T_ref))
 
 I is the q-axis current the driver regulates (the plant's and the VESC telemetry's "motor current"),
-R_ref the maker's phase-to-phase resistance. With an amplitude-invariant dq transform a q-axis current
-I is a phase current of amplitude I, i.e. I/sqrt(2) rms in each of three phases of the star-equivalent
-resistance R_ll/2, so k = 3 * (1/2) * (1/2) = 0.75 (``COPPER_LOSS_FACTOR``). Iron and friction losses
-are left out (they heat the housing mostly and are not published for the catalogue motors).
+R_ref the maker's phase-to-phase resistance and k = 1 (``COPPER_LOSS_FACTOR``): the makers' motor
+constant Km (torque per square root of copper loss) is Kt / sqrt(R_ll) for every catalogue motor, so
+their copper loss at torque Kt I is (Kt I / Km)^2 = R_ll I^2, the same DC equivalent the plant and the
+AK60-6 driver model use (v_q = R i + Ke w). Iron and friction losses are left out (they heat the
+housing mostly and are not published for the catalogue motors).
 
 The step is backward Euler on the 2x2 linear system (R's temperature dependence enters linearly), so
 it is stable for any step; the plant steps far below the 17 s winding time constant.
@@ -16,7 +17,7 @@ it is stable for any step; the plant steps far below the 17 s winding time const
 >>> from hal.virtual.plant.motors import load_motor
 >>> t = WindingThermal(ThermalParams.from_motor(load_motor("ak60_6")), ambient_c=25.0)
 >>> round(t.steady_state_c(6.5)[0], 1)  # rated current, from 25 C ambient
-45.8
+53.6
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 from hal.virtual.plant.motors import MotorSpec
 
 #: Copper loss per (q-axis ampere)^2 per ohm of phase-to-phase resistance (see the module docstring).
-COPPER_LOSS_FACTOR = 0.75
+COPPER_LOSS_FACTOR = 1.0
 
 
 @dataclass(frozen=True)
