@@ -12,6 +12,8 @@ The blocks:
   ``pafp sweep profiles/sweeps/baud_gains.toml``. The points run here one after the other through the
   function the sweep ships to its Dask workers (``sweep_point.run_point``); a sweep's rows do not depend on
   the workers (docs/sweeps.md), so these are the sweep's rows.
+* ``motor_catalogue`` (docs/design.md): every ``profiles/motors/`` file with its winding figures from
+  ``hal.virtual.plant.thermal`` and every ``profiles/batteries/`` pack.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from typing import Any
 __all__ = ["BLOCKS", "FILES", "check", "render", "write"]
 
 ROOT = Path(__file__).resolve().parents[1]
-FILES = ("README.md", "docs/sweeps.md")
+FILES = ("README.md", "docs/sweeps.md", "docs/design.md")
 """The Markdown files (relative to the checkout) that hold generated blocks."""
 
 
@@ -94,7 +96,40 @@ def baud_gains_summary() -> str:
     return _summary(_baud_gains_rows())
 
 
-BLOCKS: dict[str, Callable[[], str]] = {"baud_gains": baud_gains, "baud_gains_summary": baud_gains_summary}
+def motor_catalogue() -> str:
+    """The catalogue: one row per motor (maker figures, CAN MIT ranges, winding figures), then the packs."""
+    from hal.virtual.plant.battery import battery_names, load_battery
+    from hal.virtual.plant.motors import catalogue_names, load_motor
+    from hal.virtual.plant.thermal import ThermalParams, WindingThermal
+
+    lines = ["| file | actuator | supply | ratio | peak torque (output) | peak current | Kt (motor) | mass | "
+             "MIT P / V / T max | winding at rated current, 25 °C ambient | continuous current to the limit |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name in catalogue_names():
+        m = load_motor(name)
+        thermal = WindingThermal(ThermalParams.from_motor(m), ambient_c=25.0)
+        lines.append(
+            f"| `{name}` | {m.model} | {m.supply_voltage_v:g} V | {m.gear_ratio:g}:1 | {m.peak_torque_nm:g} N·m | "
+            f"{m.peak_current_a:g} A | {m.kt_nm_per_a:g} N·m/A | {m.mass_kg:g} kg | "
+            f"{m.p_max_rad:g} rad / {m.v_max_rad_s:g} rad/s / {m.t_max_nm:g} N·m | "
+            f"{thermal.steady_state_c(m.rated_current_a)[0]:.1f} °C at {m.rated_current_a:g} A | "
+            f"{thermal.continuous_current_a():.1f} A to {m.max_winding_c:g} °C |")
+    taus = sorted({tuple(round(t, 1) for t in ThermalParams.from_motor(load_motor(n)).time_constants_s())
+                   for n in catalogue_names()})
+    lines += ["", "Thermal time constants (R fixed): " + "; ".join(
+        f"{fast:g} s and {slow:g} s" for fast, slow in taus) + f" ({len(taus)} distinct network(s))."]
+    lines += ["", "| pack | cells | full / empty (open circuit) | energy | resistance | cell mass |",
+              "|---|---|---|---|---|---|"]
+    for name in battery_names():
+        b = load_battery(name)
+        volts = f"{b.open_circuit_v(1.0):.2f} / {b.open_circuit_v(0.0):.2f} V"
+        lines.append(f"| `{name}` | {b.series}S{b.parallel}P | {volts}"
+                     f" | {b.capacity_wh:.1f} Wh | {b.resistance_ohm * 1000:.0f} mOhm | {b.mass_kg:.2f} kg |")
+    return "\n".join(lines)
+
+
+BLOCKS: dict[str, Callable[[], str]] = {"baud_gains": baud_gains, "baud_gains_summary": baud_gains_summary,
+                                        "motor_catalogue": motor_catalogue}
 
 
 def _pattern(name: str) -> re.Pattern[str]:

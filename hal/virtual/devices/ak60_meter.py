@@ -7,7 +7,10 @@ integral and the integral of its square are computed exactly; products with the 
 trapezoidal rule. Electrical model: the report's DC equivalent, ``v_q = R i + Ke w_m``, input power
 ``(R + R_fet) i^2 + Ke w_m i`` drawn from a supply of ``V_s`` behind ``R_src``. Temperatures: one
 first-order node each for the winding (``R i^2``) and the MOSFETs (``R_fet i^2``), exact for the
-interval's mean power. Averages are read and reset like VESC's ``mc_interface_read_reset_avg_*``: time
+interval's mean power. ``attach_thermal`` and ``attach_battery`` replace the winding node by the two-node
+model of ``hal.virtual.plant.thermal`` and the fixed supply by a ``hal.virtual.plant.battery`` pack (bus
+voltage sagging with its state of charge, regeneration into it); without them nothing changes.
+Averages are read and reset like VESC's ``mc_interface_read_reset_avg_*``: time
 averages over the span since the previous read (VESC averages its 20-30 kHz samples; same thing).
 """
 
@@ -18,6 +21,8 @@ from typing import Final
 
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.plant import PlantParams
+from hal.virtual.plant.battery import Battery
+from hal.virtual.plant.thermal import WindingThermal
 
 __all__ = ["Ak60Meter", "tach_steps"]
 
@@ -78,6 +83,18 @@ class Ak60Meter:
         self._input_current_total = 0.0
         self._vq_total = 0.0
         self._marks = {quantity: _Mark(index) for quantity, index in _QUANTITIES.items()}
+        self._winding: WindingThermal | None = None
+        self._battery: Battery | None = None
+
+    def attach_thermal(self, winding: WindingThermal) -> None:
+        """From now on the reported motor temperature is this two-node model's winding temperature."""
+        self._winding = winding
+        self.temp_motor_c = winding.winding_c
+
+    def attach_battery(self, battery: Battery) -> None:
+        """From now on the input power is drawn from (and regenerated into) this pack, not a fixed supply."""
+        self._battery = battery
+        self.v_in_v = battery.bus_v
 
     def sample(self, t_s: float, current_a: float, motor_velocity_rad_s: float, motor_angle_rad: float) -> None:
         """Take the plant's values at t_s (>= the previous sample) and integrate the interval since then."""
@@ -94,8 +111,13 @@ class Ak60Meter:
             int_w = 0.5 * dt * (w0 + w1)
             mean_i2 = int_i2 / dt
             power_w = ((self.r_ohm + self.r_fet_ohm) * int_i2 + self.ke * int_wi) / dt
-            i_in = self._input_current(power_w)
-            v_in = self.v_supply_v - self.r_src_ohm * i_in
+            battery = self._battery
+            if battery is None:
+                i_in = self._input_current(power_w)
+                v_in = self.v_supply_v - self.r_src_ohm * i_in
+            else:
+                v_in = battery.step_power(dt, power_w)
+                i_in = battery.current_a
             self.input_current_a, self.v_in_v = i_in, v_in
             self._time_total += dt
             self._current_total += int_i
@@ -107,8 +129,13 @@ class Ak60Meter:
             else:
                 self.amp_seconds_charged -= i_in * dt
                 self.watt_seconds_charged -= v_in * i_in * dt
-            ss_w = self.ambient_c + self.r_ohm * mean_i2 * self._rth_w
-            self.temp_motor_c = ss_w + (self.temp_motor_c - ss_w) * math.exp(-dt / self._tau_w)
+            winding = self._winding
+            if winding is None:
+                ss_w = self.ambient_c + self.r_ohm * mean_i2 * self._rth_w
+                self.temp_motor_c = ss_w + (self.temp_motor_c - ss_w) * math.exp(-dt / self._tau_w)
+            else:
+                winding.step(dt, math.sqrt(mean_i2))
+                self.temp_motor_c = winding.winding_c
             ss_f = self.ambient_c + self.r_fet_ohm * mean_i2 * self._rth_f
             self.temp_fet_c = ss_f + (self.temp_fet_c - ss_f) * math.exp(-dt / self._tau_f)
         self.t_s = max(self.t_s, t_s)

@@ -1,0 +1,158 @@
+"""Winding temperature: a two-node (winding, housing) thermal model driven by the copper loss.
+
+    C_w dT_w/dt = P_cu - (T_w - T_h) / R_wh
+    C_h dT_h/dt = (T_w - T_h) / R_wh - (T_h - T_a) / R_ha
+    P_cu = k I^2 R(T_w),   R(T) = R_ref (1 + alpha (T - T_ref))
+
+I is the q-axis current the driver regulates (the plant's and the VESC telemetry's "motor current"),
+R_ref the maker's phase-to-phase resistance and k = 1 (``COPPER_LOSS_FACTOR``): the makers' motor
+constant Km (torque per square root of copper loss) is Kt / sqrt(R_ll) for every catalogue motor, so
+their copper loss at torque Kt I is (Kt I / Km)^2 = R_ll I^2, the same DC equivalent the plant and the
+AK60-6 driver model use (v_q = R i + Ke w). Iron and friction losses are left out (they heat the
+housing mostly and are not published for the catalogue motors).
+
+The step is backward Euler on the 2x2 linear system (R's temperature dependence enters linearly), so
+it is stable for any step; the plant steps far below the 17 s winding time constant.
+
+>>> from hal.virtual.plant.motors import load_motor
+>>> t = WindingThermal(ThermalParams.from_motor(load_motor("ak60_6")), ambient_c=25.0)
+>>> round(t.steady_state_c(6.5)[0], 1)  # rated current, from 25 C ambient
+53.6
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from hal.virtual.plant.motors import MotorSpec
+
+#: Copper loss per (q-axis ampere)^2 per ohm of phase-to-phase resistance (see the module docstring).
+COPPER_LOSS_FACTOR = 1.0
+
+
+@dataclass(frozen=True)
+class ThermalParams:
+    """Thermal network and winding resistance of one motor, SI units and degrees Celsius."""
+
+    winding_to_housing_k_per_w: float
+    housing_to_ambient_k_per_w: float
+    winding_heat_capacity_j_per_k: float
+    housing_heat_capacity_j_per_k: float
+    resistance_ohm: float
+    copper_tempco_per_k: float
+    resistance_reference_c: float
+    max_winding_c: float
+    copper_loss_factor: float = COPPER_LOSS_FACTOR
+
+    def __post_init__(self) -> None:
+        """Every parameter finite and positive (the temperatures finite)."""
+        for name in ("winding_to_housing_k_per_w", "housing_to_ambient_k_per_w",
+                     "winding_heat_capacity_j_per_k", "housing_heat_capacity_j_per_k",
+                     "resistance_ohm", "copper_loss_factor"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"thermal parameter {name} = {value!r} must be finite and > 0")
+        for name in ("copper_tempco_per_k", "resistance_reference_c", "max_winding_c"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or (name == "copper_tempco_per_k" and value < 0.0):
+                raise ValueError(f"thermal parameter {name} = {value!r} must be finite (tempco >= 0)")
+
+    @classmethod
+    def from_motor(cls, m: MotorSpec) -> ThermalParams:
+        """The thermal parameters of a catalogue motor."""
+        return cls(
+            winding_to_housing_k_per_w=m.winding_to_housing_k_per_w,
+            housing_to_ambient_k_per_w=m.housing_to_ambient_k_per_w,
+            winding_heat_capacity_j_per_k=m.winding_heat_capacity_j_per_k,
+            housing_heat_capacity_j_per_k=m.housing_heat_capacity_j_per_k,
+            resistance_ohm=m.phase_resistance_ohm,
+            copper_tempco_per_k=m.copper_tempco_per_k,
+            resistance_reference_c=m.resistance_reference_c,
+            max_winding_c=m.max_winding_c,
+        )
+
+    def time_constants_s(self) -> tuple[float, float]:
+        """(fast, slow) time constants of the network with R fixed: -1/eigenvalues of its matrix."""
+        g1 = 1.0 / self.winding_to_housing_k_per_w
+        g2 = 1.0 / self.housing_to_ambient_k_per_w
+        a11 = -g1 / self.winding_heat_capacity_j_per_k
+        a12 = g1 / self.winding_heat_capacity_j_per_k
+        a21 = g1 / self.housing_heat_capacity_j_per_k
+        a22 = -(g1 + g2) / self.housing_heat_capacity_j_per_k
+        trace, det = a11 + a22, a11 * a22 - a12 * a21
+        root = math.sqrt(trace * trace / 4.0 - det)
+        fast, slow = trace / 2.0 - root, trace / 2.0 + root
+        return -1.0 / fast, -1.0 / slow
+
+
+class WindingThermal:
+    """Winding and housing temperatures of one motor, stepped with the current it carries."""
+
+    def __init__(self, params: ThermalParams, ambient_c: float = 25.0) -> None:
+        """Start at thermal equilibrium with the ambient."""
+        if not math.isfinite(ambient_c) or not -40.0 <= ambient_c <= 80.0:
+            raise ValueError(f"ambient temperature {ambient_c!r} C is outside the allowed range [-40, 80]")
+        self.params = params
+        self.ambient_c = ambient_c
+        self.winding_c = ambient_c
+        self.housing_c = ambient_c
+        self.copper_energy_j = 0.0
+
+    def resistance_ohm(self) -> float:
+        """Phase-to-phase winding resistance at the present winding temperature."""
+        p = self.params
+        return p.resistance_ohm * (1.0 + p.copper_tempco_per_k * (self.winding_c - p.resistance_reference_c))
+
+    def copper_loss_w(self, current_a: float) -> float:
+        """Copper loss at q-axis current ``current_a`` and the present winding temperature."""
+        return self.params.copper_loss_factor * current_a * current_a * self.resistance_ohm()
+
+    def step(self, dt_s: float, current_a: float) -> None:
+        """Advance by ``dt_s`` with the q-axis current held at ``current_a`` (backward Euler)."""
+        p = self.params
+        kir = p.copper_loss_factor * current_a * current_a * p.resistance_ohm
+        # P_cu(T_w) = a + b T_w
+        b = kir * p.copper_tempco_per_k
+        a = kir - b * p.resistance_reference_c
+        g1 = 1.0 / p.winding_to_housing_k_per_w
+        g2 = 1.0 / p.housing_to_ambient_k_per_w
+        cw = p.winding_heat_capacity_j_per_k / dt_s
+        ch = p.housing_heat_capacity_j_per_k / dt_s
+        m11, m12 = cw - b + g1, -g1
+        m21, m22 = -g1, ch + g1 + g2
+        r1 = cw * self.winding_c + a
+        r2 = ch * self.housing_c + g2 * self.ambient_c
+        det = m11 * m22 - m12 * m21
+        winding = (r1 * m22 - m12 * r2) / det
+        housing = (m11 * r2 - m21 * r1) / det
+        self.copper_energy_j += (a + b * winding) * dt_s
+        self.winding_c, self.housing_c = winding, housing
+
+    def steady_state_c(self, current_a: float) -> tuple[float, float]:
+        """(winding, housing) temperatures at a constant current; ``inf`` if the winding runs away.
+
+        Solves T_w - T_a = P_cu(T_w) (R_wh + R_ha): with R rising with temperature the loss grows with
+        the winding temperature, and above a current I^2 >= 1/(k R_ref alpha (R_wh + R_ha)) no steady
+        state exists.
+        """
+        p = self.params
+        r_sum = p.winding_to_housing_k_per_w + p.housing_to_ambient_k_per_w
+        kir = p.copper_loss_factor * current_a * current_a * p.resistance_ohm
+        denominator = 1.0 - p.copper_tempco_per_k * kir * r_sum
+        if denominator <= 0.0:
+            return math.inf, math.inf
+        rise = kir * r_sum * (1.0 + p.copper_tempco_per_k * (self.ambient_c - p.resistance_reference_c))
+        rise /= denominator
+        power = rise / r_sum
+        return self.ambient_c + rise, self.ambient_c + power * p.housing_to_ambient_k_per_w
+
+    def continuous_current_a(self) -> float:
+        """Largest constant q-axis current whose steady winding temperature stays at ``max_winding_c``."""
+        p = self.params
+        r_sum = p.winding_to_housing_k_per_w + p.housing_to_ambient_k_per_w
+        rise = p.max_winding_c - self.ambient_c
+        if rise <= 0.0:
+            return 0.0
+        r_hot = p.resistance_ohm * (1.0 + p.copper_tempco_per_k * (p.max_winding_c - p.resistance_reference_c))
+        return math.sqrt(rise / (r_sum * p.copper_loss_factor * r_hot))
