@@ -12,7 +12,6 @@ from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.safety import SafetyLimits
-from hal.links import link_entry
 from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
 
@@ -85,7 +84,7 @@ class FirmwareConfig:
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
-    motor_link: str = "uart"  # [motor] link: a name of hal.links.MOTOR_LINKS
+    motor_link: str = "uart"  # [motor] link: a name of firmware.drivers.motor_links.MOTOR_LINKS
     motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
     controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
     controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
@@ -94,7 +93,9 @@ class FirmwareConfig:
         """Check every rate, control scalar and task name (profile keys: firmware/config.py's tables)."""
         for name in RATE_FIELDS:
             check_int_range(name, getattr(self, name), 1, 10_000)
-        link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
+        from firmware.drivers.motor_links import MOTOR_LINKS  # imports firmware.config
+
+        MOTOR_LINKS.check(self.motor_link, "motor_link")  # ValueError naming the choices
         check_int_range("motor_can_id", self.motor_can_id, 0, 127)
         if self.full_values_hz > self.control_hz:
             raise ValueError(

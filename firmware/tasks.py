@@ -70,7 +70,7 @@ class FirmwareTasks:
         self._gait_curve = self.reference.curve  # sampled directly: compiled, not through the interpreted class
         self.encoder = EncoderDriver(board.encoder, self.ts_s, velocity_cutoff_hz=c.velocity_cutoff_hz)
         self.imu = ImuDriver(board.imu_uart)
-        self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (hal.links)
+        self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (motor_links.MOTOR_LINKS)
         self.logger = TelemetryLogger(board.telemetry_uart)
         self.supervisor = Supervisor(c.safety)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)

@@ -291,7 +291,7 @@ class Board:
     watchdog: Watchdog
     now_cycles: Callable[[], int]
     f_cpu_hz: int
-    can: CanPort | None = None  # the CAN controller, on boards whose motor link is CAN (hal.links)
+    can: CanPort | None = None  # the CAN controller, on boards whose motor link is CAN
 
     def __post_init__(self) -> None:
         """Check the clock frequency."""

@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from pathlib import Path
 
 from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
-HELP = ("reproduce the report's bench-top tests (uncontrolled, backdrive, fast-response, loading, tracking, "
-        "baud-study, link-study, all)")
+HELP = f"reproduce the report's bench-top tests ({', '.join(TESTS.names())}, all)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,8 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _run_one(name: str, seed: int, quick: bool) -> BenchResult:
     """Run one test; a test whose module is missing gives a row saying so instead of a number."""
     try:
-        module = importlib.import_module(f"host_tools.benchtests.{TESTS[name]}")
-    except ImportError as exc:
+        module = TESTS.load(name)
+    except ValueError as exc:  # its module cannot be imported
         return BenchResult(name, [Figure("(not available)", "", "", None, None, f"not available: {exc}",
                                          basis="assumed: nothing (the test did not run)")])
     return module.run(seed=seed, quick=quick)
