@@ -8,16 +8,7 @@ the bench probe of a virtual run.
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
-
-What stays interpreted on purpose: the VESC message classes (built by ``__init_subclass__``
-metaprogramming mypyc does not support; their frame decoder and their per-message scaling, packing and
-unpacking, ``vesc_codec``, are compiled), the telemetry records (enum fields that compiled code would
-store as plain ints; their framing, ``telemetry_frame``, is compiled), the configuration value classes and the plant
-parameters (their checks must see the values as given: compiled code turns a bool into an int at the
-boundary), the gait reference (tests replace its constructors; the curve it samples,
-``firmware.control.curve``, is compiled), the RTOS task declarations (``rtos.task``: their checks must
-see bools), the controller interface and registry and a user's controller class (the compiled control
-task calls it through a Python call), the analysis and the host tools other than the probe.
+docs/compiled.md states the rules the build imposes (what stays interpreted, and why) and how it builds.
 """
 
 from __future__ import annotations

@@ -63,7 +63,7 @@ class Uart(ABC):
     """
 
     def __init__(self, baud: object, name: str = "uart") -> None:
-        """Validate the baud rate (an int; typed ``object`` so that the compiled build sees a bool as one).
+        """Validate the baud rate (an int; typed ``object``: docs/compiled.md, "Values checked as given").
 
         Also sets up the shared error counters.
         """
