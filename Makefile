@@ -8,18 +8,26 @@ PYTHON ?= $(shell for p in /usr/bin/python3 python3; do $$p -c 'import sys, sysc
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.pafp-installed
 ARGS ?=
+SHELL := /bin/bash
 
 .PHONY: install test fuzz bench lint run clean
 
-# The hot path is compiled with mypyc: an edit of any module listed in setup.py's COMPILED rebuilds it.
-# PAFP_PURE_PYTHON=1 make install gives the pure-Python package instead.
+# The hot path is compiled with mypyc: an edit of any module listed in setup.py's COMPILED rebuilds it, one
+# compiler per core (PAFP_BUILD_JOBS=N sets how many), showing the build's `pafp build:` progress lines; pip's
+# whole output is in build/install.log. PAFP_PURE_PYTHON=1 make install gives the pure-Python package instead.
+# --no-compile: pip does not byte-compile the ~4700 modules of the dependencies up front (13 s of CPU); Python
+# compiles each one the first time it is imported, so only what runs is compiled.
 SOURCES := $(shell sed -n 's/^ *"\([a-z0-9_/]*\.py\)",$$/\1/p' setup.py)
 EXTENSIONS = find firmware protocol hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
 
 $(STAMP): pyproject.toml setup.py $(SOURCES)
-	@test -x $(PY) || { $(PYTHON) -m venv $(VENV) && $(PY) -m pip install -q --upgrade pip; }
+	@test -x $(PY) || { $(PYTHON) -m venv $(VENV) && $(PY) -m pip install -q --no-compile --upgrade pip; }
 	@$(EXTENSIONS)
-	$(PY) -m pip install -q -e '.[dev]'
+	@mkdir -p build
+	@echo "$(PY) -m pip install -v --no-compile -e '.[dev]' > build/install.log"
+	@set -o pipefail; $(PY) -m pip install -v --no-compile -e '.[dev]' 2>&1 | tee build/install.log \
+	  | { grep --line-buffered '^ *pafp build:' | sed -u 's/^ *//' || true; } \
+	  || { tail -n 40 build/install.log; echo "make: pip install failed, its output is in build/install.log"; exit 1; }
 	@touch $(STAMP)
 
 install: $(STAMP)

@@ -9,16 +9,7 @@ the bench probe of a virtual run.
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.
-
-What stays interpreted on purpose: the VESC message classes (built by ``__init_subclass__``
-metaprogramming mypyc does not support; their frame decoder and their per-message scaling, packing and
-unpacking, ``vesc_codec``, are compiled), the telemetry records (enum fields that compiled code would
-store as plain ints; their framing, ``telemetry_frame``, is compiled), the configuration value classes and the plant
-parameters (their checks must see the values as given: compiled code turns a bool into an int at the
-boundary), the gait reference (tests replace its constructors; the curve it samples,
-``firmware.control.curve``, is compiled), the RTOS task declarations (``rtos.task``: their checks must
-see bools), the controller interface and registry and a user's controller class (the compiled control
-task calls it through a Python call), the analysis and the host tools other than the probe.
+docs/compiled.md states the rules the build imposes (what stays interpreted, and why) and how it builds.
 """
 
 from __future__ import annotations
@@ -27,8 +18,12 @@ import os
 import shutil
 import sys
 import sysconfig
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 from setuptools import setup
+from setuptools.command.build_ext import build_ext
 
 COMPILED = [
     "rtos/scheduler.py",
@@ -105,7 +100,69 @@ def _extensions() -> list:
     except ImportError:  # a build without the [build-system] requirements (e.g. --no-build-isolation)
         print("pafp: mypyc not available, installing the pure-Python package", file=sys.stderr)
         return []
-    return mypycify(["--ignore-missing-imports", *COMPILED], opt_level="3")
+    # multi_file: one C file per module (and the mypyc runtime in its own files) instead of one 28 MB file, so
+    # that the files compile in parallel (ParallelBuildExt); the modules stay one group (one shared library),
+    # so calls between them stay direct C calls.
+    return mypycify(["--ignore-missing-imports", *COMPILED], opt_level="3", multi_file=True)
 
 
-setup(ext_modules=_extensions())
+def _jobs() -> int:
+    """Compiler processes to run at once: PAFP_BUILD_JOBS, else the cores this process may use."""
+    given = os.environ.get("PAFP_BUILD_JOBS", "")
+    if given:
+        if not given.isdigit() or int(given) < 1:
+            sys.exit(f"pafp: PAFP_BUILD_JOBS={given!r} (from the environment) must be a whole number >= 1")
+        return int(given)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def _progress(line: str) -> None:
+    """One line of build progress (``make install`` shows the lines starting with ``pafp build:``)."""
+    print(f"pafp build: {line}", file=sys.stderr, flush=True)
+
+
+class ParallelBuildExt(build_ext):
+    """build_ext that compiles every C file of every extension in parallel, one compiler per core, with progress.
+
+    setuptools' own ``--parallel`` builds whole extensions in parallel, but the compiled package is one large
+    extension (the shared library of all the modules) and small shims, so the parallelism is taken per C file.
+    """
+
+    def build_extensions(self) -> None:
+        jobs = _jobs()
+        total = sum(len(ext.sources) for ext in self.extensions)
+        _progress(f"compiling {total} C files of {len(self.extensions)} extensions, {jobs} at a time")
+        compilers = threading.BoundedSemaphore(jobs)  # compiler processes at once, over all the extensions
+        lock = threading.Lock()
+        done = [0]
+        compiler: Any = self.compiler
+        serial_compile = compiler._compile
+
+        def compile_one(obj: str, src: str, ext: str, cc_args: list, extra_postargs: list, pp_opts: list) -> None:
+            with compilers:
+                serial_compile(obj, src, ext, cc_args, extra_postargs, pp_opts)
+            with lock:
+                done[0] += 1
+                _progress(f"[{done[0]}/{total}] {src}")
+
+        def parallel_compile(sources: list, output_dir: str | None = None, macros: Any = None,
+                             include_dirs: Any = None, debug: bool = False, extra_preargs: Any = None,
+                             extra_postargs: Any = None, depends: Any = None) -> list:
+            """CCompiler.compile with the files compiled on threads (each runs one compiler process)."""
+            macros, objects, extra_postargs, pp_opts, build = compiler._setup_compile(
+                output_dir, macros, include_dirs, sources, depends, extra_postargs)
+            cc_args = compiler._get_cc_args(pp_opts, debug, extra_preargs)
+            with ThreadPoolExecutor(max_workers=jobs) as pool:
+                for future in [pool.submit(compile_one, obj, *build[obj], cc_args, extra_postargs, pp_opts)
+                               for obj in objects if obj in build]:
+                    future.result()
+            return objects
+
+        compiler.compile = parallel_compile
+        self.parallel = jobs  # setuptools builds the extensions on that many threads
+        super().build_extensions()
+        _progress("done")
+
+
+if __name__ == "__main__":  # setuptools runs this file as __main__; tests import ParallelBuildExt from it
+    setup(ext_modules=_extensions(), cmdclass={"build_ext": ParallelBuildExt})

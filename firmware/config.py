@@ -14,7 +14,6 @@ from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.safety import SafetyLimits
 from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S
-from hal.links import link_entry
 from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
 
@@ -95,7 +94,7 @@ class FirmwareConfig:
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
-    motor_link: str = "uart"  # [motor] link: a name of hal.links.MOTOR_LINKS
+    motor_link: str = "uart"  # [motor] link: a name of firmware.drivers.motor_links.MOTOR_LINKS
     motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
     controller: str = "cascade"  # a shipped controller's name (firmware.control.registry) or FILE.py:CLASS
     controller_params: dict[str, Any] = field(default_factory=dict)  # the profile's [controller] table
@@ -106,7 +105,9 @@ class FirmwareConfig:
         """Check every rate, control scalar and task name (profile keys: firmware/config.py's tables)."""
         for name in RATE_FIELDS:
             check_int_range(name, getattr(self, name), 1, 10_000)
-        link_entry(self.motor_link, "motor_link")  # ValueError naming the choices
+        from firmware.drivers.motor_links import MOTOR_LINKS  # imports firmware.config
+
+        MOTOR_LINKS.check(self.motor_link, "motor_link")  # ValueError naming the choices
         check_int_range("motor_can_id", self.motor_can_id, 0, MAX_CAN_ID)
         streak_max = max(1, int(TIMEOUT_MAX_S * self.control_hz))
         if self.safety.deadline_miss_streak > streak_max:
@@ -296,7 +297,9 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
             raise ValueError(f"has no key {unknown[0]!r}: its keys are link, can_id")
         links = {"motor_link": motor["link"]} if "link" in motor else {}
         if "link" in motor:
-            link_entry(motor["link"], "link")  # ValueError naming the choices, blamed on [motor]
+            from firmware.drivers.motor_links import MOTOR_LINKS  # imports firmware.config
+
+            MOTOR_LINKS.check(motor["link"], "link")  # ValueError naming the choices, blamed on [motor]
         if "can_id" in motor:
             links["motor_can_id"] = check_int_range("can_id", motor["can_id"], 0, MAX_CAN_ID)
         section = "controller"

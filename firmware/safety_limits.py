@@ -1,7 +1,6 @@
 """The safety supervisor's thresholds as given in a profile.
 
-Interpreted on purpose (not in setup.py's COMPILED): the checks must see the values as given, and a
-compiled class would turn a bool into a number before ``__post_init__`` sees it. The compiled
+Interpreted on purpose (docs/compiled.md, "Values checked as given"); the compiled
 :class:`~firmware.safety.Supervisor` reads them.
 """
 

@@ -72,7 +72,7 @@ class FirmwareTasks:
         self._gait_curve = self.reference.curve  # sampled directly: compiled, not through the interpreted class
         self.encoder = EncoderDriver(board.encoder, self.ts_s, velocity_cutoff_hz=c.velocity_cutoff_hz)
         self.imu = ImuDriver(board.imu_uart)
-        self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (hal.links)
+        self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (motor_links.MOTOR_LINKS)
         self.logger = TelemetryLogger(board.telemetry_uart)
         self.supervisor = Supervisor(c.safety)
         self.motor_encoder_gap = MotorEncoderGap(c.safety.belt_ratio)

@@ -64,7 +64,7 @@ class Uart(ABC):
     """
 
     def __init__(self, baud: object, name: str = "uart") -> None:
-        """Validate the baud rate (an int; typed ``object`` so that the compiled build sees a bool as one).
+        """Validate the baud rate (an int; typed ``object``: docs/compiled.md, "Values checked as given").
 
         Also sets up the shared error counters.
         """
@@ -359,7 +359,7 @@ class Board:
     watchdog: Watchdog
     now_cycles: Callable[[], int]
     f_cpu_hz: int
-    can: CanPort | None = None  # the CAN controller, on boards whose motor link is CAN (hal.links)
+    can: CanPort | None = None  # the CAN controller, on boards whose motor link is CAN
     adc: Adc | None = None  # the ADC with the ground sensors (load cell, heel/toe FSRs), on boards that have them
 
     def __post_init__(self) -> None:

@@ -1,30 +1,30 @@
-"""The `pafp` command line: one subcommand per module of host_tools.commands."""
+"""The `pafp` command line: one subcommand per module of host_tools.commands (or of a package's entry point)."""
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import os
 import sys
 from typing import NoReturn
 
+from hal.registry import Registry
 from host_tools.build_info import ROOT, describe, stale_sources, version
 
-# name -> module under host_tools.commands; each module defines HELP, add_arguments(parser), run(args) -> int
-COMMANDS: dict[str, str] = {
-    "run": "run",
-    "bench": "bench",
-    "emulate": "emulate",
-    "monitor": "monitor",
-    "decode": "decode",
-    "rta": "rta",
-    "tune": "tune",
-    "sweep": "sweep",
-    "replay": "replay",
-    "fit": "fit",
-    "faults": "faults",
-}
+COMMANDS = Registry("command", {
+    "run": "host_tools.commands.run",
+    "bench": "host_tools.commands.bench",
+    "emulate": "host_tools.commands.emulate",
+    "monitor": "host_tools.commands.monitor",
+    "decode": "host_tools.commands.decode",
+    "rta": "host_tools.commands.rta",
+    "tune": "host_tools.commands.tune",
+    "sweep": "host_tools.commands.sweep",
+    "replay": "host_tools.commands.replay",
+    "fit": "host_tools.commands.fit",
+    "faults": "host_tools.commands.faults",
+}, group="pafp.commands")
+"""Subcommand name -> its module, which defines HELP, add_arguments(parser) and run(args) -> int."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,10 +47,10 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages to stderr")
     parser.add_argument("--version", action="version", version=f"pafp {version()} ({describe()})")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, module_name in COMMANDS.items():
+    for name in COMMANDS:
         if only is not None and name != only:
             continue
-        module = importlib.import_module(f"host_tools.commands.{module_name}")
+        module = COMMANDS.load(name)
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)

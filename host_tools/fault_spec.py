@@ -8,7 +8,7 @@ motor links, checked whole before any run (docs/safety.md)::
     onsets = [0.0, 0.125, 0.25]      # gait phase of the onset in the first whole stride, 0 <= phase < 1
     durations_s = [0.05, 0.2]        # how long each fault acts, (0, 10] s
     controllers = ["cascade"]        # shipped controllers
-    links = ["uart", "can-servo"]    # motor links (hal.links)
+    links = ["uart", "can-servo"]    # motor links (firmware/drivers/motor_links.py)
     settle_s = 0.3                   # simulated time kept after the fault's end, (0, 5] s
     timeout_s = 120                  # wall seconds per point
 
@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from firmware.config import DEFAULT_PROFILE
-from hal.links import MOTOR_LINKS
+from firmware.drivers.motor_links import MOTOR_LINKS
 from hal.virtual.faults import INJECTORS, injector_class, make_injector
 from host_tools.sweep_spec import SpecError
 from profiles import profile_path

@@ -278,7 +278,7 @@ def _open_ports(cfg: SerialRunConfig, telemetry_uart: Uart | None = None) -> _Po
     devices = None
     if sim_roles:
         bauds = {"motor": cfg.baud, "imu": cfg.imu_baud, "ground": cfg.ground_baud}
-        devices = WallDevices(list(sim_roles), bauds=bauds,
+        devices = WallDevices([u.device for u in sim_roles.values()], bauds=bauds,
                               fixture=cfg.fixture, seed=cfg.seed)
     opened: dict[str, Uart] = {}
     can_port: CanPort | None = None
@@ -335,7 +335,7 @@ def run_serial(cfg: SerialRunConfig, out: Path, progress: Callable[[float], None
     board_cfg = board_profile(cfg.board)
     f_cpu = int(board_cfg["f_cpu_hz"])
     fw_cfg = cfg.firmware or load_firmware_config()
-    if is_can_url(cfg.motor):  # the driver of the URL's mode (hal.links)
+    if is_can_url(cfg.motor):  # the driver of the URL's mode (firmware.drivers.motor_links)
         url = parse_can_url(cfg.motor, "--motor")
         fw_cfg = fw_cfg.with_changes(motor_link=f"can-{url.mode}", motor_can_id=url.driver_id)
     reference = (GaitReference.from_csv(cfg.reference_csv, stride_s=fw_cfg.stride_s) if cfg.reference_csv

@@ -132,8 +132,7 @@ class RvcFrame:
         self, index: int, yaw_rad: float, pitch_rad: float, roll_rad: float, accel_x_mps2: float,
         accel_y_mps2: float, accel_z_mps2: float, motion_intent: int = 0, motion_request: int = 0,
     ) -> None:
-        """Set the fields (written out: the compiled build sets them natively; a generated frozen
-        ``__init__`` would stay interpreted)."""
+        """Set the fields (written out: docs/compiled.md, "Constructors written out")."""
         object.__setattr__(self, "index", index)
         object.__setattr__(self, "yaw_rad", yaw_rad)
         object.__setattr__(self, "pitch_rad", pitch_rad)

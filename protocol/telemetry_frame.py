@@ -1,7 +1,7 @@
 """Telemetry framing, compiled (setup.py): CRC-16/CCITT-FALSE, COBS + delimiter, and the record framer.
 
 The record layout itself (fields, versions, error explanations, decoding) is in
-:mod:`protocol.telemetry`, which stays interpreted (its records carry enum members); this
+:mod:`protocol.telemetry`, which stays interpreted (docs/compiled.md, "Enum fields"); this
 module is what the logger runs for every record.
 """
 

@@ -2,10 +2,11 @@
 
 The message classes (:mod:`protocol.vesc_message`, :mod:`~protocol.vesc`,
 :mod:`~protocol.vesc_values`) are built by ``__init_subclass__`` metaprogramming and stay
-interpreted; what they do per message lives here: :func:`to_raw` (scaling, see the vesc_message module
-doc), :class:`MessageCodec` (one generic message class's payload both ways) and :class:`SelectiveCodec`
-(the GET_VALUES_SELECTIVE reply). Instances are created without the dataclass ``__init__`` (values from
-the wire are valid by construction) and their slots written through the setters the classes hand over.
+interpreted (docs/compiled.md, "Metaprogramming stays interpreted"); what they do per message lives
+here: :func:`to_raw` (scaling, see the vesc_message module doc), :class:`MessageCodec` (one generic
+message class's payload both ways) and :class:`SelectiveCodec` (the GET_VALUES_SELECTIVE reply).
+Instances are created without the dataclass ``__init__`` (values from the wire are valid by
+construction) and their slots written through the setters the classes hand over.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The job record a task body receives: a compiled class, so the scheduler fills it with native writes.
 
-``rtos.task`` re-exports ``Job``; the task classes stay interpreted (their checks must see bools).
+``rtos.task`` re-exports ``Job``; the task classes stay interpreted (docs/compiled.md, "Values checked as given").
 """
 
 from __future__ import annotations

@@ -308,8 +308,8 @@ class Scheduler:
 
         A job started before ``t_end`` runs to completion even if it ends later. ``progress(fraction)``
         is called about every 1 % of the span and once with 1.0 at the end (unless stopped).
-        ``t_end`` is typed ``object`` so that the compiled build refuses a bool too (an ``int``
-        parameter would already have turned it into 0 or 1); the loop runs on the checked int.
+        ``t_end`` is typed ``object`` (docs/compiled.md, "Values checked as given"); the loop runs on the
+        checked int.
         """
         if isinstance(t_end, bool) or not isinstance(t_end, int):
             raise ValueError(f"t_end must be an int number of cycles, got {t_end!r}")

@@ -30,8 +30,7 @@ class Watchdog:
     def __init__(self, timeout_cycles: object, on_reset: Callable[[int], None] | None = None) -> None:
         """Create a disarmed watchdog; ``on_reset`` receives the cycle of each reset.
 
-        ``timeout_cycles`` is taken as ``object`` so that the check sees a bool as given (compiled code
-        would turn a bool passed as ``int`` into 0 or 1 before the check).
+        ``timeout_cycles`` is taken as ``object`` (docs/compiled.md, "Values checked as given").
         """
         if isinstance(timeout_cycles, bool) or not isinstance(timeout_cycles, int) or timeout_cycles <= 0:
             raise ValueError(f"watchdog timeout must be an int >= 1 cycles, got {timeout_cycles!r}")

@@ -174,16 +174,23 @@ def test_emulate_can_serves_the_motor_not_the_imu_alone(capsys):
     assert "mode='foc' not one of ('servo', 'mit')" in capsys.readouterr().err
 
 
-def test_a_new_link_is_one_registry_entry(monkeypatch):
+def test_a_new_link_is_one_registry_entry():
     """A link registered under a new name drives both sides (firmware driver, bench wiring) with no other edit."""
     from firmware.config import load_firmware_config
-    from hal.links import MOTOR_LINKS, MotorLinkEntry
+    from firmware.drivers.motor_links import MOTOR_LINKS
+    from hal.virtual.wiring import MOTOR_WIRING
     from host_tools.runner import RunConfig, run_virtual
 
-    monkeypatch.setitem(MOTOR_LINKS, "uart-again", MotorLinkEntry("firmware.drivers.motor:MotorDriver",
-                                                                  "hal.virtual.wiring:wire_uart_motor", "uart"))
-    base = load_firmware_config()
-    runs = [run_virtual(RunConfig(strides=1, firmware=base.with_changes(motor_link=link), trace_capacity=0))
-            for link in ("uart", "uart-again")]
+    MOTOR_LINKS.register("uart-again", "firmware.drivers.motor:MotorDriver")
+    MOTOR_WIRING.register("uart-again", "hal.virtual.wiring:wire_uart_motor")
+    try:
+        base = load_firmware_config()
+        runs = [run_virtual(RunConfig(strides=1, firmware=base.with_changes(motor_link=link), trace_capacity=0))
+                for link in ("uart", "uart-again")]
+    finally:
+        MOTOR_LINKS.unregister("uart-again")
+        MOTOR_WIRING.unregister("uart-again")
     assert runs[1].bench.motor_link == "uart-again"
     assert runs[0].telemetry == runs[1].telemetry
+    with pytest.raises(ValueError, match=r"motor_link 'uart-again' unknown: one of \['can-mit', 'can-servo', 'uart'\]"):
+        base.with_changes(motor_link="uart-again")

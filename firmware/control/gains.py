@@ -1,8 +1,7 @@
 """Controller parameters as given in a profile: PID gains and the feed-forward's physical parameters.
 
-Interpreted on purpose (not in setup.py's COMPILED): their checks must see the values as given, and a
-compiled class would turn a bool into a number before ``__post_init__`` sees it. The compiled
-controllers in :mod:`firmware.control.pid` read them.
+Interpreted on purpose (docs/compiled.md, "Values checked as given"); the compiled controllers in
+:mod:`firmware.control.pid` read them.
 """
 
 from __future__ import annotations

@@ -1,7 +1,9 @@
-"""Controllers by name: the shipped ones in one table, and a user's class from ``FILE.py:CLASS``.
+"""Controllers by name: the shipped ones in one registry, and a user's class from ``FILE.py:CLASS``.
 
 A new shipped controller is a new module plus one entry in :data:`CONTROLLERS`: a function of the
-firmware configuration and the profile's ``[controller]`` parameters that returns the controller.
+firmware configuration and the profile's ``[controller]`` parameters that returns the controller. A
+separate package adds one through the entry-point group ``pafp.controllers``; its entry may also name a
+controller class, built as a ``FILE.py:CLASS`` one is (docs/control.md).
 """
 
 from __future__ import annotations
@@ -9,17 +11,18 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from firmware.config import FirmwareConfig
 from firmware.control.interface import check_controller
+from hal.registry import Registry
 
-__all__ = ["CONTROLLERS", "build_controller", "load_class"]
+__all__ = ["CONTROLLERS", "build_cascade", "build_controller", "load_class"]
 
 
-def _cascade(config: FirmwareConfig, params: dict[str, Any]) -> object:
+def build_cascade(config: FirmwareConfig, params: dict[str, Any]) -> object:
+    """The cascaded position PID -> velocity PI controller of the profile's gains (it takes no parameters)."""
     from firmware.control.cascade import Cascade
     from firmware.control.pid import Feedforward
 
@@ -31,31 +34,19 @@ def _cascade(config: FirmwareConfig, params: dict[str, Any]) -> object:
                    Feedforward(c.feedforward_params) if c.feedforward else None, c.com_angle_rad)
 
 
-def _impedance(config: FirmwareConfig, params: dict[str, Any]) -> object:
-    from firmware.control.impedance import impedance_from_config
-
-    return impedance_from_config(config, params)
-
-
-def _sysid(config: FirmwareConfig, params: dict[str, Any]) -> object:
-    from firmware.control.sysid import sysid_from_config
-
-    return sysid_from_config(config, params)
-
-
-CONTROLLERS: dict[str, Callable[[FirmwareConfig, dict[str, Any]], object]] = {
-    "cascade": _cascade,
-    "impedance": _impedance,
-    "sysid": _sysid,
-}
-"""Shipped controllers: name -> factory(config, params)."""
+CONTROLLERS = Registry("controller", {
+    "cascade": "firmware.control.registry:build_cascade",
+    "impedance": "firmware.control.impedance:impedance_from_config",
+    "sysid": "firmware.control.sysid:sysid_from_config",
+}, group="pafp.controllers")
+"""Shipped controllers: name -> factory(config, params), or a controller class (built as FILE.py:CLASS)."""
 
 
 def load_class(spec: str) -> type:
     """The class CLASS of ``FILE.py:CLASS``; ValueError naming the file, the class and what is wrong."""
     file, sep, name = spec.rpartition(":")
     if not sep or not file.endswith(".py") or not name.isidentifier():
-        raise ValueError(f"controller {spec!r} is neither one of {sorted(CONTROLLERS)} nor FILE.py:CLASS")
+        raise ValueError(f"controller {spec!r} is neither one of {CONTROLLERS.names()} nor FILE.py:CLASS")
     path = Path(file)
     if not path.is_file():
         raise ValueError(f"controller file {file!r} not found")
@@ -102,8 +93,11 @@ def build_controller(spec: str, config: FirmwareConfig, params: dict[str, Any] |
     """The controller named spec (a shipped name or FILE.py:CLASS), built with params, checked."""
     params = dict(params or {})
     if not isinstance(spec, str):
-        raise ValueError(f"controller {spec!r} is not a name: one of {sorted(CONTROLLERS)} or FILE.py:CLASS")
-    factory = CONTROLLERS.get(spec)
-    controller = factory(config, params) if factory is not None else _construct(load_class(spec), params, spec)
+        raise ValueError(f"controller {spec!r} is not a name: one of {CONTROLLERS.names()} or FILE.py:CLASS")
+    if spec in CONTROLLERS:
+        made = CONTROLLERS.load(spec)
+        controller = _construct(made, params, spec) if isinstance(made, type) else made(config, params)
+    else:
+        controller = _construct(load_class(spec), params, spec)
     check_controller(controller)
     return controller

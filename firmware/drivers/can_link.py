@@ -1,7 +1,7 @@
 """What the AK60-6's CAN drivers share (servo and MIT mode): taking frames, queueing one, the stop path.
 
-A subclass sets ``LINK`` (its name in hal.links.MOTOR_LINKS), decodes the frames ``_take`` returns and
-builds its own commands; a port failure latches ``link_lost`` here, in one place.
+A subclass sets ``LINK`` (its name in firmware.drivers.motor_links.MOTOR_LINKS), decodes the frames
+``_take`` returns and builds its own commands; a port failure latches ``link_lost`` here, in one place.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ __all__ = ["CanLink"]
 class CanLink(MotorLink):
     """A motor driver on a CAN port: the port, the feedback, the accounting and the frame plumbing."""
 
-    LINK: ClassVar[str] = "can"  # the name in hal.links.MOTOR_LINKS
+    LINK: ClassVar[str] = "can"  # its name in motor_links.MOTOR_LINKS
 
     def __init__(self, port: CanPort, driver_id: int) -> None:
         """Feedback, statistics and counters empty; nothing is sent yet."""

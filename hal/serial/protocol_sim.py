@@ -9,11 +9,11 @@ any pyserial program can open::
     serial.serial_for_url("sim://ground-sensors")  # 115200, a Firmata board with the load cell and FSRs
 
 URL: ``sim://DEVICE[?baud=N&fixture=NAME&seed=S]``; DEVICE is ``ak60-6`` (alias ``motor``), ``bno08x``
-(alias ``imu``) or ``ground-sensors`` (alias ``firmata``: the load cell and FSRs, unloaded, behind a Firmata
-board; hal/virtual/devices/firmata_board.py). The baud is the URL's, else the port's ``baudrate`` unless
-that is pyserial's default 9600, else the device's default. The device runs on the wall clock from
-``open()``: a read returns only bytes whose stop bit has ended by now; writes go on the wire from the moment
-of the call. Timeouts follow
+(alias ``imu``), ``ground-sensors`` (alias ``firmata``: the load cell and FSRs, unloaded, behind a Firmata
+board; hal/virtual/devices/firmata_board.py) or any name registered in ``hal.virtual.devices.registry.DEVICES``.
+The baud is the URL's, else the port's ``baudrate`` unless that is pyserial's default 9600, else the device
+model's default. The device runs on the wall clock from ``open()``: a read returns only bytes whose stop bit
+has ended by now; writes go on the wire from the moment of the call. Timeouts follow
 pyserial: ``timeout=None`` blocks until ``size`` bytes, ``0`` returns at once, a float waits up to that
 many seconds (polling every 0.5 ms). A baud rate changed after opening is ignored (logged).
 """
@@ -27,7 +27,7 @@ from typing import Any
 import serial
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, SerialTimeoutException, to_bytes
 
-from hal.serial.sim_port import DEFAULT_BAUDS, WallDevices, parse_sim_url
+from hal.serial.sim_port import WallDevices, parse_sim_url
 from hal.virtual.uart import VirtualUart
 
 __all__ = ["POLL_S", "Serial", "register_sim_handler"]
@@ -69,15 +69,15 @@ class Serial(SerialBase):
         baud = url.baud
         if baud is None:
             given = self._baudrate
-            baud = given if given != _PYSERIAL_DEFAULT_BAUD else DEFAULT_BAUDS[url.role]
+            baud = given if given != _PYSERIAL_DEFAULT_BAUD else None  # None: the device's own default
         try:
-            self.devices = WallDevices([url.role], bauds={url.role: int(baud)}, fixture=url.fixture,
-                                       seed=url.seed)
+            self.devices = WallDevices([url.device], bauds={} if baud is None else {url.role: int(baud)},
+                                       fixture=url.fixture, seed=url.seed)
         except ValueError as exc:
             raise SerialException(f"cannot open {self._port!r}: {exc}") from None
         self._uart = self.devices.uarts[url.role]
         self.is_open = True
-        log.debug("opened %s: %s at %d baud", self._port, url.role, baud)
+        log.debug("opened %s: %s (%s) at %d baud", self._port, url.device, url.role, self._uart.baud)
 
     def close(self) -> None:
         """Stop the device."""

@@ -1,8 +1,9 @@
-"""Virtual devices on the wall clock: the AK60-6, BNO08x and/or the ground sensors' Firmata board on one plant,
+"""Virtual devices on the wall clock: a motor, an IMU and/or the ground sensors' Firmata board on one plant,
 ticks = nanoseconds since start.
 
 Used by the pyserial ``sim://`` URL handler (:mod:`hal.serial.protocol_sim`) and by ``pafp emulate``.
-The device models and the plant are the very ones of the virtual bench; only the clock differs: a
+The device models (by name, from ``hal.virtual.devices.registry.DEVICES``: the AK60-6, the BNO08x, or any
+model registered there) and the plant are the very ones of the virtual bench; only the clock differs: a
 :class:`~hal.virtual.uart.VirtualUart` on ``time.perf_counter_ns`` (``f_hz = 10**9``) stands for the
 far end of the link, so byte timing is kept (a read returns only the bytes whose stop bit has ended by
 now) and the world runs lazily whenever the port is used.
@@ -13,31 +14,19 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from hal.virtual.bench import fixture_by_name
-from hal.virtual.devices.ak60 import Ak60
-from hal.virtual.devices.bno08x import Bno08x, Bno08xConfig
+from hal.virtual.devices.bno08x import Bno08xConfig
+from hal.virtual.devices.registry import device_model
 from hal.virtual.devices.world import World
 from hal.virtual.plant import Fixture, Plant, PlantParams
 from hal.virtual.uart import VirtualUart
 
-if TYPE_CHECKING:  # the ground sensors are imported when served: a sim:// port of another device stays quick to open
-    from hal.virtual.devices.firmata_board import FirmataBoard
-    from hal.virtual.ground_sensors import GroundSensors
-
-__all__ = ["DEFAULT_BAUDS", "DEVICE_ROLES", "NS_PER_S", "SimUrl", "WallDevices", "arrival_end_times",
-           "parse_sim_url"]
+__all__ = ["NS_PER_S", "SimUrl", "WallDevices", "arrival_end_times", "parse_sim_url"]
 
 NS_PER_S = 1_000_000_000
-DEVICE_ROLES: Mapping[str, str] = {"ak60-6": "motor", "ak60": "motor", "motor": "motor",
-                                   "bno08x": "imu", "bno085": "imu", "imu": "imu",
-                                   "ground-sensors": "ground", "firmata": "ground", "ground": "ground"}
-"""Device names accepted after ``sim://`` and the role each one plays."""
-DEFAULT_BAUDS: Mapping[str, int] = {"motor": 921_600, "imu": 115_200, "ground": 115_200}
-"""Default baud per role: 921600 for the AK60-6 (PROTOCOLS.md C), 115200 for UART-RVC (D.1) and for the
-ground sensors' Firmata board (docs/hardware.md, "Ground sensors")."""
 _OPTIONS = ("baud", "fixture", "seed")
 
 
@@ -46,6 +35,7 @@ class SimUrl:
     """A parsed ``sim://device[?baud=N&fixture=NAME&seed=S]`` URL (baud None: not given)."""
 
     role: str
+    device: str = ""  # the device model's name in hal.virtual.devices.registry.DEVICES ('' = the role's default)
     baud: int | None = None
     fixture: str = "suspended"
     seed: int = 0
@@ -56,14 +46,13 @@ def parse_sim_url(url: str) -> SimUrl:
     """Parse a sim:// URL; ValueError naming the bad part and the allowed values.
 
     >>> parse_sim_url("sim://ak60-6?baud=921600")
-    SimUrl(role='motor', baud=921600, fixture='suspended', seed=0, options={'baud': '921600'})
+    SimUrl(role='motor', device='ak60-6', baud=921600, fixture='suspended', seed=0, options={'baud': '921600'})
     """
     parts = urlsplit(url)
     if parts.scheme.lower() != "sim":
         raise ValueError(f"URL {url!r} must start with sim://")
     name = (parts.netloc + parts.path).strip("/").lower()
-    if name not in DEVICE_ROLES:
-        raise ValueError(f"sim:// device {name!r} unknown: one of {sorted(DEVICE_ROLES)}")
+    role = device_model(name, "sim:// device").role  # ValueError naming the registered devices
     options: dict[str, str] = {}
     for key, values in parse_qs(parts.query, keep_blank_values=True).items():
         if key not in _OPTIONS:
@@ -73,7 +62,7 @@ def parse_sim_url(url: str) -> SimUrl:
     seed = _int_option(options, "seed", 0, 2**63 - 1)
     fixture = options.get("fixture", "suspended")
     fixture_by_name(fixture)  # validates the name
-    return SimUrl(DEVICE_ROLES[name], baud, fixture, 0 if seed is None else seed, options)
+    return SimUrl(role, name, baud, fixture, 0 if seed is None else seed, options)
 
 
 def _int_option(options: Mapping[str, str], key: str, lo: int, hi: int) -> int | None:
@@ -106,11 +95,16 @@ def arrival_end_times(n_bytes: int, arrival_ns: int, byte_ns: float, after_ns: i
 
 
 class WallDevices:
-    """One plant and the requested device roles, each behind a VirtualUart on the wall clock (ns)."""
+    """One plant and the requested devices, each behind a VirtualUart on the wall clock (ns).
+
+    ``devices`` are names of ``hal.virtual.devices.registry.DEVICES`` (``motor`` and ``imu`` name the
+    default device of each role); at most one per role. ``bauds`` is by role; a role without one runs at
+    its device model's default baud.
+    """
 
     def __init__(
         self,
-        roles: Iterable[str],
+        devices: Iterable[str],
         *,
         bauds: Mapping[str, int] | None = None,
         fixture: Fixture | str | None = None,
@@ -136,33 +130,26 @@ class WallDevices:
         self.world = World(Plant(plant_params, fx, initial_angle_rad=initial_angle_rad, backlash_rad=backlash_rad),
                            NS_PER_S)
         self.uarts: dict[str, VirtualUart] = {}
-        self.motor: Ak60 | None = None
-        self.imu: Bno08x | None = None
-        self.ground: FirmataBoard | None = None  # the ground sensors' acquisition board (unloaded: no ground here)
-        self.ground_sensors: GroundSensors | None = None
+        self.motor: Any = None
+        """The device playing the motor (the AK60-6 unless another model was named), None if not served."""
+        self.imu: Any = None
+        """The device playing the IMU (the BNO08x unless another model was named), None if not served."""
+        self.ground: Any = None
+        """The ground sensors' acquisition board (unloaded: no ground here), None if not served."""
         bauds = dict(bauds or {})
-        for role in dict.fromkeys(roles):
-            if role not in DEFAULT_BAUDS:
-                raise ValueError(f"role {role!r} unknown: one of {sorted(DEFAULT_BAUDS)}")
-            baud = bauds.get(role, DEFAULT_BAUDS[role])
+        for name in dict.fromkeys(devices):
+            model = device_model(name, "sim:// device")
+            role = model.role
+            if role in self.uarts:
+                raise ValueError(f"sim:// device {name!r}: the {role} is already served by another device")
+            baud = bauds.get(role, model.baud)
             uart = VirtualUart(self.now, NS_PER_S, baud, rx_buffer_size, tx_queue_size, name=role)
-            device: Ak60 | Bno08x | FirmataBoard
-            if role == "motor":
-                device = self.motor = Ak60(self.world, link=uart)
-            elif role == "imu":
-                device = self.imu = Bno08x(self.world, imu_config, seed=seed, link=uart)
-            else:
-                from hal.virtual.devices.firmata_board import FirmataBoard
-                from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, wire_ground_sensors
-                from hal.virtual.plant.ground import NoGround
-
-                sensors = wire_ground_sensors(None, NS_PER_S, NoGround(), AdcSettings(), seed=seed)
-                self.ground_sensors = sensors
-                device = self.ground = FirmataBoard(self.world, sensors.codes_at, len(ADC_CHANNELS), link=uart)
+            device = model.build(self.world, uart, seed=seed, config=imu_config if role == "imu" else None)
+            setattr(self, role, device)
             uart.connect(device)
             self.uarts[role] = uart
 
-    def device(self, role: str) -> Ak60 | Bno08x | FirmataBoard:
+    def device(self, role: str) -> Any:
         """The device model playing role."""
         dev = {"motor": self.motor, "imu": self.imu, "ground": self.ground}.get(role)
         if dev is None:

@@ -1,7 +1,9 @@
 """The virtual bench: the virtual MCU's peripherals wired to one shared plant and the device models.
 
 ``VirtualBench`` is what the firmware runs against in virtual mode. It builds, on one cycle clock:
-the motor UART with the AK60-6 driver model, the IMU UART with the BNO08x (UART-RVC), the telemetry
+the motor UART with the AK60-6 driver model (wired by the motor link's entry of ``hal.virtual.wiring``), the
+IMU UART with the device model ``imu_model`` names (``hal.virtual.devices.registry``; the BNO08x in UART-RVC
+by default), the telemetry
 UART with a recording sink (the laptop), the encoder timer reading the ankle through the encoder mount,
 the e-stop input, the status LED and the watchdog; all devices share one :class:`Plant` on a fixture
 and are advanced in time order by one :class:`~hal.virtual.devices.world.World`. It hands the
@@ -19,20 +21,22 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart
-from hal.links import link_entry, resolve
+from hal.registry import Registry
 from hal.virtual.can import VirtualBxCan
 from hal.virtual.can_bus import VirtualCanBus
 from hal.virtual.devices.ak60 import Ak60
 from hal.virtual.devices.ak60_config import Ak60Config
-from hal.virtual.devices.bno08x import Bno08x, Bno08xConfig
+from hal.virtual.devices.bno08x import Bno08xConfig
 from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.devices.plant_view import PlantView
+from hal.virtual.devices.registry import DEVICES, device_model
 from hal.virtual.devices.sink import ByteSink
 from hal.virtual.devices.world import World
 from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.mcu import VirtualMcu
 from hal.virtual.plant import Fixture, Plant, PlantParams, backdrive, spring_bench, suspended
 from hal.virtual.plant.ground import NoGround
+from hal.virtual.wiring import MOTOR_WIRING
 
 if TYPE_CHECKING:  # imported when fitted (numpy and the sensor models): a bench without them starts quicker
     from hal.virtual.ground_sensors import AdcSettings, GroundSensors
@@ -41,26 +45,23 @@ __all__ = ["FIXTURES", "VirtualBench", "fixture_by_name"]
 
 log = logging.getLogger(__name__)
 
-FIXTURES: Mapping[str, Callable[[], Fixture]] = {
+FIXTURES = Registry("fixture", {
     "suspended": suspended,
     "spring_bench": spring_bench,
     "spring_bench_1.08kg": lambda: spring_bench(1.08),
     "spring_bench_1.48kg": lambda: spring_bench(1.48),
     "unpowered": lambda: backdrive([(0.0, 0.0)]),
-}
-"""Fixtures that need no arguments, by name (``--fixture`` on the command line)."""
+}, group="pafp.fixtures")
+"""Fixtures that need no arguments, by name (``--fixture`` on the command line): name -> () -> Fixture."""
 
-_MODELS = {"motor": "ak60-6", "imu": "bno08x", "telemetry": ""}
 CAN_RX_CYCLES = 150
 """Cycles of the CAN RX interrupt (HAL_CAN_IRQHandler + FIFO read) when the board profile names none."""
 
 
 def fixture_by_name(name: str) -> Fixture:
     """The fixture called name (see FIXTURES); ValueError naming the choices otherwise."""
-    try:
-        return FIXTURES[name]()
-    except KeyError:
-        raise ValueError(f"fixture {name!r} unknown: choose one of {sorted(FIXTURES)}") from None
+    made: Fixture = FIXTURES.load(name)()
+    return made
 
 
 class VirtualBench:
@@ -85,6 +86,7 @@ class VirtualBench:
         backlash_rad: float = 0.0,
         motor_config: Ak60Config | None = None,
         imu_config: Bno08xConfig | None = None,
+        imu_model: str = "bno08x",
         encoder_offset_rad: float = 0.0,
         encoder_counts_per_rev: int = 4000,
         encoder_bits: int = 16,
@@ -119,11 +121,16 @@ class VirtualBench:
         self.can: VirtualBxCan | None = None  # the MCU's bxCAN and its bus, on a CAN motor link
         self.can_bus: VirtualCanBus | None = None
         self.motor_device: Any = None  # the device on the motor link (for UART: self.motor)
-        entry = link_entry(motor_link, "motor_link")
-        wire: Any = resolve(entry.bench)
-        self.motor: Ak60 = wire(self, entry, motor_config)
+        wire: Any = MOTOR_WIRING.load(motor_link, "motor_link")
+        self.motor: Ak60 = wire(self, motor_config)
         """The AK60-6 model (plant, meter, faults); on a CAN link the core of ``motor_device``."""
-        self.imu = Bno08x(world, imu_config, seed=seed, link=self.imu_uart)
+        imu = device_model(imu_model, "imu_model")
+        if imu.role != "imu":
+            raise ValueError(f"imu_model {imu_model!r} is a {imu.role} device, not an IMU")
+        self.models = {"motor": "ak60-6", "imu": imu_model, "telemetry": ""}
+        """The device model (hal.virtual.devices.registry name) on each UART ('' = not a device model)."""
+        self.imu: Any = imu.build(world, self.imu_uart, seed=seed, config=imu_config)
+        """The IMU model (the BNO08x unless imu_model names another)."""
         self.telemetry = ByteSink()
         self.imu_uart.connect(self.imu)
         self.telemetry_uart.connect(self.telemetry)
@@ -195,8 +202,11 @@ class VirtualBench:
         uarts = self.mcu.uarts
         if role not in uarts:
             raise ValueError(f"role {role!r} has no UART on the bench: one of {sorted(uarts)}")
-        if model not in ("", _MODELS[role]):
-            raise ValueError(f"{role} UART serves {_MODELS[role] or 'the telemetry sink'!r}, not {model!r}")
+        built = self.models[role]
+        same = model == built or (model in DEVICES and built in DEVICES
+                                  and device_model(model) is device_model(built))  # an alias
+        if model and not same:
+            raise ValueError(f"{role} UART serves {built or 'the telemetry sink'!r}, not {model!r}")
         uart = uarts[role]
         if baud != uart.baud:
             raise ValueError(f"{role} UART was built at {uart.baud} baud, not {baud}: pass {role}_baud to "

@@ -1,7 +1,7 @@
 """Argument checks shared by the virtual MCU's pieces: counts and rates given as ints, configuration ranges.
 
-Parameters checked here are typed ``object`` at their constructors: in the compiled build an ``int``
-parameter would already have turned a bool into 0 or 1, so the check would never see it.
+Parameters checked here are typed ``object`` at their constructors (docs/compiled.md, "Values checked as
+given").
 """
 
 from __future__ import annotations

@@ -118,9 +118,8 @@ def readings_table(run: Callable[[str, str], BenchResult]) -> str:
 
 def default_runner(test: str, geometry: str) -> BenchResult:
     """Run one bench test under a geometry with the profile's other values (seed 0, default lengths)."""
-    import importlib
 
     from host_tools.benchtests import TESTS
 
-    module = importlib.import_module(f"host_tools.benchtests.{TESTS[test]}")
+    module = TESTS.load(test)
     return module.run(seed=0, quick=False, params=with_geometry(load_plant_params(), geometry))

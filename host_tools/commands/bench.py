@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from pathlib import Path
 
@@ -13,8 +12,7 @@ from host_tools.arguments import seed
 from host_tools.benchtests import TESTS
 from host_tools.benchtests.output import BenchResult, Figure, markdown_table, write_outputs
 
-HELP = ("reproduce the report's bench-top tests (uncontrolled, backdrive, fast-response, loading, tracking, "
-        "baud-study, link-study, motor-tf, open-loop, root-locus, kinematics, all)")
+HELP = f"reproduce the report's bench-top tests ({', '.join(TESTS.names())}, all)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,8 +36,8 @@ def _run_one(name: str, seed: int, quick: bool, geometry: str | None = None) -> 
     A test whose READINGS say its geometry is "n/a" does not depend on it and runs as it is.
     """
     try:
-        module = importlib.import_module(f"host_tools.benchtests.{TESTS[name]}")
-    except ImportError as exc:
+        module = TESTS.load(name)
+    except ValueError as exc:  # its module cannot be imported
         return BenchResult(name, [Figure("(not available)", "", "", None, None, f"not available: {exc}",
                                          basis="assumed: nothing (the test did not run)")])
     readings = dict(getattr(module, "READINGS", {}))
@@ -63,7 +61,7 @@ def plan(test: str, geometry: str | None) -> list[tuple[str, str | None]]:
     geometries: list[str | None] = list(GEOMETRIES) if geometry == "both" else [geometry]
     runs: list[tuple[str, str | None]] = []
     for n in names:
-        module = importlib.import_module(f"host_tools.benchtests.{TESTS[n]}")
+        module = TESTS.load(n)
         independent = getattr(module, "READINGS", {}).get("geometry") == "n/a"
         runs += [(n, None)] if independent else [(n, g) for g in geometries]
     return runs

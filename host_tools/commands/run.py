@@ -29,12 +29,15 @@ HELP = "run the firmware on the virtual bench, or on serial ports (--motor/--imu
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of `pafp run`."""
+    """Options of `pafp run` (the choices of --motor-link and --controller from their registries)."""
+    from firmware.control.registry import CONTROLLERS
+    from firmware.drivers.motor_links import MOTOR_LINKS
+
     parser.add_argument("--strides", type=int, default=None,
                         help=f"gait strides to run on the virtual bench (default {STRIDES})")
     parser.add_argument("--baud", type=int, default=921600, help="motor UART baud rate (default 921600)")
     parser.add_argument("--motor-link", default=None, metavar="NAME",
-                        help="motor link on the virtual bench: uart, can-servo or can-mit (CAN at 1 Mbit/s; "
+                        help=f"motor link on the virtual bench: {MOTOR_LINKS.spoken()} (CAN at 1 Mbit/s; "
                              "default: the firmware profile's [motor] link, uart)")
     parser.add_argument("--profile", type=Path, default=None,
                         help="firmware profile TOML (default profiles/firmware.toml)")
@@ -54,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
-                        help="the control law: cascade or impedance (shipped), or a class in a Python file "
+                        help=f"the control law: {CONTROLLERS.spoken()} (shipped), or a class in a Python file "
                              "(README: 'Your own controller'); default: the profile's [controller], else cascade")
     parser.add_argument("--experiment", choices=("sysid",), default=None,
                         help="run the identification experiment (the shipped controller sysid, its [controller] "
@@ -289,9 +292,9 @@ def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
     if experiment is not None:
         args.controller = experiment
     if getattr(args, "motor_link", None) is not None:
-        from hal.links import link_entry
+        from firmware.drivers.motor_links import MOTOR_LINKS
 
-        link_entry(args.motor_link, "--motor-link")
+        MOTOR_LINKS.check(args.motor_link, "--motor-link")
         fw_cfg = fw_cfg.with_changes(motor_link=args.motor_link)
     if args.controller is not None and args.controller != fw_cfg.controller:
         fw_cfg = fw_cfg.with_changes(controller=args.controller, controller_params={})

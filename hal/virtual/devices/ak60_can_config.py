@@ -1,4 +1,7 @@
-"""The CAN side of the AK60-6 over CAN: driver id, mode, status rate, MIT ranges (interpreted: its checks see bools)."""
+"""The CAN side of the AK60-6 over CAN: driver id, mode, status rate, MIT ranges.
+
+Interpreted on purpose (docs/compiled.md, "Values checked as given").
+"""
 
 from __future__ import annotations
 

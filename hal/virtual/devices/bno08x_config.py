@@ -1,5 +1,5 @@
-"""Configuration of the BNO08x UART-RVC model (interpreted on purpose: its checks must see the values as
-given, a compiled class would turn a bool into a number before ``__post_init__`` sees it)."""
+"""Configuration of the BNO08x UART-RVC model (interpreted on purpose: docs/compiled.md, "Values checked as
+given")."""
 
 from __future__ import annotations
 

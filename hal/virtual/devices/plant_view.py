@@ -1,7 +1,7 @@
 """The shared plant as seen from outside the device world (a bench probe, a test, a fixture).
 
-Kept apart from world.py, which is compiled (see setup.py): this wrapper builds its timed methods
-on the fly and caches them in the instance ``__dict__``.
+Kept apart from world.py, which is compiled: this wrapper builds its timed methods on the fly and caches
+them in the instance ``__dict__`` (docs/compiled.md, "Dynamic attributes").
 """
 
 from __future__ import annotations

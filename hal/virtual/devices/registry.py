@@ -1,0 +1,104 @@
+"""Device models by name: what the virtual bench and ``sim://`` build (:data:`DEVICES`, docs/devices.md).
+
+An entry is a :class:`DeviceModel`: the bench role the device plays (the peripheral it sits on), the
+peripheral kind of that link, its default baud and a ``build(world, link, *, seed, config)`` function.
+``VirtualBench(imu_model=NAME)`` and ``sim://NAME`` look the name up here, so a new device is one file
+(its model and its ``DeviceModel``) plus one entry: in :data:`DEVICES`, through
+:meth:`~hal.registry.Registry.register`, or from a separate package through the entry-point group
+``pafp.devices``. The aliases ``motor`` and ``imu`` name the default device of each role.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from hal.registry import Registry
+
+__all__ = ["AK60_6", "BNO08X", "DEVICES", "GROUND_BOARD", "KINDS", "DeviceModel", "device_model"]
+
+KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground")}
+"""Peripheral kind a device model may sit on -> the bench roles of that kind that carry a device (a sensor on
+another peripheral, e.g. an ADC channel, is a new kind here with its roles, and a ``build`` taking that link)."""
+
+
+@dataclass(frozen=True)
+class DeviceModel:
+    """A device model the virtual bench and ``sim://`` build by name."""
+
+    role: str
+    """The bench role it plays (for a UART device: ``motor`` or ``imu``)."""
+    kind: str
+    """The peripheral kind of its link (a key of :data:`KINDS`)."""
+    baud: int
+    """Default baud rate of its link (the device's own default)."""
+    build: Callable[..., Any]
+    """``build(world, link, *, seed, config)``: the device on ``world``'s plant, transmitting on ``link``;
+    ``config`` is the bench's configuration for the role (e.g. a ``Bno08xConfig``, None for the defaults)."""
+    summary: str = ""
+    """One line for help texts and tables."""
+
+    def __post_init__(self) -> None:
+        """Check the role, the kind, the baud and that build is callable."""
+        if self.kind not in KINDS:
+            raise ValueError(f"device model kind {self.kind!r} unknown: one of {list(KINDS)}")
+        if self.role not in KINDS[self.kind]:
+            raise ValueError(f"device model role {self.role!r} unknown for a {self.kind}: one of "
+                             f"{list(KINDS[self.kind])}")
+        if isinstance(self.baud, bool) or not isinstance(self.baud, int) or not 1 <= self.baud <= 20_000_000:
+            raise ValueError(f"device model baud {self.baud!r} out of range 1..20000000")
+        if not callable(self.build):
+            raise ValueError(f"device model build {self.build!r} is not callable")
+
+
+def _build_ak60(world: Any, link: Any, *, seed: int = 0, config: Any = None) -> Any:
+    from hal.virtual.devices.ak60 import Ak60
+
+    return Ak60(world, config, link=link)
+
+
+def _build_bno08x(world: Any, link: Any, *, seed: int = 0, config: Any = None) -> Any:
+    from hal.virtual.devices.bno08x import Bno08x
+
+    return Bno08x(world, config, seed=seed, link=link)
+
+
+def _build_ground_board(world: Any, link: Any, *, seed: int = 0, config: Any = None) -> Any:
+    from hal.virtual.devices.firmata_board import FirmataBoard
+    from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, wire_ground_sensors
+    from hal.virtual.plant.ground import NoGround
+
+    sensors = wire_ground_sensors(None, world.f_hz, NoGround(), AdcSettings(), seed=seed)
+    return FirmataBoard(world, sensors.codes_at, len(ADC_CHANNELS), link=link)
+
+
+AK60_6 = DeviceModel("motor", "uart", 921_600, _build_ak60,
+                     "CubeMars AK60-6 driver, VESC servo mode (PROTOCOLS.md C)")
+BNO08X = DeviceModel("imu", "uart", 115_200, _build_bno08x,
+                     "BNO08x IMU in UART-RVC, 100 Hz frames (PROTOCOLS.md D)")
+
+GROUND_BOARD = DeviceModel("ground", "uart", 115_200, _build_ground_board,
+                           "load cell and heel/toe FSRs, unloaded, behind a Firmata board (docs/hardware.md)")
+
+DEVICES = Registry("device", {
+    "ak60-6": "hal.virtual.devices.registry:AK60_6",
+    "ak60": "hal.virtual.devices.registry:AK60_6",
+    "motor": "hal.virtual.devices.registry:AK60_6",
+    "bno08x": "hal.virtual.devices.registry:BNO08X",
+    "bno085": "hal.virtual.devices.registry:BNO08X",
+    "imu": "hal.virtual.devices.registry:BNO08X",
+    "ground-sensors": "hal.virtual.devices.registry:GROUND_BOARD",
+    "firmata": "hal.virtual.devices.registry:GROUND_BOARD",
+    "ground": "hal.virtual.devices.registry:GROUND_BOARD",
+}, group="pafp.devices")
+"""Device name -> :class:`DeviceModel` (aliases point to the same model)."""
+
+
+def device_model(name: str, where: str = "device") -> DeviceModel:
+    """The model registered as name; ValueError naming where it came from and the choices otherwise."""
+    model = DEVICES.load(name, where)
+    if not isinstance(model, DeviceModel):
+        raise ValueError(f"{where} {name!r}: {DEVICES.reference(name)} is a {type(model).__name__}, "
+                         "not a hal.virtual.devices.registry.DeviceModel")
+    return model
