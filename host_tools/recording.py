@@ -16,6 +16,7 @@ from pathlib import Path
 
 from firmware.config import TASK_NAMES, CostModel, FirmwareConfig
 from firmware.control.pid import FeedforwardParams, PidGains
+from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.safety import SafetyLimits
 from hal.interfaces import Board
 from hal.record.recorder import Recorder
@@ -44,7 +45,10 @@ def config_from_dict(d: dict) -> FirmwareConfig:
                              "velocity_gains": PidGains(**d["velocity_gains"]),
                              "feedforward_params": FeedforwardParams(**d["feedforward_params"]),
                              "safety": SafetyLimits(**d["safety"]),
-                             "task_cycles": {k: CostModel(**v) for k, v in d["task_cycles"].items()}})
+                             "task_cycles": {k: CostModel(**v) for k, v in d["task_cycles"].items()},
+                             "ground_sensors": GroundSensorConfig.from_table(
+                                 {**d["ground_sensors"],
+                                  "calibration": [list(r) for r in d["ground_sensors"]["calibration"]]})})
 
 
 def _board_header(board: Board) -> dict:

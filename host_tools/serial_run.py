@@ -223,6 +223,7 @@ class SerialRunResult:
     time_in_run_s: float = 0.0
     telemetry_file_error: OSError | None = None  # writing telemetry.bin failed (a full disk): the run went on
     capture_error: OSError | None = None  # a --capture file could not be written: the capture ended there
+    record_error: OSError | None = None  # record.bin could not be written: the incomplete record was removed
 
     @property
     def interrupted(self) -> bool:
@@ -406,7 +407,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     board = Board(motor_uart=ports.motor, imu_uart=ports.imu, telemetry_uart=telemetry,
                   encoder=encoder, estop=NullDigitalIn(False), led=NullDigitalOut(), watchdog=kernel_wd,
                   now_cycles=now, f_cpu_hz=f_cpu, can=ports.can, adc=adc)
-    recording = None
+    recording, record_error = None, None
     if cfg.record and out is not None:
         recording = RunRecording(out, board, fw_cfg, "serial", reference_record(cfg.reference_csv, None), 0,
                                  {"seed": cfg.seed, "bindings": {"motor": cfg.motor, "imu": cfg.imu}})
@@ -476,7 +477,12 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         if host_wd is not None:
             host_wd.close()  # its thread and its handle
         if recording is not None:
-            recording.close({"complete": stop.reason == "duration", "stop": stop.reason, "end_cycles": sched.now})
+            try:
+                recording.close({"complete": stop.reason == "duration", "stop": stop.reason, "end_cycles": sched.now})
+            except OSError as e:  # a full disk: an incomplete record is removed, reported after the outputs
+                record_error = e
+                with suppress(OSError):
+                    recording.path.unlink()
         wall = (done_ns - wall0_ns) / 1e9
     period_s = fw.ts_s
     wire_s = (len(stop.safe.frames) * 10 / ports.motor.baud if ports.can is None
@@ -499,7 +505,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     cfg.strides = strides
     return SerialRunResult(cfg, fw, sched, probe, timings, capture.captured(), run_s, wall, fw.gait_start_s,
                            started_unix, "plant" if plant is not None else "fused estimate", stop, warnings,
-                           section.granted, link.event, watch, capture.inner_error, seen, time_in_run_s=time_in_run)
+                           section.granted, link.event, watch, capture.inner_error, seen, time_in_run_s=time_in_run,
+                           record_error=record_error)
 
 
 def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: LinkWatch,

@@ -11,6 +11,7 @@ compresses and writes them (hal/record/format.py), so the firmware's loop never 
 
 from __future__ import annotations
 
+import errno
 import queue
 import struct
 import threading
@@ -106,7 +107,9 @@ class Recorder:
         finally:
             self._file.close()
         if self._error is not None:
-            raise OSError(f"record {self.path}: writing failed ({self._error})") from self._error
+            err = self._error
+            raise OSError(getattr(err, "errno", None) or errno.EIO, getattr(err, "strerror", None) or str(err),
+                          str(self.path)) from err
 
     # Wrapping the board ---------------------------------------------------------------------------
     def board(self, board: Board) -> Board:

@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
     parser.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
-    parser.add_argument("--plant-seed", type=seed, default=None, metavar="N",
+    parser.add_argument("--plant-seed", type=int, default=None, metavar="N",
                         help="draw the plant's parameters from their tolerances (profiles/plant_tolerances.toml) "
                              "with seed N; default: the nominal plant. The firmware keeps its nominal model")
     parser.add_argument("--plant", type=Path, default=None, metavar="FILE",
@@ -396,6 +396,10 @@ def _run_serial(args: argparse.Namespace) -> int:
             print(write_failed("run", e, f"the motor was stopped first ({stopped}); the files complete in {out} "
                                "are kept, partial ones removed"), file=sys.stderr)
             return EXIT_WRITE_FAILED
+    if result.record_error is not None:
+        print(write_failed("run", result.record_error, f"the motor was stopped first; record.bin was removed, the "
+                           f"other files in {out} are complete"), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     from host_tools.report import tracking_text
 
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
