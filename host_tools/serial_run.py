@@ -437,6 +437,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     now.bind(sched)
+    _follow_gait(ports, fw, lambda: sched.now / f_cpu, fw_cfg.stride_s)
     fw.kernel_health = kernel_health(sched, fw)
     if recording is not None:
         fw.kernel_health = recording.health(fw.kernel_health)
@@ -507,6 +508,21 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                            started_unix, "plant" if plant is not None else "fused estimate", stop, warnings,
                            section.granted, link.event, watch, capture.inner_error, seen, time_in_run_s=time_in_run,
                            record_error=record_error)
+
+
+def _follow_gait(ports: _Ports, fw: Firmware, now_s: Callable[[], float], stride_s: float) -> None:
+    """Tell every ``fault://`` port (hal/serial/protocol_fault.py) the firmware's gait clock, so a fault given as
+    a gait phase starts at that phase (a host instrument: the firmware does not know the port is wrapped)."""
+    def gait_time_s() -> float | None:
+        start = fw.gait_start_s
+        return None if start is None else now_s() - start
+
+    for uart in (ports.untapped_motor or ports.motor, ports.imu, ports.ground):
+        while uart is not None and not hasattr(uart, "serial"):  # a capture's tap or the recorder's wrapper
+            uart = getattr(uart, "inner", None)
+        follow = getattr(getattr(uart, "serial", None), "follow_gait", None)
+        if follow is not None:
+            follow(gait_time_s, stride_s)
 
 
 def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: LinkWatch,

@@ -39,10 +39,39 @@ def test_loop_port_loses_bytes_in_the_window_only():
         port.close()
 
 
+def test_a_phase_onset_waits_for_the_gait_clock_then_starts_at_that_phase():
+    register_fault_handler()
+    port = serial.serial_for_url("fault://loop://?fault=motor_replies_lost&phase=0.5&duration=0.5", timeout=0)
+    try:
+        port.write(b"no gait clock")
+        time.sleep(0.01)
+        assert port.read(100) == b"no gait clock"  # not placed: without the gait clock the fault never acts
+        gait_start = time.monotonic() + 0.05  # the gait starts 50 ms from now, its stride 0.4 s: phase 0.5 at +0.25 s
+        port.follow_gait(lambda: time.monotonic() - gait_start, 0.4)
+        port.write(b"placed")
+        time.sleep(0.01)
+        assert port.read(100) == b"placed"
+        onset = port.fault.onset_s
+        assert onset == pytest.approx(gait_start + 0.2 - port._t0, abs=0.02)
+        time.sleep(max(0.0, gait_start + 0.2 + 0.03 - time.monotonic()))
+        port.write(b"during")
+        time.sleep(0.01)
+        assert port.read(100) == b""  # lost in the window
+        time.sleep(max(0.0, gait_start + 0.75 - time.monotonic()))
+        port.write(b"after")
+        time.sleep(0.01)
+        assert port.read(100) == b"after"
+        assert port.fault.record.fired and port.fault.record.count == 1
+    finally:
+        port.close()
+
+
 @pytest.mark.parametrize("url, match", [
     ("fault://loop://?fault=encoder_reversed&at=1", "virtual bench only"),
     ("fault://loop://?fault=imu_bias_step&at=1", "refused on a real port"),
-    ("fault://loop://?fault=imu_silent", "fault=NAME and at=SECONDS are required"),
+    ("fault://loop://?fault=imu_silent", "one of at=SECONDS or phase=P"),
+    ("fault://loop://?fault=imu_silent&at=1&phase=0.5", "one of at=SECONDS or phase=P"),
+    ("fault://loop://?fault=imu_silent&phase=1.5", "phase=1.5 out of range"),
     ("fault://loop://?fault=imu_silent&at=soon", "at='soon' is not a number"),
     ("fault://loop://?fault=imu_corrupt&at=1&bit_error_rate=5", "bit_error_rate = 5.0 out of range"),
     ("fault://?fault=imu_silent&at=1", "name the port to wrap"),

@@ -4,11 +4,14 @@ In the manner of pyserial's ``spy://``, it wraps another port, here to inject a 
 reads from it, on a real bench as on the virtual one: the same injector classes (hal/virtual/faults, the
 :class:`~hal.virtual.faults.base.ByteFault` ones) act on the bytes read. The URL::
 
-    fault://PORT?fault=NAME&at=SECONDS[&duration=SECONDS][&PARAM=VALUE...][&allow_dangerous=1]
+    fault://PORT?fault=NAME&(at=SECONDS|phase=P)[&duration=SECONDS][&PARAM=VALUE...][&allow_dangerous=1]
 
 PORT is a device path or a pyserial URL without a query of its own (``/dev/ttyUSB0``, ``/dev/pts/7``,
-``socket://host:port``); ``at`` counts from the moment the port opens; ``duration`` defaults to the rest of
-the run. A fault marked dangerous (it feeds the controller a plausible but false angle, so the foot is driven
+``socket://host:port``); ``at`` counts from the moment the port opens; ``phase`` (0 <= P < 1) is a gait
+phase instead: the fault starts the first time the firmware's gait clock reaches it, which serial mode
+tells the port through :meth:`Serial.follow_gait` (until then, and without it, the fault never acts);
+``duration`` defaults to the rest of the run.
+A fault marked dangerous (it feeds the controller a plausible but false angle, so the foot is driven
 by it: ``imu_frozen``, ``imu_bias_step``) is refused unless ``allow_dangerous=1`` is given: docs/hardware.md,
 "Faults on a real bench". Faults that act elsewhere than on a wire (encoder, CPU, supply, plant, controller)
 are refused: they exist on the virtual bench only. When the fault first acts and when the port closes, the
@@ -21,6 +24,7 @@ import logging
 import math
 import time
 import urllib.parse
+from collections.abc import Callable
 from typing import Any
 
 import serial
@@ -30,7 +34,7 @@ __all__ = ["Serial", "parse_fault_url", "register_fault_handler"]
 
 log = logging.getLogger(__name__)
 
-_OWN_KEYS = ("fault", "at", "duration", "allow_dangerous", "seed")
+_OWN_KEYS = ("fault", "at", "phase", "duration", "allow_dangerous", "seed")
 
 
 def register_fault_handler() -> None:
@@ -61,9 +65,13 @@ def parse_fault_url(url: str) -> tuple[str, Any]:
     query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
     options = {k: v[-1] for k, v in query.items()}
     name = options.get("fault")
-    if not name or "at" not in options:
-        raise SerialException(f"{url}: fault=NAME and at=SECONDS are required")
-    at = _number(url, "at", options["at"])
+    if not name or ("at" in options) == ("phase" in options):
+        raise SerialException(f"{url}: fault=NAME and one of at=SECONDS or phase=P (a gait phase, 0 <= P < 1) "
+                              "are required")
+    phase = _number(url, "phase", options["phase"]) if "phase" in options else None
+    if phase is not None and not 0.0 <= phase < 1.0:
+        raise SerialException(f"{url}: phase={options['phase']} out of range: a gait phase, 0 <= P < 1")
+    at = _number(url, "at", options["at"]) if phase is None else 0.0
     duration = _number(url, "duration", options["duration"]) if "duration" in options else math.inf
     params: dict[str, Any] = {}
     for k, v in options.items():
@@ -82,6 +90,9 @@ def parse_fault_url(url: str) -> tuple[str, Any]:
     if fault.DANGEROUS and options.get("allow_dangerous") != "1":
         raise SerialException(f"{url}: fault {name} is refused on a real port: {fault.HAZARD}; add "
                               "allow_dangerous=1 only with the foot free of any person (docs/hardware.md)")
+    fault.phase = phase
+    if phase is not None:
+        fault.move_onset(math.inf)  # placed once the gait clock runs (Serial.follow_gait)
     return inner, fault
 
 
@@ -94,7 +105,27 @@ class Serial(SerialBase):
         self.fault: Any = None
         self._t0 = 0.0
         self._reported = False
+        self._gait: tuple[Callable[[], float | None], float] | None = None
         super().__init__(*args, **kwargs)
+
+    def follow_gait(self, gait_time_s: Callable[[], float | None], stride_s: float) -> None:
+        """Place a ``phase=P`` onset on the firmware's gait clock: gait_time_s() is the time since the gait
+        started (None before), stride_s the stride's length. The fault starts the first time the phase is P."""
+        self._gait = (gait_time_s, stride_s)
+
+    def _place_onset(self, now_s: float) -> None:
+        if self._gait is None or not math.isinf(self.fault.onset_s):
+            return
+        gait_t = self._gait[0]()
+        if gait_t is None:
+            return
+        stride = self._gait[1]
+        target = self.fault.phase * stride
+        while target < gait_t:
+            target += stride
+        self.fault.move_onset(now_s + target - gait_t)
+        log.warning("fault://: %s placed at gait phase %g: %.4f s after open", self.fault.NAME, self.fault.phase,
+                    self.fault.onset_s)
 
     def open(self) -> None:
         """Open the wrapped port with this port's settings and arm the fault from now."""
@@ -133,7 +164,10 @@ class Serial(SerialBase):
     def read(self, size: int = 1) -> bytes:
         """Read from the wrapped port; the fault acts on what came."""
         data = bytes(self._open_inner().read(size))
-        out = self.fault.filter(data, time.monotonic() - self._t0)
+        now_s = time.monotonic() - self._t0
+        if self.fault.phase is not None:
+            self._place_onset(now_s)
+        out = self.fault.filter(data, now_s)
         if out != data and not self._reported:
             self._reported = True
             log.warning("fault://: %s acts from %.4f s after open", self.fault.NAME, self.fault.record.first_s)

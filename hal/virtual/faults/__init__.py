@@ -1,18 +1,21 @@
-"""Fault injectors by name: one table of ``name -> "module:Class"``, each class imported only when used.
+"""Fault injectors by name: one registry (hal/registry.py) of ``name -> "module:Class"``, each class imported
+only when used.
 
 A new injector is a new module here (a subclass of :class:`~hal.virtual.faults.base.Injector` that acts where
-its fault happens and notes what it changed) plus one entry below; docs/safety.md says how to write one.
+its fault happens and notes what it changed) plus one entry below, or, from a separate package, an entry point
+of the group ``pafp.faults``; docs/safety.md says how to write one.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from typing import Any
 
+from hal.registry import Registry
+
 __all__ = ["INJECTORS", "injector_class", "make_injector"]
 
-INJECTORS: dict[str, str] = {
+INJECTORS = Registry("fault", {
     "imu_frozen": "hal.virtual.faults.imu_frozen:ImuFrozen",
     "imu_silent": "hal.virtual.faults.imu_silent:ImuSilent",
     "imu_bias_step": "hal.virtual.faults.imu_bias_step:ImuBiasStep",
@@ -31,17 +34,13 @@ INJECTORS: dict[str, str] = {
     "controller_nan": "hal.virtual.faults.controller_nan:ControllerNan",
     "can_bus_off": "hal.virtual.faults.can_bus_off:CanBusOff",
     "can_error_passive": "hal.virtual.faults.can_error_passive:CanErrorPassive",
-}
+}, group="pafp.faults")
 """Every injector: name -> "module:Class"."""
 
 
 def injector_class(name: str) -> Any:
     """The injector class called name; ValueError naming the choices otherwise."""
-    ref = INJECTORS.get(name)
-    if ref is None:
-        raise ValueError(f"fault {name!r} unknown: one of {', '.join(INJECTORS)}")
-    module, _, attr = ref.partition(":")
-    return getattr(importlib.import_module(module), attr)
+    return INJECTORS.load(name, "fault")
 
 
 def make_injector(name: str, onset_s: float, duration_s: float = math.inf, seed: int = 0, **params: Any) -> Any:

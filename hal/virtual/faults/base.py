@@ -122,6 +122,12 @@ class Injector:
                                        for k, spec in self.PARAMS.items()}
         self.record = FaultRecord()
 
+    def move_onset(self, onset_s: float) -> None:
+        """Act from onset_s instead (the same duration): a ``fault://`` onset given as a gait phase is known only
+        once the firmware's gait clock has started."""
+        self.onset_s = float(onset_s)
+        self.end_s = self.onset_s + self.duration_s
+
     def active(self, t_s: float) -> bool:
         """Whether t_s lies in the fault's window."""
         return self.onset_s <= t_s < self.end_s
