@@ -87,12 +87,14 @@ def test_dangerous_fault_with_the_explicit_flag():
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="ptys")
-def test_motor_replies_lost_on_the_emulated_bench_is_detected_and_made_safe(tmp_path: Path, caplog):
-    """The issue's end-to-end case: fault:// around the pty of `pafp emulate bench`, replies lost from 1.5 s."""
+@pytest.mark.parametrize("onset", ["at=1.5", "phase=0.3"])
+def test_motor_replies_lost_on_the_emulated_bench_is_detected_and_made_safe(tmp_path: Path, caplog, onset):
+    """The issue's end-to-end case: fault:// around the pty of `pafp emulate bench`, replies lost from 1.5 s after
+    the port opened, or from 30 % of the first stride on the firmware's gait clock."""
     proc, motor, imu = _emulator(20.0)
     out, capture = tmp_path / "out", tmp_path / "capture"
     try:
-        code = main(["run", "--motor", f"fault://{motor}?fault=motor_replies_lost&at=1.5&duration=1", "--imu", imu,
+        code = main(["run", "--motor", f"fault://{motor}?fault=motor_replies_lost&{onset}&duration=1", "--imu", imu,
                      "--duration", "3", "--out", str(out), "--quiet", "--capture", str(capture)])
     finally:
         _stop(proc)
@@ -101,6 +103,8 @@ def test_motor_replies_lost_on_the_emulated_bench_is_detected_and_made_safe(tmp_
     age = float(re.findall(r"([0-9.]+) ms", s["fault"]["detail"])[0])
     assert age > 20.0
     assert any("fault://: motor_replies_lost" in r.getMessage() for r in caplog.records)
+    if onset.startswith("phase"):
+        assert any("placed at gait phase 0.3" in r.getMessage() for r in caplog.records)
     # the capture of what the firmware sent: after the trip, zero current then the brake, and nothing else
     frames = Decoder("to-motor").feed((capture / "motor.tx.bin").read_bytes())
     commands = [f for f in frames if isinstance(f, (SetCurrent, SetCurrentBrake))]
