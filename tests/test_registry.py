@@ -128,6 +128,10 @@ def test_a_device_model_checks_its_fields():
         from hal.virtual.bench import VirtualBench
 
         VirtualBench(lambda: 0, 168_000_000, imu_model="ak60-6")
+    from hal.serial.sim_port import parse_sim_url
+
+    with pytest.raises(ValueError, match=r"^sim:// device 'load-cell' is a sensor on the adc: sim://ground-sensors"):
+        parse_sim_url("sim://load-cell")
 
 
 _ACME = '''
