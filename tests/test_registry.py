@@ -32,6 +32,21 @@ def _dist(folder: Path, name: str, entry_points: str) -> None:
     (info / "entry_points.txt").write_text(textwrap.dedent(entry_points))
 
 
+def _run_with_device(folder: Path, module: str, source: str, name: str, script: str) -> dict:
+    """script's last line of JSON, run in a fresh Python with module (source, entry point pafp.devices name =
+    module:MODEL) in folder as a separate package would install it."""
+    (folder / f"{module}.py").write_text(source)
+    _dist(folder, module, f"""
+        [pafp.devices]
+        {name} = {module}:MODEL
+    """)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(folder), str(ROOT)])}
+    done = subprocess.run([sys.executable, "-c", script], env=env, cwd=folder, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.splitlines()[-1])
+
+
 def test_names_are_listed_without_importing_and_loaded_on_first_use(tmp_path, monkeypatch):
     (tmp_path / "lazy_thing.py").write_text("VALUE = 42\n")
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -182,16 +197,7 @@ print(json.dumps(out))
 
 def test_a_second_imu_from_outside_the_package_runs_on_the_bench_and_behind_sim(tmp_path):
     """The acme-imu lives in a folder of its own with an entry point; pafp's files are not touched."""
-    (tmp_path / "acme_imu.py").write_text(_ACME)
-    _dist(tmp_path, "acme_imu", """
-        [pafp.devices]
-        acme-imu = acme_imu:MODEL
-    """)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    done = subprocess.run([sys.executable, "-c", _SCRIPT], env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    out = json.loads(done.stdout.splitlines()[-1])
+    out = _run_with_device(tmp_path, "acme_imu", _ACME, "acme-imu", _SCRIPT)
     assert out["registered"]
     bno, acme = out["bno08x"], out["acme-imu"]
     assert bno["rate_hz"] == 100.0 and acme["rate_hz"] == 50.0 and acme["noise"] == pytest.approx(4 * bno["noise"])
@@ -283,16 +289,7 @@ def test_a_toy_adc_sensor_from_outside_the_package_runs_on_the_bench_and_behind_
     from hal.virtual.ground_sensors import ADC_CHANNELS
     from host_tools.runner import RunConfig, run_virtual
 
-    (tmp_path / "toy_thermistor.py").write_text(_THERMISTOR)
-    _dist(tmp_path, "toy_thermistor", """
-        [pafp.devices]
-        toy-thermistor = toy_thermistor:MODEL
-    """)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    done = subprocess.run([sys.executable, "-c", _ADC_SCRIPT], env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    out = json.loads(done.stdout.splitlines()[-1])
+    out = _run_with_device(tmp_path, "toy_thermistor", _THERMISTOR, "toy-thermistor", _ADC_SCRIPT)
     assert out["sensors"] == ["load-cell", "fsr-heel", "fsr-toe", "toy-thermistor"]
     spec = importlib.util.spec_from_file_location("toy_thermistor_here", tmp_path / "toy_thermistor.py")
     toy = importlib.util.module_from_spec(spec)
