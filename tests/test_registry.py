@@ -32,6 +32,21 @@ def _dist(folder: Path, name: str, entry_points: str) -> None:
     (info / "entry_points.txt").write_text(textwrap.dedent(entry_points))
 
 
+def _run_with_device(folder: Path, module: str, source: str, name: str, script: str) -> dict:
+    """script's last line of JSON, run in a fresh Python with module (source, entry point pafp.devices name =
+    module:MODEL) in folder as a separate package would install it."""
+    (folder / f"{module}.py").write_text(source)
+    _dist(folder, module, f"""
+        [pafp.devices]
+        {name} = {module}:MODEL
+    """)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(folder), str(ROOT)])}
+    done = subprocess.run([sys.executable, "-c", script], env=env, cwd=folder, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.splitlines()[-1])
+
+
 def test_names_are_listed_without_importing_and_loaded_on_first_use(tmp_path, monkeypatch):
     (tmp_path / "lazy_thing.py").write_text("VALUE = 42\n")
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -116,14 +131,22 @@ def test_no_module_of_hal_names_the_firmware():
 def test_a_device_model_checks_its_fields():
     with pytest.raises(ValueError, match=r"role 'foot' unknown for a uart: one of \['motor', 'imu', 'ground'\]"):
         DeviceModel("foot", "uart", 115_200, print)
-    with pytest.raises(ValueError, match=r"kind 'spi' unknown: one of \['uart'\]"):
+    with pytest.raises(ValueError, match=r"kind 'spi' unknown: one of \['uart', 'adc'\]"):
         DeviceModel("imu", "spi", 115_200, print)
-    with pytest.raises(ValueError, match="baud 0 out of range"):
+    with pytest.raises(ValueError, match="baud 0 out of range 1..20000000 for a uart"):
         DeviceModel("imu", "uart", 0, print)
+    with pytest.raises(ValueError, match=r"role 'imu' unknown for a adc: one of \['sensor'\]"):
+        DeviceModel("imu", "adc", 0, print)
+    with pytest.raises(ValueError, match="baud 9600 out of range 0..0 for a adc"):
+        DeviceModel("sensor", "adc", 9600, print)
     with pytest.raises(ValueError, match=r"imu_model 'ak60-6' is a motor device, not an IMU"):
         from hal.virtual.bench import VirtualBench
 
         VirtualBench(lambda: 0, 168_000_000, imu_model="ak60-6")
+    from hal.serial.sim_port import parse_sim_url
+
+    with pytest.raises(ValueError, match=r"^sim:// device 'load-cell' is a sensor on the adc: sim://ground-sensors"):
+        parse_sim_url("sim://load-cell")
 
 
 _ACME = '''
@@ -174,16 +197,7 @@ print(json.dumps(out))
 
 def test_a_second_imu_from_outside_the_package_runs_on_the_bench_and_behind_sim(tmp_path):
     """The acme-imu lives in a folder of its own with an entry point; pafp's files are not touched."""
-    (tmp_path / "acme_imu.py").write_text(_ACME)
-    _dist(tmp_path, "acme_imu", """
-        [pafp.devices]
-        acme-imu = acme_imu:MODEL
-    """)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    done = subprocess.run([sys.executable, "-c", _SCRIPT], env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    out = json.loads(done.stdout.splitlines()[-1])
+    out = _run_with_device(tmp_path, "acme_imu", _ACME, "acme-imu", _SCRIPT)
     assert out["registered"]
     bno, acme = out["bno08x"], out["acme-imu"]
     assert bno["rate_hz"] == 100.0 and acme["rate_hz"] == 50.0 and acme["noise"] == pytest.approx(4 * bno["noise"])
@@ -194,3 +208,104 @@ def test_a_second_imu_from_outside_the_package_runs_on_the_bench_and_behind_sim(
     sim = out["sim"]
     assert sim["banner"] == 81 and sim["lost"] == 0
     assert abs(sim["frames"] - 50 * sim["elapsed"]) <= 3, sim
+
+
+_THERMISTOR = '''
+"""A toy NTC thermistor on a spare ADC channel, warming 2 K a second from 25 C (a test's own sensor,
+outside pafp: one file plus one entry point). 10 kohm at 25 C, B = 3950 K, on the low side of a divider
+with a 10 kohm pull-up to 3.3 V."""
+import math
+
+from hal.virtual.devices.registry import DeviceModel
+
+R25, B, T25, R_PULL, SUPPLY = 10_000.0, 3950.0, 298.15, 10_000.0, 3.3
+
+
+def celsius(t_s):
+    return 25.0 + 2.0 * t_s
+
+
+def volts_at(c):
+    r = R25 * math.exp(B * (1.0 / (c + 273.15) - 1.0 / T25))
+    return SUPPLY * r / (r + R_PULL)
+
+
+class Thermistor:
+    def __init__(self, f_hz):
+        self.f_hz = f_hz
+
+    def volts(self, t):
+        return volts_at(celsius(t / self.f_hz))
+
+    def outputs(self):
+        return {"thermistor": self.volts}
+
+    def set_fault(self, mode):
+        raise ValueError(f"thermistor fault {mode!r} unknown")
+
+
+def build(ground, f_hz, *, seed=0, config=None):
+    return Thermistor(f_hz)
+
+
+MODEL = DeviceModel("sensor", "adc", 0, build, "toy NTC thermistor, 10 kohm B3950 under a 10 kohm pull-up")
+'''
+
+_ADC_SCRIPT = '''
+import hashlib, json, time
+from hal.serial.backend import SerialUart
+from hal.serial.firmata_adc import FirmataAdc
+from hal.serial.protocol_sim import register_sim_handler
+from hal.virtual.devices.registry import adc_sensor_models
+from hal.virtual.ground_sensors import ADC_CHANNELS
+from host_tools.runner import RunConfig, run_virtual
+
+out = {"sensors": [name for name, _ in adc_sensor_models()]}
+r = run_virtual(RunConfig(strides=1, trace_capacity=0, ground_sensors=True))
+adc = r.bench.ground_sensors.adc
+out["run"] = {"channels": list(adc.channels), "codes": adc.read(), "t_s": adc.now() / adc.f_cpu_hz,
+              "lsb": adc.vref_v / 2 ** adc.bits, "telemetry": hashlib.sha256(r.telemetry).hexdigest()}
+register_sim_handler()
+uart = SerialUart("sim://ground-sensors", 115_200)
+board = FirmataAdc(uart, ADC_CHANNELS + ("thermistor",))
+t0 = time.perf_counter()
+codes = board.read()
+while time.perf_counter() - t0 < 2.0 and board.decoder.stats.analog < 100:
+    time.sleep(0.005)
+    codes = board.read()
+out["sim"] = {"codes": codes, "analog": board.decoder.stats.analog, "dropped": board.decoder.stats.dropped,
+              "elapsed": time.perf_counter() - t0}
+uart.serial.close()
+print(json.dumps(out))
+'''
+
+
+def test_a_toy_adc_sensor_from_outside_the_package_runs_on_the_bench_and_behind_sim(tmp_path):
+    """A thermistor in a folder of its own with an entry point reaches a fifth ADC channel, after the shipped
+    sensors' four, on the virtual bench and on sim://ground-sensors; pafp's files are not touched."""
+    import hashlib
+    import importlib.util
+
+    from hal.virtual.ground_sensors import ADC_CHANNELS
+    from host_tools.runner import RunConfig, run_virtual
+
+    out = _run_with_device(tmp_path, "toy_thermistor", _THERMISTOR, "toy-thermistor", _ADC_SCRIPT)
+    assert out["sensors"] == ["load-cell", "fsr-heel", "fsr-toe", "toy-thermistor"]
+    spec = importlib.util.spec_from_file_location("toy_thermistor_here", tmp_path / "toy_thermistor.py")
+    toy = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(toy)
+    run = out["run"]
+    assert run["channels"] == [*ADC_CHANNELS, "thermistor"]
+    expected = toy.volts_at(toy.celsius(run["t_s"])) / run["lsb"]  # the last conversion is < 1 ms old: 0.002 K
+    assert run["t_s"] > 1.0 and abs(run["codes"][4] - expected) <= 5, (run, expected)
+    # the shipped sensors read exactly what they read without the toy, and the firmware sends the same bytes
+    alone = run_virtual(RunConfig(strides=1, trace_capacity=0, ground_sensors=True))
+    assert list(alone.bench.ground_sensors.adc.channels) == list(ADC_CHANNELS)
+    assert alone.bench.ground_sensors.adc.read() == run["codes"][:4]
+    assert hashlib.sha256(alone.telemetry).hexdigest() == run["telemetry"]
+    sim = out["sim"]
+    assert sim["analog"] >= 100 and sim["dropped"] == 0, sim
+    lsb = run["lsb"]
+    hot, cold = toy.volts_at(toy.celsius(sim["elapsed"] + 0.5)) / lsb, toy.volts_at(25.0) / lsb
+    assert hot - 5 <= sim["codes"][4] <= cold + 5, (sim, hot, cold)  # warmed from 25 C since the port opened
+    assert abs(sim["codes"][3] * lsb) < 0.02  # and the shipped sensors still stream beside it, unloaded

@@ -52,7 +52,7 @@ def parse_sim_url(url: str) -> SimUrl:
     if parts.scheme.lower() != "sim":
         raise ValueError(f"URL {url!r} must start with sim://")
     name = (parts.netloc + parts.path).strip("/").lower()
-    role = device_model(name, "sim:// device").role  # ValueError naming the registered devices
+    role = _uart_model(name).role
     options: dict[str, str] = {}
     for key, values in parse_qs(parts.query, keep_blank_values=True).items():
         if key not in _OPTIONS:
@@ -63,6 +63,15 @@ def parse_sim_url(url: str) -> SimUrl:
     fixture = options.get("fixture", "suspended")
     fixture_by_name(fixture)  # validates the name
     return SimUrl(role, name, baud, fixture, 0 if seed is None else seed, options)
+
+
+def _uart_model(name: str) -> Any:
+    """The device model registered as name, if it sits on a UART (an ADC sensor is on sim://ground-sensors)."""
+    model = device_model(name, "sim:// device")  # ValueError naming the registered devices
+    if model.kind != "uart":
+        raise ValueError(f"sim:// device {name!r} is a sensor on the {model.kind}: sim://ground-sensors serves "
+                         "every registered ADC sensor")
+    return model
 
 
 def _int_option(options: Mapping[str, str], key: str, lo: int, hi: int) -> int | None:
@@ -138,7 +147,7 @@ class WallDevices:
         """The ground sensors' acquisition board (unloaded: no ground here), None if not served."""
         bauds = dict(bauds or {})
         for name in dict.fromkeys(devices):
-            model = device_model(name, "sim:// device")
+            model = _uart_model(name)
             role = model.role
             if role in self.uarts:
                 raise ValueError(f"sim:// device {name!r}: the {role} is already served by another device")

@@ -6,6 +6,11 @@ peripheral kind of that link, its default baud and a ``build(world, link, *, see
 (its model and its ``DeviceModel``) plus one entry: in :data:`DEVICES`, through
 :meth:`~hal.registry.Registry.register`, or from a separate package through the entry-point group
 ``pafp.devices``. The aliases ``motor`` and ``imu`` name the default device of each role.
+
+A sensor on an ADC channel is a model of kind ``adc`` (role ``sensor``, baud 0): its
+``build(ground, f_hz, *, seed, config)`` returns the part, whose ``outputs()`` maps each of its ADC channel
+names to ``volts(t_cycles)``. The virtual bench and ``sim://ground-sensors`` put every registered ADC
+sensor on the ADC, in registry order (:func:`adc_sensor_models`; hal/virtual/ground_sensors.py).
 """
 
 from __future__ import annotations
@@ -16,11 +21,12 @@ from typing import Any
 
 from hal.registry import Registry
 
-__all__ = ["AK60_6", "BNO08X", "DEVICES", "GROUND_BOARD", "KINDS", "DeviceModel", "device_model"]
+__all__ = ["AK60_6", "BNO08X", "DEVICES", "FSR_HEEL", "FSR_TOE", "GROUND_BOARD", "KINDS", "LOAD_CELL", "DeviceModel",
+           "adc_sensor_models", "device_model"]
 
-KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground")}
+KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground"), "adc": ("sensor",)}
 """Peripheral kind a device model may sit on -> the bench roles of that kind that carry a device (a sensor on
-another peripheral, e.g. an ADC channel, is a new kind here with its roles, and a ``build`` taking that link)."""
+another peripheral is a new kind here with its roles, and a ``build`` taking what that peripheral needs)."""
 
 
 @dataclass(frozen=True)
@@ -32,10 +38,13 @@ class DeviceModel:
     kind: str
     """The peripheral kind of its link (a key of :data:`KINDS`)."""
     baud: int
-    """Default baud rate of its link (the device's own default)."""
+    """Default baud rate of its link (the device's own default); 0 for a kind that is not a UART."""
     build: Callable[..., Any]
-    """``build(world, link, *, seed, config)``: the device on ``world``'s plant, transmitting on ``link``;
-    ``config`` is the bench's configuration for the role (e.g. a ``Bno08xConfig``, None for the defaults)."""
+    """On a UART, ``build(world, link, *, seed, config)``: the device on ``world``'s plant, transmitting on
+    ``link``; ``config`` is the bench's configuration for the role (e.g. a ``Bno08xConfig``, None for the
+    defaults). On the ADC, ``build(ground, f_hz, *, seed, config)``: the sensor under ``ground``
+    (``at(t_s) -> (F_z, F_x, CoP)``) on a clock of f_hz ticks a second; its ``outputs()`` maps its channel
+    names to ``volts(t_ticks)`` (``config``: the ground sensor profile's path, None for the shipped one)."""
     summary: str = ""
     """One line for help texts and tables."""
 
@@ -46,8 +55,9 @@ class DeviceModel:
         if self.role not in KINDS[self.kind]:
             raise ValueError(f"device model role {self.role!r} unknown for a {self.kind}: one of "
                              f"{list(KINDS[self.kind])}")
-        if isinstance(self.baud, bool) or not isinstance(self.baud, int) or not 1 <= self.baud <= 20_000_000:
-            raise ValueError(f"device model baud {self.baud!r} out of range 1..20000000")
+        lo, hi = (1, 20_000_000) if self.kind == "uart" else (0, 0)
+        if isinstance(self.baud, bool) or not isinstance(self.baud, int) or not lo <= self.baud <= hi:
+            raise ValueError(f"device model baud {self.baud!r} out of range {lo}..{hi} for a {self.kind}")
         if not callable(self.build):
             raise ValueError(f"device model build {self.build!r} is not callable")
 
@@ -66,11 +76,30 @@ def _build_bno08x(world: Any, link: Any, *, seed: int = 0, config: Any = None) -
 
 def _build_ground_board(world: Any, link: Any, *, seed: int = 0, config: Any = None) -> Any:
     from hal.virtual.devices.firmata_board import FirmataBoard
-    from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, wire_ground_sensors
+    from hal.virtual.ground_sensors import AdcSettings, wire_ground_sensors
     from hal.virtual.plant.ground import NoGround
 
     sensors = wire_ground_sensors(None, world.f_hz, NoGround(), AdcSettings(), seed=seed)
-    return FirmataBoard(world, sensors.codes_at, len(ADC_CHANNELS), link=link)
+    return FirmataBoard(world, sensors.codes_at, len(sensors.adc.channels), link=link)
+
+
+def _build_load_cell(ground: Any, f_hz: int, *, seed: int = 0, config: Any = None) -> Any:
+    from hal.virtual.devices.load_cell import LoadCell
+    from hal.virtual.ground_sensors import load_ground_profile
+
+    return LoadCell(load_ground_profile(config)[0], ground, f_hz, seed)
+
+
+def _build_fsr_heel(ground: Any, f_hz: int, *, seed: int = 0, config: Any = None) -> Any:
+    from hal.virtual.ground_sensors import foot_fsr
+
+    return foot_fsr(ground, f_hz, "fsr_heel", config)
+
+
+def _build_fsr_toe(ground: Any, f_hz: int, *, seed: int = 0, config: Any = None) -> Any:
+    from hal.virtual.ground_sensors import foot_fsr
+
+    return foot_fsr(ground, f_hz, "fsr_toe", config)
 
 
 AK60_6 = DeviceModel("motor", "uart", 921_600, _build_ak60,
@@ -80,6 +109,11 @@ BNO08X = DeviceModel("imu", "uart", 115_200, _build_bno08x,
 
 GROUND_BOARD = DeviceModel("ground", "uart", 115_200, _build_ground_board,
                            "load cell and heel/toe FSRs, unloaded, behind a Firmata board (docs/hardware.md)")
+
+LOAD_CELL = DeviceModel("sensor", "adc", 0, _build_load_cell,
+                        "pylon load cell: axial force and sagittal moment (channels load_force, load_moment)")
+FSR_HEEL = DeviceModel("sensor", "adc", 0, _build_fsr_heel, "heel FSR in its divider (channel fsr_heel)")
+FSR_TOE = DeviceModel("sensor", "adc", 0, _build_fsr_toe, "toe FSR in its divider (channel fsr_toe)")
 
 DEVICES = Registry("device", {
     "ak60-6": "hal.virtual.devices.registry:AK60_6",
@@ -91,6 +125,9 @@ DEVICES = Registry("device", {
     "ground-sensors": "hal.virtual.devices.registry:GROUND_BOARD",
     "firmata": "hal.virtual.devices.registry:GROUND_BOARD",
     "ground": "hal.virtual.devices.registry:GROUND_BOARD",
+    "load-cell": "hal.virtual.devices.registry:LOAD_CELL",
+    "fsr-heel": "hal.virtual.devices.registry:FSR_HEEL",
+    "fsr-toe": "hal.virtual.devices.registry:FSR_TOE",
 }, group="pafp.devices")
 """Device name -> :class:`DeviceModel` (aliases point to the same model)."""
 
@@ -102,3 +139,15 @@ def device_model(name: str, where: str = "device") -> DeviceModel:
         raise ValueError(f"{where} {name!r}: {DEVICES.reference(name)} is a {type(model).__name__}, "
                          "not a hal.virtual.devices.registry.DeviceModel")
     return model
+
+
+def adc_sensor_models() -> list[tuple[str, DeviceModel]]:
+    """Every registered ADC sensor (name, model), in registry order (shipped first), each model once."""
+    seen: list[DeviceModel] = []
+    out: list[tuple[str, DeviceModel]] = []
+    for name in DEVICES:
+        model = device_model(name)
+        if model.kind == "adc" and not any(model is m for m in seen):
+            seen.append(model)
+            out.append((name, model))
+    return out
