@@ -129,15 +129,15 @@ def test_no_module_of_hal_names_the_firmware():
 
 
 def test_a_device_model_checks_its_fields():
-    with pytest.raises(ValueError, match=r"role 'foot' unknown for a uart: one of \['motor', 'imu', 'ground'\]"):
+    with pytest.raises(ValueError, match=r"role 'foot' unknown on the UART: one of \['motor', 'imu', 'ground'\]"):
         DeviceModel("foot", "uart", 115_200, print)
     with pytest.raises(ValueError, match=r"kind 'spi' unknown: one of \['uart', 'adc'\]"):
         DeviceModel("imu", "spi", 115_200, print)
-    with pytest.raises(ValueError, match="baud 0 out of range 1..20000000 for a uart"):
+    with pytest.raises(ValueError, match="baud 0 out of range 1..20000000 on the UART"):
         DeviceModel("imu", "uart", 0, print)
-    with pytest.raises(ValueError, match=r"role 'imu' unknown for a adc: one of \['sensor'\]"):
+    with pytest.raises(ValueError, match=r"role 'imu' unknown on the ADC: one of \['sensor'\]"):
         DeviceModel("imu", "adc", 0, print)
-    with pytest.raises(ValueError, match="baud 9600 out of range 0..0 for a adc"):
+    with pytest.raises(ValueError, match="baud 9600 out of range 0..0 on the ADC"):
         DeviceModel("sensor", "adc", 9600, print)
     with pytest.raises(ValueError, match=r"imu_model 'ak60-6' is a motor device, not an IMU"):
         from hal.virtual.bench import VirtualBench

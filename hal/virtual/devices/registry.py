@@ -53,11 +53,11 @@ class DeviceModel:
         if self.kind not in KINDS:
             raise ValueError(f"device model kind {self.kind!r} unknown: one of {list(KINDS)}")
         if self.role not in KINDS[self.kind]:
-            raise ValueError(f"device model role {self.role!r} unknown for a {self.kind}: one of "
+            raise ValueError(f"device model role {self.role!r} unknown on the {self.kind.upper()}: one of "
                              f"{list(KINDS[self.kind])}")
         lo, hi = (1, 20_000_000) if self.kind == "uart" else (0, 0)
         if isinstance(self.baud, bool) or not isinstance(self.baud, int) or not lo <= self.baud <= hi:
-            raise ValueError(f"device model baud {self.baud!r} out of range {lo}..{hi} for a {self.kind}")
+            raise ValueError(f"device model baud {self.baud!r} out of range {lo}..{hi} on the {self.kind.upper()}")
         if not callable(self.build):
             raise ValueError(f"device model build {self.build!r} is not callable")
 
