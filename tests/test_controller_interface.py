@@ -182,6 +182,6 @@ def test_the_readme_example_controller_runs_as_written(tmp_path):
     r = _run(f"{tmp_path / 'my_controller.py'}:MyController", strides=1)
     assert r.firmware.supervisor.reason is FaultReason.NONE
     assert r.firmware.published_names == ("torque_nm", "error_deg")
-    from host_tools.report import summarise
+    from host_tools.reports.report import summarise
 
     assert summarise(r)["tracking"]["truth"]["rms_deg"] < 3.0
