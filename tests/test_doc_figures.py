@@ -33,8 +33,8 @@ def test_a_stale_or_missing_figure_is_caught_and_write_mends_it(tmp_path):
     text = sweeps.read_text(encoding="utf-8")
     assert "| 3 | 460800 | 4 | ok |" in text
     sweeps.write_text(text.replace("| 3 | 460800 | 4 | ok | ", "| 3 | 460800 | 4 | ok | 9"), encoding="utf-8")
-    readme = root / "README.md"
-    readme.write_text(readme.read_text(encoding="utf-8").replace("<!-- figures:baud_gains_summary -->", ""),
+    commands = root / "docs" / "commands.md"
+    commands.write_text(commands.read_text(encoding="utf-8").replace("<!-- figures:baud_gains_summary -->", ""),
                       encoding="utf-8")
     files = ", ".join(doc_figures.FILES)
     assert doc_figures.check(root) == ["docs/sweeps.md: block baud_gains",

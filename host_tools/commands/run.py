@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
                         help=f"the control law: {CONTROLLERS.spoken()} (shipped), or a class in a Python file "
-                             "(README: 'Your own controller'); default: the profile's [controller], else cascade")
+                             "(docs/controllers.md); default: the profile's [controller], else cascade")
     parser.add_argument("--experiment", choices=("sysid",), default=None,
                         help="run the identification experiment (the shipped controller sysid, its [controller] "
                              "parameters from the profile when it names sysid) for its whole length instead of "

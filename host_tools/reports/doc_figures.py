@@ -8,7 +8,7 @@ the docs are regenerated.
 
 The blocks:
 
-* ``baud_gains`` (docs/sweeps.md) and ``baud_gains_summary`` (README.md): the rows of
+* ``baud_gains`` (docs/sweeps.md) and ``baud_gains_summary`` (docs/commands.md): the rows of
   ``pafp sweep profiles/sweeps/baud_gains.toml``. The points run here one after the other through the
   function the sweep ships to its Dask workers (``sweep_point.run_point``); a sweep's rows do not depend on
   the workers (docs/sweeps.md), so these are the sweep's rows.
@@ -30,7 +30,7 @@ from typing import Any
 __all__ = ["BLOCKS", "FILES", "check", "render", "write"]
 
 ROOT = Path(__file__).resolve().parents[2]
-FILES = ("README.md", "docs/sweeps.md", "docs/design.md")
+FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md")
 """The Markdown files (relative to the checkout) that hold generated blocks."""
 
 
@@ -92,7 +92,7 @@ def baud_gains() -> str:
 
 
 def baud_gains_summary() -> str:
-    """The baud_gains sweep in one paragraph (the README's)."""
+    """The baud_gains sweep in one paragraph (docs/commands.md's)."""
     return _summary(_baud_gains_rows())
 
 
