@@ -7,7 +7,7 @@ samples the plant's true angle for the tracking metrics.
 
 The scheduler runs in segments of SEGMENT_S simulated seconds (the outputs are the same byte for byte
 as in one go); with ``RunConfig.stream_to`` set, what each segment produced goes to the files at once
-(host_tools/run_files.py), so a run's memory does not grow with its length, and ``should_stop`` is asked
+(host_tools/reports/run_files.py), so a run's memory does not grow with its length, and ``should_stop`` is asked
 between segments (a stop signal: the run ends there, marked incomplete).
 """
 
@@ -31,8 +31,8 @@ from hal.virtual.plant.draw import draw_plant, drawn_values
 from hal.virtual.plant.readings import DRIVERS, geometry_of
 from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
-from host_tools.run_files import RunFiles
-from host_tools.tracking_stream import probe_stream
+from host_tools.reports.run_files import RunFiles
+from host_tools.reports.tracking_stream import probe_stream
 from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, ground_reaction, walking_load
 from host_tools.wire_capture import WireCapture
 from profiles import profile_path, profile_paths

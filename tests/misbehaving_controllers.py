@@ -1,4 +1,4 @@
-"""Controllers that track like README's PD example for MISBEHAVE_AFTER_S of RUN, then leave `update` badly.
+"""Controllers that track like docs/controllers.md's PD example for MISBEHAVE_AFTER_S of RUN, then leave `update` badly.
 
 Used by tests/test_controller_exit.py as ``--controller tests/misbehaving_controllers.py:CLASS``: one calls
 ``sys.exit(0)``, one raises ``KeyboardInterrupt``, one ``GeneratorExit``, one a ``BaseException`` of its
@@ -14,7 +14,7 @@ BLOCK_S = 2.0
 
 
 class Tracks:
-    """PD on the ankle angle plus the foot's weight (README, "Your own controller")."""
+    """PD on the ankle angle plus the foot's weight (docs/controllers.md)."""
 
     def __init__(self, params):
         self.nm_per_a = 0.078 * 28.0 * 0.855

@@ -13,8 +13,8 @@ from hal.virtual.imperfections import NAMES, load_imperfections
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.draw import draw_plant, drawn_values, load_tolerances
 from host_tools.cli import main
-from host_tools.metrics import RUN_STATE, run_window, signal_figures
-from host_tools.report import summarise
+from host_tools.reports.metrics import RUN_STATE, run_window, signal_figures
+from host_tools.reports.report import summarise
 from host_tools.runner import RunConfig, run_virtual
 
 SIGNALS = ("imu", "encoder", "fused", "truth")
@@ -42,7 +42,7 @@ def test_four_tracking_figures_and_the_imu_shows_degrees(two_strides):
     assert tr["imu"]["rms_deg"] > 1.0 and tr["imu"]["rms_deg"] > 3 * tr["encoder"]["rms_deg"]
     assert tr["imu"]["lag_ms"] > 15.0
     # the top-level figures are what a bench measures (IMU, encoder), never the truth (issue 24)
-    from host_tools.report import HEADLINE_KEYS
+    from host_tools.reports.report import HEADLINE_KEYS
 
     for key in HEADLINE_KEYS:
         sig, fig = key.split("_", 1)
@@ -190,8 +190,8 @@ def test_backlash_holds_off_torque_while_the_rotor_crosses_the_gap():
 def test_tracking_plot_draws_the_encoder_strides_beside_the_imu_and_the_truth():
     # tracking.png's top panel: the IMU (what the report plotted), the encoder (the bench-measurable stand-in
     # for the foot) and the truth (emulation only), each stride cut from the run
-    from host_tools.report import tracking_of
-    from host_tools.tracking_stream import PLOT_STRIDES
+    from host_tools.reports.report import tracking_of
+    from host_tools.reports.tracking_stream import PLOT_STRIDES
 
     assert PLOT_STRIDES == ("imu", "encoder", "truth")
     strides = tracking_of(run_virtual(RunConfig(strides=2, trace_capacity=0))).strides

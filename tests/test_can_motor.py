@@ -147,7 +147,7 @@ def test_the_link_is_chosen_by_name_and_a_bad_name_is_one_line(tmp_path, capsys)
 @pytest.mark.parametrize("link", ["can-servo", "can-mit"])
 def test_can_runs_track_and_are_deterministic(link):
     from firmware.config import load_firmware_config
-    from host_tools.report import summarise
+    from host_tools.reports.report import summarise
     from host_tools.runner import RunConfig, run_virtual
 
     fw_cfg = load_firmware_config().with_changes(motor_link=link)

@@ -73,7 +73,7 @@ def test_parse_can_url_names_the_bad_value() -> None:
                    (True, 0x201, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE, 3.0))]),
 ])
 def test_serial_mode_stop_path_on_can_sends_the_safe_frames(link, expected) -> None:
-    """Firmware.stop (what host_tools/serial_run.py calls) puts the link's safe frames on a python-can bus."""
+    """Firmware.stop (serial mode calls it: host_tools/serial_mode/serial_run.py) puts the safe frames on the bus."""
     channel = f"pafp-stop-{os.getpid()}-{link}"
     motor_end = can.Bus(interface="virtual", channel=channel)
     port = PythonCanPort(can.Bus(interface="virtual", channel=channel))

@@ -174,14 +174,17 @@ def test_profile_names_the_controller_and_passes_its_table(user_file, tmp_path):
         build_controller("cascade", cfg, {"kp": 1})
 
 
-def test_the_readme_example_controller_runs_as_written(tmp_path):
-    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
-    section = readme.split("## Your own controller", 1)[1]
+@pytest.mark.parametrize(("doc", "heading"), [("README.md", "## Your own controller"),
+                                              ("docs/controllers.md", "# Your own controller")])
+def test_the_documented_example_controller_runs_as_written(tmp_path, doc, heading):
+    """The README's 10-line controller and docs/controllers.md's complete one, each run as written."""
+    text = (Path(__file__).parents[1] / doc).read_text(encoding="utf-8")
+    section = text.split(heading, 1)[1]
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     (tmp_path / "my_controller.py").write_text(code, encoding="utf-8")
     r = _run(f"{tmp_path / 'my_controller.py'}:MyController", strides=1)
     assert r.firmware.supervisor.reason is FaultReason.NONE
     assert r.firmware.published_names == ("torque_nm", "error_deg")
-    from host_tools.report import summarise
+    from host_tools.reports.report import summarise
 
     assert summarise(r)["tracking"]["truth"]["rms_deg"] < 3.0

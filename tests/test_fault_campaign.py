@@ -13,12 +13,12 @@ import pytest
 
 from host_tools.cli import main
 from host_tools.commands.faults import columns
-from host_tools.fault_point import fault_error_row, run_fault_point
-from host_tools.fault_report import check_criteria, hazard_rows, load_criteria
-from host_tools.fault_spec import load_fault_spec
-from host_tools.sweep_engine import dask_client, run_tasks
-from host_tools.sweep_spec import SpecError
-from host_tools.sweep_table import TIMING_COLUMNS
+from host_tools.studies.fault_point import fault_error_row, run_fault_point
+from host_tools.studies.fault_report import check_criteria, hazard_rows, load_criteria
+from host_tools.studies.fault_spec import load_fault_spec
+from host_tools.studies.sweep_engine import dask_client, run_tasks
+from host_tools.studies.sweep_spec import SpecError
+from host_tools.studies.sweep_table import TIMING_COLUMNS
 
 SPEC = """
 [campaign]

@@ -62,8 +62,8 @@ def test_sim_ground_sensors_stream_the_unloaded_sensors_to_the_firmata_backend()
 
 
 def test_serial_mode_reads_the_ground_sensors_from_the_firmata_board(tmp_path):
-    from host_tools.realtime import RealtimeSettings
-    from host_tools.serial_run import SerialRunConfig, run_serial
+    from host_tools.serial_mode.realtime import RealtimeSettings
+    from host_tools.serial_mode.serial_run import SerialRunConfig, run_serial
 
     cfg = SerialRunConfig(motor="sim://ak60-6", imu="sim://bno08x", ground="sim://ground-sensors", encoder="sim",
                           duration_s=1.0, realtime=RealtimeSettings.none())

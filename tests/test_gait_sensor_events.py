@@ -14,7 +14,7 @@ from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.drivers.ground_sensors import GroundSensorDriver
 from hal.interfaces import Adc
 from host_tools.cli import main
-from host_tools.gait_latency import event_summary, latencies
+from host_tools.reports.gait_latency import event_summary, latencies
 from host_tools.runner import RunConfig, run_virtual
 
 

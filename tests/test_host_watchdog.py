@@ -1,4 +1,4 @@
-"""The host watchdog (host_tools/host_watchdog.py): its pre-built frames are the driver's own stop path, it
+"""The host watchdog (host_tools/serial_mode/host_watchdog.py): its pre-built frames are the driver's own stop path, it
 stays quiet while kicked, fires once the kicks stop and sends again while the loop stays silent; its
 timeout comes from the firmware profile, with a range."""
 
@@ -11,7 +11,7 @@ import pytest
 
 from firmware.config import load_firmware_config
 from hal.virtual.bench import VirtualBench
-from host_tools.host_watchdog import HostWatchdog, stop_frames
+from host_tools.serial_mode.host_watchdog import HostWatchdog, stop_frames
 from profiles import profile_path
 from protocol import can_mit, can_servo
 from protocol.vesc import SetCurrent, SetCurrentBrake

@@ -28,7 +28,7 @@ import pytest
 from host_tools import outdir
 from host_tools.cli import main
 from host_tools.outdir import EXIT_WRITE_FAILED, clean_stale
-from host_tools.sweep_table import JOURNAL
+from host_tools.studies.sweep_table import JOURNAL
 
 PAFP = [sys.executable, "-m", "host_tools"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -317,7 +317,7 @@ def test_sweep_point_writes_the_files_docs_sweeps_md_lists(tmp_path, capsys):
 
 
 def test_a_table_that_cannot_be_written_leaves_no_temporary(tmp_path, monkeypatch):
-    from host_tools.sweep_table import ResultsTable
+    from host_tools.studies.sweep_table import ResultsTable
 
     real = Path.write_text
 
@@ -397,7 +397,7 @@ def test_tune_stopped_by_a_signal_keeps_the_best_candidate_so_far(tmp_path, sig)
     feasible = [e for e in doc["evaluations"] if e["feasible"]]
     assert best["score"] == min(e["score"] for e in feasible)
     from firmware.config import load_firmware_config
-    from host_tools.tuning import gains_of
+    from host_tools.studies.tuning import gains_of
 
     assert gains_of(load_firmware_config(out / "firmware_tuned.toml")) == pytest.approx(best["gains"])
     assert not (out / "tune.png").exists()
@@ -446,8 +446,7 @@ def test_tune_whose_disk_fills_keeps_the_files_written_whole_and_exits_74(tmp_pa
                                                                         atomic_writes_fill):
     import contextlib
 
-    from host_tools import sweep_engine
-
+    from host_tools.studies import sweep_engine
     monkeypatch.setattr(sweep_engine, "dask_client", lambda **k: contextlib.nullcontext(None))  # in-process search
     atomic_writes_fill[0] = 20_000  # the tuned profile fits, the PNG does not
     out = tmp_path / "tune"

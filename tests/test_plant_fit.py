@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from hal.virtual.plant import load_plant_params
+from host_tools.calibration.plant_fit import fit_percentage
 from host_tools.cli import main
-from host_tools.plant_fit import fit_percentage
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'

@@ -12,9 +12,9 @@ from hal.errors import HalError
 from hal.record.format import Kind, RecordError
 from hal.record.recorder import Recorder
 from hal.record.replay import RecordReader
+from host_tools.calibration.replay_run import replay_record
 from host_tools.cli import main
 from host_tools.recording import RECORD_NAME, config_dict, config_from_dict
-from host_tools.replay_run import replay_record
 from protocol.vesc import Decoder, SetCurrent
 
 ROOT = Path(__file__).resolve().parents[1]

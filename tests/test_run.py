@@ -16,7 +16,7 @@ import pytest
 from firmware.config import CostModel, load_firmware_config
 from firmware.safety import FaultReason, SupervisorState
 from host_tools.cli import main
-from host_tools.report import summarise
+from host_tools.reports.report import summarise
 from host_tools.runner import RunConfig, run_virtual
 from protocol.telemetry import TelemetryDecoder
 from protocol.vesc import FaultCode

@@ -15,7 +15,7 @@ import pytest
 
 from firmware.config import DEFAULT_PROFILE
 from host_tools.cli import main
-from host_tools.report import summarise, write_outputs
+from host_tools.reports.report import summarise, write_outputs
 from host_tools.runner import RunConfig, run_virtual
 from protocol.telemetry import TelemetryDecoder
 

@@ -13,9 +13,9 @@ import pytest
 
 from firmware.drivers.motor import MotorDriver
 from hal.interfaces import Uart
-from host_tools.realtime import RealtimeSection, RealtimeSettings
+from host_tools.serial_mode.realtime import RealtimeSection, RealtimeSettings
+from host_tools.serial_mode.telemetry_pty import TelemetryPty
 from host_tools.stop_signals import StopSignals
-from host_tools.telemetry_pty import TelemetryPty
 from host_tools.wire_capture import WireCapture
 from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 

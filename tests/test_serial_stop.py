@@ -20,7 +20,7 @@ import pytest
 from test_serial_faults import CLEAN, _relay, _relay_counts
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified, assert_stopped_safely
 
-import host_tools.serial_run as serial_run
+import host_tools.serial_mode.serial_run as serial_run
 from host_tools.cli import main
 from protocol.telemetry import TelemetryDecoder
 

@@ -17,11 +17,11 @@ import pytest
 
 from hal.virtual.plant.params import load_plant_params
 from host_tools.cli import main
-from host_tools.sweep_engine import Progress, check_points, dask_client, run_sweep, tasks_of
-from host_tools.sweep_point import plant_seed_run_options, run_point
-from host_tools.sweep_report import write_report
-from host_tools.sweep_spec import SpecError, load_spec, plant_seed_of
-from host_tools.sweep_table import JOURNAL, TIMING_COLUMNS, read_rows
+from host_tools.studies.sweep_engine import Progress, check_points, dask_client, run_sweep, tasks_of
+from host_tools.studies.sweep_point import plant_seed_run_options, run_point
+from host_tools.studies.sweep_report import write_report
+from host_tools.studies.sweep_spec import SpecError, load_spec, plant_seed_of
+from host_tools.studies.sweep_table import JOURNAL, TIMING_COLUMNS, read_rows
 
 
 def plant_double(seed: int) -> dict:

@@ -121,9 +121,9 @@ def test_emulate_has_the_bench_imperfections_and_the_plant(tmp_path):
 
 
 def test_sweep_spec_runs_a_plant_file(tmp_path):
-    from host_tools.sweep_engine import tasks_of
-    from host_tools.sweep_point import plant_seed_run_options, run_config_of
-    from host_tools.sweep_spec import SpecError, load_spec
+    from host_tools.studies.sweep_engine import tasks_of
+    from host_tools.studies.sweep_point import plant_seed_run_options, run_config_of
+    from host_tools.studies.sweep_spec import SpecError, load_spec
 
     plant = _plant_file(tmp_path, coulomb_friction_nm=0.3)
     spec = tmp_path / "spec.toml"

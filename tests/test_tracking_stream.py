@@ -1,12 +1,12 @@
-"""TrackingStream: the figures of host_tools.metrics from samples fed in chunks, whatever the chunking."""
+"""TrackingStream: the figures of host_tools.reports.metrics from samples fed in chunks, whatever the chunking."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from host_tools.metrics import cut_strides, run_window, signal_figures, tracking_metrics
-from host_tools.tracking_stream import TrackingStream
+from host_tools.reports.metrics import cut_strides, run_window, signal_figures, tracking_metrics
+from host_tools.reports.tracking_stream import TrackingStream
 
 
 def _samples(seed: int = 1, seconds: float = 30.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

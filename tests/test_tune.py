@@ -1,4 +1,4 @@
-"""`pafp tune` and host_tools.tuning: determinism, constraints, the written profile."""
+"""`pafp tune` and host_tools.studies.tuning: determinism, constraints, the written profile."""
 
 import json
 import math
@@ -8,9 +8,9 @@ import pytest
 
 from firmware.config import DEFAULT_PROFILE, load_firmware_config
 from firmware.control.pid import PidGains
-from host_tools import tuning
 from host_tools.cli import main
-from host_tools.sweep_engine import dask_client
+from host_tools.studies import tuning
+from host_tools.studies.sweep_engine import dask_client
 
 
 def test_search_is_deterministic_whatever_the_worker_count():

@@ -15,8 +15,8 @@ from firmware.control.reference import GaitReference
 from firmware.control.registry import build_controller
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.walking import WalkingLoad
-from host_tools.actuator import design_check
 from host_tools.cli import main
+from host_tools.reports.actuator import design_check
 from host_tools.runner import RunConfig, run_virtual
 from host_tools.walk import moment_curve, walking_load
 

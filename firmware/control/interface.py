@@ -7,7 +7,7 @@ supervisor enters RUN and when it enters SAFE), ``cost_cycles`` (an int: the con
 cycles for the RTOS and the response-time analysis; default: the profile's ``[task_cycles] control``),
 and ``published`` (a dict of name -> number: its keys as they are after construction become columns of
 telemetry.csv, its values are logged with every telemetry record). ``obs`` is an
-:class:`~firmware.control.observation.Observation`. README.md has a complete example.
+:class:`~firmware.control.observation.Observation`. docs/controllers.md has a complete example.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.drivers.motor import FEEDBACK_MASK, selective_reply_bytes
 from hal.virtual.plant import PlantParams
 from host_tools.benchtests.output import BenchResult, Figure
-from host_tools.report import summarise
+from host_tools.reports.report import summarise
 from host_tools.runner import RunConfig, RunResult, run_virtual
 from protocol.vesc import GetValues, GetValuesSelective, SetCurrent
 

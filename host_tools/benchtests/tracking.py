@@ -4,7 +4,7 @@ Protocol (docs/bench.md): the firmware runs on the virtual suspended-foot bench 
 encoder, IMU and motor over UART at 921600 baud, the real bench's imperfections) and follows the
 normative ankle angle. Per case the figures are measured as the report measured them -- the IMU pitch
 the firmware received against the reference (its Figs 4.8-4.10) -- then the plant's true angle
-(emulation only), over whole strides in RUN (host_tools.metrics), with the lag that best aligns them.
+(emulation only), over whole strides in RUN (host_tools.reports.metrics), with the lag that best aligns them.
 Cases:
 
 - untuned: the report's first run had no feed-forward (its controller is a PID cascade, 3.6.3-3.6.4) and
@@ -36,8 +36,8 @@ from hal.virtual.imperfections import load_imperfections
 from hal.virtual.plant import PlantParams
 from hal.virtual.plant.readings import IMUS, imu_reading_signal
 from host_tools.benchtests.output import BenchResult, Figure
-from host_tools.metrics import run_window, signal_figures
-from host_tools.report import summarise
+from host_tools.reports.metrics import run_window, signal_figures
+from host_tools.reports.report import summarise
 from host_tools.runner import RunConfig, RunResult, run_virtual
 
 logger = logging.getLogger(__name__)

@@ -37,7 +37,7 @@ from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.wire_capture import WireCapture
 
 if TYPE_CHECKING:
-    from host_tools.can_emulate import WallCanMotor
+    from host_tools.serial_mode.can_emulate import WallCanMotor
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
 MAX_SLEEP_S = 0.001
@@ -155,13 +155,13 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def _run_can(args: argparse.Namespace) -> int:
-    """`emulate motor|bench --can URL` (host_tools/can_emulate.py); bench: the IMU on a new pty, or on
+    """`emulate motor|bench --can URL` (host_tools/serial_mode/can_emulate.py); bench: the IMU on a new pty, or on
     --imu-port, on the motor's plant."""
     import time
 
     from hal.errors import HalError
     from hal.pycan import open_can, parse_can_url
-    from host_tools.can_emulate import WallCanMotor
+    from host_tools.serial_mode.can_emulate import WallCanMotor
 
     stop: list[str] = []
 

@@ -30,15 +30,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def columns() -> list[str]:
     """The columns of results.parquet."""
-    from host_tools.fault_point import FIGURES
+    from host_tools.studies.fault_point import FIGURES
 
     return ["point", "fault", "params", "scenario", "body_mass_kg", "controller", "link", "onset_phase",
             "duration_s", "seed", "status", "error", *FIGURES]
 
 
 def _one_point(spec: object, index: int, out: Path) -> int:
-    from host_tools.fault_point import faulted_run
-    from host_tools.report import write_outputs
+    from host_tools.reports.report import write_outputs
+    from host_tools.studies.fault_point import faulted_run
 
     points = spec.points()  # type: ignore[attr-defined]
     if not 0 <= index < len(points):
@@ -58,11 +58,11 @@ def _one_point(spec: object, index: int, out: Path) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Check the spec and criteria whole, run the points not yet finished, write the table and report.md."""
-    from host_tools.fault_point import fault_error_row, run_fault_point
-    from host_tools.fault_report import check_criteria, load_criteria, write_fault_report
-    from host_tools.fault_spec import load_fault_spec
-    from host_tools.sweep_engine import dask_client, run_tasks
-    from host_tools.sweep_table import check_out
+    from host_tools.studies.fault_point import fault_error_row, run_fault_point
+    from host_tools.studies.fault_report import check_criteria, load_criteria, write_fault_report
+    from host_tools.studies.fault_spec import load_fault_spec
+    from host_tools.studies.sweep_engine import dask_client, run_tasks
+    from host_tools.studies.sweep_table import check_out
 
     try:
         if args.workers is not None and not 1 <= args.workers <= 1024:

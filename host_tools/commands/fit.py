@@ -30,10 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check the inputs, fit, write the outputs, print the table."""
-    from host_tools.fit_report import figure as _g
-    from host_tools.fit_report import validate, write_fit_outputs
+    from host_tools.calibration.fit_report import figure as _g
+    from host_tools.calibration.fit_report import validate, write_fit_outputs
+    from host_tools.calibration.plant_fit import DEFAULT_FIT, PARAMS, fit_plant, load_base, load_experiment
     from host_tools.outdir import OutDirError, RunDir
-    from host_tools.plant_fit import DEFAULT_FIT, PARAMS, fit_plant, load_base, load_experiment
     from profiles import profile_path
 
     try:

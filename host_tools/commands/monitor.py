@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     """Decode until the end of the file (or stop); 0 when done, 1 if the port was lost, 2 if it cannot open."""
     import serial
 
-    from host_tools.monitor import CsvSink, MonitorState, render
+    from host_tools.serial_mode.monitor import CsvSink, MonitorState, render
 
     try:
         read, close, is_file = _reader(args.source, args.baud)

@@ -40,9 +40,9 @@ def run(args: argparse.Namespace) -> int:
     """Check the inputs, replay, write the outputs, print the verdict."""
     from hal.record.format import RecordError
     from hal.record.replay import RecordReader
+    from host_tools.calibration.replay_run import find_record, replay_record
     from host_tools.outdir import OutDirError, RunDir, write_atomic
     from host_tools.recording import config_from_dict
-    from host_tools.replay_run import find_record, replay_record
 
     out = args.out or Path("runs") / (time.strftime("%Y%m%d-%H%M%S") + "-replay")
     try:
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"pafp replay: {e}", file=sys.stderr)
                 run_dir.discard()
                 return 2
-        from host_tools.report import _write_telemetry_csv
+        from host_tools.reports.report import _write_telemetry_csv
 
         data = (run_dir.path / "telemetry.bin").read_bytes()
         decoder = _write_telemetry_csv(data, run_dir.path / "telemetry.csv", r.firmware.f_cpu_hz,

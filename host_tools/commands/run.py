@@ -1,6 +1,6 @@
 """`pafp run`: the firmware on the virtual bench (the main job), or on serial ports in wall-clock time.
 
-With ``--motor PORT --imu PORT`` the same firmware runs in serial mode (host_tools/serial_run.py):
+With ``--motor PORT --imu PORT`` the same firmware runs in serial mode (host_tools/serial_mode/serial_run.py):
 ports not bound to ``sim://`` are opened with pyserial and the RTOS runs on the wall clock.
 """
 
@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
                         help=f"the control law: {CONTROLLERS.spoken()} (shipped), or a class in a Python file "
-                             "(README: 'Your own controller'); default: the profile's [controller], else cascade")
+                             "(docs/controllers.md); default: the profile's [controller], else cascade")
     parser.add_argument("--experiment", choices=("sysid",), default=None,
                         help="run the identification experiment (the shipped controller sysid, its [controller] "
                              "parameters from the profile when it names sysid) for its whole length instead of "
@@ -227,7 +227,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     """The virtual run proper, streaming into run_dir, which is published at the end."""
     from dataclasses import replace
 
-    from host_tools.report import readings_text, run_into, tracking_text
+    from host_tools.reports.report import readings_text, run_into, tracking_text
     from host_tools.stop_signals import StopSignals
 
     fw_cfg = cfg.firmware
@@ -329,8 +329,8 @@ def _remove_partial(path: Path, size: int) -> None:
 def _run_serial(args: argparse.Namespace) -> int:
     """Serial mode: check the ports, run on the wall clock, stop safely, write the same outputs (exit codes:
     docs/hardware.md)."""
-    from host_tools.realtime import RealtimeSettings
-    from host_tools.serial_run import SerialRunConfig, StartupError, run_serial
+    from host_tools.serial_mode.realtime import RealtimeSettings
+    from host_tools.serial_mode.serial_run import SerialRunConfig, StartupError, run_serial
     from host_tools.stop_signals import StopSignals
 
     if not (args.motor and args.imu):
@@ -361,7 +361,7 @@ def _run_serial(args: argparse.Namespace) -> int:
                               realtime=RealtimeSettings.none() if args.no_realtime else RealtimeSettings(),
                               ground=args.ground)
         if args.telemetry == "pty":
-            from host_tools.telemetry_pty import TelemetryPty
+            from host_tools.serial_mode.telemetry_pty import TelemetryPty
 
             telemetry_pty = TelemetryPty()
             cfg.telemetry = telemetry_pty.url
@@ -382,8 +382,8 @@ def _run_serial(args: argparse.Namespace) -> int:
             print(f"pafp run: {e}", file=sys.stderr)
             return signals.exit_code or 2
         bar.done()
-        from host_tools.report import write_outputs  # matplotlib: imported after the run, not before it
-        from host_tools.serial_report import serial_extra
+        from host_tools.reports.report import write_outputs  # matplotlib: imported after the run, not before it
+        from host_tools.serial_mode.serial_report import serial_extra
 
         extra, md = serial_extra(result)
         try:  # telemetry.bin is rewritten from memory: a capture that failed mid-run is complete if this works
@@ -400,7 +400,7 @@ def _run_serial(args: argparse.Namespace) -> int:
         print(write_failed("run", result.record_error, f"the motor was stopped first; record.bin was removed, the "
                            f"other files in {out} are complete"), file=sys.stderr)
         return EXIT_WRITE_FAILED
-    from host_tools.report import tracking_text
+    from host_tools.reports.report import tracking_text
 
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
     print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it tracking in RUN; "

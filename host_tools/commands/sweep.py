@@ -27,11 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _one_point(spec: object, index: int, out: Path) -> int:
     """Point `index` alone, with the full outputs of `pafp run` staged and published into `out` as `pafp run`
-    does (host_tools/report.py: run_into): --out checked before the run, a failing write exits 74."""
+    does (host_tools/reports/report.py: run_into): --out checked before the run, a failing write exits 74."""
     from host_tools.outdir import EXIT_WRITE_FAILED, RunDir, write_failed
-    from host_tools.report import run_into
-    from host_tools.sweep_engine import tasks_of
-    from host_tools.sweep_point import run_config_of
+    from host_tools.reports.report import run_into
+    from host_tools.studies.sweep_engine import tasks_of
+    from host_tools.studies.sweep_point import run_config_of
 
     tasks = tasks_of(spec)  # type: ignore[arg-type]
     if not 0 <= index < len(tasks):
@@ -62,12 +62,12 @@ def run(args: argparse.Namespace) -> int:
     sweep (the journal keeps every row written before); 128 + N after signal N (the report says how far the
     sweep got; --resume finishes it).
     """
-    from host_tools.interrupt import Interrupted, interrupting
     from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
-    from host_tools.sweep_engine import check_points, check_scheduler, dask_client, run_sweep
-    from host_tools.sweep_report import write_report
-    from host_tools.sweep_spec import load_spec
-    from host_tools.sweep_table import check_out, read_rows
+    from host_tools.studies.interrupt import Interrupted, interrupting
+    from host_tools.studies.sweep_engine import check_points, check_scheduler, dask_client, run_sweep
+    from host_tools.studies.sweep_report import write_report
+    from host_tools.studies.sweep_spec import load_spec
+    from host_tools.studies.sweep_table import check_out, read_rows
 
     try:
         if args.workers is not None and not 1 <= args.workers <= 1024:
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 def _interrupted(spec: object, out: Path, rows: list, stop: object, where: str) -> int:
     """After a stop signal: the report of the rows finished so far, marked interrupted; exit 128 + N."""
     from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
-    from host_tools.sweep_report import write_report
+    from host_tools.studies.sweep_report import write_report
 
     n = spec.n_points  # type: ignore[attr-defined]
     print(f"pafp sweep: stopped by {stop.signal}: {len(rows)} of {n} points finished, kept in "  # type: ignore[attr-defined]

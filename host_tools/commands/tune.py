@@ -66,10 +66,10 @@ def run(args: argparse.Namespace) -> int:
     write that fails is one line, exit 74 (files are written whole or not at all).
     """
     from firmware.config import DEFAULT_PROFILE, load_firmware_config
-    from host_tools import tuning
-    from host_tools.interrupt import Interrupted, interrupting
     from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
-    from host_tools.sweep_engine import Progress, dask_client
+    from host_tools.studies import tuning
+    from host_tools.studies.interrupt import Interrupted, interrupting
+    from host_tools.studies.sweep_engine import Progress, dask_client
 
     source = args.profile or DEFAULT_PROFILE
     try:
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
         if args.scheduler is not None:
-            from host_tools.sweep_engine import check_scheduler
+            from host_tools.studies.sweep_engine import check_scheduler
 
             check_scheduler(args.scheduler)
         tuning.check_budget(args.budget)
@@ -108,10 +108,10 @@ def run(args: argparse.Namespace) -> int:
 def _write(args: argparse.Namespace, source: Path, base: object, result: object, where: str) -> int:
     """Write the tuned profile, tune.json and (a finished search) tune.png; print the figures; the exit code."""
     from firmware.config import load_firmware_config
-    from host_tools import tuning
     from host_tools.benchtests.tracking import run_case
     from host_tools.outdir import write_atomic
     from host_tools.stop_signals import EXIT_CODES
+    from host_tools.studies import tuning
 
     assert isinstance(result, tuning.TuneResult)
     out: Path = args.out

@@ -14,9 +14,9 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from host_tools.commands.faults import columns
-from host_tools.fault_point import fault_error_row, run_fault_point
-from host_tools.fault_spec import load_fault_spec
-from host_tools.sweep_engine import dask_client, run_tasks
+from host_tools.studies.fault_point import fault_error_row, run_fault_point
+from host_tools.studies.fault_spec import load_fault_spec
+from host_tools.studies.sweep_engine import dask_client, run_tasks
 
 DEFAULT = Path(__file__).resolve().parents[2] / "profiles" / "faults" / "default.toml"
 GOAL_S = 15 * 60

@@ -20,9 +20,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from host_tools.realtime import RealtimeSettings
-from host_tools.serial_report import serial_extra
-from host_tools.serial_run import SerialRunConfig, run_serial
+from host_tools.serial_mode.realtime import RealtimeSettings
+from host_tools.serial_mode.serial_report import serial_extra
+from host_tools.serial_mode.serial_run import SerialRunConfig, run_serial
 
 ROOT = Path(__file__).resolve().parents[2]
 DURATION_S = 3.0

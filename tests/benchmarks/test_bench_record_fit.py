@@ -20,13 +20,13 @@ import time
 import warnings
 from pathlib import Path
 
+from host_tools.calibration.plant_fit import fit_plant, load_base, load_experiment
+from host_tools.calibration.replay_run import replay_record
 from host_tools.cli import main
-from host_tools.plant_fit import fit_plant, load_base, load_experiment
-from host_tools.realtime import RealtimeSettings
 from host_tools.recording import RECORD_NAME
-from host_tools.replay_run import replay_record
-from host_tools.serial_report import serial_extra
-from host_tools.serial_run import SerialRunConfig, run_serial
+from host_tools.serial_mode.realtime import RealtimeSettings
+from host_tools.serial_mode.serial_report import serial_extra
+from host_tools.serial_mode.serial_run import SerialRunConfig, run_serial
 
 REPLAY_GOAL = 20.0
 FIT_GOAL_S = 60.0

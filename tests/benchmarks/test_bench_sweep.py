@@ -16,9 +16,9 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from host_tools.sweep_engine import check_points, dask_client, run_sweep
-from host_tools.sweep_spec import load_spec
-from host_tools.sweep_table import TIMING_COLUMNS
+from host_tools.studies.sweep_engine import check_points, dask_client, run_sweep
+from host_tools.studies.sweep_spec import load_spec
+from host_tools.studies.sweep_table import TIMING_COLUMNS
 
 SWEEPS = Path(__file__).resolve().parents[2] / "profiles" / "sweeps"
 SEEDS_SPEC = """

@@ -5,8 +5,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from host_tools.serial_report import serial_extra
-from host_tools.serial_run import SerialRunConfig, run_serial
+from host_tools.serial_mode.serial_report import serial_extra
+from host_tools.serial_mode.serial_run import SerialRunConfig, run_serial
 
 DURATION_S = 10.0
 
@@ -56,7 +56,7 @@ def test_serial_against_emulator_tracks_like_virtual(benchmark, tmp_path: Path) 
     import sys
 
     from host_tools.cli import main
-    from host_tools.report import summarise
+    from host_tools.reports.report import summarise
     from host_tools.runner import RunConfig, run_virtual
 
     root = Path(__file__).resolve().parents[2]

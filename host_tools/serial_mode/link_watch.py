@@ -18,7 +18,7 @@ from hal.errors import HalError
 from host_tools.wire_capture import WireCapture
 
 if TYPE_CHECKING:
-    from host_tools.serial_run import SerialRunConfig
+    from host_tools.serial_mode.serial_run import SerialRunConfig
 
 __all__ = ["RECONNECT_EVERY_S", "STOP_AFTER_LOSS_S", "LinkEvent", "LinkWatch"]
 

@@ -38,7 +38,7 @@ from typing import Any
 from firmware.config import DEFAULT_PROFILE
 from firmware.drivers.motor_links import MOTOR_LINKS
 from hal.virtual.faults import INJECTORS, injector_class, make_injector
-from host_tools.sweep_spec import SpecError
+from host_tools.studies.sweep_spec import SpecError
 from profiles import profile_path
 
 __all__ = ["DEFAULT_CRITERIA", "FaultPoint", "FaultSpec", "load_fault_spec"]

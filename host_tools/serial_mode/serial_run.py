@@ -41,14 +41,14 @@ from hal.serial.sim_port import WallDevices, parse_sim_url
 from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.null import NullDigitalIn, NullDigitalOut, NullUart
 from hal.virtual.timer import VirtualEncoderTimer
-from host_tools.host_watchdog import HostWatchdog, WatchdogRecord, arm_watchdog
-from host_tools.jitter import TaskTimings, instrument
-from host_tools.link_watch import LinkEvent, LinkWatch
-from host_tools.realtime import RealtimeSection, RealtimeSettings
 from host_tools.recording import RunRecording
 from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health, reference_record
-from host_tools.serial_checks import EXPECTED, StartupError, check_imu, check_motor
-from host_tools.serial_io import CaptureUart
+from host_tools.serial_mode.host_watchdog import HostWatchdog, WatchdogRecord, arm_watchdog
+from host_tools.serial_mode.jitter import TaskTimings, instrument
+from host_tools.serial_mode.link_watch import LinkEvent, LinkWatch
+from host_tools.serial_mode.realtime import RealtimeSection, RealtimeSettings
+from host_tools.serial_mode.serial_checks import EXPECTED, StartupError, check_imu, check_motor
+from host_tools.serial_mode.serial_io import CaptureUart
 from host_tools.stop_signals import StopSignals
 from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog

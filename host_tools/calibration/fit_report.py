@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from hal.virtual.plant import PlantParams
+from host_tools.calibration.plant_fit import PARAMS, Experiment, FitResult, fit_percentage, plant_with, simulate
 from host_tools.outdir import write_atomic
-from host_tools.plant_fit import PARAMS, Experiment, FitResult, fit_percentage, plant_with, simulate
 
 __all__ = ["figure", "fit_json", "validate", "write_fit_outputs"]
 

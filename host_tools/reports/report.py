@@ -18,13 +18,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from host_tools.build_info import describe
-from host_tools.gait_latency import event_summary, gait_event_lines
-from host_tools.metrics import TrackingMetrics
 from host_tools.outdir import naming, write_atomic
-from host_tools.process_clock import process_elapsed_s
+from host_tools.reports.gait_latency import event_summary, gait_event_lines
+from host_tools.reports.metrics import TrackingMetrics
+from host_tools.reports.process_clock import process_elapsed_s
+from host_tools.reports.telemetry_csv import TelemetryCsv
+from host_tools.reports.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 from host_tools.runner import RunConfig, RunResult
-from host_tools.telemetry_csv import TelemetryCsv
-from host_tools.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 from protocol.telemetry import TelemetryDecoder
 
 if TYPE_CHECKING:
@@ -326,7 +326,7 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
             r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
     fw = r.firmware
     if plot:  # drawn on every path, also when no stride ran (a run stopped early still shows its currents)
-        from host_tools.plots import plot_tracking  # matplotlib: only when a plot is drawn
+        from host_tools.reports.plots import plot_tracking  # matplotlib: only when a plot is drawn
 
         ref = fw.reference
         pct = np.linspace(0, 100, 101)
@@ -341,7 +341,7 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
                       f"{_figure(s['imu_rms_error_deg'], 2, '°')}, by the encoder "
                       f"{_figure(s['encoder_rms_error_deg'], 2, '°')}")
     if getattr(r.config, "scenario", "suspended") == "walk":
-        from host_tools.actuator import walk_outputs
+        from host_tools.reports.actuator import walk_outputs
 
         s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a)
         md_extra = [*(md_extra or []), *walk_md]

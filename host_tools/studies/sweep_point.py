@@ -66,7 +66,7 @@ def firmware_config_of(profile_text: str, overrides: dict[str, Any], profile_nam
 def _firmware_config(profile_text: str, items: tuple[tuple[str, Any], ...], profile_name: str) -> Any:
     overrides = dict(items)
     from firmware.config import load_firmware_config
-    from host_tools.sweep_spec import set_profile_key
+    from host_tools.studies.sweep_spec import set_profile_key
 
     doc = tomllib.loads(profile_text)
     if not overrides:
@@ -144,7 +144,7 @@ def _float(value: float | None) -> float:
 def warm_up() -> str:
     """Import what a point needs (run once on every worker before the first point); returns the build."""
     from host_tools.build_info import describe
-    from host_tools.report import summarise  # noqa: F401
+    from host_tools.reports.report import summarise  # noqa: F401
     from host_tools.runner import run_virtual  # noqa: F401
 
     return describe()
@@ -153,7 +153,7 @@ def warm_up() -> str:
 def run_point(task: PointTask, plant_options: Callable[[int], dict[str, Any]] = plant_seed_run_options
               ) -> dict[str, Any]:
     """Run one point on the virtual bench and return its row; an exception or a timeout becomes the row's error."""
-    from host_tools.report import summarise
+    from host_tools.reports.report import summarise
     from host_tools.runner import run_virtual
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)  # a fault is in the row, not on the console

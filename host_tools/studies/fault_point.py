@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from host_tools.fault_spec import FaultPoint
+from host_tools.studies.fault_spec import FaultPoint
 
 __all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "fault_free_arrays", "faulted_run", "figures", "onset_of",
            "point_run_config", "run_fault_point"]
@@ -58,7 +58,7 @@ def fault_error_row(p: FaultPoint, status: str, error: str, wall_time_s: float =
 
 
 def _firmware(p: FaultPoint) -> Any:
-    from host_tools.sweep_point import firmware_config_of
+    from host_tools.studies.sweep_point import firmware_config_of
 
     fw = firmware_config_of(p.profile_text, {}, p.profile_name)
     changes: dict[str, Any] = {}
@@ -165,7 +165,7 @@ def fault_free_arrays(p: FaultPoint) -> dict[str, np.ndarray]:
 
 def run_fault_point(p: FaultPoint) -> dict[str, Any]:
     """Run one point (its fault-free pair from the worker's cache) and return its row; failures are its error."""
-    from host_tools.sweep_point import _deadline, _PointTimeout  # the sweep's per-point wall-time limit
+    from host_tools.studies.sweep_point import _deadline, _PointTimeout  # the sweep's per-point wall-time limit
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)
     t0 = time.perf_counter()

@@ -3,7 +3,7 @@
 :func:`host_tools.runner.run_virtual` runs the scheduler in segments of simulated time and, after each,
 hands what the segment produced to a :class:`RunFiles`: the telemetry UART's bytes are appended to
 ``telemetry.bin`` and decoded into ``telemetry.csv`` (its decoder's counters go to the summary), and the
-bench probe's samples feed a :class:`~host_tools.tracking_stream.TrackingStream` (the tracking figures).
+bench probe's samples feed a :class:`~host_tools.reports.tracking_stream.TrackingStream` (the tracking figures).
 The trace is not streamed: it is a ring buffer of the last jobs (``RunConfig.trace_capacity``), written at
 the end.
 """
@@ -19,8 +19,8 @@ from firmware.app import Firmware
 from hal.virtual.bench import VirtualBench
 from host_tools.outdir import naming
 from host_tools.probe import Probe
-from host_tools.telemetry_csv import TelemetryCsv
-from host_tools.tracking_stream import TrackingResult, TrackingStream, feed_probe
+from host_tools.reports.telemetry_csv import TelemetryCsv
+from host_tools.reports.tracking_stream import TrackingResult, TrackingStream, feed_probe
 from protocol.telemetry import TelemetryDecoder
 
 __all__ = ["RunFiles", "take_samples"]

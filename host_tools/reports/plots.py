@@ -11,8 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from host_tools.metrics import StrideSet  # noqa: E402
 from host_tools.outdir import save_figure  # noqa: E402
+from host_tools.reports.metrics import StrideSet  # noqa: E402
 
 __all__ = ["plot_tracking"]
 
@@ -23,7 +23,7 @@ def plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndar
     """Angle vs % gait (each stride and their mean per signal, the normative mean +- 1 SD); current and the
     tracking errors (reference minus each signal, NaN outside RUN) vs time.
 
-    The time series of a long run come as each group's minimum and maximum (host_tools/tracking_stream.py):
+    The time series of a long run come as each group's minimum and maximum (host_tools/reports/tracking_stream.py):
     a line zigzagging over the whole height, which Agg rasterises with a cell per pixel crossed unless the
     path is drawn in chunks (1000 vertices: 40,000 points took 140 MB and 2.8 s in one piece, 16 MB and 0.7 s).
     """

@@ -10,7 +10,7 @@ over BOUNDS, population POPULATION, seeded with numpy.random.default_rng(seed); 
 the starting gains plus POPULATION - 1 log-normal perturbations (SIGMA0 in log space); each generation's
 candidates are evaluated through its map-like `workers` on Dask (`_DaskMap`) and ranked by (score, index),
 so the result is the same for a seed whatever the number of workers or their completion order.
-A stop signal (host_tools/interrupt.py: Interrupted) ends the search where it is: the result holds every
+A stop signal (host_tools/studies/interrupt.py: Interrupted) ends the search where it is: the result holds every
 candidate finished so far, its best one, and ``interrupted`` names the signal.
 """
 
@@ -28,10 +28,10 @@ from scipy.optimize import differential_evolution
 
 from firmware.config import FirmwareConfig
 from firmware.control.pid import PidGains
-from host_tools.interrupt import Interrupted
 from host_tools.outdir import naming, write_atomic
-from host_tools.report import summarise
+from host_tools.reports.report import summarise
 from host_tools.runner import RunConfig, run_virtual
+from host_tools.studies.interrupt import Interrupted
 
 logger = logging.getLogger(__name__)
 
@@ -120,7 +120,7 @@ def evaluate(index: int, base: FirmwareConfig, gains: Candidate, strides: int, s
     rms_i = float(np.sqrt(np.mean(i**2)))
     rms_di = float(np.sqrt(np.mean(np.diff(i) ** 2)))
     sat = float(np.mean(np.abs(i) >= SATURATION_LEVEL * cfg.current_limit_a))
-    # None: less than one stride in RUN (host_tools.metrics), scored as not stable below
+    # None: less than one stride in RUN (host_tools.reports.metrics), scored as not stable below
     truth = s["tracking"]["truth"]  # the tuner scores the plant (emulation only)
     rms, mx = (math.nan if truth[k] is None else float(truth[k]) for k in ("rms_deg", "max_deg"))
     reasons = []

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from host_tools.outdir import naming, save_figure, write_atomic
-from host_tools.sweep_spec import SweepSpec
+from host_tools.studies.sweep_spec import SweepSpec
 
 __all__ = ["PLOTTED", "rerun_command", "write_report"]
 

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from hal.virtual.faults import INJECTORS, injector_class
-from host_tools.fault_spec import FaultSpec
 from host_tools.outdir import write_atomic
+from host_tools.studies.fault_spec import FaultSpec
 
 __all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "load_criteria", "rerun_command",
            "write_fault_report"]
@@ -209,7 +209,7 @@ def _trace(path: Path, spec: FaultSpec, index: int) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from host_tools.fault_point import fault_free_arrays, faulted_run
+    from host_tools.studies.fault_point import fault_free_arrays, faulted_run
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)  # the trip is in the plot, not on the console
     p = spec.points()[index]

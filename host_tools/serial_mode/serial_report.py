@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict
 
-from host_tools.serial_run import SerialRunResult
+from host_tools.serial_mode.serial_run import SerialRunResult
 
 __all__ = ["CONTROL_TASKS", "serial_extra"]
 

@@ -3,7 +3,7 @@
 `dask_client(workers=N)` starts a LocalCluster of N single-threaded worker processes listening on
 127.0.0.1 only (no dashboard); `dask_client(scheduler="tcp://HOST:PORT")` connects to a running cluster
 (`dask scheduler` + `dask worker`, or dask-jobqueue). `run_sweep` submits every point not yet finished,
-records each row as it completes (host_tools/sweep_table.py) and returns the rows sorted by point, so the
+records each row as it completes (host_tools/studies/sweep_table.py) and returns the rows sorted by point, so the
 table is the same whatever the number of workers or the order in which they finish.
 """
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from host_tools.sweep_point import (
+from host_tools.studies.sweep_point import (
     FIGURES,
     PointTask,
     error_row,
@@ -31,8 +31,8 @@ from host_tools.sweep_point import (
     run_point,
     warm_up,
 )
-from host_tools.sweep_spec import SpecError, SweepSpec
-from host_tools.sweep_table import ResultsTable
+from host_tools.studies.sweep_spec import SpecError, SweepSpec
+from host_tools.studies.sweep_table import ResultsTable
 
 __all__ = ["Progress", "SweepOutcome", "check_points", "check_scheduler", "columns_of", "dask_client", "run_sweep",
            "run_tasks", "tasks_of"]
@@ -97,7 +97,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, proces
 
 TERMINAL_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGHUP") if hasattr(signal, n))
 """What a terminal sends its whole process group (Ctrl-C, a closed terminal): the worker processes ignore them
-and are stopped by the command's own clean-up (host_tools/interrupt.py closes the cluster)."""
+and are stopped by the command's own clean-up (host_tools/studies/interrupt.py closes the cluster)."""
 
 
 @contextmanager
@@ -218,7 +218,7 @@ def run_tasks(tasks: list[Any], run: Callable[[Any], dict[str, Any]], out: Path,
               resume: bool = False, progress: bool = True, stream: TextIO | None = None,
               ok: Callable[[dict[str, Any]], bool] = lambda row: row["status"] == "ok") -> SweepOutcome:
     """Run `run(task)` for every task (each with an ``index``) not already finished in `out` on the Dask `client`,
-    journalling each row as it comes (host_tools/sweep_table.py); a lost worker is that task's ``error_row``."""
+    journalling each row as it comes (host_tools/studies/sweep_table.py); a lost worker is that task's ``error_row``."""
     from dask.distributed import as_completed
 
     try:  # every worker imports pafp now: a worker without it fails here, not once per point

@@ -2,10 +2,10 @@
 
 A long run's samples never sit in memory together: :class:`TrackingStream` keeps, for each signal (the IMU
 pitch, the encoder angle, the fused estimate, the probe's true angle), running sums for the RMS, maximum
-and lag of :func:`host_tools.metrics.signal_figures` (the lag's cost for each shift is summed chunk by chunk,
+and lag of :func:`host_tools.reports.metrics.signal_figures` (the lag's cost for each shift is summed chunk by chunk,
 holding back the last ``max_lag_s`` of samples until the reference after them is known). Only samples of
 the run window count: the whole strides from the gait's start with the supervisor in RUN
-(:func:`host_tools.metrics.run_window`), and for each signal only its finite samples (an IMU before its
+(:func:`host_tools.reports.metrics.run_window`), and for each signal only its finite samples (an IMU before its
 first frame is NaN). It cuts each whole stride of the chosen signals on the % gait grid as soon as it is
 complete, and keeps at most about ``plot_points`` samples of the time series for the plot (beyond that,
 the minimum and maximum of each group of samples). Fed everything in one chunk it gives the figures of
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from host_tools.metrics import MIN_RUN_STRIDES, StrideSet, TrackingMetrics
+from host_tools.reports.metrics import MIN_RUN_STRIDES, StrideSet, TrackingMetrics
 
 __all__ = ["PLOT_STRIDES", "TRACKING_SIGNALS", "PlotSeries", "TrackingResult", "TrackingStream", "feed_probe",
            "probe_stream"]
