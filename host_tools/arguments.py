@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 from firmware.control.validation import interval
 
-__all__ = ["float_in", "int_in", "seed"]
+__all__ = ["add_study_options", "float_in", "int_in", "seed"]
 
 
 def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
@@ -65,3 +65,19 @@ def float_in(lo: float, hi: float = math.inf, *, lo_open: bool = False, hi_open:
 
 seed = int_in(0)
 """A seed: numpy's SeedSequence takes any integer >= 0."""
+
+
+def add_study_options(parser: argparse.ArgumentParser, what: str) -> None:
+    """The options of a study on the sweep engine (`pafp sweep`, `pafp faults`): --out (default runs/WHAT-<spec
+    name>), --workers or --scheduler, --resume and --point."""
+    from pathlib import Path
+
+    parser.add_argument("--out", type=Path, default=None, help=f"output directory (default runs/{what}-<spec name>)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None,
+                       help="worker processes of a LocalCluster on 127.0.0.1 (default: the number of cores)")
+    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
+    parser.add_argument("--resume", action="store_true", help="keep the finished rows in --out and run the rest")
+    parser.add_argument("--point", type=int, default=None, metavar="N",
+                        help="run only point N here with the full outputs of `pafp run` (tracking.png, ...)")

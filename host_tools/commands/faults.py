@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from host_tools.arguments import add_study_options
+
 HELP = ("run a fault-injection campaign (faults x onsets x durations x scenarios x controllers x links) on Dask: "
         "results.parquet and a hazard table; exit 1 when a criterion is not met")
 
@@ -15,15 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp faults`."""
     parser.add_argument("spec", type=Path, help="campaign spec TOML (docs/safety.md), e.g. "
                         "profiles/faults/default.toml")
-    parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/faults-<spec name>)")
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None,
-                       help="worker processes of a LocalCluster on 127.0.0.1 (default: the number of cores)")
-    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
-    parser.add_argument("--resume", action="store_true", help="keep the finished rows in --out and run the rest")
-    parser.add_argument("--point", type=int, default=None, metavar="N",
-                        help="run only point N here with the full outputs of `pafp run` (tracking.png, ...)")
+    add_study_options(parser, "faults")
     parser.add_argument("--no-traces", action="store_true", help="leave the worst points' traces out of report.md")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 

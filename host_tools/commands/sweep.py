@@ -7,21 +7,15 @@ import os
 import sys
 from pathlib import Path
 
+from host_tools.arguments import add_study_options
+
 HELP = "sweep a spec's grid / Monte Carlo points on Dask (local or a cluster): results.parquet/.csv and a report"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp sweep`."""
     parser.add_argument("spec", type=Path, help="sweep spec TOML (docs/sweeps.md)")
-    parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/sweep-<spec name>)")
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None,
-                       help="worker processes of a LocalCluster on 127.0.0.1 (default: the number of cores)")
-    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
-    parser.add_argument("--resume", action="store_true", help="keep the finished rows in --out and run the rest")
-    parser.add_argument("--point", type=int, default=None, metavar="N",
-                        help="run only point N here with the full outputs of `pafp run` (tracking.png, ...)")
+    add_study_options(parser, "sweep")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
