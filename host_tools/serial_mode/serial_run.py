@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import sys
 import time
-import traceback
 from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass, field
@@ -30,7 +29,7 @@ from pathlib import Path
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
 from firmware.control.reference import GaitReference
-from firmware.drivers.motor import MotorFeedback, SafeStop
+from firmware.drivers.motor import MotorFeedback
 from hal.binding import open_uart
 from hal.can import CanPort
 from hal.errors import HalError
@@ -49,6 +48,7 @@ from host_tools.serial_mode.link_watch import LinkEvent, LinkWatch
 from host_tools.serial_mode.realtime import RealtimeSection, RealtimeSettings
 from host_tools.serial_mode.serial_checks import EXPECTED, StartupError, check_imu, check_motor
 from host_tools.serial_mode.serial_io import CaptureUart
+from host_tools.serial_mode.stop_record import StopRecord, stop_record
 from host_tools.stop_signals import StopSignals
 from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
@@ -168,33 +168,6 @@ class HostWarnings:
             self.first_watchdog_s = t
         log.warning("watchdog expired at %.4f s: the host stalled the loop %.0f ms (a warning on the wall clock)",
                     t, WATCHDOG_TIMEOUT_S * 1e3)
-
-
-@dataclass
-class StopRecord:
-    """Why and when the run ended, and what the stop path put on the motor's wire."""
-
-    reason: str  # duration | signal | link_lost | exception | watchdog
-    at_s: float  # run time at which the stop began (signal: its arrival)
-    signal: str | None = None
-    task: str | None = None
-    error: str | None = None
-    traceback: str | None = None
-    safe: SafeStop | None = None
-    latency_ms: float | None = None  # from the stop's start (the signal) to the safe frames out of the port
-    goal_ms: float | None = None  # one control period plus the frames' wire time
-
-    def as_dict(self) -> dict:
-        """For summary.json: the safe frames decoded, whether they left the port, the latency."""
-        safe = self.safe
-        frames = list(safe.names) if safe is not None else []
-        return {"reason": self.reason, "at_s": round(self.at_s, 6), "signal": self.signal, "task": self.task,
-                "error": self.error, "safe_frames": frames,
-                "safe_bytes": len(safe.frames) if safe is not None else 0,
-                "safe_bytes_written": safe.written if safe is not None else 0,
-                "safe_on_wire": safe.on_wire if safe is not None else False,
-                "safe_error": (safe.error or None) if safe is not None else None,
-                "latency_ms": self.latency_ms, "goal_ms": self.goal_ms}
 
 
 @dataclass
@@ -470,7 +443,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         assert isinstance(watch, WatchdogRecord)
         if watch.fired_at_s is not None:
             fw.on_watchdog_reset(sched.now)  # the IWDG's job done from outside: the safe state latched
-        stop = _stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s, watch)
+        stop = stop_record(signals, error, failed_task, link, run_s, wall0_ns, cfg.duration_s, watch)
         if recording is not None:
             recording.stop_section(sched.now)
         stop.safe = fw.stop(run_s, STOP_DRAIN_TIMEOUT_S)  # the stop path: on the wire before any port closes
@@ -523,23 +496,3 @@ def _follow_gait(ports: _Ports, fw: Firmware, now_s: Callable[[], float], stride
         follow = getattr(getattr(uart, "serial", None), "follow_gait", None)
         if follow is not None:
             follow(gait_time_s, stride_s)
-
-
-def _stop_record(signals: StopSignals, error: BaseException | None, task: str | None, link: LinkWatch,
-                 run_s: float, wall0_ns: int, duration_s: float, watch: WatchdogRecord) -> StopRecord:
-    """Why the loop ended: a signal, a task's exception, the host watchdog, a lost link, or the duration."""
-    if signals.name is not None:
-        at = (signals.at_ns - wall0_ns) / 1e9 if signals.at_ns is not None else run_s
-        return StopRecord("signal", max(0.0, at), signal=signals.name)
-    if error is not None:
-        where = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
-        text = f"{type(error).__name__}: {error}" + (f" ({where.filename}:{where.lineno})" if where else "")
-        return StopRecord("exception", run_s, task=task, error=text,
-                          traceback="".join(traceback.format_exception(error)))
-    if watch.fired_at_s is not None and watch.silent_ms is not None:
-        return StopRecord("watchdog", max(0.0, watch.fired_at_s - watch.silent_ms / 1e3), task=watch.task,
-                          error=f"the loop did not kick the host watchdog for {watch.silent_ms} ms "
-                                f"(limit {watch.timeout_ms} ms)")
-    if link.stop_at is not None:
-        return StopRecord("link_lost", run_s)
-    return StopRecord("duration", min(run_s, duration_s))
