@@ -85,6 +85,7 @@ COMPILED = [
     "protocol/cobs.py",
     "protocol/telemetry_frame.py",
     "host_tools/probe.py",
+    "hal/record/recorder.py",
 ]
 
 

@@ -19,7 +19,7 @@ from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.safety import SafetyLimits
 from hal.interfaces import Board
-from hal.record.recorder import Recorder
+from hal.record.recorder import Recorder, SectionedBody
 from host_tools.build_info import describe, version
 from rtos import Job, Task
 
@@ -78,13 +78,7 @@ class RunRecording:
 
     def _wrap(self, task_id: int, body: Callable[[Job], object] | None) -> Callable[[Job], object]:
         assert body is not None
-        job_section = self.recorder.job
-
-        def recorded(job: Job) -> object:
-            job_section(task_id, job.start, job.index)
-            return body(job)
-
-        return recorded
+        return SectionedBody(self.recorder, task_id, body)
 
     def health(self, kernel_health: Callable[[], tuple[int, int]]) -> Callable[[], tuple[int, int]]:
         """The kernel's deadline health as the firmware reads it, recorded."""
