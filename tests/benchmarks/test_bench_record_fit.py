@@ -6,8 +6,11 @@
   Goal >= 20 on the wall clock. Also the record's size (``record_mb``).
 - ``fit``: `fit_plant` on the same recording (10 parameters, least squares), best of two. Goal < 60 s.
 - ``record overhead``: serial mode on in-process sim:// devices, 3 s runs with and without the record,
-  interleaved (with, without, with, ...) five times each: the median of each side's control release jitter
-  p99. Goal: with the record within 10 % of without (a 5 us floor: the jitter's histogram has 1 us bins).
+  interleaved eight times each, the order alternating in each pair (with, without; without, with; ...) so a
+  change of the host's load falls on both sides: the median of each side's control release jitter p99, and
+  the host time per control tick (the tasks' mean execution, what the record adds to each tick), with the
+  load average. Goal: with the record within 10 % of without (a 5 us floor: the jitter's histogram has 1 us
+  bins).
 
 Goals are recorded in ``extra_info`` and warned about, not asserted (the figures depend on the machine).
 """
@@ -75,25 +78,34 @@ def test_replay_and_fit(benchmark, tmp_path: Path) -> None:  # type: ignore[no-u
 
 
 def test_record_overhead_on_serial_jitter(benchmark, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    def p99(record: bool, k: int) -> float:
+    def run(record: bool, k: int) -> tuple[float, float]:
         out = tmp_path / f"{'rec' if record else 'plain'}-{k}"
         r = run_serial(SerialRunConfig("sim://ak60-6", "sim://bno08x", encoder="sim", duration_s=3.0,
                                        trace_capacity=0, record=record, realtime=RealtimeSettings()), out)
         assert (out / RECORD_NAME).exists() == record
-        return float(serial_extra(r)[0]["realtime"]["release_jitter_us"]["p99_us"])
+        rt = serial_extra(r)[0]["realtime"]
+        return float(rt["release_jitter_us"]["p99_us"]), float(rt["host_time_per_tick_us"])
 
     def measure() -> dict:
-        sides: dict[bool, list[float]] = {True: [], False: []}
-        for k in range(5):
-            for record in (True, False):
-                sides[record].append(p99(record, k))
-        return {"p99_with_record_us": statistics.median(sides[True]),
-                "p99_without_us": statistics.median(sides[False]), "runs": {str(k): v for k, v in sides.items()}}
+        sides: dict[bool, list[tuple[float, float]]] = {True: [], False: []}
+        loads = [os.getloadavg()[0]]
+        for k in range(8):
+            for record in ((True, False) if k % 2 == 0 else (False, True)):
+                sides[record].append(run(record, k))
+            loads.append(os.getloadavg()[0])
+        return {"p99_with_record_us": statistics.median(p for p, _ in sides[True]),
+                "p99_without_us": statistics.median(p for p, _ in sides[False]),
+                "tick_with_record_us": round(statistics.median(t for _, t in sides[True]), 2),
+                "tick_without_us": round(statistics.median(t for _, t in sides[False]), 2),
+                "load_average_1min": round(statistics.median(loads), 2),
+                "runs": {str(k): [p for p, _ in v] for k, v in sides.items()}}
 
     figures = benchmark.pedantic(measure, rounds=1, iterations=1)
     with_, without = figures["p99_with_record_us"], figures["p99_without_us"]
     figures["goal_met"] = with_ <= max(without * (1 + JITTER_GOAL), without + 5.0)
     benchmark.extra_info.update(figures)
-    print(f"\nserial control release jitter p99: {with_} us with the record, {without} us without")
+    print(f"\nserial control release jitter p99: {with_} us with the record, {without} us without; host time per "
+          f"control tick {figures['tick_with_record_us']} us vs {figures['tick_without_us']} us (load average "
+          f"{figures['load_average_1min']})")
     if not figures["goal_met"]:
         warnings.warn(f"record overhead: p99 {with_} us vs {without} us", stacklevel=1)
