@@ -86,6 +86,7 @@ COMPILED = [
     "protocol/telemetry_frame.py",
     "host_tools/probe.py",
     "hal/record/recorder.py",
+    "hal/record/replay.py",
 ]
 
 

@@ -6,45 +6,84 @@ replayed firmware takes the next recorded result of the same kind on the same po
 makes its calls in another order still gets the same bytes; a call beyond the record gets a neutral
 answer (no bytes, the last CNT) and is counted (``starved``). What the firmware writes is kept for the
 comparison (`ReplayBoard.finish`), never sent anywhere. The firmware does not know it is replayed.
+
+`replay_sections` is the replay loop: each section's job run at its recorded time, its outputs compared
+and added to each port's stream (`Stream`: counts and SHA-256 of the bytes recorded and replayed). The
+module is compiled (setup.py's COMPILED): the loop, the decoding and the calls the firmware makes are
+what a replay costs beyond the firmware's own work.
 """
 
 from __future__ import annotations
 
+import hashlib
 import struct
 from collections import deque
-from collections.abc import Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO, Final
 
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
 from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart, UartErrors, Watchdog
 from hal.record.format import FIXED, VARIABLE, Kind, RecordError, read_chunks, read_header
 from hal.record.recorder import PORTS
+from rtos.job import Job
 
-__all__ = ["OUTPUT_KINDS", "RecordReader", "ReplayBoard", "Section", "port_name"]
+__all__ = ["OUTPUT_KINDS", "RecordReader", "ReplayBoard", "Section", "Stream", "item_bytes", "port_name",
+           "replay_sections"]
 
-OUTPUT_KINDS = frozenset({Kind.WRITE, Kind.ENC_SET, Kind.LED, Kind.KICK, Kind.CAN_TX})
-_PORT_NAMES = {v: k for k, v in PORTS.items()}
-_OUTPUT_NAMES = {Kind.ENC_SET: "encoder", Kind.LED: "led", Kind.KICK: "watchdog", Kind.CAN_TX: "can"}
+OUTPUT_KINDS: Final = frozenset({Kind.WRITE, Kind.ENC_SET, Kind.LED, Kind.KICK, Kind.CAN_TX})
+_PORT_NAMES: Final = {v: k for k, v in PORTS.items()}
+_OUTPUT_NAMES: Final = {Kind.ENC_SET: "encoder", Kind.LED: "led", Kind.KICK: "watchdog", Kind.CAN_TX: "can"}
+_JOB: Final = Kind.JOB
+_READ: Final = Kind.READ
+_WRITE: Final = Kind.WRITE
+_RAISE: Final = Kind.RAISE
+_CAN_RX: Final = Kind.CAN_RX
+_CAN_TX: Final = Kind.CAN_TX
+_ERRORS: Final = Kind.ERRORS
+_HEALTH: Final = Kind.HEALTH
+_KICK: Final = Kind.KICK
+_CLOCK_KEY: Final = Kind.CLOCK << 2
+_HEALTH_KEY: Final = Kind.HEALTH << 2
+_ENC_CNT_KEY: Final = Kind.ENC_CNT << 2
+_ENC_DIR_KEY: Final = Kind.ENC_DIR << 2
+_ENC_SET_KEY: Final = Kind.ENC_SET << 2
+_ESTOP_KEY: Final = Kind.ESTOP << 2
+_LED_KEY: Final = Kind.LED << 2
+_KICK_KEY: Final = Kind.KICK << 2
+_FLUSH_BYTES: Final = 1 << 16  # a stream hashes its bytes once this many are pending (one update per ~64 KB)
 
 
 def port_name(key: int) -> str:
     """The name of an output key (``kind << 2 | port``): motor, imu, telemetry, can, encoder, led, watchdog."""
     kind, port = key >> 2, key & 3
-    return _PORT_NAMES[port] if kind == Kind.WRITE else _OUTPUT_NAMES.get(kind, f"kind{kind}")
+    return _PORT_NAMES[port] if kind == _WRITE else _OUTPUT_NAMES.get(kind, f"kind{kind}")
 
 
-@dataclass
+def item_bytes(key: int, item: Any) -> bytes:
+    """The bytes an output item stands for in its port's stream (a write: the bytes the port accepted)."""
+    kind = key >> 2
+    if kind == _WRITE:
+        accepted, data = item
+        return data if accepted == len(data) else data[:accepted]
+    if kind == _CAN_TX:
+        ok, frame = item
+        return bytes([ok, frame.extended]) + frame.arbitration_id.to_bytes(4, "little") + frame.data
+    return repr(item).encode()
+
+
 class Section:
     """One recorded job: its task, start and index, the results of its calls and what it sent."""
 
-    task_id: int
-    start: int
-    index: int
-    inputs: dict[int, deque] = field(default_factory=dict)
-    outputs: dict[int, list] = field(default_factory=dict)
+    def __init__(self, task_id: int, start: int, index: int, inputs: dict[int, deque] | None = None,
+                 outputs: dict[int, list] | None = None) -> None:
+        """A section with no call results yet (unless given)."""
+        self.task_id = task_id
+        self.start = start
+        self.index = index
+        self.inputs: dict[int, deque] = {} if inputs is None else inputs
+        self.outputs: dict[int, list] = {} if outputs is None else outputs
 
 
 class RecordReader:
@@ -58,7 +97,7 @@ class RecordReader:
         except OSError as e:
             raise RecordError(f"record {path}: cannot be read ({e.strerror})") from None
         try:
-            self.header = read_header(self._file, path)
+            self.header: dict = read_header(self._file, path)
         except BaseException:
             self._file.close()
             raise
@@ -82,9 +121,10 @@ class RecordReader:
         if section is not None:
             yield section
 
-    def _parse(self, offset: int, raw: bytes) -> Iterator[Section]:
+    def _parse(self, offset: int, raw: bytes) -> list[Section]:
         """The sections a chunk holds (a chunk starts with a job: the recorder cuts chunks there)."""
         pos, n = 0, len(raw)
+        out: list[Section] = []
         section: Section | None = None
         layouts = _LAYOUTS
         try:
@@ -98,74 +138,118 @@ class RecordReader:
                 kind, st, variable, output = layout
                 vals = st.unpack_from(raw, pos)
                 pos += st.size
+                data = b""
                 if variable:
+                    if pos + 2 > n:
+                        raise struct.error("short length")
                     length = raw[pos] | raw[pos + 1] << 8
                     pos += 2
                     if pos + length > n:
                         raise struct.error("short data")
                     data = raw[pos:pos + length]
                     pos += length
-                if kind == Kind.JOB:
-                    if section is not None:
-                        yield section
-                    section = Section(vals[0], vals[1], vals[2], {}, {})
+                if kind == _JOB:
+                    section = Section(vals[0], vals[1], vals[2])
+                    out.append(section)
                     continue
                 if section is None:
                     raise RecordError(f"record {self.path}: the chunk at byte offset {offset} does not start "
                                       "with a job")
                 key = tag
                 value: Any
-                if kind == Kind.READ:
+                if kind == _READ:
                     value = data
-                elif kind == Kind.WRITE:
+                elif kind == _WRITE:
                     value = (vals[0], data)
-                elif kind == Kind.RAISE:
+                elif kind == _RAISE:
                     key, value = vals[0] << 2 | tag & 3, HalError(data.decode("utf-8", "replace"))
-                elif kind == Kind.CAN_RX:
+                elif kind == _CAN_RX:
                     value = CanFrame(vals[1], data, bool(vals[0] & 2)) if vals[0] & 1 else None
-                elif kind == Kind.CAN_TX:
+                elif kind == _CAN_TX:
                     value = (vals[0], CanFrame(vals[2], data, bool(vals[1])))
-                elif kind == Kind.ERRORS or kind == Kind.HEALTH:
+                elif kind == _ERRORS or kind == _HEALTH:
                     value = vals
-                elif kind == Kind.KICK:
+                elif kind == _KICK:
                     value = None
                 else:
                     value = vals[0]
                 if output:
-                    out = section.outputs.get(key)
-                    if out is None:
-                        section.outputs[key] = [value]
+                    outs = section.outputs
+                    out_list = outs.get(key)
+                    if out_list is None:
+                        outs[key] = [value]
                     else:
-                        out.append(value)
+                        out_list.append(value)
                 else:
-                    q = section.inputs.get(key)
+                    ins = section.inputs
+                    q = ins.get(key)
                     if q is None:
-                        section.inputs[key] = deque((value,))
+                        ins[key] = deque((value,))
                     else:
                         q.append(value)
         except (struct.error, IndexError):
             raise RecordError(f"record {self.path}: the chunk at byte offset {offset} ends inside an event "
                               f"(event byte {pos})") from None
-        if section is not None:
-            yield section
+        return out
 
 
 # kind -> (kind, fixed part, followed by <H length + bytes, an output)
-_LAYOUTS = {**{k: (k, st, False, k in OUTPUT_KINDS) for k, st in FIXED.items()},
-            **{k: (k, st, True, k in OUTPUT_KINDS) for k, st in VARIABLE.items()}}
+_LAYOUTS: Final[dict[int, tuple[int, Any, bool, bool]]] = {
+    **{k: (k, st, False, k in OUTPUT_KINDS) for k, st in FIXED.items()},
+    **{k: (k, st, True, k in OUTPUT_KINDS) for k, st in VARIABLE.items()}}
+
+
+class Stream:
+    """The bytes one port carried, in the record and in the replay: counts and SHA-256 (hashed ~64 KB at a time).
+
+    `sink` (a binary file) receives the replayed bytes as they are hashed: the replay's telemetry.bin.
+    """
+
+    def __init__(self, sink: BinaryIO | None = None) -> None:
+        """Empty; `sink` gets the replayed bytes."""
+        self.expected_hash: Any = hashlib.sha256()
+        self.produced_hash: Any = hashlib.sha256()
+        self.expected = bytearray()
+        self.produced = bytearray()
+        self.expected_n = 0
+        self.produced_n = 0
+        self.sink = sink
+
+    def flush(self) -> None:
+        """Hash (and write to the sink) the pending bytes."""
+        if self.expected:
+            self.expected_hash.update(self.expected)
+            self.expected = bytearray()
+        if self.produced:
+            self.produced_hash.update(self.produced)
+            if self.sink is not None:
+                self.sink.write(self.produced)
+            self.produced = bytearray()
+
+    def as_dict(self) -> dict:
+        """Counts, digests and whether the replayed bytes are the recorded ones (flushes first)."""
+        self.flush()
+        same = self.expected_hash.digest() == self.produced_hash.digest() and self.expected_n == self.produced_n
+        return {"recorded_items": self.expected_n, "replayed_items": self.produced_n, "identical": same,
+                "recorded_sha256": self.expected_hash.hexdigest(), "replayed_sha256": self.produced_hash.hexdigest()}
 
 
 class ReplayBoard:
     """The replayed peripherals: `board` for the firmware, `begin(section)` before each job, `finish()` after."""
 
-    def __init__(self, header: dict) -> None:
-        """Peripherals shaped like the recorded ones (bauds, encoder width, CAN) from the record's header."""
+    def __init__(self, header: dict, sinks: dict[str, BinaryIO] | None = None) -> None:
+        """Peripherals shaped like the recorded ones (bauds, encoder width, CAN) from the record's header;
+        `sinks` by port name receive the replayed bytes of that port (e.g. telemetry)."""
         ports = header["ports"]
         self.section = Section(-1, 0, 0)
         self.produced: dict[int, list] = {}
         self.starved = 0  # calls the record had no answer for (a changed firmware asking more)
         self.unused = 0  # recorded answers no call took (a changed firmware asking less)
         self.last: dict[int, Any] = {}
+        self.last_control = -1  # the start of the latest control job replayed (replay_sections)
+        self.streams: dict[str, Stream] = {}
+        self._by_key: dict[int, Stream] = {}
+        self._sinks: dict[str, BinaryIO] = dict(sinks or {})
         self.f_cpu_hz = int(header["f_cpu_hz"])
         can = ReplayCan(self, int(header["can_bitrate"])) if header.get("can_bitrate") else None
         self.board = Board(
@@ -190,12 +274,41 @@ class ReplayBoard:
                 self.unused += len(q)
         if s.outputs == self.produced:
             return {}
-        diff = {}
+        diff: dict[int, tuple[list, list]] = {}
         for key in s.outputs.keys() | self.produced.keys():
             expected, produced = s.outputs.get(key, []), self.produced.get(key, [])
             if expected != produced:
                 diff[key] = (expected, produced)
         return diff
+
+    def stream(self, key: int) -> Stream:
+        """The stream of an output key (one per port name)."""
+        s = self._by_key.get(key)
+        if s is None:
+            name = port_name(key)
+            s = self.streams.get(name)
+            if s is None:
+                s = self.streams[name] = Stream(self._sinks.get(name))
+            self._by_key[key] = s
+        return s
+
+    def account(self, diff: dict[int, tuple[list, list]]) -> None:
+        """Add the job's outputs to the streams: the replayed ones, and the recorded ones (the same when no diff)."""
+        for key, items in self.produced.items():
+            s = self.stream(key)
+            data = item_bytes_all(key, items)
+            s.produced += data
+            s.produced_n += len(items)
+            if not diff:  # the same items were recorded
+                s.expected += data
+                s.expected_n += len(items)
+            if len(s.produced) >= _FLUSH_BYTES or len(s.expected) >= _FLUSH_BYTES:
+                s.flush()
+        if diff:
+            for key, items in self.section.outputs.items():
+                s = self.stream(key)
+                s.expected += item_bytes_all(key, items)
+                s.expected_n += len(items)
 
     def take(self, key: int, default: Any) -> Any:
         """The next recorded result of this call (key: kind << 2 | port); a HalError recorded there is raised."""
@@ -213,26 +326,71 @@ class ReplayBoard:
         """Keep an output of the replayed firmware."""
         out = self.produced.get(key)
         if out is None:
-            out = self.produced[key] = []
-        out.append(value)
+            self.produced[key] = [value]
+        else:
+            out.append(value)
 
     def expected_accept(self, key: int, data: bytes) -> int:
         """How many bytes the recorded port accepted for this write (all, when the record has no such write)."""
-        recorded = self.section.outputs.get(key, [])
-        i = len(self.produced.get(key, []))
-        if i < len(recorded):
-            accepted, was = recorded[i]
-            if was == data or accepted < len(was):
-                return min(accepted, len(data))
+        recorded = self.section.outputs.get(key)
+        if recorded is not None:
+            done = self.produced.get(key)
+            i = 0 if done is None else len(done)
+            if i < len(recorded):
+                accepted, was = recorded[i]
+                if was == data or accepted < len(was):
+                    return min(int(accepted), len(data))
         return len(data)
 
     def now_cycles(self) -> int:
         """A recorded clock reading (the job's start when the record has none left)."""
-        return int(self.take(Kind.CLOCK << 2, self.section.start))
+        return int(self.take(_CLOCK_KEY, self.section.start))
 
     def health(self) -> tuple[int, int]:
         """The recorded kernel deadline health."""
-        return tuple(self.take(Kind.HEALTH << 2, (0, 0)))  # type: ignore[return-value]
+        h = self.take(_HEALTH_KEY, (0, 0))
+        return int(h[0]), int(h[1])
+
+
+def item_bytes_all(key: int, items: list) -> bytes:
+    """The bytes of a job's output items on one key, joined."""
+    if len(items) == 1:
+        return item_bytes(key, items[0])
+    return b"".join([item_bytes(key, item) for item in items])
+
+
+def replay_sections(replay: ReplayBoard, sections: Iterator[Section],
+                    bodies: dict[int, tuple[Callable[[Job], object], Job]], control_task: int, stop_task: int,
+                    stop: Callable[[int], object], on_diff: Callable[[Section, dict[int, tuple[list, list]]], None],
+                    progress: Callable[[int], None] | None) -> tuple[int, int]:
+    """Run each section's job on its recorded inputs, compare and account its outputs; (jobs run, last start).
+
+    `stop(start)` runs the stop path's section; `on_diff(section, diff)` is told of each diverging job
+    (`replay.last_control` is then the start of the latest job of `control_task`); `progress(start)` is
+    called every 8192 jobs.
+    """
+    jobs, last = 0, 0
+    for section in sections:
+        replay.begin(section)
+        tid = section.task_id
+        if tid == control_task:
+            replay.last_control = section.start
+        if tid == stop_task:
+            stop(section.start)
+        else:
+            body, job = bodies[tid]
+            job.release = job.ready = job.start = section.start
+            job.index = section.index
+            body(job)
+        jobs += 1
+        diff = replay.finish()
+        replay.account(diff)
+        if diff:
+            on_diff(section, diff)
+        last = section.start
+        if progress is not None and jobs % 8192 == 0:
+            progress(last)
+    return jobs, last
 
 
 class ReplayUart(Uart):
@@ -242,32 +400,36 @@ class ReplayUart(Uart):
         """The recorded port's baud and name."""
         super().__init__(baud, name)
         self.replay, self.port = replay, port
+        self._write_key, self._read_key = Kind.WRITE << 2 | port, Kind.READ << 2 | port
+        self._rx_key, self._tx_key = Kind.IN_WAITING << 2 | port, Kind.TX_FREE << 2 | port
+        self._flush_key, self._errors_key = Kind.FLUSH << 2 | port, Kind.ERRORS << 2 | port
 
     def _send(self, data: bytes) -> int:
-        key = Kind.WRITE << 2 | self.port
-        q = self.replay.section.inputs.get(key)
+        key = self._write_key
+        replay = self.replay
+        q = replay.section.inputs.get(key)
         if q and isinstance(q[0], HalError):  # the recorded write raised
             raise HalError(str(q.popleft()))
-        accepted = self.replay.expected_accept(key, data)
-        self.replay.put(key, (accepted, data))
+        accepted = replay.expected_accept(key, data)
+        replay.put(key, (accepted, data))
         return accepted
 
     def _receive(self, max_bytes: int) -> bytes:
-        data = self.replay.take(Kind.READ << 2 | self.port, b"")
-        self.replay.last.pop(Kind.READ << 2 | self.port, None)  # a starved read returns nothing, not the last bytes
+        data: bytes = self.replay.take(self._read_key, b"")
+        self.replay.last.pop(self._read_key, None)  # a starved read returns nothing, not the last bytes
         return data
 
     def _rx_count(self) -> int:
-        return int(self.replay.take(Kind.IN_WAITING << 2 | self.port, 0))
+        return int(self.replay.take(self._rx_key, 0))
 
     def _tx_space(self) -> int:
-        return int(self.replay.take(Kind.TX_FREE << 2 | self.port, 1 << 12))
+        return int(self.replay.take(self._tx_key, 1 << 12))
 
     def _drain(self, timeout_s: float) -> bool:
-        return bool(self.replay.take(Kind.FLUSH << 2 | self.port, True))
+        return bool(self.replay.take(self._flush_key, True))
 
     def _refresh_errors(self) -> None:
-        e = self.replay.take(Kind.ERRORS << 2 | self.port, (0, 0, 0, 0, 0))
+        e = self.replay.take(self._errors_key, (0, 0, 0, 0, 0))
         self._errors = UartErrors(*e)
 
 
@@ -281,14 +443,14 @@ class ReplayEncoder(EncoderTimer):
 
     def cnt(self) -> int:
         """The recorded CNT."""
-        return int(self.replay.take(Kind.ENC_CNT << 2, 0))
+        return int(self.replay.take(_ENC_CNT_KEY, 0))
 
     def counting_down(self) -> bool:
         """The recorded DIR bit."""
-        return bool(self.replay.take(Kind.ENC_DIR << 2, False))
+        return bool(self.replay.take(_ENC_DIR_KEY, False))
 
     def _write_cnt(self, value: int) -> None:
-        self.replay.put(Kind.ENC_SET << 2, value)
+        self.replay.put(_ENC_SET_KEY, value)
 
 
 class ReplayPin(DigitalIn):
@@ -300,7 +462,7 @@ class ReplayPin(DigitalIn):
 
     def read(self) -> bool:
         """The recorded level."""
-        return bool(self.replay.take(Kind.ESTOP << 2, False))
+        return bool(self.replay.take(_ESTOP_KEY, False))
 
 
 class ReplayLed(DigitalOut):
@@ -312,7 +474,7 @@ class ReplayLed(DigitalOut):
         self.replay = replay
 
     def _drive(self, level: bool) -> None:
-        self.replay.put(Kind.LED << 2, int(level))
+        self.replay.put(_LED_KEY, int(level))
 
 
 class ReplayWatchdog(Watchdog):
@@ -324,7 +486,7 @@ class ReplayWatchdog(Watchdog):
 
     def kick(self) -> None:
         """Keep the kick."""
-        self.replay.put(Kind.KICK << 2, None)
+        self.replay.put(_KICK_KEY, None)
 
 
 class ReplayCan(CanPort):
@@ -334,23 +496,26 @@ class ReplayCan(CanPort):
         """The recorded bus's bit rate."""
         super().__init__(bitrate, "can (replay)")
         self.replay = replay
-        self._key = PORTS["can"]
+        port = PORTS["can"]
+        self._tx_key, self._rx_key = Kind.CAN_TX << 2 | port, Kind.CAN_RX << 2 | port
+        self._pending_key, self._flush_key = Kind.CAN_PENDING << 2 | port, Kind.CAN_FLUSH << 2 | port
 
     def _send(self, frame: CanFrame) -> bool:
-        key = Kind.CAN_TX << 2 | self._key
+        key = self._tx_key
         recorded = self.replay.section.outputs.get(key, [])
-        i = len(self.replay.produced.get(key, []))
+        done = self.replay.produced.get(key)
+        i = 0 if done is None else len(done)
         ok = bool(recorded[i][0]) if i < len(recorded) else True
         self.replay.put(key, (int(ok), frame))
         return ok
 
     def _receive(self) -> CanFrame | None:
-        frame = self.replay.take(Kind.CAN_RX << 2 | self._key, None)
-        self.replay.last.pop(Kind.CAN_RX << 2 | self._key, None)
+        frame: CanFrame | None = self.replay.take(self._rx_key, None)
+        self.replay.last.pop(self._rx_key, None)
         return frame
 
     def _tx_pending(self) -> int:
-        return int(self.replay.take(Kind.CAN_PENDING << 2 | self._key, 0))
+        return int(self.replay.take(self._pending_key, 0))
 
     def _drain(self, timeout_s: float) -> bool:
-        return bool(self.replay.take(Kind.CAN_FLUSH << 2 | self._key, True))
+        return bool(self.replay.take(self._flush_key, True))

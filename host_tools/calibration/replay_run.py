@@ -11,17 +11,16 @@ with its commands (that is the fitted twin's job, docs/calibration.md).
 
 from __future__ import annotations
 
-import hashlib
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 from firmware.app import Firmware
 from firmware.config import TASK_NAMES, FirmwareConfig
 from hal.record.format import Kind, RecordError
-from hal.record.replay import RecordReader, ReplayBoard, Section, port_name
+from hal.record.replay import RecordReader, ReplayBoard, Section, item_bytes, port_name, replay_sections
 from host_tools.recording import INIT_TASK, RECORD_NAME, STOP_TASK, config_from_dict
 from host_tools.runner import gait_reference
 from rtos import Job
@@ -63,21 +62,6 @@ class Divergence:
 
 
 @dataclass
-class _Stream:
-    """The bytes a port carried, in the record and in the replay: counts and SHA-256."""
-
-    expected: Any = field(default_factory=hashlib.sha256)
-    produced: Any = field(default_factory=hashlib.sha256)
-    expected_n: int = 0
-    produced_n: int = 0
-
-    def as_dict(self) -> dict:
-        same = self.expected.digest() == self.produced.digest() and self.expected_n == self.produced_n
-        return {"recorded_items": self.expected_n, "replayed_items": self.produced_n, "identical": same,
-                "recorded_sha256": self.expected.hexdigest(), "replayed_sha256": self.produced.hexdigest()}
-
-
-@dataclass
 class ReplayResult:
     """What a replay found: identical or not, the first divergence, per-port streams, counts."""
 
@@ -101,17 +85,6 @@ class ReplayResult:
         return self.diverging_jobs == 0 and all(s["identical"] for s in self.streams.values())
 
 
-def _item_bytes(key: int, item: Any) -> bytes:
-    kind = key >> 2
-    if kind == Kind.WRITE:
-        accepted, data = item
-        return data if accepted == len(data) else data[:accepted]
-    if kind == Kind.CAN_TX:
-        ok, frame = item
-        return bytes([ok, frame.extended]) + frame.arbitration_id.to_bytes(4, "little") + frame.data
-    return repr(item).encode()
-
-
 def _decode(port: str, data: bytes, extra_fields: int) -> list[dict]:
     """The messages in data as JSON-ready dicts (raw hex where the port has no codec)."""
     from host_tools.commands.decode import _jsonable, message_fields
@@ -131,8 +104,8 @@ def _divergence(section: Section, diff: dict[int, tuple[list, list]], f_cpu: int
     key = min(diff)  # UART writes (motor first) before the pins
     expected, produced = diff[key]
     port = port_name(key)
-    exp = b"".join(_item_bytes(key, i) for i in expected)
-    got = b"".join(_item_bytes(key, i) for i in produced)
+    exp = b"".join(item_bytes(key, i) for i in expected)
+    got = b"".join(item_bytes(key, i) for i in produced)
     task = ("init" if section.task_id == INIT_TASK else "stop" if section.task_id == STOP_TASK
             else TASK_NAMES[section.task_id])
     if key >> 2 == Kind.WRITE:
@@ -148,7 +121,7 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
                   progress: Callable[[float], None] | None = None) -> ReplayResult:
     """Re-execute the firmware on the record at `path`; `fw_cfg`/`controller` replace the recorded ones.
 
-    The telemetry the replayed firmware writes goes to `telemetry_out` as it is produced. RecordError
+    The telemetry the replayed firmware writes goes to `telemetry_out` (about 64 KB at a time). RecordError
     (naming the byte offset) when the record is truncated or damaged.
     """
     reader = RecordReader(path)
@@ -156,7 +129,7 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
     try:
         recorded_cfg = config_from_dict(header["firmware"])
         f_cpu = int(header["f_cpu_hz"])
-        replay = ReplayBoard(header)
+        replay = ReplayBoard(header, {"telemetry": telemetry_out} if telemetry_out is not None else None)
         names = list(header["tasks"])
     except (KeyError, TypeError, ValueError) as e:
         reader.close()
@@ -178,63 +151,27 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
         assert t.body is not None
         bodies[names.index(t.name)] = (t.body, Job(t))
     extra = len(fw.published_names)
-    streams: dict[str, _Stream] = {}
-    first: Divergence | None = None
-    diverging = jobs = 0
-    last = 0
+    first: list[Divergence] = []
+    diverging = 0
     wall0, cpu0 = time.perf_counter(), time.process_time()
 
-    telemetry_key = Kind.WRITE << 2 | 2
+    def on_diff(section: Section, diff: dict) -> None:
+        nonlocal diverging
+        diverging += 1
+        if not first:
+            d = _divergence(section, diff, f_cpu, extra)
+            # the control job of the period whose command this job sends (control runs before the motor task)
+            d.control_t_s = None if replay.last_control < 0 else replay.last_control / f_cpu
+            first.append(d)
 
-    def stream(key: int) -> _Stream:
-        s = streams.get(port_name(key))
-        if s is None:
-            s = streams[port_name(key)] = _Stream()
-        return s
-
-    def account(section: Section, diff: dict) -> None:
-        nonlocal first, diverging
-        for key, items in replay.produced.items():
-            s = stream(key)
-            data = b"".join([_item_bytes(key, item) for item in items])
-            s.produced.update(data)
-            s.produced_n += len(items)
-            if not diff:  # the same items were recorded
-                s.expected.update(data)
-                s.expected_n += len(items)
-            if telemetry_out is not None and key == telemetry_key:
-                telemetry_out.write(data)
-        if diff:
-            for key, items in section.outputs.items():
-                s = stream(key)
-                s.expected.update(b"".join([_item_bytes(key, item) for item in items]))
-                s.expected_n += len(items)
-            diverging += 1
-            if first is None:
-                first = _divergence(section, diff, f_cpu, extra)
-                first.control_t_s = None if last_control is None else last_control / f_cpu
-
-    control_id = names.index("control")
-    last_control: int | None = None
-    account(first_section, replay.finish())
-    for section in sections:
-        replay.begin(section)
-        tid = section.task_id
-        if tid == control_id:
-            last_control = section.start
-        if tid == STOP_TASK:
-            fw.stop(section.start / f_cpu, 0.5)
-        else:
-            body, job = bodies[tid]
-            job.release = job.ready = job.start = section.start
-            job.index = section.index
-            body(job)
-        jobs += 1
-        account(section, replay.finish())
-        last = section.start
-        if progress is not None and jobs % 8192 == 0:
-            progress(last / f_cpu)
+    diff0 = replay.finish()
+    replay.account(diff0)
+    if diff0:
+        on_diff(first_section, diff0)
+    jobs, last = replay_sections(replay, sections, bodies, names.index("control"), STOP_TASK,
+                                 lambda start: fw.stop(start / f_cpu, 0.5), on_diff,
+                                 None if progress is None else lambda start: progress(start / f_cpu))
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-    return ReplayResult(header, reader.footer, fw, jobs, diverging, first,
-                        {k: v.as_dict() for k, v in sorted(streams.items())}, replay.starved, replay.unused,
+    return ReplayResult(header, reader.footer, fw, jobs, diverging, first[0] if first else None,
+                        {k: v.as_dict() for k, v in sorted(replay.streams.items())}, replay.starved, replay.unused,
                         last / f_cpu, wall, changed, cpu)
