@@ -123,3 +123,56 @@ def test_firmware_config_pickles_for_the_tuning_workers() -> None:
     cfg = load_firmware_config()
     back = pickle.loads(pickle.dumps(cfg))
     assert back == cfg and back.position_gains == cfg.position_gains and back.safety == cfg.safety
+
+
+PLANT = DEFAULT_PROFILE.parent / "plant_ak60_6.toml"
+
+
+def _heavier_plant(tmp_path):
+    """The packaged plant with the foot's damping x4 and Coulomb friction x2.5 (a plant `pafp fit` could write)."""
+    text = PLANT.read_text(encoding="utf-8")
+    assert text.count("foot_damping_nm_s_per_rad = 0.5") == 1 and text.count("coulomb_friction_nm = 0.1") == 1
+    path = tmp_path / "plant_fitted.toml"
+    path.write_text(text.replace("foot_damping_nm_s_per_rad = 0.5", "foot_damping_nm_s_per_rad = 2.0")
+                    .replace("coulomb_friction_nm = 0.1", "coulomb_friction_nm = 0.25"), encoding="utf-8")
+    return path
+
+
+def test_candidates_run_the_plant_they_are_given(tmp_path):
+    base = load_firmware_config()
+    gains = tuning.gains_of(base)
+    nominal = tuning.evaluate(0, base, gains, strides=1, seed=0)
+    packaged = tuning.evaluate(0, base, gains, strides=1, seed=0, plant=tuning.TunePlant(PLANT))
+    heavier = tuning.evaluate(0, base, gains, strides=1, seed=0, plant=tuning.TunePlant(_heavier_plant(tmp_path)))
+    drawn = tuning.evaluate(0, base, gains, strides=1, seed=0, plant=tuning.TunePlant(seed=7))
+    assert packaged.as_dict() == nominal.as_dict()  # the packaged file is the default plant
+    assert heavier.rms_current_a != nominal.rms_current_a and heavier.rms_error_deg != nominal.rms_error_deg
+    assert drawn.rms_error_deg != nominal.rms_error_deg
+
+
+def test_pafp_tune_on_a_plant_file(tmp_path, capsys):
+    plant = _heavier_plant(tmp_path)
+    out = tmp_path / "tune"
+    assert main(["tune", "--budget", "5", "--strides", "1", "--workers", "1", "--seed", "3", "--quiet",
+                 "--plant", str(plant), "--plant-seed", "7", "--out", str(out)]) == 0
+    doc = json.loads((out / "tune.json").read_text())
+    assert doc["plant"] == {"file": str(plant), "seed": 7}
+    base = load_firmware_config()
+    again = tuning.evaluate(0, base, tuning.gains_of(base), strides=1, seed=3,
+                            plant=tuning.TunePlant(plant, 7))
+    assert doc["before"] == json.loads(json.dumps(again.as_dict()))  # candidate 0 ran that plant, that draw
+    assert f"on plant {plant} drawn with seed 7" in capsys.readouterr().out
+
+
+def test_pafp_tune_refuses_a_missing_plant_file_before_any_run(tmp_path, capsys):
+    out = tmp_path / "tune"
+    assert main(["tune", "--budget", "5", "--strides", "1", "--quiet", "--plant", str(tmp_path / "missing.toml"),
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--plant {tmp_path / 'missing.toml'}: cannot read it" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_a_bad_plant_seed_is_refused_naming_it():
+    with pytest.raises(ValueError, match=r"plant seed -1 out of range"):
+        tuning.search(load_firmware_config(), budget=5, strides=1, plant=tuning.TunePlant(seed=-1))

@@ -93,17 +93,18 @@ class CaseResult:
 
 
 def run_case(name: str, firmware: FirmwareConfig, *, strides: int, seed: int, baud: int = 921600,
-             params: PlantParams | None = None, imu: str = IMUS[0]) -> CaseResult:
+             params: PlantParams | None = None, imu: str = IMUS[0], run_options: dict | None = None) -> CaseResult:
     """Run the firmware once on the virtual bench (no trace) and keep its summary and signals.
 
     imu: the IMU reading the device model runs (hal.virtual.plant.readings), with the bench's imperfections.
+    run_options: more RunConfig options (e.g. the plant_file and plant_seed `pafp tune --plant` runs).
     """
     options: dict = {} if params is None else {"plant_params": params}
     if imu != IMUS[0]:
         base = load_imperfections().bench_options(seed)["imu_config"]
         options["imu_config"] = with_imu_reading(base, imu)
     result: RunResult = run_virtual(RunConfig(strides=strides, baud=baud, seed=seed, firmware=firmware,
-                                              trace_capacity=0, bench_options=options))
+                                              trace_capacity=0, bench_options=options, **(run_options or {})))
     s = summarise(result)
     p = result.probe.arrays()
     imu = s["tracking"]["imu"]

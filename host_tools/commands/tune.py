@@ -28,6 +28,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="an existing Dask scheduler: tcp://HOST:PORT or a scheduler file (.json) (docs/sweeps.md)")
     parser.add_argument("--profile", type=Path, default=None,
                         help="starting firmware profile (default profiles/firmware.toml)")
+    parser.add_argument("--plant", type=Path, default=None, metavar="FILE",
+                        help="plant profile TOML every candidate runs (keys of profiles/plant_ak60_6.toml, e.g. one "
+                             "`pafp fit` wrote) instead of the packaged one; --plant-seed draws around it")
+    parser.add_argument("--plant-seed", type=seed, default=None, metavar="N",
+                        help="draw the plant's parameters from their tolerances around the plant profile with seed N "
+                             "(the same draw for every candidate); default: no draw")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -83,15 +89,19 @@ def run(args: argparse.Namespace) -> int:
 
             check_scheduler(args.scheduler)
         tuning.check_budget(args.budget)
+        plant = tuning.TunePlant(args.plant, args.plant_seed)
+        plant.check()
         check_writable(args.out)
         workers = args.workers or os.cpu_count() or 1
         where = f"scheduler {args.scheduler}" if args.scheduler else f"{workers} workers"
-        print(f"pafp tune: budget {args.budget} runs of {args.strides} strides on {where}, seed {args.seed} "
+        on = "" if args.plant is None else f" on plant {args.plant}"
+        on += "" if args.plant_seed is None else f" drawn with seed {args.plant_seed}"
+        print(f"pafp tune: budget {args.budget} runs of {args.strides} strides on {where}, seed {args.seed}{on} "
               f"-> {args.out}")
         bar = Progress(args.budget, not args.quiet, label="candidates")
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             result = tuning.search(base, budget=args.budget, strides=args.strides, seed=args.seed, client=client,
-                                   progress=lambda done, total: bar.step())
+                                   progress=lambda done, total: bar.step(), plant=plant)
     except ValueError as e:
         print(f"pafp tune: {e}", file=sys.stderr)
         return 2
@@ -121,8 +131,10 @@ def _write(args: argparse.Namespace, source: Path, base: object, result: object,
         print(f"pafp tune: {profile_path} does not read back the tuned gains", file=sys.stderr)
         return 1
     if result.interrupted is None:
-        before = run_case("before", base, strides=args.strides, seed=args.seed)
-        after = run_case("after", tuning.with_gains(base, result.best.gains), strides=args.strides, seed=args.seed)
+        plant = tuning.TunePlant(args.plant, args.plant_seed).run_options()
+        before = run_case("before", base, strides=args.strides, seed=args.seed, run_options=plant)
+        after = run_case("after", tuning.with_gains(base, result.best.gains), strides=args.strides, seed=args.seed,
+                         run_options=plant)
         _plot(out / "tune.png", before, after,
               f"pafp tune: {args.budget} candidates, {args.strides} strides, seed {args.seed}")
     else:  # no before/after runs after a stop signal: a tune.png of an earlier search would not match
@@ -132,6 +144,7 @@ def _write(args: argparse.Namespace, source: Path, base: object, result: object,
         **({"interruption": {"by": result.interrupted, "candidates_run": len(result.evaluations)}}
            if result.interrupted else {}),
         "seed": args.seed, "budget": args.budget, "strides": args.strides, "workers": where,
+        "plant": tuning.TunePlant(args.plant, args.plant_seed).as_dict(),
         "source_profile": str(source), "tuned_profile": str(profile_path),
         "objective": {"score": "rms_error_deg + effort_weight * (rms_current_a + rms_current_step_a)",
                       "effort_weight_deg_per_a": tuning.EFFORT_WEIGHT,

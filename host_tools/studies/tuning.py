@@ -12,6 +12,9 @@ candidates are evaluated through its map-like `workers` on Dask (`_DaskMap`) and
 so the result is the same for a seed whatever the number of workers or their completion order.
 A stop signal (host_tools/studies/interrupt.py: Interrupted) ends the search where it is: the result holds every
 candidate finished so far, its best one, and ``interrupted`` names the signal.
+The plant every candidate runs is `TunePlant`: the packaged one, a plant profile (`pafp tune --plant FILE`, e.g.
+one `pafp fit` wrote) and/or a draw around it (``--plant-seed``), handed to RunConfig as `pafp run` and the
+sweeps' ``[base] plant`` do (RunConfig.bench_setup builds the bench from them).
 """
 
 from __future__ import annotations
@@ -35,8 +38,8 @@ from host_tools.studies.interrupt import Interrupted
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BOUNDS", "Candidate", "Evaluation", "TuneResult", "check_budget", "evaluate", "gains_of", "search",
-           "with_gains", "write_profile"]
+__all__ = ["BOUNDS", "Candidate", "Evaluation", "TunePlant", "TuneResult", "check_budget", "evaluate", "gains_of",
+           "search", "with_gains", "write_profile"]
 
 #: Searched gains and their bounds (log-uniform space): name -> (low, high).
 BOUNDS: dict[str, tuple[float, float]] = {
@@ -83,6 +86,29 @@ class Evaluation:
 
 
 @dataclass(frozen=True)
+class TunePlant:
+    """The plant the candidates run: a plant profile (None: the packaged one) and a draw around it (None: none)."""
+
+    file: Path | None = None
+    seed: int | None = None
+
+    def run_options(self) -> dict[str, Any]:
+        """The RunConfig options that select this plant (those of `pafp run --plant FILE --plant-seed N`)."""
+        return {"plant_file": self.file, "plant_seed": self.seed}
+
+    def check(self) -> None:
+        """ValueError naming the file or the seed when the bench cannot be built from them (before any run)."""
+        try:
+            RunConfig(**self.run_options()).bench_setup()
+        except OSError as e:
+            raise ValueError(f"--plant {self.file}: cannot read it ({e.strerror or e})") from None
+
+    def as_dict(self) -> dict[str, object]:
+        """For tune.json."""
+        return {"file": None if self.file is None else str(self.file), "seed": self.seed}
+
+
+@dataclass(frozen=True)
 class TuneResult:
     """Every evaluation in index order, the starting one (index 0) and the best feasible one (the start if none
     is); ``interrupted``: the signal that ended the search early (its evaluations are those finished by then)."""
@@ -107,10 +133,11 @@ def with_gains(cfg: FirmwareConfig, gains: Candidate) -> FirmwareConfig:
         velocity_gains=PidGains(gains["velocity_kp"], gains["velocity_ki"], v.kd, v.derivative_tau_s))
 
 
-def evaluate(index: int, base: FirmwareConfig, gains: Candidate, strides: int, seed: int) -> Evaluation:
+def evaluate(index: int, base: FirmwareConfig, gains: Candidate, strides: int, seed: int,
+             plant: TunePlant = TunePlant()) -> Evaluation:
     """Run one candidate on the virtual bench and score it (module-level, so a process pool can call it)."""
     cfg = with_gains(base, gains)
-    r = run_virtual(RunConfig(strides=strides, seed=seed, firmware=cfg, trace_capacity=0))
+    r = run_virtual(RunConfig(strides=strides, seed=seed, firmware=cfg, trace_capacity=0, **plant.run_options()))
     s = summarise(r)
     p = r.probe.arrays()
     start = r.gait_start_s if r.gait_start_s is not None else math.inf
@@ -174,8 +201,9 @@ class _DaskMap:
     """
 
     def __init__(self, client: Any, base: FirmwareConfig, strides: int, seed: int, budget: int,
-                 progress: Callable[[int, int], None] | None) -> None:
+                 progress: Callable[[int, int], None] | None, plant: TunePlant) -> None:
         self.client, self.base, self.strides, self.seed, self.budget = client, base, strides, seed, budget
+        self.plant = plant
         self.progress = progress
         self.evaluations: list[Evaluation] = []
         self.done = 0
@@ -186,12 +214,12 @@ class _DaskMap:
         results: list[Evaluation] = []
         if self.client is None:
             for k, c in enumerate(cands):
-                results.append(evaluate(idx0 + k, self.base, c, self.strides, self.seed))
+                results.append(evaluate(idx0 + k, self.base, c, self.strides, self.seed, self.plant))
                 self.evaluations.append(results[-1])  # kept as it comes: an interrupted search keeps it
                 self._step()
         else:
-            futures = [self.client.submit(evaluate, idx0 + k, self.base, c, self.strides, self.seed, pure=False)
-                       for k, c in enumerate(cands)]
+            futures = [self.client.submit(evaluate, idx0 + k, self.base, c, self.strides, self.seed, self.plant,
+                                          pure=False) for k, c in enumerate(cands)]
             for fut in futures:  # in index order; progress counts them as they come
                 results.append(fut.result())
                 self.evaluations.append(results[-1])
@@ -214,18 +242,21 @@ def check_budget(budget: int) -> None:
 
 
 def search(base: FirmwareConfig, *, budget: int, strides: int = 2, seed: int = 0, client: Any = None,
-           start: Candidate | None = None, progress: Callable[[int, int], None] | None = None) -> TuneResult:
+           start: Candidate | None = None, progress: Callable[[int, int], None] | None = None,
+           plant: TunePlant = TunePlant()) -> TuneResult:
     """Search the gains with differential evolution within `budget` runs (>= 5); deterministic for a seed.
 
     `client`: a dask.distributed Client whose workers run each generation's candidates (None: in-process).
+    `plant`: the plant every candidate runs (checked before the first run: ValueError naming it).
     """
     check_budget(budget)
+    plant.check()
     rng = np.random.default_rng(seed)
     first = dict(start) if start is not None else gains_of(base)
     size = min(POPULATION, budget)
     generations = budget // size  # the initial population and generations - 1 evolved ones
     init = np.array([_to_x(first)] + [_to_x(_perturb(rng, first, SIGMA0)) for _ in range(size - 1)])
-    mapper = _DaskMap(client, base, strides, seed, size * generations, progress)
+    mapper = _DaskMap(client, base, strides, seed, size * generations, progress, plant)
     lo, hi = _to_x({k: b[0] for k, b in BOUNDS.items()}), _to_x({k: b[1] for k, b in BOUNDS.items()})
     interrupted = None
     try:
