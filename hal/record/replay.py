@@ -1,8 +1,9 @@
 """The replay backend: a `Board` whose peripherals and clock serve back what a record says they returned.
 
-A record (hal/record/format.py) is read one section (one job) at a time: its inputs go into one queue per
-call kind and port, its outputs into the list the replayed job is compared with. Each call of the
-replayed firmware takes the next recorded result of the same kind on the same port, so a firmware that
+A record (hal/record/format.py) is read one section (one job) at a time: its inputs in recorded order
+(each with its key: call kind and port), its outputs into the list the replayed job is compared with. Each
+call of the replayed firmware takes the next recorded result of the same kind on the same port (the first
+not yet taken: a job makes a handful of calls, a scan is cheaper than a queue per key), so a firmware that
 makes its calls in another order still gets the same bytes; a call beyond the record gets a neutral
 answer (no bytes, the last CNT) and is counted (``starved``). What the firmware writes is kept for the
 comparison (`ReplayBoard.finish`), never sent anywhere. The firmware does not know it is replayed.
@@ -35,15 +36,10 @@ __all__ = ["OUTPUT_KINDS", "RecordReader", "ReplayBoard", "Section", "Stream", "
 OUTPUT_KINDS: Final = frozenset({Kind.WRITE, Kind.ENC_SET, Kind.LED, Kind.KICK, Kind.CAN_TX})
 _PORT_NAMES: Final = {v: k for k, v in PORTS.items()}
 _OUTPUT_NAMES: Final = {Kind.ENC_SET: "encoder", Kind.LED: "led", Kind.KICK: "watchdog", Kind.CAN_TX: "can"}
-_JOB: Final = Kind.JOB
-_READ: Final = Kind.READ
 _WRITE: Final = Kind.WRITE
 _RAISE: Final = Kind.RAISE
 _CAN_RX: Final = Kind.CAN_RX
 _CAN_TX: Final = Kind.CAN_TX
-_ERRORS: Final = Kind.ERRORS
-_HEALTH: Final = Kind.HEALTH
-_KICK: Final = Kind.KICK
 _CLOCK_KEY: Final = Kind.CLOCK << 2
 _HEALTH_KEY: Final = Kind.HEALTH << 2
 _ENC_CNT_KEY: Final = Kind.ENC_CNT << 2
@@ -74,16 +70,44 @@ def item_bytes(key: int, item: Any) -> bytes:
 
 
 class Section:
-    """One recorded job: its task, start and index, the results of its calls and what it sent."""
+    """One recorded job: its task, start and index, the results of its calls and what it sent.
 
-    def __init__(self, task_id: int, start: int, index: int, inputs: dict[int, deque] | None = None,
-                 outputs: dict[int, list] | None = None) -> None:
-        """A section with no call results yet (unless given)."""
+    The results are `keys` and `values` in recorded order; a result taken by the replay has its key set to -1.
+    """
+
+    def __init__(self, task_id: int, start: int, index: int) -> None:
+        """A section with no call results yet."""
         self.task_id = task_id
         self.start = start
         self.index = index
-        self.inputs: dict[int, deque] = {} if inputs is None else inputs
-        self.outputs: dict[int, list] = {} if outputs is None else outputs
+        self.keys: list[int] = []
+        self.values: list[Any] = []
+        self.outputs: dict[int, list] = {}
+
+    @property
+    def inputs(self) -> dict[int, deque]:
+        """The results not taken yet, by key, in order (for reading a record; the replay uses `take`)."""
+        out: dict[int, deque] = {}
+        for key, value in zip(self.keys, self.values, strict=True):
+            if key >= 0:
+                out.setdefault(key, deque()).append(value)
+        return out
+
+    def find(self, key: int) -> int:
+        """The index of the first result of `key` not taken yet, -1 when there is none."""
+        keys = self.keys
+        for i in range(len(keys)):
+            if keys[i] == key:
+                return i
+        return -1
+
+    def untaken(self) -> int:
+        """How many results were not taken."""
+        n = 0
+        for key in self.keys:
+            if key >= 0:
+                n += 1
+        return n
 
 
 class RecordReader:
@@ -122,34 +146,26 @@ class RecordReader:
             yield section
 
     def _parse(self, offset: int, raw: bytes) -> list[Section]:
-        """The sections a chunk holds (a chunk starts with a job: the recorder cuts chunks there)."""
+        """The sections a chunk holds (a chunk starts with a job: the recorder cuts chunks there).
+
+        The common kinds are decoded here byte by byte (compiled: no call, no tuple); the others by their
+        struct (format.FIXED, format.VARIABLE).
+        """
         pos, n = 0, len(raw)
         out: list[Section] = []
         section: Section | None = None
-        layouts = _LAYOUTS
         try:
             while pos < n:
                 tag = raw[pos]
+                kind = tag >> 2
+                shape = _SHAPES[kind]
+                if shape < 0:
+                    raise RecordError(f"record {self.path}: unknown event kind {kind} in the chunk at byte "
+                                      f"offset {offset} (event byte {pos})")
                 pos += 1
-                layout = layouts.get(tag >> 2)
-                if layout is None:
-                    raise RecordError(f"record {self.path}: unknown event kind {tag >> 2} in the chunk at byte "
-                                      f"offset {offset} (event byte {pos - 1})")
-                kind, st, variable, output = layout
-                vals = st.unpack_from(raw, pos)
-                pos += st.size
-                data = b""
-                if variable:
-                    if pos + 2 > n:
-                        raise struct.error("short length")
-                    length = raw[pos] | raw[pos + 1] << 8
-                    pos += 2
-                    if pos + length > n:
-                        raise struct.error("short data")
-                    data = raw[pos:pos + length]
-                    pos += length
-                if kind == _JOB:
-                    section = Section(vals[0], vals[1], vals[2])
+                if shape == _S_JOB:
+                    section = Section(raw[pos], _u64(raw, pos + 1), _u32(raw, pos + 9))
+                    pos += 13
                     out.append(section)
                     continue
                 if section is None:
@@ -157,23 +173,52 @@ class RecordReader:
                                       "with a job")
                 key = tag
                 value: Any
-                if kind == _READ:
-                    value = data
-                elif kind == _WRITE:
-                    value = (vals[0], data)
-                elif kind == _RAISE:
-                    key, value = vals[0] << 2 | tag & 3, HalError(data.decode("utf-8", "replace"))
-                elif kind == _CAN_RX:
-                    value = CanFrame(vals[1], data, bool(vals[0] & 2)) if vals[0] & 1 else None
-                elif kind == _CAN_TX:
-                    value = (vals[0], CanFrame(vals[2], data, bool(vals[1])))
-                elif kind == _ERRORS or kind == _HEALTH:
-                    value = vals
-                elif kind == _KICK:
+                if shape == _S_U8:
+                    value = raw[pos]
+                    pos += 1
+                elif shape == _S_U32:
+                    value = _u32(raw, pos)
+                    pos += 4
+                elif shape == _S_U64:
+                    value = _u64(raw, pos)
+                    pos += 8
+                elif shape == _S_PAIR:
+                    value = (_u32(raw, pos), _u32(raw, pos + 4))
+                    pos += 8
+                elif shape == _S_NONE:
                     value = None
                 else:
-                    value = vals[0]
-                if output:
+                    vals: tuple = ()
+                    if shape == _S_WRITE:
+                        vals = (raw[pos] | raw[pos + 1] << 8,)
+                        pos += 2
+                    elif shape != _S_READ:
+                        st = _STRUCTS[kind]
+                        vals = st.unpack_from(raw, pos)
+                        pos += st.size
+                    data = b""
+                    if shape != _S_FIXED:
+                        length = raw[pos] | raw[pos + 1] << 8
+                        pos += 2
+                        if pos + length > n:
+                            raise IndexError("short data")
+                        data = raw[pos:pos + length]
+                        pos += length
+                    if shape == _S_READ:
+                        value = data
+                    elif shape == _S_WRITE:
+                        value = (vals[0], data)
+                    elif kind == _RAISE:
+                        key, value = vals[0] << 2 | tag & 3, HalError(data.decode("utf-8", "replace"))
+                    elif kind == _CAN_RX:
+                        value = CanFrame(vals[1], data, bool(vals[0] & 2)) if vals[0] & 1 else None
+                    elif kind == _CAN_TX:
+                        value = (vals[0], CanFrame(vals[2], data, bool(vals[1])))
+                    elif len(vals) == 1:
+                        value = vals[0]
+                    else:
+                        value = vals
+                if _OUTPUTS[kind]:
                     outs = section.outputs
                     out_list = outs.get(key)
                     if out_list is None:
@@ -181,22 +226,55 @@ class RecordReader:
                     else:
                         out_list.append(value)
                 else:
-                    ins = section.inputs
-                    q = ins.get(key)
-                    if q is None:
-                        ins[key] = deque((value,))
-                    else:
-                        q.append(value)
+                    section.keys.append(key)
+                    section.values.append(value)
         except (struct.error, IndexError):
             raise RecordError(f"record {self.path}: the chunk at byte offset {offset} ends inside an event "
                               f"(event byte {pos})") from None
         return out
 
 
-# kind -> (kind, fixed part, followed by <H length + bytes, an output)
-_LAYOUTS: Final[dict[int, tuple[int, Any, bool, bool]]] = {
-    **{k: (k, st, False, k in OUTPUT_KINDS) for k, st in FIXED.items()},
-    **{k: (k, st, True, k in OUTPUT_KINDS) for k, st in VARIABLE.items()}}
+def _u32(raw: bytes, p: int) -> int:
+    return raw[p] | raw[p + 1] << 8 | raw[p + 2] << 16 | raw[p + 3] << 24
+
+
+def _u64(raw: bytes, p: int) -> int:
+    return _u32(raw, p) | _u32(raw, p + 4) << 32
+
+
+# How _parse decodes each kind: its shape (-1: no such kind), its struct, whether it is an output
+_S_JOB: Final = 0
+_S_U8: Final = 1
+_S_U32: Final = 2
+_S_U64: Final = 3
+_S_PAIR: Final = 4  # two u32
+_S_NONE: Final = 5
+_S_READ: Final = 6  # <H length + bytes
+_S_WRITE: Final = 7  # <H accepted, <H length + bytes
+_S_FIXED: Final = 8  # another fixed layout (its struct)
+_S_VARIABLE: Final = 9  # another fixed part + <H length + bytes (its struct)
+_BY_FORMAT: Final = {"<BQI": _S_JOB, "<B": _S_U8, "<I": _S_U32, "<Q": _S_U64, "<II": _S_PAIR, "": _S_NONE}
+
+
+def _shapes() -> tuple[list[int], list[Any], list[bool]]:
+    shapes: list[int] = [-1] * 64
+    structs: list[Any] = [None] * 64
+    outputs: list[bool] = [False] * 64
+    for k, st in FIXED.items():
+        shapes[k], structs[k] = _BY_FORMAT.get(st.format, _S_FIXED), st
+    for k, st in VARIABLE.items():
+        shapes[k], structs[k] = _S_VARIABLE, st
+    shapes[Kind.READ], shapes[Kind.WRITE] = _S_READ, _S_WRITE
+    assert VARIABLE[Kind.READ].format == "" and VARIABLE[Kind.WRITE].format == "<H"
+    for k in OUTPUT_KINDS:
+        outputs[k] = True
+    return shapes, structs, outputs
+
+
+_TABLES: Final = _shapes()
+_SHAPES: Final[list[int]] = _TABLES[0]
+_STRUCTS: Final[list[Any]] = _TABLES[1]
+_OUTPUTS: Final[list[bool]] = _TABLES[2]
 
 
 class Stream:
@@ -269,9 +347,7 @@ class ReplayBoard:
     def finish(self) -> dict[int, tuple[list, list]]:
         """After the job: the outputs that differ from the record, by key: (expected, produced)."""
         s = self.section
-        for q in s.inputs.values():
-            if q:
-                self.unused += len(q)
+        self.unused += s.untaken()
         if s.outputs == self.produced:
             return {}
         diff: dict[int, tuple[list, list]] = {}
@@ -312,11 +388,13 @@ class ReplayBoard:
 
     def take(self, key: int, default: Any) -> Any:
         """The next recorded result of this call (key: kind << 2 | port); a HalError recorded there is raised."""
-        q = self.section.inputs.get(key)
-        if not q:
+        s = self.section
+        i = s.find(key)
+        if i < 0:
             self.starved += 1
             return self.last.get(key, default)
-        value = q.popleft()
+        s.keys[i] = -1
+        value = s.values[i]
         if isinstance(value, HalError):
             raise HalError(str(value))
         self.last[key] = value
@@ -407,9 +485,11 @@ class ReplayUart(Uart):
     def _send(self, data: bytes) -> int:
         key = self._write_key
         replay = self.replay
-        q = replay.section.inputs.get(key)
-        if q and isinstance(q[0], HalError):  # the recorded write raised
-            raise HalError(str(q.popleft()))
+        s = replay.section
+        i = s.find(key)
+        if i >= 0 and isinstance(s.values[i], HalError):  # the recorded write raised
+            s.keys[i] = -1
+            raise HalError(str(s.values[i]))
         accepted = replay.expected_accept(key, data)
         replay.put(key, (accepted, data))
         return accepted
