@@ -55,6 +55,58 @@ def test_events_round_trip(tmp_path):
     assert reader.footer["done"] is True and reader.footer["events"] == 7
 
 
+def test_every_event_kind_decodes_what_was_packed(tmp_path):
+    # the parser decodes the common kinds byte by byte: each kind at its extremes against its struct layout
+    from hal.can import CanFrame
+    from hal.record.format import FIXED, VARIABLE
+
+    rec = Recorder(tmp_path / "r.bin", {})
+    rec.job(253, 2**64 - 1, 2**32 - 1)
+    expected_in, expected_out = {}, {}
+    outputs = {Kind.WRITE, Kind.ENC_SET, Kind.LED, Kind.KICK, Kind.CAN_TX}
+    for kind, st in FIXED.items():
+        if kind == Kind.JOB:
+            continue
+        fields = st.unpack(b"\xff" * st.size)  # every field at its maximum
+        rec.emit(kind, 3, *fields)
+        value = None if not fields else fields[0] if len(fields) == 1 else tuple(fields)
+        (expected_out if kind in outputs else expected_in)[kind << 2 | 3] = value
+    data = bytes(range(256)) * 3
+    rec.emit(Kind.READ, 1, data=data)
+    rec.emit(Kind.WRITE, 1, 65535, data=b"\x00")
+    rec.emit(Kind.CAN_RX, 3, 3, 2**29 - 1, data=b"\x01\x02")
+    rec.emit(Kind.CAN_TX, 3, 1, 0, 0x7FF, data=b"")
+    rec.close({})
+    (s,) = RecordReader(tmp_path / "r.bin").sections()
+    assert (s.task_id, s.start, s.index) == (253, 2**64 - 1, 2**32 - 1)
+    inputs = {k: v[0] for k, v in s.inputs.items()}
+    assert inputs == {**expected_in, Kind.READ << 2 | 1: data,
+                      Kind.CAN_RX << 2 | 3: CanFrame(2**29 - 1, b"\x01\x02", True)}
+    assert {k: v[0] for k, v in s.outputs.items()} == {**expected_out, Kind.WRITE << 2 | 1: (65535, b"\x00"),
+                                                       Kind.CAN_TX << 2 | 3: (1, CanFrame(0x7FF, b"", False))}
+    assert set(VARIABLE) == {Kind.READ, Kind.WRITE, Kind.RAISE, Kind.CAN_RX, Kind.CAN_TX}
+
+
+@pytest.mark.parametrize(("raw", "needle"), [
+    (bytes([0, 1]) + bytes(12) + bytes([Kind.CLOCK << 2, 1, 2]),
+     "ends inside an event (the event at byte 14 of the chunk)"),
+    (bytes([0, 1]) + bytes(12) + bytes([Kind.READ << 2, 9, 0, 1]), "ends inside an event"),
+    (bytes([0, 1]) + bytes(5), "ends inside an event"),
+    (bytes([0, 1]) + bytes(12) + bytes([63 << 2]), "unknown event kind 63"),
+    (bytes([Kind.CLOCK << 2]) + bytes(8), "does not start with a job"),
+])
+def test_a_damaged_chunk_is_one_error_naming_it(tmp_path, raw, needle):
+    from hal.record.format import pack_chunk, pack_end, write_header
+
+    path = tmp_path / "r.bin"
+    with path.open("wb") as f:
+        write_header(f, {})
+        f.write(pack_chunk(raw) + pack_end({}))
+    with pytest.raises(RecordError, match="chunk at byte offset") as info:
+        list(RecordReader(path).sections())
+    assert needle in str(info.value) and len(str(info.value).splitlines()) == 1
+
+
 def test_unchanged_firmware_replays_byte_identical(recorded, tmp_path):
     out = tmp_path / "replay"
     assert main(["replay", str(recorded), "--out", str(out)]) == 0

@@ -187,7 +187,7 @@ class SectionedBody:
     """A task body that opens its job's section in the record first (`Recorder.job`), then runs the body."""
 
     def __init__(self, rec: Recorder, task_id: int, body: Callable[[Any], object]) -> None:
-        """Sections of task `task_id` (its index in firmware.config.TASK_NAMES)."""
+        """Sections of task `task_id` (its index in the task names the record's header lists)."""
         self.rec, self.task_id, self.body = rec, task_id, body
 
     def __call__(self, job: Any) -> object:

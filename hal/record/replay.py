@@ -151,17 +151,18 @@ class RecordReader:
         The common kinds are decoded here byte by byte (compiled: no call, no tuple); the others by their
         struct (format.FIXED, format.VARIABLE).
         """
-        pos, n = 0, len(raw)
+        pos, start, n = 0, 0, len(raw)
         out: list[Section] = []
         section: Section | None = None
         try:
             while pos < n:
+                start = pos
                 tag = raw[pos]
                 kind = tag >> 2
                 shape = _SHAPES[kind]
                 if shape < 0:
                     raise RecordError(f"record {self.path}: unknown event kind {kind} in the chunk at byte "
-                                      f"offset {offset} (event byte {pos})")
+                                      f"offset {offset} (event byte {start})")
                 pos += 1
                 if shape == _S_JOB:
                     section = Section(raw[pos], _u64(raw, pos + 1), _u32(raw, pos + 9))
@@ -230,7 +231,7 @@ class RecordReader:
                     section.values.append(value)
         except (struct.error, IndexError):
             raise RecordError(f"record {self.path}: the chunk at byte offset {offset} ends inside an event "
-                              f"(event byte {pos})") from None
+                              f"(the event at byte {start} of the chunk)") from None
         return out
 
 
