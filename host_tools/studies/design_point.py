@@ -101,8 +101,8 @@ def moment_share(t_s: np.ndarray, delivered_nm: np.ndarray, demand_nm: np.ndarra
     convention (the moment the actuator must apply); NaN without stance samples.
 
     >>> t = np.arange(4.0)
-    >>> moment_share(t, np.array([1.0, 3.0, -1.0, 0.0]), np.array([2.0, 2.0, 2.0, 5.0]), np.ones(4, bool))
-    0.3636...
+    >>> moment_share(t, np.array([1.0, 3.0, -1.0, 0.0]), np.array([2.0, 2.0, 2.0, 5.0]), np.ones(4, bool)) * 11
+    3.0
     """
     if not stance.any():
         return math.nan

@@ -94,8 +94,8 @@ def _shortfall(rows: list[dict[str, Any]], mass: float, min_share: float) -> str
         why.append(f"delivered {_fmt(share, '.1%')} of the stance moment ({_fmt(min_share - share, '.1%')} short "
                    f"of {min_share:.0%})")
     if not best["within_thermal"] and not best["fault"]:
-        why.append(f"winding {_fmt(best['steady_state_c'], '.0f')} °C steady (limit {_fmt(best['thermal_limit_c'], '.0f')}"
-                   " °C)")
+        why.append(f"winding {_fmt(best['steady_state_c'], '.0f')} °C steady (limit "
+                   f"{_fmt(best['thermal_limit_c'], '.0f')} °C)")
     keeps = _num(best["keeps_up_to_kg"])
     if not math.isnan(keeps) and keeps < mass:
         why.append(f"its envelope keeps up to {keeps:g} kg at peak current, {mass - keeps:.1f} kg short")
@@ -190,7 +190,8 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
         state = "walks" if walks(r, min_share) else (f"latched {r['fault']} at {_fmt(r['fault_at_s'])} s"
                                                     if r["fault"] else r["status"] if r["status"] != "ok"
                                                     else "does not walk")
-        md.append(f"- point {r['point']}, {float(r['body_mass_kg']):g} kg, {r['speed']}, {r['battery']}: {state}; moment share "
+        md.append(f"- point {r['point']}, {float(r['body_mass_kg']):g} kg, {r['speed']}, {r['battery']}: {state}; "
+                  "moment share "
                   f"{_fmt(r['moment_share'], '.1%')}; its envelope keeps up to {_fmt(r['keeps_up_to_kg'], 'g')} kg at "
                   f"peak current ({_fmt(r['keeps_up_to_kg_limit'], 'g')} kg at the firmware's current limit).")
     md += ["", "## Non-dominated designs", "",
@@ -215,8 +216,9 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
         st = r["status"] if not r["fault"] else f"fault {r['fault']} at {_fmt(r['fault_at_s'])} s"
         if r["status"] in ("error", "timeout"):
             st = f"{r['status']}: {r['error']}"[:120]
-        md.append(f"| {r['point']} | {r['motor']} | {r['driver_teeth']}/{r['driven_teeth']} x {_fmt(r['pitch_mm'], 'g')} "
-                  f"mm | {_fmt(r['ratio'], '.2f')} | {r['spring']} | {r['battery']} | {float(r['body_mass_kg']):g} | "
+        md.append(f"| {r['point']} | {r['motor']} | {r['driver_teeth']}/{r['driven_teeth']} x "
+                  f"{_fmt(r['pitch_mm'], 'g')} mm | {_fmt(r['ratio'], '.2f')} | {r['spring']} | {r['battery']} | "
+                  f"{float(r['body_mass_kg']):g} | "
                   f"{r['speed']} | {st} | {_fmt(r['moment_share'], '.3f')} | {_fmt(r['peak_current_a'], '.1f')} | "
                   f"{_fmt(r['peak_electrical_w'], '.0f')} | {_fmt(r['winding_c_end'], '.1f')} / "
                   f"{_fmt(r['steady_state_c'], '.1f')} / {_fmt(r['motor_reported_c_max'], '.1f')} | "
