@@ -7,15 +7,19 @@ Interpreted on purpose (docs/compiled.md, "Values checked as given"); the compil
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from firmware.control.validation import check_int_range, check_range
+from firmware.motor_ratings import MotorRatings
 
 __all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "MISS_STREAK_MAX", "PEAK_CURRENT_A",
            "STARTUP_GRACE_MAX_S", "TIMEOUT_MAX_S", "SafetyLimits"]
 
 # The hardware's bounds on every limit; a limit beyond them is no limit at all (or asks the motor for what it
-# cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C).
+# cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C). The two
+# currents are the AK60-6's, the default motor: a profile whose [motor] states another motor's ratings
+# (firmware.motor_ratings.MotorRatings) bounds the limits with that motor's figures instead.
 PEAK_CURRENT_A = 22.7
 """AK60-6 peak phase current (report Table B2; maker 22.7 A): the motor cannot carry more, so a current limit
 above it never trips and a command above it is not what the motor will do."""
@@ -59,9 +63,17 @@ class SafetyLimits:
     # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
+    # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
+    # is read as MotorRatings)
+    motor: MotorRatings = field(default_factory=MotorRatings)
 
     def __post_init__(self) -> None:
-        """Reject limits that cannot describe a working supervisor or lie beyond the hardware (module constants)."""
+        """Reject limits that cannot describe a working supervisor or lie beyond the hardware (the motor's ratings)."""
+        motor: Any = self.motor
+        if isinstance(motor, dict):
+            object.__setattr__(self, "motor", MotorRatings(**motor))
+        elif not isinstance(motor, MotorRatings):
+            raise ValueError(f"motor = {motor!r} is not allowed: the motor's ratings (MotorRatings)")
         for name in ("angle_min_rad", "angle_max_rad"):
             check_range(name, getattr(self, name), -ANGLE_LIMIT_RAD, ANGLE_LIMIT_RAD, unit="rad (+-90 deg)")
         if not self.angle_min_rad < self.angle_max_rad:
@@ -72,10 +84,12 @@ class SafetyLimits:
         check_range("disagreement_rad", self.disagreement_rad, 0.0, span, lo_open=True,
                     unit="rad (at most the span of the angle limits: a wider one could not tell any two readings "
                          "inside them apart)")
-        check_range("current_limit_a", self.current_limit_a, 0.0, PEAK_CURRENT_A, lo_open=True,
-                    unit="A (the AK60-6's peak current)")
-        check_range("brake_current_a", self.brake_current_a, 0.0, BRAKE_CURRENT_MAX_A, lo_open=True,
-                    unit="A (the AK60-6's rated continuous current)")
+        m = self.motor
+        name = "AK60-6" if m.model == "ak60_6" else m.model
+        check_range("current_limit_a", self.current_limit_a, 0.0, m.peak_current_a, lo_open=True,
+                    unit=f"A (the {name}'s peak current)")
+        check_range("brake_current_a", self.brake_current_a, 0.0, m.rated_current_a, lo_open=True,
+                    unit=f"A (the {name}'s rated continuous current)")
         for name in ("motor_timeout_s", "command_timeout_s", "imu_timeout_s"):
             check_range(name, getattr(self, name), 0.0, TIMEOUT_MAX_S, lo_open=True,
                         unit="s (a stale peak-current command crosses any range of motion in 0.1 s)")

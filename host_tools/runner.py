@@ -27,6 +27,7 @@ from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.devices.bno08x_config import imu_reading_of
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
+from hal.virtual.plant.design import Design, plant_params_for
 from hal.virtual.plant.draw import draw_plant, drawn_values
 from hal.virtual.plant.readings import DRIVERS, geometry_of
 from hal.virtual.plant.walking import walk
@@ -112,6 +113,9 @@ class RunConfig:
     # fault injectors and instruments (hal/virtual/faults), armed on the bench, the controller and the task costs
     faults: tuple = ()
     duration_s: float | None = None  # simulated time to run (None: settle + ramp + strides x stride + 50 ms)
+    # the design profile's [design] (hal.virtual.plant.design): the plant is its motor, belt and spring around the
+    # nominal foot, unless plant_file is given (which wins)
+    design: Design | None = None
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -148,11 +152,15 @@ class RunConfig:
         """
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
         nominal = load_plant_params(self.plant_file)
+        if self.design is not None and self.plant_file is None:
+            nominal = plant_params_for(self.design, nominal)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
         options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
         params = options["plant_params"]
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
                             "file": None if self.plant_file is None else str(self.plant_file),
+                            **({} if self.design is None else
+                               {"design": self.design.as_table(), "design_used": self.plant_file is None}),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
                             "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
                   # the readings of the report the bench ran under (hal.virtual.plant.readings, docs/bench.md)

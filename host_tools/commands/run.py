@@ -174,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
                         body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
-                        sensor_faults=tuple(args.sensor_fault))
+                        sensor_faults=tuple(args.sensor_fault), design=_design(args))
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 
@@ -236,6 +236,13 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
     if cfg.plant_file is not None:
         plant = plant.replace("plant", f"plant {cfg.plant_file}", 1)
+        if cfg.design is not None:
+            print(f"pafp run: note: --plant {cfg.plant_file} wins over the profile's [design] (motor {cfg.design.motor}):"
+                  " the bench runs that plant, the firmware keeps the design's limits", file=sys.stderr)
+    elif cfg.design is not None:
+        d = cfg.design
+        plant = plant.replace("plant", f"plant of the design ({d.motor}, {d.belt_driven_teeth}/{d.belt_driver_teeth} "
+                              f"belt{', spring' if d.has_spring else ''})", 1)
     ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
     walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
@@ -280,6 +287,15 @@ def _experiment_strides(fw_cfg, controller: object) -> int:  # FirmwareConfig, S
     import math
 
     return max(1, math.ceil((getattr(controller, "duration_s") + 0.5) / fw_cfg.stride_s))  # noqa: B009
+
+
+def _design(args: argparse.Namespace):  # -> Design | None
+    """The --profile's [design], checked (None without one or without --profile)."""
+    if args.profile is None:
+        return None
+    from hal.virtual.plant.design import load_design
+
+    return load_design(args.profile)
 
 
 def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig

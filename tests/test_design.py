@@ -1,0 +1,187 @@
+"""Designs (hal/virtual/plant/design.py): the [design] table, the belt's tooth constraint, the plant of a design,
+the design profile written for it (host_tools/design_profile.py) and `pafp run --profile DESIGN.toml`."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from firmware.config import load_firmware_config
+from hal.virtual.plant import load_plant_params
+from hal.virtual.plant.design import (
+    BELT_PITCHES,
+    Design,
+    DesignSpring,
+    belt_for_ratio,
+    design_from_mapping,
+    load_design,
+    plant_params_for,
+)
+from hal.virtual.plant.motors import load_motor
+from host_tools.design_profile import CONTROL_SHARE_OF_TRIP, SAFETY_SHARE_OF_PEAK, design_profile_text
+from profiles import profile_path, profile_paths
+
+REPORT = {"motor": "ak60_6", "belt_driver_teeth": 30, "belt_driven_teeth": 140, "belt_pitch_mm": 2.0}
+
+
+def test_the_report_design_reads_back_with_its_belt() -> None:
+    d = design_from_mapping(dict(REPORT), "t")
+    assert d == Design("ak60_6", 30, 140, 2.0)
+    assert d.belt_ratio == pytest.approx(14 / 3)
+    assert d.driver_pitch_diameter_m == pytest.approx(0.0191, rel=1e-3)  # report 3.2.2: 19.1 mm
+    assert d.driven_pitch_diameter_m == pytest.approx(0.089127, rel=1e-5)  # report 3.2.2: 89.127 mm
+    assert not d.has_spring
+    assert design_from_mapping(d.as_table(), "t") == d
+
+
+@pytest.mark.parametrize(("change", "names"), [
+    ({"colour": "red"}, "no key 'colour'"),
+    ({"belt_driver_teeth": 11}, "belt_driver_teeth = 11 is outside the allowed range [12, 157]"),
+    ({"belt_driver_teeth": 30.0}, "belt_driver_teeth = 30.0"),
+    ({"belt_driven_teeth": 158}, "belt_driven_teeth = 158 is outside the allowed range [12, 157]"),
+    ({"belt_pitch_mm": 2.5}, "belt_pitch_mm = 2.5 is not allowed"),
+    ({"motor": "ak99"}, "motor 'ak99' is not in profiles/motors/"),
+    ({"battery": "lead_acid"}, "battery 'lead_acid' is not in profiles/batteries/"),
+    ({"spring": {"stiffness_nm_per_rad": -1.0}}, "spring.stiffness_nm_per_rad = -1.0 is outside"),
+    ({"spring": {"stiffness_nm_per_rad": 50.0, "sided": "both"}}, "spring.sided = 'both' is not allowed"),
+    ({"spring": {"engage_deg": 45.0}}, "spring.engage_deg = 45.0 is outside the allowed range [-30, 30]"),
+    ({"spring": {"k": 1.0}}, "[design.spring] has no key 'k'"),
+])
+def test_a_bad_design_fails_in_one_line_naming_key_value_and_range(change: dict, names: str) -> None:
+    with pytest.raises(ValueError) as e:
+        design_from_mapping({**REPORT, **change}, "x.toml")
+    message = str(e.value)
+    assert "\n" not in message and message.startswith("x.toml: ")
+    assert names in message
+
+
+def test_a_missing_key_is_named() -> None:
+    with pytest.raises(ValueError, match="needs belt_pitch_mm"):
+        design_from_mapping({k: v for k, v in REPORT.items() if k != "belt_pitch_mm"}, "x.toml")
+
+
+def test_the_tooth_constraint_gives_a_whole_pair_within_one_percent_or_names_the_nearest() -> None:
+    for ratio in (3.0, 4.6667, 5.5, 7.25, 10.0):
+        driver, driven = belt_for_ratio(ratio, 2.0)
+        assert driver >= BELT_PITCHES[2.0][1] and isinstance(driven, int)
+        assert abs(driven / driver - ratio) <= 0.01 * ratio
+    assert belt_for_ratio(4.6667, 2.0) == (12, 56)  # 14:3 with the smallest ankle pulley (the report: 30/140)
+    assert belt_for_ratio(3.0, 5.0) == (18, 54)  # 5 mm pitch: at least 18 teeth
+    with pytest.raises(ValueError, match="nearest pairs: 62/18 = 3.444 at 5 mm"):
+        belt_for_ratio(5.0, 5.0)  # 18 x 5 = 90 teeth > 62 (a 100 mm ankle pulley at 5 mm)
+    with pytest.raises(ValueError) as e:
+        belt_for_ratio(30.0, 2.0)  # 12 teeth x 30 = 360 > 157 teeth (a 100 mm ankle pulley)
+    assert "nearest pairs: 157/12 = 13.083 at 2 mm" in str(e.value)
+    with pytest.raises(ValueError, match="pitch 4"):
+        belt_for_ratio(5.0, 4.0)
+
+
+def test_the_report_design_builds_the_packaged_plant_but_where_they_differ() -> None:
+    base = load_plant_params()
+    plant = plant_params_for(design_from_mapping(dict(REPORT), "t"), base)
+    differ = {f.name for f in dataclasses.fields(base) if getattr(plant, f.name) != getattr(base, f.name)}
+    # Ke from Kv (the catalogue has no Ke) against Table B2's 7.5 V/krpm; the pitch diameters from the teeth
+    # against the report's rounded 19.1 mm (and the pulley inertias scaled by them): docs/design.md lists them
+    assert differ == {"ke_v_s_per_rad", "belt_driver_pitch_diameter_m", "belt_driven_pitch_diameter_m",
+                      "actuator_output_inertia_kg_m2", "ankle_pulley_inertia_kg_m2"}
+    assert plant.ke_v_s_per_rad == pytest.approx(60 / (2 * math.pi * 140))
+    for name in differ - {"ke_v_s_per_rad"}:
+        assert getattr(plant, name) == pytest.approx(getattr(base, name), rel=2e-3)
+    assert plant.output_torque_per_amp_nm == base.output_torque_per_amp_nm
+
+
+def test_another_motor_brings_its_values_and_its_friction_through_the_belt() -> None:
+    base = load_plant_params()
+    design = Design("ak80_9", 20, 160, 2.0)
+    plant = plant_params_for(design, base)
+    m = load_motor("ak80_9")
+    assert (plant.kt_nm_per_a, plant.gearbox_ratio, plant.peak_current_a, plant.pole_pairs) == (0.095, 9.0, 28.0, 21)
+    assert plant.supply_voltage_v == 48.0 and plant.rotor_inertia_kg_m2 == m.rotor_inertia_kg_m2
+    assert plant.belt_ratio == 8.0 and plant.total_ratio == 72.0
+    assert plant.static_friction_nm == pytest.approx(0.51 * 8.0)
+    assert plant.coulomb_friction_nm / plant.static_friction_nm == pytest.approx(
+        base.coulomb_friction_nm / base.static_friction_nm)
+    assert plant.foot_output_inertia_kg_m2 == base.foot_output_inertia_kg_m2  # the base's foot
+    assert plant.stop_max_rad == base.stop_max_rad
+
+
+def test_a_profile_without_design_has_none_and_the_firmware_accepts_design() -> None:
+    assert load_design(profile_path("firmware.toml")) is None
+    for path in profile_paths("designs/*.toml"):
+        assert load_design(path) is not None
+        load_firmware_config(path)  # the firmware's loader takes [design] and its own sections as written
+
+
+def test_the_firmware_loader_refuses_a_design_that_is_no_table(tmp_path: Path) -> None:
+    bad = tmp_path / "p.toml"
+    bad.write_text('design = "ak80_9"\n' + profile_path("firmware.toml").read_text())
+    with pytest.raises(ValueError, match=r"design must be a table \[design\]"):
+        load_firmware_config(bad)
+
+
+@pytest.mark.parametrize("motor", ["ak60_6", "ak70_10", "ak80_9", "ak10_9", "ak80_64"])
+def test_the_design_profile_follows_the_motor(tmp_path: Path, motor: str) -> None:
+    design = Design(motor, 20, 100, 2.0, spring=DesignSpring(0.0))
+    path = tmp_path / "d.toml"
+    path.write_text(design_profile_text(design))
+    fw = load_firmware_config(path)
+    assert load_design(path) == design
+    m = load_motor(motor)
+    trip = round(SAFETY_SHARE_OF_PEAK * m.peak_current_a, 1)
+    assert fw.safety.current_limit_a == trip < m.peak_current_a
+    assert fw.current_limit_a == round(CONTROL_SHARE_OF_TRIP * trip, 1)
+    assert fw.safety.brake_current_a <= m.rated_current_a
+    assert fw.safety.belt_ratio == 5.0
+    ff = fw.feedforward_params
+    assert (ff.torque_constant_nm_per_a, ff.gear_ratio) == (m.kt_nm_per_a, m.gear_ratio * 5.0)
+    assert ff.inertia_kg_m2 == pytest.approx(0.0039 + 1.176 * 0.15**2 + m.rotor_inertia_kg_m2 * (m.gear_ratio * 5) ** 2,
+                                             abs=1e-6)
+    assert fw.velocity_limit_rad_s <= m.no_load_speed_rpm * 2 * math.pi / 60 / 5.0
+
+
+def test_the_report_profile_keeps_the_default_firmware_figures() -> None:
+    fw, default = load_firmware_config(profile_path("designs/ak60_6_report.toml")), load_firmware_config()
+    assert (fw.current_limit_a, fw.safety.current_limit_a, fw.velocity_limit_rad_s) == (12.0, 20.0, 8.0)
+    assert fw.feedforward_params.gear_ratio == default.feedforward_params.gear_ratio == 28.0
+    assert fw.feedforward_params.inertia_kg_m2 == pytest.approx(default.feedforward_params.inertia_kg_m2, abs=1e-4)
+
+
+@pytest.mark.parametrize("path", profile_paths("designs/*.toml"), ids=lambda p: p.name)
+def test_every_shipped_design_profile_is_what_design_profile_text_writes(path: Path) -> None:
+    design = load_design(path)
+    assert design is not None
+    shipped = tomllib.loads(path.read_text(encoding="utf-8"))
+    assert shipped == tomllib.loads(design_profile_text(design))
+
+
+def test_run_with_a_design_profile_runs_the_design_plant(tmp_path: Path) -> None:
+    from host_tools.cli import main
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--strides", "1", "--profile", str(profile),
+                 "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["bench"]["plant"]["design"]["motor"] == "ak80_9" if "bench" in s else s["plant"]["design"]["motor"] == "ak80_9"
+    expected = plant_params_for(Design("ak80_9", 20, 100, 2.0), load_plant_params()).output_torque_per_amp_nm
+    plant = s["bench"]["plant"] if "bench" in s else s["plant"]
+    assert plant["output_torque_per_amp_nm"] == pytest.approx(expected)
+    assert plant["design_used"] is True
+
+
+def test_a_bad_design_in_the_profile_stops_the_run_before_it_starts(tmp_path: Path, capsys) -> None:
+    from host_tools.cli import main
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)).replace("belt_driver_teeth = 20",
+                                                                                  "belt_driver_teeth = 5"))
+    assert main(["run", "--quiet", "--strides", "1", "--profile", str(profile), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "belt_driver_teeth = 5 is outside the allowed range [12, 157]" in err and "\n" not in err
+    assert not (tmp_path / "o").exists()
