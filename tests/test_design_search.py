@@ -142,7 +142,9 @@ def test_the_reports_ak60_6_walks_20_kg_and_falls_short_at_80(tmp_path):
     assert 0 < light["peak_current_a"] <= 12.5 and light["peak_electrical_w"] > 0
     assert adult["moment_share"] < light["moment_share"]  # 80 kg: far beyond what it can deliver
     assert adult["status"] == "fault" and adult["moment_share"] < 0.5  # ANGLE_LIMIT in the first stance
-    s = json.loads((Path(points[0].profile_name).parent / "summary.json").read_text(encoding="utf-8"))
+    kept = Path(points[0].profile_name).parent
+    assert sorted(f.name for f in kept.iterdir()) == ["actuator.png", "design.toml", "report.md", "summary.json"]
+    s = json.loads((kept / "summary.json").read_text(encoding="utf-8"))
     assert s["actuator"]["run"]["controller"] == "impedance" and s["strides"] == 2  # the point's own run
 
 

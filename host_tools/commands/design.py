@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -56,16 +57,23 @@ def _one_point(points: list, index: int) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Check the spec whole (every design's profile built), run the points not yet finished, write the report."""
+    """Check the spec whole (every design's profile built), run the points not yet finished, write the report.
+
+    Exit 2 for a bad spec, option or --out (before any run); 1 when a point gave no figures (error, timeout);
+    128 + N after signal N (design.md holds the points finished so far; --resume runs the rest).
+    """
     from host_tools.studies.design_point import design_error_row, run_design_point
     from host_tools.studies.design_report import write_design_report
     from host_tools.studies.design_spec import load_design_spec
-    from host_tools.studies.sweep_engine import dask_client, run_tasks
-    from host_tools.studies.sweep_table import check_out
+    from host_tools.studies.interrupt import Interrupted, interrupting
+    from host_tools.studies.sweep_engine import check_scheduler, dask_client, run_tasks
+    from host_tools.studies.sweep_table import check_out, read_rows
 
     try:
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+        if args.scheduler is not None:
+            check_scheduler(args.scheduler)
         spec = load_design_spec(args.spec)
         out: Path = args.out or Path("runs") / f"design-{spec.path.stem}"
         points = spec.points(out)
@@ -83,10 +91,17 @@ def run(args: argparse.Namespace) -> int:
     where = f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster of {workers} workers on 127.0.0.1"
     print(f"pafp design: {len(points)} points ({len(spec.designs())} designs) on {where} -> {out}")
     try:
-        with dask_client(workers=workers, scheduler=args.scheduler) as client:
+        with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_tasks(points, run_design_point, out, client, columns=columns(), digest=spec.digest,
                                 error_row=design_error_row, resume=args.resume, progress=not args.quiet,
                                 ok=lambda row: row["status"] in ("ok", "fault"))
+    except Interrupted as stop:  # the table was flushed and the cluster closed on the way out
+        rows = read_rows(out)
+        print(f"pafp design: stopped by {stop.signal}: {len(rows)} of {len(points)} points finished, kept in {out}; "
+              "`--resume` runs the rest", file=sys.stderr)
+        if rows:
+            write_design_report(spec, points, rows, out, math.nan, f"{where}, stopped by {stop.signal}")
+        return stop.exit_code
     except ValueError as e:
         print(f"pafp design: {e}", file=sys.stderr)
         return 2

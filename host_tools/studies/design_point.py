@@ -42,6 +42,7 @@ FIGURES = ("fault", "fault_at_s", "strides_walked", "moment_share", "peak_curren
            "within_thermal", "over_temperature_at_s", "energy_per_stride_j", "distance_per_charge_km",
            "motor_kg", "transmission_kg", "spring_kg", "actuator_kg", "keeps_up_to_kg", "keeps_up_to_kg_limit",
            "sim_time_s", "wall_time_s")
+KEPT = ("summary.json", "report.md", "actuator.png")  # of a point's outputs, beside its design profile
 
 
 def _base_row(p: DesignPoint) -> dict[str, Any]:
@@ -219,10 +220,27 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
             **mass, "keeps_up_to_kg": _num(keeps, "peak"), "keeps_up_to_kg_limit": _num(keeps, "control_limit")}
 
 
+def _write_summary(r: Any, out: Path) -> dict[str, Any]:
+    """The run's outputs as `pafp run` writes them, of which summary.json, report.md and actuator.png are kept in
+    out (the telemetry, 3 MB a point, is left out: the row's `pafp run` command writes it again)."""
+    import shutil
+    import tempfile
+
+    from host_tools.reports.report import write_outputs
+
+    with tempfile.TemporaryDirectory(prefix="pafp-design-point-") as tmp:
+        s = write_outputs(r, Path(tmp), plot=False, trace=False)
+        out.mkdir(parents=True, exist_ok=True)
+        for name in KEPT:
+            if (Path(tmp) / name).is_file():
+                shutil.copyfile(Path(tmp) / name, out / f".{name}.tmp")
+                (out / f".{name}.tmp").replace(out / name)
+    return s
+
+
 def run_design_point(p: DesignPoint) -> dict[str, Any]:
     """Run one point, write its summary.json and report.md beside its design profile, return its row; a failure
     is the row's error."""
-    from host_tools.reports.report import write_outputs
     from host_tools.runner import run_virtual
     from host_tools.studies.sweep_point import _deadline, _PointTimeout  # the sweep's per-point wall-time limit
 
@@ -230,7 +248,7 @@ def run_design_point(p: DesignPoint) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         r = run_virtual(point_run_config(p), progress=_deadline(p.timeout_s))
-        s = write_outputs(r, Path(p.profile_name).parent, plot=False, trace=False)
+        s = _write_summary(r, Path(p.profile_name).parent)
         row = _base_row(p)
         row.update(figures(p, r, s))
     except _PointTimeout:

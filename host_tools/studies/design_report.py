@@ -165,7 +165,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
         status[r["status"]] = status.get(r["status"], 0) + 1
     md = [f"# Design search {spec.path.name}", "",
           f"{len(rows)} points ({', '.join(f'{k} {v}' for k, v in sorted(status.items()))}) on {where} in "
-          f"{wall_time_s:.1f} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
+          f"{_fmt(wall_time_s, '.1f')} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
           f"A design walks the person when its run has no fault, its winding stays within the insulation limit "
           f"and it delivers at least {min_share:.0%} of the stance moment (measured as a bench does: the motor's "
           "reported current x the drive's N·m per A, plus the spring at the firmware's angle). Winding "
