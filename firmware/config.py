@@ -14,7 +14,7 @@ from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.drivers.ground_sensor_config import GroundSensorConfig
 from firmware.motor_ratings import RATING_KEYS, MotorRatings
 from firmware.safety import SafetyLimits
-from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S
+from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S, ThermalLimits
 from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
 
@@ -23,7 +23,7 @@ __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareCo
 DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
 SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller", "ground_sensors",
-            "host_watchdog")
+            "host_watchdog", "thermal")
 """The tables of a firmware profile ([control] holds the sub-tables position and velocity)."""
 HOST_SECTIONS = ("design",)
 """Tables a firmware profile may carry for the host, never read by the firmware: [design] (a design profile's motor,
@@ -99,6 +99,7 @@ class FirmwareConfig:
     velocity_gains: PidGains = PidGains(0.2, 3.0)
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
+    thermal: ThermalLimits = ThermalLimits()  # [thermal]: derating and OVER_TEMPERATURE (firmware.safety_limits)
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
     motor_link: str = "uart"  # [motor] link: a name of firmware.drivers.motor_links.MOTOR_LINKS
     motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
@@ -320,6 +321,8 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         feedforward_params = _parameters(FeedforwardParams, _section(doc, "feedforward"))
         section = "safety"
         safety = SafetyLimits(**safety_table, motor=ratings)
+        section = "thermal"
+        thermal = _parameters(ThermalLimits, _section(doc, "thermal"))
         section = "task_cycles"
         task_cycles = _task_cycles(_section(doc, "task_cycles"))
         section = "motor"
@@ -338,8 +341,8 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         host_watchdog = _host_watchdog(_section(doc, "host_watchdog"))
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
-                              feedforward_params=feedforward_params, safety=safety, task_cycles=task_cycles,
-                              **links, **controller, **host_watchdog, **ctl, ground_sensors=ground_sensors)
+                              feedforward_params=feedforward_params, safety=safety, thermal=thermal,
+                              task_cycles=task_cycles, **links, **controller, **host_watchdog, **ctl, ground_sensors=ground_sensors)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

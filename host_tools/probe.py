@@ -79,6 +79,7 @@ class ProbeBody:
         self.actions = actions
         self.world = bench.world
         self.plant = bench.plant.raw  # the probe brings the world up to its job's start itself
+        self.listeners: list[Callable[[float], None]] = []  # called with each sample's time (e.g. the heat log)
 
     def __call__(self, job: Job) -> None:
         """Run the actions due, advance the world to job.start, record one sample."""
@@ -89,3 +90,5 @@ class ProbeBody:
             actions.pop(0)[1](self.bench, self.fw)
         self.world.advance_to(start)
         self.probe.sample(t, self.fw, self.plant.output_angle_rad(t))
+        for listener in self.listeners:
+            listener(t)

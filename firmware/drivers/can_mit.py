@@ -67,6 +67,7 @@ class CanMitDriver(CanLink):
             fb.current_a = r.t / self.nm_per_a
             fb.fault = r.error
             fb.temp_motor_c = float(r.temperature_c)
+            fb.temp_received_s = now_s
             taken += 1
             if not self._outstanding:
                 st.stale_replies += 1

@@ -90,6 +90,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     walk.add_argument("--sensor-fault", action="append", default=[], metavar="PART:MODE",
                       help="start with a ground sensor failed: fsr_heel:open|short, fsr_toe:open|short, "
                            "load_cell:open|stuck_high; repeatable (the firmware falls back to its motor-load estimate)")
+    heat = parser.add_argument_group("winding temperature and battery (virtual bench)")
+    heat.add_argument("--ambient-c", type=float, default=None, metavar="C",
+                      help="ambient temperature in C, -40..80 (default 25): the winding starts at it and cools "
+                           "towards it (docs/design.md, 'Winding temperature')")
+    heat.add_argument("--battery", default=None, metavar="NAME|FILE",
+                      help="supply the motor from this battery (profiles/batteries/ name or a profile file; default: "
+                           "the design's, else an ideal supply): the bus sags, summary.json gains distance per charge")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -174,7 +181,13 @@ def run(args: argparse.Namespace) -> int:
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
                         body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
-                        sensor_faults=tuple(args.sensor_fault), design=_design(args))
+                        sensor_faults=tuple(args.sensor_fault), design=_design(args),
+                        battery=args.battery,
+                        ambient_c=25.0 if args.ambient_c is None else args.ambient_c)
+        if args.battery is not None:
+            from hal.virtual.plant.battery import load_battery
+
+            load_battery(args.battery)  # a bad name or profile stops here
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 
@@ -212,6 +225,10 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
         if args.strides is not None:
             return (f"--strides {args.strides} is not allowed in serial mode (--motor/--imu): a serial run lasts "
                     f"--duration S, a number of seconds > 0 (default {DURATION_S:g})")
+        for option, value in (("--ambient-c", args.ambient_c), ("--battery", args.battery)):
+            if value is not None:
+                return (f"{option} {value} is not allowed in serial mode (--motor/--imu): it sets the virtual "
+                        "bench's motor model; a real motor reports its own temperature and supply")
     elif args.duration is not None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")

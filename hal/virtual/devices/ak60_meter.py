@@ -96,6 +96,16 @@ class Ak60Meter:
         self._battery = battery
         self.v_in_v = battery.bus_v
 
+    @property
+    def winding(self) -> WindingThermal | None:
+        """The attached two-node winding model (None: the single-node estimate)."""
+        return self._winding
+
+    @property
+    def battery(self) -> Battery | None:
+        """The attached pack (None: the fixed supply)."""
+        return self._battery
+
     def sample(self, t_s: float, current_a: float, motor_velocity_rad_s: float, motor_angle_rad: float) -> None:
         """Take the plant's values at t_s (>= the previous sample) and integrate the interval since then."""
         dt = t_s - self.t_s

@@ -217,6 +217,21 @@ class Plant:
             self._x = (th, w, 0.0, s)
         self._drive = self._make_drive()
 
+    def set_supply_voltage(self, voltage_v: float, t_s: float) -> None:
+        """From t_s on, the driver's bus is at voltage_v (a battery sagging): the back-EMF limit follows it.
+
+        In the voltage-amplifier reading the duty held is kept: its current scales with the bus.
+        """
+        _check_finite("voltage_v", voltage_v)
+        if voltage_v <= 0.0:
+            raise ValueError(f"supply voltage {voltage_v!r} V out of range: > 0")
+        self._commit_event(t_s)
+        v_over_r = voltage_v / self.params.phase_resistance_ohm
+        if self._emf:
+            self._command_a *= v_over_r / self._v_over_r
+        self._v_over_r = v_over_r
+        self._drive = self._make_drive()
+
     def set_external_torque(self, load: Load, t_s: float) -> None:
         """From t_s on, replace the external ankle torque: None, a constant, a TorqueProfile or f(t)."""
         self._commit_event(t_s)
