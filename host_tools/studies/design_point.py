@@ -8,14 +8,16 @@ design profile. Its figures (docs/design.md, "Reading the search"):
 * ``status``: ok, fault (the reason and when in ``fault`` / ``fault_at_s``), error or timeout;
 * ``moment_share``: the share of the normative stance moment the actuator delivered, as a bench measures it:
   the motor's current from its status replies x the drive's ankle N·m per A (Kt x ratio x efficiency), plus the
-  parallel spring's moment at the firmware's ankle angle, against body mass x the normative moment at the same
-  gait phase; per sample the part delivered in the demand's direction, capped at the demand, summed over the
-  stance of every stride asked for (a run that latched a fault delivers nothing after it);
+  parallel spring's moment at the firmware's ankle angle (the spring of the plant the run had), against body
+  mass x the normative moment at the same gait phase; per sample the part delivered in the demand's direction,
+  capped at the demand, summed over the stance of every stride asked for (a run that latched a fault delivers
+  nothing after it);
 * ``peak_current_a``: the largest current the motor reported; ``peak_electrical_w``: the largest
   ``I² R + Ke w I`` with the reported current and the motor speed from the firmware's ankle velocity;
 * from summary.json's ``thermal`` and ``battery`` (NaN where the run has none): the winding temperature after the
   strides and its steady state (emulation only), the temperature the motor reported, energy per stride at the
-  battery and distance per charge;
+  battery and distance per charge; ``thermal_limit_c``: the firmware's over-temperature threshold ([thermal]
+  fault_c) or the winding's insulation limit, whichever is lower;
 * ``actuator_kg``: host_tools/studies/design_mass.py; ``keeps_up_to_kg``: the walking scenario's design check
   (host_tools/reports/actuator.py) on the design's drive, at peak current (``_limit``: the firmware's limit).
 """
@@ -86,15 +88,17 @@ def point_run_config(p: DesignPoint, trace: bool = False) -> Any:
                      speed=p.speed, controller=controller_for(fw, "walk", p.body_mass_kg), **extra)
 
 
-def spring_moment_nm(p: DesignPoint, angle_rad: np.ndarray) -> np.ndarray:
-    """The parallel spring's moment on the ankle (positive dorsiflexing) at the ankle angles: it pushes back
-    towards its engagement angle, on the dorsiflexion side only when one-sided."""
-    if not p.spring_nm_per_rad:
+def spring_moment_nm(params: Any, angle_rad: np.ndarray) -> np.ndarray:
+    """The parallel spring's moment on the ankle (positive dorsiflexing) at the ankle angles, as the plant the run
+    had holds it (none where its PlantParams have no spring): it pushes back towards its engagement angle, on the
+    dorsiflexion side only when one-sided."""
+    k = float(getattr(params, "parallel_stiffness_nm_per_rad", 0.0))
+    if not k:
         return np.zeros_like(angle_rad)
-    deflection = angle_rad - math.radians(p.spring_engage_deg)
-    if p.spring_sided == "one":
+    deflection = angle_rad - float(getattr(params, "parallel_engage_rad", 0.0))
+    if not getattr(params, "parallel_two_sided", False):
         deflection = np.maximum(deflection, 0.0)
-    return -p.spring_nm_per_rad * deflection
+    return -k * deflection
 
 
 def moment_share(t_s: np.ndarray, delivered_nm: np.ndarray, demand_nm: np.ndarray, stance: np.ndarray) -> float:
@@ -136,12 +140,13 @@ def _whole_run(p: DesignPoint, r: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
     a = r.probe.arrays()
     t, i = a["t_s"].astype(float), a["current_meas_a"].astype(float)
     angle = a["fused_angle_rad"].astype(float)
-    nm_per_a = _drive(p).output_torque_per_amp_nm
+    params = _drive(p)
+    nm_per_a = params.output_torque_per_amp_nm
     state = a["supervisor_state"]
     from firmware.safety import SupervisorState
 
     running = state == int(SupervisorState.RUN)
-    delivered = np.where(running, i * nm_per_a + spring_moment_nm(p, angle), 0.0)
+    delivered = np.where(running, i * nm_per_a + spring_moment_nm(params, angle), 0.0)
     stride_s = float(r.firmware.config.stride_s)
     start = r.gait_start_s if r.gait_start_s is not None else float(r.config.settle_s)
     end = start + p.strides * stride_s
@@ -197,7 +202,8 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
     sup = r.firmware.supervisor
     fault = ",".join(s["faults"])
     thermal, battery = s.get("thermal"), s.get("battery")
-    limit = motor.max_winding_c
+    thermal_limits = getattr(r.firmware.config, "thermal", None)  # [thermal]: where the firmware latches
+    limit = min(motor.max_winding_c, getattr(thermal_limits, "fault_c", math.inf))
     steady = _num(thermal, "steady_state_c")
     hottest = steady if not math.isnan(steady) else _num(thermal, "winding_c_max")
     over = _num(thermal, "over_temperature_at_s")

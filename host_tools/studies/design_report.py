@@ -166,9 +166,10 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
     md = [f"# Design search {spec.path.name}", "",
           f"{len(rows)} points ({', '.join(f'{k} {v}' for k, v in sorted(status.items()))}) on {where} in "
           f"{_fmt(wall_time_s, '.1f')} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
-          f"A design walks the person when its run has no fault, its winding stays within the insulation limit "
+          f"A design walks the person when its run has no fault, its winding stays within the thermal limit (the "
+          "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking) "
           f"and it delivers at least {min_share:.0%} of the stance moment (measured as a bench does: the motor's "
-          "reported current x the drive's N·m per A, plus the spring at the firmware's angle). Winding "
+          "reported current x the drive's N·m per A, plus the plant's spring at the firmware's angle). Winding "
           "temperatures are the thermal model's (emulation only); the actuator mass is an estimate "
           "(docs/design.md). n/a: the run's summary has no such figure.", ""]
     md += ["## The lightest design that walks each body mass and speed", ""]
@@ -181,7 +182,10 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
             md.append(f"- **{mass:g} kg, {speed}**: point {best['point']}, {_label(best)}: "
                       f"{_fmt(best['actuator_kg'], '.3f')} kg, moment share {_fmt(best['moment_share'], '.1%')}, "
                       f"peak {_fmt(best['peak_current_a'], '.1f')} A, winding {_fmt(best['winding_c_end'], '.1f')} °C "
-                      f"after {spec.strides} strides; `{rerun_command(by_index[best['point']])}`")
+                      f"after {spec.strides} strides ({_fmt(best['steady_state_c'], '.1f')} °C steady, limit "
+                      f"{_fmt(best['thermal_limit_c'], '.0f')} °C), {_fmt(best['energy_per_stride_j'], '.1f')} J per "
+                      f"stride, {_fmt(best['distance_per_charge_km'], '.1f')} km per charge; "
+                      f"`{rerun_command(by_index[best['point']])}`")
     md += ["", "## The report's actuator (AK60-6, 14:3 belt, no spring)", ""]
     mine = [r for r in rows if is_report_design(r)]
     if not mine:
