@@ -175,3 +175,21 @@ def test_the_command_writes_the_table_report_and_plot(tmp_path, capsys):
     assert "--resume" in capsys.readouterr().err
     assert main(["design", str(spec), "--point", "0", "--out", str(tmp_path / "p")]) == 0
     assert (tmp_path / "p" / "points" / "0000" / "summary.json").is_file()
+
+
+def test_a_design_whose_steady_winding_passes_the_firmwares_threshold_does_not_walk(tmp_path):
+    belt = REPORT_BELT.replace("30", "18").replace("140", "144")  # AK80-9 at 8:1 walks 80 kg, its winding warms
+    rows = []
+    for ambient in (25, 50):
+        spec = load_design_spec(spec_file(tmp_path, f'motors = ["ak80_9"]\nbody_masses_kg = [80]\nstrides = 2\n'
+                                          f"ambient_c = {ambient}\nmin_moment_share = 0.5\n", belt))
+        (p,) = spec.points(tmp_path / f"o{ambient}")
+        _write_profiles([p], tmp_path / f"o{ambient}")
+        rows.append(run_design_point(p))
+        assert ("--ambient-c 50" in rerun_command(p)) == (ambient == 50)
+    cool, warm = rows
+    assert cool["status"] == warm["status"] == "ok" and cool["thermal_limit_c"] == 90.0
+    assert cool["steady_state_c"] < 90.0 < warm["steady_state_c"]  # the same losses, 25 K warmer surroundings
+    assert warm["steady_state_c"] - cool["steady_state_c"] > 25.0  # and the copper's resistance rises with it
+    assert cool["within_thermal"] and walks(cool, 0.5) and not warm["within_thermal"] and not walks(warm, 0.5)
+    assert cool["energy_per_stride_j"] > 0 and cool["distance_per_charge_km"] > 0  # the 12S pack, i23-heat's keys

@@ -65,7 +65,8 @@ def design_error_row(p: DesignPoint, status: str, error: str, wall_time_s: float
 def rerun_command(p: DesignPoint) -> str:
     """The `pafp run` command that runs the point as it ran here."""
     return (f"pafp run --scenario walk --profile {p.profile_name} --body-mass {p.body_mass_kg:g} --speed {p.speed} "
-            f"--strides {p.strides} --controller {p.controller} --seed {p.seed}")
+            f"--strides {p.strides} --controller {p.controller} --seed {p.seed}"
+            + (f" --ambient-c {p.ambient_c:g}" if p.ambient_c != 25.0 else ""))
 
 
 def point_run_config(p: DesignPoint, trace: bool = False) -> Any:
@@ -85,7 +86,8 @@ def point_run_config(p: DesignPoint, trace: bool = False) -> Any:
     if "design" in {f.name for f in dataclasses.fields(RunConfig)}:
         extra["design"] = load_design(path)
     return RunConfig(strides=p.strides, seed=p.seed, firmware=fw, scenario="walk", body_mass_kg=p.body_mass_kg,
-                     speed=p.speed, controller=controller_for(fw, "walk", p.body_mass_kg), **extra)
+                     speed=p.speed, controller=controller_for(fw, "walk", p.body_mass_kg), ambient_c=p.ambient_c,
+                     **extra)
 
 
 def spring_moment_nm(params: Any, angle_rad: np.ndarray) -> np.ndarray:

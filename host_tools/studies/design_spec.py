@@ -13,6 +13,7 @@ speeds, each point a walking run of the firmware on its design profile; checked 
     controller = "impedance"           # a shipped controller (firmware/control/registry.py)
     seed = 0                           # run seed, 0..2^32-1
     timeout_s = 900                    # wall seconds per point
+    ambient_c = 25.0                   # the motor's surroundings, -40..80 C (pafp run --ambient-c)
     min_moment_share = 0.9             # a design "walks" the person when it delivers this share of the stance
                                        # moment, without a fault and within the thermal limit
 
@@ -47,7 +48,7 @@ from host_tools.studies.sweep_spec import SpecError
 __all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "load_design_spec", "pick_battery"]
 
 SEARCH_KEYS = ("profile", "motors", "batteries", "body_masses_kg", "speeds", "strides", "controller", "seed",
-               "timeout_s", "min_moment_share")
+               "timeout_s", "ambient_c", "min_moment_share")
 BELT_KEYS = ("driver_teeth", "driven_teeth", "pitch_mm")
 SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
 MAX_POINTS = 10_000
@@ -72,6 +73,7 @@ class DesignPoint:
     controller: str
     seed: int
     timeout_s: float
+    ambient_c: float
     profile_name: str  # where the command writes the design profile (the rerun command names it)
     profile_text: str
 
@@ -121,6 +123,7 @@ class DesignSpec:
     controller: str
     seed: int
     timeout_s: float
+    ambient_c: float
     min_moment_share: float
     profiles: dict[tuple[Any, ...], str]
     digest: str
@@ -145,7 +148,7 @@ class DesignSpec:
                            "design.toml")
                 points.append(DesignPoint(i, motor, belt[0], belt[1], belt[2], spring[0], spring[1], spring[2],
                                           battery, mass, speed, self.strides, self.controller, self.seed,
-                                          self.timeout_s, name, self.profiles[design]))
+                                          self.timeout_s, self.ambient_c, name, self.profiles[design]))
         return points
 
 
@@ -299,14 +302,15 @@ def load_design_spec(path: Path) -> DesignSpec:
         raise _err(path, "[search] controller", controller, f"one of {', '.join(CONTROLLERS)}")
     seed = _int(path, "[search] seed", s.get("seed", 0), 0, 2**32 - 1)
     timeout = _number(path, "[search] timeout_s", s.get("timeout_s", 900.0), 0.0, 86_400.0, True)
+    ambient = _number(path, "[search] ambient_c", s.get("ambient_c", 25.0), -40.0, 80.0)
     min_share = _number(path, "[search] min_moment_share", s.get("min_moment_share", 0.9), 0.0, 1.0)
     belts, springs = _belts(path, doc), _springs(path, doc)
     n = len(motors) * len(belts) * len(springs) * len(batteries) * len(masses) * len(speeds)
     if not 1 <= n <= MAX_POINTS:
         raise SpecError(f"design spec {path}: {n} points out of range: 1..{MAX_POINTS}")
     spec = DesignSpec(path, Path(base), motors, batteries, masses, speeds, belts, springs, strides, controller,
-                      seed, timeout, min_share, {}, "")
+                      seed, timeout, ambient, min_share, {}, "")
     profiles = {d: _profile_of(path, Path(base), d) for d in spec.designs()}
     digest = hashlib.sha256("\0".join([text, *(f"{d!r}\0{t}" for d, t in profiles.items())]).encode()).hexdigest()
     return DesignSpec(path, Path(base), motors, batteries, masses, speeds, belts, springs, strides, controller,
-                      seed, timeout, min_share, profiles, digest)
+                      seed, timeout, ambient, min_share, profiles, digest)
