@@ -27,7 +27,6 @@ from __future__ import annotations
 import logging
 import math
 import time
-import traceback
 from pathlib import Path
 from typing import Any
 
@@ -250,7 +249,11 @@ def run_design_point(p: DesignPoint) -> dict[str, Any]:
     """Run one point, write its summary.json and report.md beside its design profile, return its row; a failure
     is the row's error."""
     from host_tools.runner import run_virtual
-    from host_tools.studies.sweep_point import _deadline, _PointTimeout  # the sweep's per-point wall-time limit
+    from host_tools.studies.sweep_point import (  # the sweep's per-point wall-time limit
+        _deadline,
+        _PointTimeout,
+        failure_text,
+    )
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)  # a fault is in the row, not on the console
     t0 = time.perf_counter()
@@ -263,10 +266,7 @@ def run_design_point(p: DesignPoint) -> dict[str, Any]:
         return design_error_row(p, "timeout", f"timeout: no result within {p.timeout_s:g} s",
                                 time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any failure of a point is its row, not the search's end
-        last = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
-        where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
-        return design_error_row(p, "error", f"{type(e).__name__}: {e}{where}".replace("\n", " "),
-                                time.perf_counter() - t0)
+        return design_error_row(p, "error", failure_text(e), time.perf_counter() - t0)
     row.update({"status": "fault" if row["fault"] else "ok", "error": f"fault {row['fault']}" if row["fault"] else "",
                 "sim_time_s": round(r.sim_time_s, 4), "wall_time_s": round(time.perf_counter() - t0, 3)})
     return row

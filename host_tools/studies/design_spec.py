@@ -36,13 +36,12 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from firmware.config import DEFAULT_PROFILE
+from host_tools.studies.spec_values import read_spec, spec_int, spec_list, spec_number, spec_range_error
 from host_tools.studies.sweep_spec import SpecError
 
 __all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "load_design_spec", "pick_battery"]
@@ -166,31 +165,23 @@ def pick_battery(name: str, motor: str) -> str:
     return min(battery_names(), key=lambda b: (abs(load_battery(b).open_circuit_v(1.0) - supply), b))
 
 
+KIND = "design spec"
+
+
 def _err(path: Path, where: str, value: object, allowed: str) -> SpecError:
-    return SpecError(f"design spec {path}: {where} = {value!r} out of range: {allowed}")
+    return spec_range_error(KIND, path, where, value, allowed)
 
 
 def _number(path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
-    ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-          and (lo < v if low_open else lo <= v) and v <= hi)
-    if not ok:
-        raise _err(path, where, v, f"a number in {'(' if low_open else '['}{lo:g}, {hi:g}]")
-    return float(v)  # type: ignore[arg-type]
+    return spec_number(KIND, path, where, v, lo, hi, low_open)
 
 
 def _int(path: Path, where: str, v: object, lo: int, hi: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        raise _err(path, where, v, f"an int in {lo}..{hi}")
-    return v
+    return spec_int(KIND, path, where, v, lo, hi)
 
 
 def _list(path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
-    v = doc.get(key, default)
-    if not isinstance(v, list) or not v:
-        raise _err(path, f"[search] {key}", v, "a non-empty list")
-    if len(set(map(repr, v))) != len(v):
-        raise _err(path, f"[search] {key}", v, "a list without repeats")
-    return v
+    return spec_list(KIND, path, "[search]", doc, key, default)
 
 
 def _names(path: Path, key: str, values: list[Any], known: list[str], extra: tuple[str, ...] = ()) -> tuple[str, ...]:
@@ -268,14 +259,7 @@ def load_design_spec(path: Path) -> DesignSpec:
     """Read and check a search spec and build every design's profile; SpecError (one line naming the file, the
     key, the value and the allowed range) otherwise."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-        doc = tomllib.loads(text)
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise SpecError(f"design spec {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
-    unknown = sorted(set(doc) - {"search", "belt", "spring"})
-    if unknown:
-        raise SpecError(f"design spec {path}: table {unknown[0]!r} unknown: [search], [[belt]], [[spring]]")
+    text, doc = read_spec(KIND, path, ("[search]", "[[belt]]", "[[spring]]"))
     s = doc.get("search", {})
     bad = sorted(set(s) - set(SEARCH_KEYS))
     if bad:
