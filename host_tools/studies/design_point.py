@@ -91,15 +91,10 @@ def point_run_config(p: DesignPoint, trace: bool = False) -> Any:
 
 def spring_moment_nm(params: Any, angle_rad: np.ndarray) -> np.ndarray:
     """The parallel spring's moment on the ankle (positive dorsiflexing) at the ankle angles, as the plant the run
-    had holds it (none where its PlantParams have no spring): it pushes back towards its engagement angle, on the
-    dorsiflexion side only when one-sided."""
-    k = float(getattr(params, "parallel_stiffness_nm_per_rad", 0.0))
-    if not k:
+    had holds it (PlantParams.parallel_spring_torque_nm; none where the plant has no spring)."""
+    if not getattr(params, "parallel_stiffness_nm_per_rad", 0.0):
         return np.zeros_like(angle_rad)
-    deflection = angle_rad - float(getattr(params, "parallel_engage_rad", 0.0))
-    if not getattr(params, "parallel_two_sided", False):
-        deflection = np.maximum(deflection, 0.0)
-    return -k * deflection
+    return np.array([params.parallel_spring_torque_nm(float(a)) for a in angle_rad])
 
 
 def moment_share(t_s: np.ndarray, delivered_nm: np.ndarray, demand_nm: np.ndarray, stance: np.ndarray) -> float:
