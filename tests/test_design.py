@@ -185,3 +185,77 @@ def test_a_bad_design_in_the_profile_stops_the_run_before_it_starts(tmp_path: Pa
     err = capsys.readouterr().err.strip()
     assert "belt_driver_teeth = 5 is outside the allowed range [12, 157]" in err and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_mit_driver_takes_the_profile_motor_ranges_and_scalings(tmp_path: Path) -> None:
+    from firmware.drivers.can_mit import CanMitDriver
+    from protocol import can_mit
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    cfg = load_firmware_config(profile)
+    m = load_motor("ak80_9")
+    assert (cfg.motor.mit_t_max_nm, cfg.motor.pole_pairs, cfg.motor.gear_ratio) == (18.0, 21, 9.0)
+
+    from hal.can import CanFrame, CanPort
+
+    class Port(CanPort):  # only what on_port keeps: nothing is sent
+        def _send(self, frame: CanFrame) -> bool:
+            return True
+
+        def _receive(self) -> CanFrame | None:
+            return None
+
+    driver = CanMitDriver.on_port(Port(1_000_000), cfg)
+    assert driver.limits == can_mit.MitLimits(m.p_max_rad, m.v_max_rad_s, m.t_max_nm)
+    assert driver.nm_per_a == pytest.approx(m.kt_nm_per_a * m.gear_ratio)
+    assert driver.erpm_per_rad_s == pytest.approx(60 / (2 * math.pi) * 9.0 * 21)
+    default = CanMitDriver.on_port(Port(1_000_000), load_firmware_config())
+    assert default.limits == can_mit.AK60_6 and default.nm_per_a == pytest.approx(0.078 * 6.0)
+    # 16 N m is inside the AK80-9's +-18 N m but outside the AK60-6's +-15: only the design's range carries it
+    cmd = can_mit.MitCommand(t_ff=16.0)
+    assert can_mit.decode_command(can_mit.encode_command(cmd, driver.limits), driver.limits).t_ff == \
+        pytest.approx(16.0, abs=0.01)
+    assert can_mit.decode_command(can_mit.encode_command(cmd, default.limits), default.limits).t_ff == 15.0
+
+
+@pytest.mark.parametrize("link", ["uart", "can-mit"])
+def test_a_non_ak60_design_runs_on_the_uart_and_the_can_mit_link(tmp_path: Path, link: str) -> None:
+    from host_tools.cli import main
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--strides", "1", "--profile", str(profile),
+                 "--motor-link", link, "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["faults"] == [] or not s["faults"]
+    assert s["motor_link"]["feedback_rate_hz"] > 900
+    assert s["encoder_rms_error_deg"] < 2.0
+
+
+def test_the_adult_design_walks_80_kg_at_free_speed(tmp_path: Path) -> None:
+    """profiles/designs/adult_80kg.toml (issue 23 item 6); 3 strides here, docs/design.md gives the 20-stride run."""
+    from host_tools.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--scenario", "walk", "--body-mass", "80", "--speed",
+                 "free", "--controller", "impedance", "--strides", "3", "--profile",
+                 str(profile_path("designs/adult_80kg.toml")), "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert not s["faults"] and s["complete"]
+    run = s["actuator"]["run"]
+    assert run["stance_moment_share"] >= 0.95 and run["stance_peak_moment_share"] >= 0.95
+    assert s["actuator"]["drive"]["peak_current_a"] == load_motor("ak10_9").peak_current_a  # the design's drive
+    assert s["actuator"]["keeps_up_to_body_mass_kg"]["peak"] >= 80.0
+
+
+def test_the_report_design_keeps_its_limit_of_about_35_kg(tmp_path: Path) -> None:
+    """The report's design as a design profile keeps the issue's figure: it keeps up only to ~35 kg at peak."""
+    from host_tools.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--scenario", "walk", "--body-mass", "20", "--strides",
+                 "1", "--profile", str(profile_path("designs/ak60_6_report.toml")), "--out", str(out)]) == 0
+    keeps = json.loads((out / "summary.json").read_text())["actuator"]["keeps_up_to_body_mass_kg"]
+    assert 33.0 <= keeps["peak"] <= 36.0

@@ -294,14 +294,9 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
 
 
 def _spring_params(spring: DesignSpring | None) -> dict[str, Any]:
-    """The plant's parallel-spring keys for a design's spring (none: no keys, the base's zero spring)."""
-    if spring is None or not _plant_has_spring():
+    """The plant's parallel-spring keys for a design's spring (none: the base's, no spring)."""
+    if spring is None:
         return {}
     return {"parallel_stiffness_nm_per_rad": spring.stiffness_nm_per_rad,
             "parallel_engage_rad": spring.engage_rad,
             "parallel_two_sided": spring.sided == "two"}
-
-
-def _plant_has_spring() -> bool:
-    """Whether PlantParams has the parallel spring's keys."""
-    return "parallel_stiffness_nm_per_rad" in PlantParams.__dataclass_fields__
