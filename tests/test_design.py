@@ -259,3 +259,34 @@ def test_the_report_design_keeps_its_limit_of_about_35_kg(tmp_path: Path) -> Non
                  "1", "--profile", str(profile_path("designs/ak60_6_report.toml")), "--out", str(out)]) == 0
     keeps = json.loads((out / "summary.json").read_text())["actuator"]["keeps_up_to_body_mass_kg"]
     assert 33.0 <= keeps["peak"] <= 36.0
+
+
+def test_the_limits_are_bounded_by_the_profile_motor(tmp_path: Path) -> None:
+    text = design_profile_text(Design("ak80_9", 12, 96, 2.0))  # 8:1: the AK80-9's 570 rpm is 7.46 rad/s at the ankle
+    path = tmp_path / "d.toml"
+    path.write_text(text)
+    fw = load_firmware_config(path)
+    assert fw.velocity_limit_rad_s == pytest.approx(7.461, abs=1e-3) and fw.motor.model == "ak80_9"
+    path.write_text(text.replace("velocity_limit_rad_s = 7.461", "velocity_limit_rad_s = 8.0"))
+    with pytest.raises(ValueError, match=r"velocity_limit_rad_s = 8.0 is not allowed: .*\(the ak80_9's no-load speed"):
+        load_firmware_config(path)
+    path.write_text(text.replace("current_limit_a = 24.6", "current_limit_a = 28.5"))
+    with pytest.raises(ValueError, match=r"\[safety\] current_limit_a = 28.5 .* \(0, 28\] A \(the ak80_9's peak"):
+        load_firmware_config(path)
+    path.write_text(text.replace("peak_current_a = 28.0", "peak_current_a = 2800.0"))
+    with pytest.raises(ValueError, match=r"\[motor\] peak_current_a = 2800.0 is not allowed"):
+        load_firmware_config(path)
+
+
+def test_a_plant_file_wins_over_the_design_with_a_note(tmp_path: Path, capsys) -> None:
+    from host_tools.cli import main
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--strides", "1", "--profile", str(profile),
+                 "--plant", str(profile_path("plant_ak60_6.toml")), "--out", str(out)]) in (0, 1)
+    assert "wins over the profile's [design] (motor ak80_9)" in capsys.readouterr().err
+    plant = json.loads((out / "summary.json").read_text())["plant"]
+    assert plant["design_used"] is False
+    assert plant["output_torque_per_amp_nm"] == pytest.approx(load_plant_params().output_torque_per_amp_nm)
