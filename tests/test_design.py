@@ -29,6 +29,19 @@ from profiles import profile_path, profile_paths
 REPORT = {"motor": "ak60_6", "belt_driver_teeth": 30, "belt_driven_teeth": 140, "belt_pitch_mm": 2.0}
 
 
+def _design_profiles() -> list[Path]:
+    """The shipped design profiles: firmware profiles with a [design] (profiles/designs/ also holds search specs)."""
+    out = []
+    for path in profile_paths("designs/*.toml"):
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        if "design" in doc and "rates_hz" in doc:
+            out.append(path)
+    return out
+
+
+DESIGN_PROFILES = _design_profiles()
+
+
 def test_the_report_design_reads_back_with_its_belt() -> None:
     d = design_from_mapping(dict(REPORT), "t")
     assert d == Design("ak60_6", 30, 140, 2.0)
@@ -112,7 +125,8 @@ def test_another_motor_brings_its_values_and_its_friction_through_the_belt() -> 
 
 def test_a_profile_without_design_has_none_and_the_firmware_accepts_design() -> None:
     assert load_design(profile_path("firmware.toml")) is None
-    for path in profile_paths("designs/*.toml"):
+    assert {p.name for p in DESIGN_PROFILES} >= {"ak60_6_report.toml", "adult_80kg.toml"}
+    for path in DESIGN_PROFILES:
         assert load_design(path) is not None
         load_firmware_config(path)  # the firmware's loader takes [design] and its own sections as written
 
@@ -151,7 +165,7 @@ def test_the_report_profile_keeps_the_default_firmware_figures() -> None:
     assert fw.feedforward_params.inertia_kg_m2 == pytest.approx(default.feedforward_params.inertia_kg_m2, abs=1e-4)
 
 
-@pytest.mark.parametrize("path", profile_paths("designs/*.toml"), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", DESIGN_PROFILES, ids=lambda p: p.name)
 def test_every_shipped_design_profile_is_what_design_profile_text_writes(path: Path) -> None:
     design = load_design(path)
     assert design is not None
