@@ -150,7 +150,7 @@ def _check_control(value: Callable[[str], Any], control_hz: int, motor: MotorRat
                    belt_ratio: float | None = None) -> None:
     """Check the [control] scalars, read through value(name); the current and velocity bounds are the motor's."""
     ranges = dict(CONTROL_RANGES)
-    if motor is not None and (motor != MotorRatings() or belt_ratio != SafetyLimits.belt_ratio):
+    if motor is not None and motor != MotorRatings():  # the AK60-6's bounds are the table's (its 14:3 belt)
         name = "AK60-6" if motor.model == "ak60_6" else motor.model
         ranges["current_limit_a"] = (0.0, motor.peak_current_a, True, False, f"A (the {name}'s peak current)")
         ranges["velocity_limit_rad_s"] = (0.0, motor.no_load_ankle_speed_rad_s(belt_ratio or SafetyLimits.belt_ratio),

@@ -97,7 +97,7 @@ class FirmwareTasks:
         feedforward = Feedforward(c.feedforward_params)
         self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
         self.load_detector = LoadDetector(self.ts_s, feedforward.nm_per_a, feedforward.inertia_kg_m2,
-                                          feedforward.gravity_moment_nm, c.com_angle_rad)
+                                          feedforward.gravity_moment_nm, c.com_angle_rad, feedforward=feedforward)
         # gait events from the load cell and FSRs, on boards with the ADC; the load detector is the fallback
         self.ground_events: GroundEvents | None = (
             GroundEvents(GroundSensorDriver(board.adc, c.ground_sensors, self.ts_s)) if board.adc is not None else None)

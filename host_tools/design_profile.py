@@ -8,6 +8,8 @@ The firmware never reads [design]; what it needs of the motor is written into it
   rated current, [control] velocity_limit_rad_s at most its no-load speed at the ankle;
 - [feedforward] the foot of the base plant, the rotor inertia reflected through the design's ratio, Kt,
   the total ratio and the base plant's transmission efficiency;
+- [feedforward] parallel_* the design's parallel spring, which the cascade's feed-forward and the impedance
+  controller take off the moment they ask of the motor;
 - [safety] belt_ratio, the design's;
 - [motor] the motor's ratings (firmware/motor_ratings.py): peak and rated current, Kt, planetary, pole pairs,
   no-load speed and the CAN MIT ranges, which bound the limits above and scale the drivers.
@@ -67,6 +69,7 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None) -> d
             "gear_ratio": (round(n, 6), f"{m.gear_ratio:g}:1 planetary x {design.belt_driven_teeth}/"
                                         f"{design.belt_driver_teeth} belt"),
             "efficiency": (round(plant.efficiency, 6), "gearbox x belt efficiency (base plant)"),
+            **_spring_keys(design),
         },
         "motor": {
             "model": (m.name, f"{m.model} (profiles/motors/{m.name}.toml): the ratings below are its"),
@@ -86,6 +89,16 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None) -> d
             "belt_ratio": (round(design.belt_ratio, 6), f"{design.belt_driven_teeth}/{design.belt_driver_teeth} teeth"),
         },
     }
+
+
+def _spring_keys(design: Design) -> dict[str, tuple[Any, str]]:
+    """[feedforward]'s parallel-spring keys: the controllers take its moment off what they ask of the motor."""
+    spring = design.spring
+    if spring is None or not design.has_spring:
+        return {}
+    return {"parallel_stiffness_nm_per_rad": (spring.stiffness_nm_per_rad, "the design's parallel spring"),
+            "parallel_engage_deg": (spring.engage_deg, "where it engages"),
+            "parallel_two_sided": (spring.sided == "two", f"{spring.sided}-sided")}
 
 
 def design_profile_text(design: Design, base_profile_path: str | Path | None = None, *, header: str = "",

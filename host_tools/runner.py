@@ -157,6 +157,15 @@ class RunConfig:
         """Whether the bench has the ground sensors (by default when walking)."""
         return self.scenario == "walk" if self.ground_sensors is None else bool(self.ground_sensors)
 
+    def design_bench_options(self) -> dict:
+        """The virtual motor's MIT ranges when the design names a motor (its plant is in bench_setup)."""
+        if self.design is None:
+            return {}
+        from protocol.can_mit import MitLimits
+
+        m = self.design.motor_spec()
+        return {"can_options": {"limits": MitLimits(m.p_max_rad, m.v_max_rad_s, m.t_max_nm)}}
+
     def bench_setup(self) -> tuple[dict, dict]:
         """(VirtualBench arguments of the plant and the imperfections, their record for summary.json).
 
@@ -167,7 +176,8 @@ class RunConfig:
         if self.design is not None and self.plant_file is None:
             nominal = plant_params_for(self.design, nominal)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
-        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
+        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.design_bench_options(),
+                         **self.bench_options}
         params = options["plant_params"]
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
                             "file": None if self.plant_file is None else str(self.plant_file),

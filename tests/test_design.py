@@ -29,6 +29,19 @@ from profiles import profile_path, profile_paths
 REPORT = {"motor": "ak60_6", "belt_driver_teeth": 30, "belt_driven_teeth": 140, "belt_pitch_mm": 2.0}
 
 
+def _design_profiles() -> list[Path]:
+    """The shipped design profiles: firmware profiles with a [design] (profiles/designs/ also holds search specs)."""
+    out = []
+    for path in profile_paths("designs/*.toml"):
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        if "design" in doc and "rates_hz" in doc:
+            out.append(path)
+    return out
+
+
+DESIGN_PROFILES = _design_profiles()
+
+
 def test_the_report_design_reads_back_with_its_belt() -> None:
     d = design_from_mapping(dict(REPORT), "t")
     assert d == Design("ak60_6", 30, 140, 2.0)
@@ -110,14 +123,10 @@ def test_another_motor_brings_its_values_and_its_friction_through_the_belt() -> 
     assert plant.stop_max_rad == base.stop_max_rad
 
 
-def _design_profiles() -> list[Path]:
-    """The design profiles of profiles/designs/ (a design search's spec beside them, [search], is none)."""
-    return [p for p in profile_paths("designs/*.toml") if "search" not in tomllib.loads(p.read_text(encoding="utf-8"))]
-
-
 def test_a_profile_without_design_has_none_and_the_firmware_accepts_design() -> None:
     assert load_design(profile_path("firmware.toml")) is None
-    for path in _design_profiles():
+    assert {p.name for p in DESIGN_PROFILES} >= {"ak60_6_report.toml", "adult_80kg.toml"}
+    for path in DESIGN_PROFILES:
         assert load_design(path) is not None
         load_firmware_config(path)  # the firmware's loader takes [design] and its own sections as written
 
@@ -156,7 +165,7 @@ def test_the_report_profile_keeps_the_default_firmware_figures() -> None:
     assert fw.feedforward_params.inertia_kg_m2 == pytest.approx(default.feedforward_params.inertia_kg_m2, abs=1e-4)
 
 
-@pytest.mark.parametrize("path", _design_profiles(), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", DESIGN_PROFILES, ids=lambda p: p.name)
 def test_every_shipped_design_profile_is_what_design_profile_text_writes(path: Path) -> None:
     design = load_design(path)
     assert design is not None
@@ -190,3 +199,108 @@ def test_a_bad_design_in_the_profile_stops_the_run_before_it_starts(tmp_path: Pa
     err = capsys.readouterr().err.strip()
     assert "belt_driver_teeth = 5 is outside the allowed range [12, 157]" in err and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_mit_driver_takes_the_profile_motor_ranges_and_scalings(tmp_path: Path) -> None:
+    from firmware.drivers.can_mit import CanMitDriver
+    from protocol import can_mit
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    cfg = load_firmware_config(profile)
+    m = load_motor("ak80_9")
+    assert (cfg.motor.mit_t_max_nm, cfg.motor.pole_pairs, cfg.motor.gear_ratio) == (18.0, 21, 9.0)
+
+    from hal.can import CanFrame, CanPort
+
+    class Port(CanPort):  # only what on_port keeps: nothing is sent
+        def _send(self, frame: CanFrame) -> bool:
+            return True
+
+        def _receive(self) -> CanFrame | None:
+            return None
+
+    driver = CanMitDriver.on_port(Port(1_000_000), cfg)
+    assert driver.limits == can_mit.MitLimits(m.p_max_rad, m.v_max_rad_s, m.t_max_nm)
+    assert driver.nm_per_a == pytest.approx(m.kt_nm_per_a * m.gear_ratio)
+    assert driver.erpm_per_rad_s == pytest.approx(60 / (2 * math.pi) * 9.0 * 21)
+    default = CanMitDriver.on_port(Port(1_000_000), load_firmware_config())
+    assert default.limits == can_mit.AK60_6 and default.nm_per_a == pytest.approx(0.078 * 6.0)
+    # 16 N m is inside the AK80-9's +-18 N m but outside the AK60-6's +-15: only the design's range carries it
+    cmd = can_mit.MitCommand(t_ff=16.0)
+    assert can_mit.decode_command(can_mit.encode_command(cmd, driver.limits), driver.limits).t_ff == \
+        pytest.approx(16.0, abs=0.01)
+    assert can_mit.decode_command(can_mit.encode_command(cmd, default.limits), default.limits).t_ff == 15.0
+
+
+@pytest.mark.parametrize("link", ["uart", "can-mit"])
+def test_a_non_ak60_design_runs_on_the_uart_and_the_can_mit_link(tmp_path: Path, link: str) -> None:
+    from host_tools.cli import main
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--strides", "1", "--profile", str(profile),
+                 "--motor-link", link, "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["faults"] == [] or not s["faults"]
+    assert s["motor_link"]["feedback_rate_hz"] > 900
+    assert s["encoder_rms_error_deg"] < 2.0
+
+
+def test_the_adult_design_walks_80_kg_at_free_speed(tmp_path: Path) -> None:
+    """profiles/designs/adult_80kg.toml (issue 23 item 6); 3 strides here, docs/design.md gives the 20-stride run."""
+    from host_tools.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--scenario", "walk", "--body-mass", "80", "--speed",
+                 "free", "--controller", "impedance", "--strides", "3", "--profile",
+                 str(profile_path("designs/adult_80kg.toml")), "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert not s["faults"] and s["complete"]
+    run = s["actuator"]["run"]
+    assert run["stance_moment_share"] >= 0.95 and run["stance_peak_moment_share"] >= 0.95
+    assert s["actuator"]["drive"]["peak_current_a"] == load_motor("ak10_9").peak_current_a  # the design's drive
+    assert s["actuator"]["keeps_up_to_body_mass_kg"]["peak"] >= 80.0
+
+
+def test_the_report_design_keeps_its_limit_of_about_35_kg(tmp_path: Path) -> None:
+    """The report's design as a design profile keeps the issue's figure: it keeps up only to ~35 kg at peak."""
+    from host_tools.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--scenario", "walk", "--body-mass", "20", "--strides",
+                 "1", "--profile", str(profile_path("designs/ak60_6_report.toml")), "--out", str(out)]) == 0
+    keeps = json.loads((out / "summary.json").read_text())["actuator"]["keeps_up_to_body_mass_kg"]
+    assert 33.0 <= keeps["peak"] <= 36.0
+
+
+def test_the_limits_are_bounded_by_the_profile_motor(tmp_path: Path) -> None:
+    text = design_profile_text(Design("ak80_9", 12, 96, 2.0))  # 8:1: the AK80-9's 570 rpm is 7.46 rad/s at the ankle
+    path = tmp_path / "d.toml"
+    path.write_text(text)
+    fw = load_firmware_config(path)
+    assert fw.velocity_limit_rad_s == pytest.approx(7.461, abs=1e-3) and fw.motor.model == "ak80_9"
+    path.write_text(text.replace("velocity_limit_rad_s = 7.461", "velocity_limit_rad_s = 8.0"))
+    with pytest.raises(ValueError, match=r"velocity_limit_rad_s = 8.0 is not allowed: .*\(the ak80_9's no-load speed"):
+        load_firmware_config(path)
+    path.write_text(text.replace("current_limit_a = 24.6", "current_limit_a = 28.5"))
+    with pytest.raises(ValueError, match=r"\[safety\] current_limit_a = 28.5 .* \(0, 28\] A \(the ak80_9's peak"):
+        load_firmware_config(path)
+    path.write_text(text.replace("peak_current_a = 28.0", "peak_current_a = 2800.0"))
+    with pytest.raises(ValueError, match=r"\[motor\] peak_current_a = 2800.0 is not allowed"):
+        load_firmware_config(path)
+
+
+def test_a_plant_file_wins_over_the_design_with_a_note(tmp_path: Path, capsys) -> None:
+    from host_tools.cli import main
+
+    profile = tmp_path / "d.toml"
+    profile.write_text(design_profile_text(Design("ak80_9", 20, 100, 2.0)))
+    out = tmp_path / "run"
+    assert main(["run", "--quiet", "--no-plot", "--no-trace", "--strides", "1", "--profile", str(profile),
+                 "--plant", str(profile_path("plant_ak60_6.toml")), "--out", str(out)]) in (0, 1)
+    assert "wins over the profile's [design] (motor ak80_9)" in capsys.readouterr().err
+    plant = json.loads((out / "summary.json").read_text())["plant"]
+    assert plant["design_used"] is False
+    assert plant["output_torque_per_amp_nm"] == pytest.approx(load_plant_params().output_torque_per_amp_nm)

@@ -40,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"motor link on the virtual bench: {MOTOR_LINKS.spoken()} (CAN at 1 Mbit/s; "
                              "default: the firmware profile's [motor] link, uart)")
     parser.add_argument("--profile", type=Path, default=None,
-                        help="firmware profile TOML (default profiles/firmware.toml)")
+                        help="firmware profile TOML (default profiles/firmware.toml); a design profile "
+                             "(profiles/designs/, a [design] table) also sets the bench's plant (docs/design.md)")
     parser.add_argument("--board", default="stm32f4", help="board profile name (profiles/board_<name>.toml)")
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")

@@ -343,7 +343,8 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     if getattr(r.config, "scenario", "suspended") == "walk":
         from host_tools.reports.actuator import walk_outputs
 
-        s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a)
+        s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a,
+                                              tracking.plot.current_meas_a)
         md_extra = [*(md_extra or []), *walk_md]
     if getattr(r, "heat", None):  # a virtual run: the winding model, the supply and their log (runner.attach_heat)
         from host_tools.reports.thermal import battery_summary, thermal_lines, thermal_summary

@@ -46,10 +46,10 @@ BELT_PITCHES: dict[float, tuple[str, int]] = {
     5.0: ("GT2 5 mm (5MGT) / HTD 5M", 18),
     8.0: ("GT2 8 mm (8MGT) / HTD 8M", 22),
 }
-"""Standard timing-belt pitches (mm) -> (name, fewest teeth on a pulley). The smallest pulleys are the Gates
-PowerGrip GT2 Drive Design Manual's (no. 17195) smallest stock sprockets per pitch as we read its sprocket
-tables; the manual names them the minimum for belt life. Smaller pulleys bend the belt's cords below their
-rated radius."""
+"""Standard timing-belt pitches (mm) -> (name, fewest teeth on a pulley). The fewest teeth are [I]: the smallest
+stock sprockets per pitch of the Gates PowerGrip GT2 Drive Design Manual (no. 17195, "Sprocket Specification
+Tables") as recalled, not checked against the current catalogue; smaller pulleys bend the belt's cords below
+their rated radius and shorten its life. Check them against the belt maker's table before building."""
 MAX_DRIVEN_PITCH_DIAMETER_M = 0.100
 """Largest ankle pulley [I]: the report's is 89.1 mm (3.2.2); much larger would not fit inside the foot's
 shell above the keel, so a ratio that needs one is refused."""
@@ -58,6 +58,9 @@ BELT_RATIO_TOLERANCE = 0.01
 SPRING_SIDES = ("one", "two")
 _KEYS = ("motor", "belt_driver_teeth", "belt_driven_teeth", "belt_pitch_mm", "spring", "battery")
 _SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
+MOTOR_KEYS = ("supply_voltage_v", "kv_rpm_per_v", "kt_nm_per_a", "phase_resistance_ohm", "phase_inductance_h",
+              "pole_pairs", "rotor_inertia_kg_m2", "peak_current_a")
+"""The plant's keys a motor profile gives under the same name (MotorSpec's fields)."""
 MAX_SPRING_NM_PER_RAD = 2000.0
 """Stiffest parallel spring: 2000 N m/rad is the plant's hard stop (profiles/plant_ak60_6.toml); the
 prosthesis literature's parallel springs are far softer (a few hundred N m/rad)."""
@@ -270,15 +273,8 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
     spring = design.spring if design.has_spring else None
     return replace(
         base,
-        supply_voltage_v=m.supply_voltage_v,
-        kv_rpm_per_v=m.kv_rpm_per_v,
-        kt_nm_per_a=m.kt_nm_per_a,
+        **{key: getattr(m, key) for key in MOTOR_KEYS},
         ke_v_s_per_rad=60.0 / (2.0 * math.pi * m.kv_rpm_per_v),
-        phase_resistance_ohm=m.phase_resistance_ohm,
-        phase_inductance_h=m.phase_inductance_h,
-        pole_pairs=m.pole_pairs,
-        rotor_inertia_kg_m2=m.rotor_inertia_kg_m2,
-        peak_current_a=m.peak_current_a,
         gearbox_ratio=m.gear_ratio,
         belt_ratio=design.belt_ratio,
         belt_driver_pitch_diameter_m=driver_d,
@@ -294,14 +290,9 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
 
 
 def _spring_params(spring: DesignSpring | None) -> dict[str, Any]:
-    """The plant's parallel-spring keys for a design's spring (none: no keys, the base's zero spring)."""
-    if spring is None or not _plant_has_spring():
+    """The plant's parallel-spring keys for a design's spring (none: the base's, no spring)."""
+    if spring is None:
         return {}
     return {"parallel_stiffness_nm_per_rad": spring.stiffness_nm_per_rad,
             "parallel_engage_rad": spring.engage_rad,
             "parallel_two_sided": spring.sided == "two"}
-
-
-def _plant_has_spring() -> bool:
-    """Whether PlantParams has the parallel spring's keys."""
-    return "parallel_stiffness_nm_per_rad" in PlantParams.__dataclass_fields__
