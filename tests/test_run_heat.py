@@ -79,3 +79,45 @@ def test_the_report_and_the_plot_show_the_walk(tmp_path: Path) -> None:
     assert "## Winding temperature and battery" in md and "energy per stride at the battery" in md
     assert (tmp_path / "thermal.png").stat().st_size > 0
     assert json.loads((tmp_path / "summary.json").read_text())["battery"]["name"] == "molicel_p42a_6s1p"
+
+
+def _hot_profile(tmp_path: Path) -> Path:
+    """The shipped firmware profile with thresholds a few kelvin above a 40 C ambient (the walk's heat reaches them
+    within a few strides; the shipped 70/100/90 C take a long walk at 80 C ambient)."""
+    from firmware.config import DEFAULT_PROFILE
+
+    text = DEFAULT_PROFILE.read_text()
+    for old, new in (("derate_start_c = 70.0", "derate_start_c = 41.0"), ("fault_c = 90.0", "fault_c = 43.0")):
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / "hot.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_hot_walk_derates_then_latches_over_temperature_and_the_summary_says_when(tmp_path: Path) -> None:
+    from firmware.config import load_firmware_config
+    from protocol.telemetry import FaultReason, TelemetryDecoder
+
+    fw = load_firmware_config(_hot_profile(tmp_path))
+    s = _summary(tmp_path / "out", RunConfig(strides=12, scenario="walk", body_mass_kg=20.0, ambient_c=40.0,
+                                             firmware=fw))
+    t = s["thermal"]
+    assert s["faults"] == ["OVER_TEMPERATURE"]
+    assert t["derating_started_s"] is not None and t["over_temperature_at_s"] is not None
+    assert 1.5 < t["derating_started_s"] < t["over_temperature_at_s"]  # heated past 41 C first, then past 43 C
+    assert t["motor_reported_c_max"] > 43.0
+    # the telemetry says it too: the supervisor in SAFE for OVER_TEMPERATURE from the trip on, the motor told zero
+    # current and then the brake (the shipped 2 A brake current)
+    records = TelemetryDecoder().feed((tmp_path / "out" / "telemetry.bin").read_bytes())
+    f_cpu = 168e6
+    after = [r for r in records if r.time_cycles / f_cpu > t["over_temperature_at_s"] + 0.002]
+    assert after and all(r.fault_reason == FaultReason.OVER_TEMPERATURE for r in after)
+    assert after[0].current_cmd_a == 0.0 and after[-1].current_cmd_a == pytest.approx(2.0)
+
+
+def test_the_same_hot_walk_with_the_shipped_thresholds_neither_derates_nor_latches(tmp_path: Path) -> None:
+    # the counterpart: the heat alone (40 C ambient, a few strides) stays below the shipped 70 C
+    s = _summary(tmp_path, RunConfig(strides=3, scenario="walk", body_mass_kg=20.0, ambient_c=40.0))
+    assert s["thermal"]["derating_started_s"] is None and s["thermal"]["over_temperature_at_s"] is None
+    assert s["faults"] == []
