@@ -45,7 +45,9 @@ def test_a_battery_sags_under_load_takes_regeneration_and_gives_the_distance_per
     assert b["name"] == "molicel_p42a_6s1p" and b["capacity_wh"] == pytest.approx(pack.capacity_wh, abs=0.01)
     assert b["min_bus_v"] < pack.open_circuit_v(1.0) - 0.1  # I R under load
     assert b["regenerated_j"] > 0.0 and b["soc_end"] < 1.0
-    assert len(b["bus_v_by_stride"]) == 3
+    assert len(b["bus_v_by_stride"]) == 3 and len(b["bus_v_min_by_stride"]) == 3
+    assert all(lo < end for lo, end in zip(b["bus_v_min_by_stride"], b["bus_v_by_stride"], strict=True))
+    assert min(b["bus_v_min_by_stride"]) == pytest.approx(b["min_bus_v"], abs=1e-3)
     e = b["energy_per_stride_j"]
     assert e > 0.0
     assert b["strides_per_charge"] == pytest.approx(pack.capacity_wh * 3600.0 / e, rel=1e-3)
