@@ -123,3 +123,16 @@ def test_the_same_hot_walk_with_the_shipped_thresholds_neither_derates_nor_latch
     s = _summary(tmp_path, RunConfig(strides=3, scenario="walk", body_mass_kg=20.0, ambient_c=40.0))
     assert s["thermal"]["derating_started_s"] is None and s["thermal"]["over_temperature_at_s"] is None
     assert s["faults"] == []
+
+
+@pytest.mark.parametrize("link", ["uart", "can-servo", "can-mit"])
+def test_every_motor_link_carries_the_temperature_the_firmware_derates_on(tmp_path: Path, link: str) -> None:
+    # 75 C ambient: above the shipped 70 C derating start, so the firmware derates as soon as a reading arrives
+    from dataclasses import replace
+
+    from firmware.config import load_firmware_config
+
+    fw = replace(load_firmware_config(), motor_link=link)
+    t = _summary(tmp_path, RunConfig(strides=1, ambient_c=75.0, firmware=fw))["thermal"]
+    assert t["motor_reported_c_max"] >= 75.0
+    assert t["derating_started_s"] is not None and t["derating_started_s"] < 0.5
