@@ -112,6 +112,7 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
         return "n/a" if v is None else f"{v}{unit}"
 
     by_stride = thermal["winding_c_by_stride"]
+    first, last = (by_stride[0], by_stride[-1]) if by_stride else (None, None)
     lines = ["", "## Winding temperature and battery", "",
              f"Motor {thermal['motor']} at {thermal['ambient_c']:g} °C ambient; winding and housing from the "
              f"{thermal['model']} thermal model (emulation only), the reported temperature from the motor's status "
@@ -120,7 +121,7 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
              f"| winding, end / max (emulation only) | {fig(thermal['winding_c_end'], ' °C')} / "
              f"{fig(thermal['winding_c_max'], ' °C')} |",
              f"| winding after stride 1 / last ({len(by_stride)}) | "
-             f"{fig(by_stride[0] if by_stride else None, ' °C')} / {fig(by_stride[-1] if by_stride else None, ' °C')} |",
+             f"{fig(first, ' °C')} / {fig(last, ' °C')} |",
              f"| steady state at the walk's RMS current {fig(thermal['rms_current_a'], ' A')} | "
              f"{fig(thermal['steady_state_c'], ' °C')} (time constants {thermal['time_constants_s']} s) |",
              f"| motor-reported max | {fig(thermal['motor_reported_c_max'], ' °C')} |",
