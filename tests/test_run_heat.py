@@ -136,3 +136,29 @@ def test_every_motor_link_carries_the_temperature_the_firmware_derates_on(tmp_pa
     t = _summary(tmp_path, RunConfig(strides=1, ambient_c=75.0, firmware=fw))["thermal"]
     assert t["motor_reported_c_max"] >= 75.0
     assert t["derating_started_s"] is not None and t["derating_started_s"] < 0.5
+
+
+def test_the_thermal_model_and_battery_come_from_the_design_and_battery_wins() -> None:
+    # RunConfig.design (a design profile's [design] table) names the motor and the battery; --battery wins
+    from types import SimpleNamespace
+
+    from hal.virtual.bench import VirtualBench
+    from hal.virtual.plant.motors import load_motor
+    from hal.virtual.plant.thermal import ThermalParams
+    from host_tools.runner import attach_heat
+
+    design = SimpleNamespace(motor="ak80_9", battery="molicel_p42a_12s1p")
+
+    def fitted(**kw) -> tuple[VirtualBench, dict]:
+        bench = VirtualBench(lambda: 0, 168_000_000)
+        cfg = SimpleNamespace(**{"design": design, "ambient_c": 30.0, "thermal": True, "battery": None, **kw})
+        return bench, attach_heat(bench, cfg)
+
+    bench, rec = fitted()
+    assert rec["motor"] == "ak80_9" and rec["winding"].params == ThermalParams.from_motor(load_motor("ak80_9"))
+    assert bench.motor.meter.winding is rec["winding"] and rec["winding"].winding_c == 30.0
+    assert rec["battery"].params.name == "molicel_p42a_12s1p" and bench.motor.meter.battery is rec["battery"]
+    _, rec = fitted(battery="molicel_p42a_6s1p")
+    assert rec["battery"].params.name == "molicel_p42a_6s1p"
+    _, rec = fitted(design=None, thermal=False)
+    assert rec["motor"] == "ak60_6" and "winding" not in rec and rec["battery"] is None
