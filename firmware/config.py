@@ -342,7 +342,8 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
                               feedforward_params=feedforward_params, safety=safety, thermal=thermal,
-                              task_cycles=task_cycles, **links, **controller, **host_watchdog, **ctl, ground_sensors=ground_sensors)
+                              task_cycles=task_cycles, **links, **controller, **host_watchdog, **ctl,
+                              ground_sensors=ground_sensors)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

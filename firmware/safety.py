@@ -219,6 +219,7 @@ class ThermalGuard:
         """No reading yet: the full limit."""
         self.limits = limits
         self.max_age_s = limits.max_age_s
+        self._start_c = limits.derate_start_c  # native copy: the common case (cool) makes no call into the limits
         self.derating_since_s: float | None = None
         self.factor = 1.0
 
@@ -231,10 +232,11 @@ class ThermalGuard:
     def limit_a(self, limit_a: float, temp_c: float, received_s: float | None, now_s: float) -> float:
         """The current limit allowed now: limit_a derated by the fresh temperature (limit_a itself without one)."""
         t = self.fresh_c(temp_c, received_s, now_s)
+        if not t > self._start_c:  # cool, or no fresh reading (NaN): the full limit
+            self.factor = 1.0
+            return limit_a
         factor = self.limits.derating(t)
         self.factor = factor
-        if factor >= 1.0:
-            return limit_a
         if self.derating_since_s is None:
             self.derating_since_s = now_s
             log.warning("derating at %.4f s: motor temperature %.1f C, current limit %.2f A", now_s, t,

@@ -282,7 +282,15 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     for name, t in s["tasks"].items():
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
+    t = s.get("thermal")
+    if t is not None:  # the winding model and the supply (docs/design.md, "Winding temperature in a run")
+        b = s.get("battery")
+        supply = ("ideal supply" if b is None else f"{b['name']}: {b['energy_per_stride_j']} J/stride, "
+                  f"{b['distance_per_charge_km']} km per charge at {b['speed_m_s']} m/s")
+        print(f"  winding {t['winding_c_end']} C at the end (max {t['winding_c_max']}, steady state "
+              f"{t['steady_state_c']}, emulation only), motor reported max {t['motor_reported_c_max']} C; {supply}")
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
+               *(["thermal.png"] if (out / "thermal.png").exists() else []),
                *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
     print(f"  outputs: {out}/{', '.join(written)}")
     _say_controller_error(result.firmware.controller_error)

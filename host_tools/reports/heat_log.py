@@ -25,6 +25,7 @@ class StrideHeat:
     housing_c: float
     reported_c: float
     bus_v: float
+    bus_v_min: float  # the lowest bus voltage within the stride (the sag under its peak load)
     supply_energy_j: float  # net energy drawn at the supply since the start (regeneration subtracted)
     amp2_s: float  # integral of the q current squared since the start (the two-node model's; NaN without it)
 
@@ -41,6 +42,7 @@ class HeatLog:
     winding_c_max: float = -math.inf
     reported_c_max: float = math.nan
     bus_v_min: float = math.inf
+    _stride_bus_v_min: float = math.inf
     gait_energy_j: float | None = None  # supply energy when the gait started (the start-up ramp is no stride)
     gait_amp2_s: float = math.nan  # the current-squared integral then
     gait_t_s: float = math.nan  # the time of that sample
@@ -69,6 +71,8 @@ class HeatLog:
         bus_v = float(self.meter.v_in_v)
         if bus_v < self.bus_v_min:
             self.bus_v_min = bus_v
+        if bus_v < self._stride_bus_v_min:
+            self._stride_bus_v_min = bus_v
         start = self.gait_start()
         if start is None or t_s < start:
             return
@@ -77,8 +81,9 @@ class HeatLog:
             self.gait_amp2_s = self._amp2_s()
             self.gait_t_s = t_s
         while t_s >= start + (len(self.strides) + 1) * self.stride_s:
-            self.strides.append(StrideHeat(t_s, winding_c, housing_c, reported, bus_v, self.supply_energy_j(),
-                                           self._amp2_s()))
+            self.strides.append(StrideHeat(t_s, winding_c, housing_c, reported, bus_v, self._stride_bus_v_min,
+                                           self.supply_energy_j(), self._amp2_s()))
+            self._stride_bus_v_min = bus_v
 
     def _amp2_s(self) -> float:
         w = self.meter.winding

@@ -97,6 +97,7 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
         "rejected_regeneration_j": round(battery.rejected_j, 3),
         "min_bus_v": _finite(log.bus_v_min, 3),
         "bus_v_by_stride": [round(row.bus_v, 3) for row in log.strides],
+        "bus_v_min_by_stride": [round(row.bus_v_min, 3) for row in log.strides],
         "soc_end": round(battery.soc, 6),
         "strides_per_charge": _finite(strides, 0),
         "speed_m_s": round(speed_m_s, 3),
@@ -111,6 +112,7 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
         return "n/a" if v is None else f"{v}{unit}"
 
     by_stride = thermal["winding_c_by_stride"]
+    first, last = (by_stride[0], by_stride[-1]) if by_stride else (None, None)
     lines = ["", "## Winding temperature and battery", "",
              f"Motor {thermal['motor']} at {thermal['ambient_c']:g} °C ambient; winding and housing from the "
              f"{thermal['model']} thermal model (emulation only), the reported temperature from the motor's status "
@@ -119,7 +121,7 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
              f"| winding, end / max (emulation only) | {fig(thermal['winding_c_end'], ' °C')} / "
              f"{fig(thermal['winding_c_max'], ' °C')} |",
              f"| winding after stride 1 / last ({len(by_stride)}) | "
-             f"{fig(by_stride[0] if by_stride else None, ' °C')} / {fig(by_stride[-1] if by_stride else None, ' °C')} |",
+             f"{fig(first, ' °C')} / {fig(last, ' °C')} |",
              f"| steady state at the walk's RMS current {fig(thermal['rms_current_a'], ' A')} | "
              f"{fig(thermal['steady_state_c'], ' °C')} (time constants {thermal['time_constants_s']} s) |",
              f"| motor-reported max | {fig(thermal['motor_reported_c_max'], ' °C')} |",
@@ -144,6 +146,7 @@ def plot_thermal(path: Path, thermal: dict, battery: dict | None) -> None:
     series = {"winding (emulation only)": thermal["winding_c_by_stride"],
               "housing (emulation only)": thermal["housing_c_by_stride"],
               "motor-reported": thermal["motor_reported_c_by_stride"]}
-    lower = {"bus voltage": battery["bus_v_by_stride"]} if battery is not None else {}
+    lower = ({"bus voltage at the stride's end": battery["bus_v_by_stride"],
+              "lowest in the stride": battery["bus_v_min_by_stride"]} if battery is not None else {})
     plot_per_stride(path, series, "temperature (°C)", lower, "bus voltage (V)",
                     f"Winding temperature, {thermal['motor']} at {thermal['ambient_c']:g} °C ambient")
