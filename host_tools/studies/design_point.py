@@ -18,8 +18,8 @@ design profile. Its figures (docs/design.md, "Reading the search"):
   strides and its steady state (emulation only), the temperature the motor reported, energy per stride at the
   battery and distance per charge; ``thermal_limit_c``: the firmware's over-temperature threshold ([thermal]
   fault_c) or the winding's insulation limit, whichever is lower;
-* ``actuator_kg``: host_tools/studies/design_mass.py; ``keeps_up_to_kg``: the walking scenario's design check
-  (host_tools/reports/actuator.py) on the design's drive, at peak current (``_limit``: the firmware's limit).
+* ``actuator_kg``: host_tools/studies/design_mass.py; ``keeps_up_to_kg``: summary.json's actuator design check
+  (host_tools/reports/actuator.py, on the plant the bench ran), at peak current (``_limit``: the firmware's limit).
 """
 
 from __future__ import annotations
@@ -164,17 +164,6 @@ def _drive(p: DesignPoint) -> Any:
     return base if design is None else plant_params_for(design, base)
 
 
-def _keeps_up_to(p: DesignPoint, r: Any, params: Any) -> dict[str, float]:
-    """The walking scenario's design check (host_tools/reports/actuator.py) on the design's drive: the body mass its
-    envelope keeps up with at the motor's peak current and at the firmware's current limit."""
-    from host_tools.reports.actuator import design_check
-    from host_tools.walk import walking_load
-
-    fw = r.firmware
-    load = walking_load(p.body_mass_kg, fw.config.stride_s, None, p.speed)
-    return design_check(params, fw.config.current_limit_a, load, fw.reference, ())["keeps_up_to_body_mass_kg"]
-
-
 def _num(d: dict[str, Any] | None, key: str) -> float:
     v = (d or {}).get(key)
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
@@ -207,7 +196,7 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
     stride_s = float(r.firmware.config.stride_s)
     walked = 0 if r.gait_start_s is None else int(min(p.strides, max(0.0, (
         (sup.tripped_at_s if sup.tripped_at_s is not None else r.sim_time_s) - r.gait_start_s) / stride_s)))
-    keeps = _keeps_up_to(p, r, params)
+    keeps = (s.get("actuator") or {}).get("keeps_up_to_body_mass_kg")  # the design check on the bench's plant
     mass = actuator_mass(motor.mass_kg, p.driver_teeth, p.driven_teeth, p.pitch_mm, p.spring_nm_per_rad,
                          p.spring_engage_deg, p.spring_sided, params.stop_min_rad, params.stop_max_rad)
     return {"fault": fault, "fault_at_s": round(sup.tripped_at_s, 4) if sup.tripped_at_s is not None else math.nan,
