@@ -18,7 +18,7 @@ from host_tools.commands.design import _write_profiles, columns
 from host_tools.studies.design_mass import actuator_mass
 from host_tools.studies.design_point import design_error_row, moment_share, rerun_command, run_design_point
 from host_tools.studies.design_report import is_report_design, lightest, pareto, walks
-from host_tools.studies.design_spec import SpecError, load_design_spec, pick_battery
+from host_tools.studies.design_spec import SpecError, WalkCriteria, load_design_spec, pick_battery
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 from host_tools.studies.sweep_table import TIMING_COLUMNS
 
@@ -72,6 +72,7 @@ def test_points_are_the_product_and_every_design_has_its_profile(tmp_path):
     ('batteries = ["lead"]\n', REPORT_BELT, r"\[search\] batteries = 'lead' out of range: one of auto, none"),
     ("body_masses_kg = [80, 80]\n", REPORT_BELT, "a list without repeats"),
     ("min_moment_share = 1.5\n", REPORT_BELT, r"min_moment_share = 1.5 out of range: a number in \[0, 1\]"),
+    ("max_tracking_rms_deg = 0\n", REPORT_BELT, r"max_tracking_rms_deg = 0 out of range: a number in \(0, 90\]"),
     ("colour = 1\n", REPORT_BELT, "key 'colour' unknown"),
     ("", "", r"no \[\[belt\]\]"),
     ("", REPORT_BELT.replace("30", "3"), r"belt_driver_teeth = 3 is outside the allowed range"),
@@ -111,19 +112,25 @@ def test_moment_share_counts_only_what_goes_the_demands_way_up_to_the_demand():
     assert math.isnan(moment_share(t, demand, demand, np.zeros(6, bool)))
 
 
-def _row(point, kg, share, status="ok", hot=True, energy=math.nan):
+def _row(point, kg, share, status="ok", hot=True, energy=math.nan, rms=2.0):
     return {"point": point, "actuator_kg": kg, "moment_share": share, "status": status, "within_thermal": hot,
-            "energy_per_stride_j": energy}
+            "energy_per_stride_j": energy, "tracking_rms_deg": rms}
+
+
+def c(share, rms=5.0):
+    return WalkCriteria(share, rms)
 
 
 def test_pareto_and_the_lightest_design_that_walks():
     rows = [_row(0, 0.5, 0.80), _row(1, 0.9, 0.95), _row(2, 1.2, 0.99), _row(3, 1.0, 0.93), _row(4, 0.7, 0.97,
                                                                                                    "fault"),
-            _row(5, 0.8, 0.96, hot=False)]
-    assert not walks(rows[0], 0.9) and walks(rows[1], 0.9) and not walks(rows[4], 0.9) and not walks(rows[5], 0.9)
-    ok = [r for r in rows if walks(r, 0.9)]
+            _row(5, 0.8, 0.96, hot=False), _row(6, 0.6, 0.97, rms=7.9)]
+    assert not walks(rows[0], c(0.9)) and walks(rows[1], c(0.9)) and not walks(rows[4], c(0.9))
+    assert not walks(rows[5], c(0.9)) and not walks(rows[6], c(0.9)) and walks(rows[6], c(0.9, 8.0))
+    ok = [r for r in rows if walks(r, c(0.9))]
     assert [r["point"] for r in pareto(ok)] == [1, 2]  # 3 is heavier than 1 and delivers less
-    assert lightest(rows, 0.9)["point"] == 1 and lightest(rows, 0.99)["point"] == 2 and lightest(rows, 1.0) is None
+    assert lightest(rows, c(0.9))["point"] == 1 and lightest(rows, c(0.99))["point"] == 2
+    assert lightest(rows, c(1.0)) is None and lightest(rows, c(0.9, 8.0))["point"] == 6
     e = [_row(0, 1.0, 0.95, energy=10.0), _row(1, 1.0, 0.95, energy=12.0), _row(2, 1.1, 0.95, energy=8.0)]
     assert [r["point"] for r in pareto(e)] == [0, 2]  # energy counts when every row has it
 
@@ -139,7 +146,7 @@ def test_the_reports_ak60_6_walks_20_kg_and_falls_short_at_80(tmp_path):
         assert row["keeps_up_to_kg_limit"] == pytest.approx(18.3, abs=0.5)
         assert row["actuator_kg"] > row["motor_kg"] == 0.368 and row["thermal_limit_c"] == 90.0  # [thermal] fault_c
     assert light["status"] == "ok" and light["strides_walked"] == 2 and 0.5 < light["moment_share"] <= 1.0
-    assert 0 < light["peak_current_a"] <= 12.5 and light["peak_electrical_w"] > 0
+    assert 0 < light["peak_current_a"] <= 12.5 and light["peak_electrical_w"] > 0 and light["tracking_rms_deg"] > 0
     assert adult["moment_share"] < light["moment_share"]  # 80 kg: far beyond what it can deliver
     assert adult["status"] == "fault" and adult["moment_share"] < 0.5  # ANGLE_LIMIT in the first stance
     kept = Path(points[0].profile_name).parent
@@ -161,7 +168,8 @@ def test_same_table_on_one_or_two_workers_and_after_an_interrupted_run(tmp_path)
 
 
 def test_the_command_writes_the_table_report_and_plot(tmp_path, capsys):
-    spec = spec_file(tmp_path, 'motors = ["ak60_6"]\nbody_masses_kg = [20]\nstrides = 1\nmin_moment_share = 0.0\n')
+    spec = spec_file(tmp_path, 'motors = ["ak60_6"]\nbody_masses_kg = [20]\nstrides = 1\nmin_moment_share = 0.0\n'
+                     'max_tracking_rms_deg = 90\n')
     out = tmp_path / "out"
     assert main(["design", str(spec), "--out", str(out), "--workers", "1", "--quiet"]) == 0
     md = (out / "design.md").read_text(encoding="utf-8")
@@ -191,5 +199,6 @@ def test_a_design_whose_steady_winding_passes_the_firmwares_threshold_does_not_w
     assert cool["status"] == warm["status"] == "ok" and cool["thermal_limit_c"] == 90.0
     assert cool["steady_state_c"] < 90.0 < warm["steady_state_c"]  # the same losses, 25 K warmer surroundings
     assert warm["steady_state_c"] - cool["steady_state_c"] > 25.0  # and the copper's resistance rises with it
-    assert cool["within_thermal"] and walks(cool, 0.5) and not warm["within_thermal"] and not walks(warm, 0.5)
+    assert cool["within_thermal"] and walks(cool, c(0.5, 90)) and not warm["within_thermal"]
+    assert not walks(warm, c(0.5, 90))
     assert cool["energy_per_stride_j"] > 0 and cool["distance_per_charge_km"] > 0  # the 12S pack, i23-heat's keys

@@ -12,6 +12,7 @@ design profile. Its figures (docs/design.md, "Reading the search"):
   mass x the normative moment at the same gait phase; per sample the part delivered in the demand's direction,
   capped at the demand, summed over the stance of every stride asked for (a run that latched a fault delivers
   nothing after it);
+* ``tracking_rms_deg``: the RMS tracking error the encoder measured over the time in RUN (summary.json);
 * ``peak_current_a``: the largest current the motor reported; ``peak_electrical_w``: the largest
   ``I² R + Ke w I`` with the reported current and the motor speed from the firmware's ankle velocity;
 * from summary.json's ``thermal`` and ``battery`` (NaN where the run has none): the winding temperature after the
@@ -38,11 +39,11 @@ __all__ = ["AXES", "FIGURES", "design_error_row", "moment_share", "point_run_con
            "run_design_point"]
 
 AXES = ("motor", "driver_teeth", "driven_teeth", "pitch_mm", "ratio", "spring", "battery", "body_mass_kg", "speed")
-FIGURES = ("fault", "fault_at_s", "strides_walked", "moment_share", "peak_current_a", "peak_electrical_w",
-           "winding_c_end", "winding_c_max", "steady_state_c", "motor_reported_c_max", "thermal_limit_c",
-           "within_thermal", "over_temperature_at_s", "energy_per_stride_j", "distance_per_charge_km",
-           "motor_kg", "transmission_kg", "spring_kg", "actuator_kg", "keeps_up_to_kg", "keeps_up_to_kg_limit",
-           "sim_time_s", "wall_time_s")
+FIGURES = ("fault", "fault_at_s", "strides_walked", "moment_share", "tracking_rms_deg", "peak_current_a",
+           "peak_electrical_w", "winding_c_end", "winding_c_max", "steady_state_c", "motor_reported_c_max",
+           "thermal_limit_c", "within_thermal", "over_temperature_at_s", "energy_per_stride_j",
+           "distance_per_charge_km", "motor_kg", "transmission_kg", "spring_kg", "actuator_kg", "keeps_up_to_kg",
+           "keeps_up_to_kg_limit", "sim_time_s", "wall_time_s")
 KEPT = ("summary.json", "report.md", "actuator.png")  # of a point's outputs, beside its design profile
 
 
@@ -201,6 +202,7 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
                          p.spring_engage_deg, p.spring_sided, params.stop_min_rad, params.stop_max_rad)
     return {"fault": fault, "fault_at_s": round(sup.tripped_at_s, 4) if sup.tripped_at_s is not None else math.nan,
             "strides_walked": walked, "moment_share": round(share, 4),
+            "tracking_rms_deg": _num(s, "encoder_rms_error_deg"),
             "peak_current_a": round(float(i.max()), 3) if len(i) else math.nan,
             "peak_electrical_w": round(float(power.max()), 1) if len(power) else math.nan,
             "winding_c_end": _num(thermal, "winding_c_end"), "winding_c_max": _num(thermal, "winding_c_max"),

@@ -2,9 +2,10 @@
 body mass and speed (with the `pafp run` command that runs it) or by how much the best falls short, the
 report's AK60-6 transmission with its limit, and the table of every point (docs/design.md, "Reading the search").
 
-A point **walks** the person when its run completed without a fault, the winding stays within its insulation
-limit (the steady state of continuous walking when summary.json has it, else the hottest the run saw) and it
-delivered at least the spec's ``min_moment_share`` of the stance moment. The Pareto front of each body mass and
+A point **walks** the person when its run completed without a fault, the winding stays within its thermal
+limit (the steady state of continuous walking when summary.json has it, else the hottest the run saw), it
+delivered at least the spec's ``min_moment_share`` of the stance moment and tracked the gait within its
+``max_tracking_rms_deg`` (the encoder's RMS error). The Pareto front of each body mass and
 speed is taken among the points that walk, on actuator mass (lower), moment share (higher) and energy per stride
 at the battery (lower; left out where no point has it).
 """
@@ -17,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from host_tools.outdir import write_atomic
-from host_tools.studies.design_spec import DesignPoint, DesignSpec
+from host_tools.studies.design_spec import DesignPoint, DesignSpec, WalkCriteria
 
 __all__ = ["REPORT_RATIO", "groups", "is_report_design", "lightest", "pareto", "walks", "write_design_report"]
 
@@ -28,11 +29,11 @@ def _num(v: object) -> float:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
 
 
-def walks(row: dict[str, Any], min_share: float) -> bool:
+def walks(row: dict[str, Any], c: WalkCriteria) -> bool:
     """Whether the point walks the person (module docstring)."""
-    share = _num(row.get("moment_share"))
+    share, rms = _num(row.get("moment_share")), _num(row.get("tracking_rms_deg"))
     return row.get("status") == "ok" and bool(row.get("within_thermal")) and not math.isnan(share) \
-        and share >= min_share
+        and share >= c.min_moment_share and not math.isnan(rms) and rms <= c.max_tracking_rms_deg
 
 
 def groups(rows: list[dict[str, Any]]) -> list[tuple[float, str]]:
@@ -63,9 +64,9 @@ def pareto(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for i, r in enumerate(rows) if not dominated(i)]
 
 
-def lightest(rows: list[dict[str, Any]], min_share: float) -> dict[str, Any] | None:
+def lightest(rows: list[dict[str, Any]], c: WalkCriteria) -> dict[str, Any] | None:
     """The lightest row that walks (ties: the higher moment share, then the lower point)."""
-    ok = [r for r in rows if walks(r, min_share)]
+    ok = [r for r in rows if walks(r, c)]
     return min(ok, key=lambda r: (_num(r["actuator_kg"]), -_num(r["moment_share"]), r["point"])) if ok else None
 
 
@@ -79,7 +80,7 @@ def _fmt(v: object, digits: str = ".2f") -> str:
     return "n/a" if math.isnan(x) else format(x, digits)
 
 
-def _shortfall(rows: list[dict[str, Any]], mass: float, min_share: float) -> str:
+def _shortfall(rows: list[dict[str, Any]], mass: float, c: WalkCriteria) -> str:
     """Why the best design of a group does not walk it, and by how much."""
     ran = [r for r in rows if r["status"] in ("ok", "fault")]
     if not ran:
@@ -90,9 +91,12 @@ def _shortfall(rows: list[dict[str, Any]], mass: float, min_share: float) -> str
     if best["fault"]:
         why.append(f"latched {best['fault']} at {_fmt(best['fault_at_s'])} s after {best['strides_walked']} strides")
     share = _num(best["moment_share"])
-    if math.isnan(share) or share < min_share:
-        why.append(f"delivered {_fmt(share, '.1%')} of the stance moment ({_fmt(min_share - share, '.1%')} short "
-                   f"of {min_share:.0%})")
+    if math.isnan(share) or share < c.min_moment_share:
+        why.append(f"delivered {_fmt(share, '.1%')} of the stance moment ({_fmt(c.min_moment_share - share, '.1%')} "
+                   f"short of {c.min_moment_share:.0%})")
+    rms = _num(best["tracking_rms_deg"])
+    if not best["fault"] and (math.isnan(rms) or rms > c.max_tracking_rms_deg):
+        why.append(f"tracked the gait at {_fmt(rms, '.1f')}° RMS (limit {c.max_tracking_rms_deg:g}°)")
     if not best["within_thermal"] and not best["fault"]:
         why.append(f"winding {_fmt(best['steady_state_c'], '.0f')} °C steady (limit "
                    f"{_fmt(best['thermal_limit_c'], '.0f')} °C)")
@@ -108,7 +112,7 @@ def _label(r: dict[str, Any]) -> str:
             f"({_fmt(r['ratio'], '.2f')}:1), spring {r['spring']}, {r['battery']}")
 
 
-def _plot(path: Path, rows: list[dict[str, Any]], min_share: float) -> None:
+def _plot(path: Path, rows: list[dict[str, Any]], c: WalkCriteria) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -125,21 +129,25 @@ def _plot(path: Path, rows: list[dict[str, Any]], min_share: float) -> None:
     for ax, (mass, speed) in zip(axes[0], gs, strict=True):
         mine = [r for r in rows if (float(r["body_mass_kg"]), r["speed"]) == (mass, speed)
                 and not math.isnan(_num(r["moment_share"]))]
-        ok = [r for r in mine if walks(r, min_share)]
+        ok = [r for r in mine if walks(r, c)]
         front = pareto(ok)
         x = np.array([_num(r["actuator_kg"]) for r in mine])
         y = np.array([_num(r["moment_share"]) for r in mine])
-        c = np.array([_num(r["energy_per_stride_j"]) for r in mine])
+        e = np.array([_num(r["energy_per_stride_j"]) for r in mine])
         fault = np.array([r["status"] != "ok" or not r["within_thermal"] for r in mine], dtype=bool)
+        loose = np.array([not walks(r, c) for r in mine], dtype=bool) & ~fault
         if len(mine):
             ax.scatter(x[fault], y[fault], marker="x", color="tab:red", s=18, label="fault or too hot")
-            kw = {"c": c[~fault], "cmap": "viridis", "norm": norm} if norm is not None else {"color": "tab:blue"}
-            sc = ax.scatter(x[~fault], y[~fault], s=22, label="no fault", **kw)
+            ax.scatter(x[loose], y[loose], marker="+", color="tab:orange", s=22,
+                       label=f"tracks worse than {c.max_tracking_rms_deg:g}° RMS" + " or share below")
+            ok_ = ~fault & ~loose
+            kw = {"c": e[ok_], "cmap": "viridis", "norm": norm} if norm is not None else {"color": "tab:blue"}
+            sc = ax.scatter(x[ok_], y[ok_], s=22, label="walks", **kw)
         if front:
             f = sorted(front, key=lambda r: _num(r["actuator_kg"]))
             ax.plot([_num(r["actuator_kg"]) for r in f], [_num(r["moment_share"]) for r in f], "k-o", mfc="none",
                     ms=9, lw=0.8, label="non-dominated (walks)")
-        ax.axhline(min_share, color="grey", ls="--", lw=0.8, label=f"walks: share ≥ {min_share:.0%}")
+        ax.axhline(c.min_moment_share, color="grey", ls="--", lw=0.8, label=f"share ≥ {c.min_moment_share:.0%}")
         ax.set_title(f"{mass:g} kg, {speed}", fontsize=9)
         ax.set_xlabel("actuator mass [kg] (estimate)")
         ax.grid(True, alpha=0.3)
@@ -159,7 +167,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
     from host_tools.studies.design_point import rerun_command
 
     by_index = {p.index: p for p in points}
-    min_share = spec.min_moment_share
+    c = spec.criteria
     status: dict[str, int] = {}
     for r in rows:
         status[r["status"]] = status.get(r["status"], 0) + 1
@@ -168,16 +176,17 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
           f"{_fmt(wall_time_s, '.1f')} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
           f"A design walks the person when its run has no fault, its winding stays within the thermal limit (the "
           "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking) "
-          f"and it delivers at least {min_share:.0%} of the stance moment (measured as a bench does: the motor's "
-          "reported current x the drive's N·m per A, plus the plant's spring at the firmware's angle). Winding "
+          f"it delivers at least {c.min_moment_share:.0%} of the stance moment (measured as a bench does: the "
+          "motor's reported current x the drive's N·m per A, plus the plant's spring at the firmware's angle) and "
+          f"the encoder measures at most {c.max_tracking_rms_deg:g}° RMS tracking error. Winding "
           "temperatures are the thermal model's (emulation only); the actuator mass is an estimate "
           "(docs/design.md). n/a: the run's summary has no such figure.", ""]
     md += ["## The lightest design that walks each body mass and speed", ""]
     for mass, speed in groups(rows):
         mine = [r for r in rows if (float(r["body_mass_kg"]), r["speed"]) == (mass, speed)]
-        best = lightest(mine, min_share)
+        best = lightest(mine, c)
         if best is None:
-            md.append(f"- **{mass:g} kg, {speed}**: {_shortfall(mine, mass, min_share)}.")
+            md.append(f"- **{mass:g} kg, {speed}**: {_shortfall(mine, mass, c)}.")
         else:
             md.append(f"- **{mass:g} kg, {speed}**: point {best['point']}, {_label(best)}: "
                       f"{_fmt(best['actuator_kg'], '.3f')} kg, moment share {_fmt(best['moment_share'], '.1%')}, "
@@ -191,7 +200,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
     if not mine:
         md.append("Not in this search.")
     for r in mine:
-        state = "walks" if walks(r, min_share) else (f"latched {r['fault']} at {_fmt(r['fault_at_s'])} s"
+        state = "walks" if walks(r, c) else (f"latched {r['fault']} at {_fmt(r['fault_at_s'])} s"
                                                     if r["fault"] else r["status"] if r["status"] != "ok"
                                                     else "does not walk")
         md.append(f"- point {r['point']}, {float(r['body_mass_kg']):g} kg, {r['speed']}, {r['battery']}: {state}; "
@@ -206,7 +215,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
            "| body mass kg | speed | point | design | actuator kg | moment share | energy/stride J | km/charge | "
            "winding °C (end / steady) |", "|---|---|---|---|---|---|---|---|---|"]
     for mass, speed in groups(rows):
-        ok = [r for r in rows if (float(r["body_mass_kg"]), r["speed"]) == (mass, speed) and walks(r, min_share)]
+        ok = [r for r in rows if (float(r["body_mass_kg"]), r["speed"]) == (mass, speed) and walks(r, c)]
         for r in sorted(pareto(ok), key=lambda r: _num(r["actuator_kg"])):
             md.append(f"| {mass:g} | {speed} | {r['point']} | {_label(r)} | {_fmt(r['actuator_kg'], '.3f')} | "
                       f"{_fmt(r['moment_share'], '.3f')} | {_fmt(r['energy_per_stride_j'], '.1f')} | "
@@ -230,7 +239,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
                   f"{_fmt(r['actuator_kg'], '.3f')} | {_fmt(r['keeps_up_to_kg'], 'g')} |")
     md += ["", "Files: `results.parquet`, `results.csv` (every column), `pareto.png`, `points/NNNN/` (each point's "
            "design profile, summary.json and report.md).", ""]
-    _plot(out / "pareto.png", rows, min_share)
+    _plot(out / "pareto.png", rows, c)
     path = out / "design.md"
     write_atomic(path, "\n".join(md) + "\n")
     return path

@@ -15,7 +15,8 @@ speeds, each point a walking run of the firmware on its design profile; checked 
     timeout_s = 900                    # wall seconds per point
     ambient_c = 25.0                   # the motor's surroundings, -40..80 C (pafp run --ambient-c)
     min_moment_share = 0.9             # a design "walks" the person when it delivers this share of the stance
-                                       # moment, without a fault and within the thermal limit
+                                       # moment, without a fault and within the thermal limit,
+    max_tracking_rms_deg = 5.0         # and tracks the gait within this RMS (the encoder's, in RUN)
 
     [[belt]]                           # one per ratio: the belt's tooth pair and pitch
     driver_teeth = 12
@@ -44,13 +45,22 @@ from firmware.config import DEFAULT_PROFILE
 from host_tools.studies.spec_values import read_spec, spec_int, spec_list, spec_number, spec_range_error
 from host_tools.studies.sweep_spec import SpecError
 
-__all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "load_design_spec", "pick_battery"]
+__all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "WalkCriteria", "load_design_spec", "pick_battery"]
 
 SEARCH_KEYS = ("profile", "motors", "batteries", "body_masses_kg", "speeds", "strides", "controller", "seed",
-               "timeout_s", "ambient_c", "min_moment_share")
+               "timeout_s", "ambient_c", "min_moment_share",
+               "max_tracking_rms_deg")
 BELT_KEYS = ("driver_teeth", "driven_teeth", "pitch_mm")
 SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
 MAX_POINTS = 10_000
+
+
+@dataclass(frozen=True)
+class WalkCriteria:
+    """What a point must show to walk the person (docs/design.md, "Reading the search")."""
+
+    min_moment_share: float = 0.9
+    max_tracking_rms_deg: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -123,7 +133,7 @@ class DesignSpec:
     seed: int
     timeout_s: float
     ambient_c: float
-    min_moment_share: float
+    criteria: WalkCriteria
     profiles: dict[tuple[Any, ...], str]
     digest: str
 
@@ -287,14 +297,16 @@ def load_design_spec(path: Path) -> DesignSpec:
     seed = _int(path, "[search] seed", s.get("seed", 0), 0, 2**32 - 1)
     timeout = _number(path, "[search] timeout_s", s.get("timeout_s", 900.0), 0.0, 86_400.0, True)
     ambient = _number(path, "[search] ambient_c", s.get("ambient_c", 25.0), -40.0, 80.0)
-    min_share = _number(path, "[search] min_moment_share", s.get("min_moment_share", 0.9), 0.0, 1.0)
+    criteria = WalkCriteria(_number(path, "[search] min_moment_share", s.get("min_moment_share", 0.9), 0.0, 1.0),
+                            _number(path, "[search] max_tracking_rms_deg", s.get("max_tracking_rms_deg", 5.0), 0.0,
+                                    90.0, True))
     belts, springs = _belts(path, doc), _springs(path, doc)
     n = len(motors) * len(belts) * len(springs) * len(batteries) * len(masses) * len(speeds)
     if not 1 <= n <= MAX_POINTS:
         raise SpecError(f"design spec {path}: {n} points out of range: 1..{MAX_POINTS}")
     spec = DesignSpec(path, Path(base), motors, batteries, masses, speeds, belts, springs, strides, controller,
-                      seed, timeout, ambient, min_share, {}, "")
+                      seed, timeout, ambient, criteria, {}, "")
     profiles = {d: _profile_of(path, Path(base), d) for d in spec.designs()}
     digest = hashlib.sha256("\0".join([text, *(f"{d!r}\0{t}" for d, t in profiles.items())]).encode()).hexdigest()
     return DesignSpec(path, Path(base), motors, batteries, masses, speeds, belts, springs, strides, controller,
-                      seed, timeout, ambient, min_share, profiles, digest)
+                      seed, timeout, ambient, criteria, profiles, digest)
