@@ -304,3 +304,23 @@ def test_a_plant_file_wins_over_the_design_with_a_note(tmp_path: Path, capsys) -
     plant = json.loads((out / "summary.json").read_text())["plant"]
     assert plant["design_used"] is False
     assert plant["output_torque_per_amp_nm"] == pytest.approx(load_plant_params().output_torque_per_amp_nm)
+
+
+def test_the_stance_moment_share_is_the_motor_moment_over_the_demand() -> None:
+    import numpy as np
+
+    from host_tools.reports.actuator import stance_moment_share
+    from host_tools.walk import walking_load
+
+    load = walking_load(80.0, 1.1)
+    t = np.arange(0.0, 2.2, 0.002)
+    start = 0.0
+    demand = np.array([load.moment_nm(((x - start) / 1.1 % 1.0) * 100.0) for x in t])
+    nm_per_a = 7.5
+    full = stance_moment_share(t, -demand / nm_per_a, nm_per_a, load, start, math.inf)
+    assert full == {"stance_moment_share": 1.0, "stance_peak_moment_share": 1.0}
+    half = stance_moment_share(t, -0.5 * demand / nm_per_a, nm_per_a, load, start, math.inf)
+    assert half == {"stance_moment_share": 0.5, "stance_peak_moment_share": 0.5}
+    wrong_way = stance_moment_share(t, demand / nm_per_a, nm_per_a, load, start, math.inf)  # dorsiflexing: none given
+    assert wrong_way["stance_moment_share"] == 0.0
+    assert stance_moment_share(t, 0 * t, nm_per_a, load, 5.0, math.inf)["stance_moment_share"] is None  # no stance
