@@ -1,6 +1,7 @@
 """The winding temperature and the supply over a run, one row per stride: bounded memory for 1000-stride walks.
 
-The bench probe calls :meth:`HeatLog.sample` at each of its samples (500 Hz). The log keeps running extremes
+The bench probe calls :meth:`HeatLog.sample` at every tenth of its samples (50 Hz; the lowest bus voltage comes
+from the meter's every sample in between). The log keeps running extremes
 and, at each stride boundary of the firmware's gait clock (``gait_start_s + k * stride_s``), one row: the
 winding and housing temperatures of the thermal model (emulation only), the temperature the motor last
 reported to the firmware (the bench figure), the bus voltage and the energy drawn at the supply so far. A
@@ -69,10 +70,11 @@ class HeatLog:
         if math.isfinite(reported) and not reported <= self.reported_c_max:
             self.reported_c_max = reported
         bus_v = float(self.meter.v_in_v)
-        if bus_v < self.bus_v_min:
-            self.bus_v_min = bus_v
-        if bus_v < self._stride_bus_v_min:
-            self._stride_bus_v_min = bus_v
+        lowest = float(self.meter.reset_v_in_min())  # the meter's every sample since the previous call
+        if lowest < self.bus_v_min:
+            self.bus_v_min = lowest
+        if lowest < self._stride_bus_v_min:
+            self._stride_bus_v_min = lowest
         start = self.gait_start()
         if start is None or t_s < start:
             return
