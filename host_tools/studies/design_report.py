@@ -175,7 +175,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
           f"{len(rows)} points ({', '.join(f'{k} {v}' for k, v in sorted(status.items()))}) on {where} in "
           f"{_fmt(wall_time_s, '.1f')} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
           f"A design walks the person when its run has no fault, its winding stays within the thermal limit (the "
-          "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking) "
+          "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking), "
           f"it delivers at least {c.min_moment_share:.0%} of the stance moment (measured as a bench does: the "
           "motor's reported current x the drive's N·m per A, plus the plant's spring at the firmware's angle) and "
           f"the encoder measures at most {c.max_tracking_rms_deg:g}° RMS tracking error. Winding "
@@ -211,7 +211,7 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
            "Per body mass and speed, among the designs that walk: no other is lighter, delivers more of the moment "
            "and spends less energy per stride all at once (energy left out where a run has no battery figure). "
            "Plot: `pareto.png` (x: actuator mass, y: moment share, colour: energy per stride; red crosses: a fault "
-           "or too hot; circled: non-dominated).", "",
+           "or too hot; orange pluses: tracks or delivers too little; circled: non-dominated).", "",
            "| body mass kg | speed | point | design | actuator kg | moment share | energy/stride J | km/charge | "
            "winding °C (end / steady) |", "|---|---|---|---|---|---|---|---|---|"]
     for mass, speed in groups(rows):
