@@ -12,8 +12,9 @@ from firmware.control.filters import ORDER_RANGE
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.control.validation import check_int_range, check_range, is_number
 from firmware.drivers.ground_sensor_config import GroundSensorConfig
+from firmware.motor_ratings import RATING_KEYS, MotorRatings
 from firmware.safety import SafetyLimits
-from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S
+from firmware.safety_limits import ANGLE_LIMIT_RAD, PEAK_CURRENT_A, TIMEOUT_MAX_S, ThermalLimits
 from profiles import profile_path, read_toml
 from protocol.rvc import RVC_RATE_HZ
 
@@ -22,8 +23,11 @@ __all__ = ["DEFAULT_PROFILE", "SECTIONS", "TASK_NAMES", "CostModel", "FirmwareCo
 DEFAULT_PROFILE = profile_path("firmware.toml")
 RATE_FIELDS = ("control_hz", "imu_poll_hz", "logger_hz", "watchdog_kick_hz", "full_values_hz")  # [rates_hz] + "_hz"
 SECTIONS = ("rates_hz", "control", "feedforward", "safety", "task_cycles", "motor", "controller", "ground_sensors",
-            "host_watchdog")
+            "host_watchdog", "thermal")
 """The tables of a firmware profile ([control] holds the sub-tables position and velocity)."""
+HOST_SECTIONS = ("design",)
+"""Tables a firmware profile may carry for the host, never read by the firmware: [design] (a design profile's motor,
+belt and spring, checked by hal.virtual.plant.design.load_design where the bench is built; docs/design.md)."""
 TASK_NAMES = ("encoder", "supervisor", "control", "motor", "imu", "logger", "watchdog")
 """The firmware's tasks (firmware.app's table): the names [task_cycles] may price."""
 MAX_JOB_CYCLES = 10_000_000
@@ -36,8 +40,10 @@ MAX_CAN_ID = 127
 section G); the firmware keeps to 0..127."""
 MAX_VELOCITY_RAD_S = 560 * 2 * math.pi / 60 / (14 / 3)
 """Largest ankle velocity limit: the AK60-6's no-load output speed, 560 rpm (maker, PROTOCOLS.md section C), through
-the 14:3 belt = 12.6 rad/s; the drive cannot go faster, so a higher limit would never act."""
-# [control] scalars: (lo, hi, lo_open, hi_open, unit); hi None = a bound from the rates, checked in FirmwareConfig
+the 14:3 belt = 12.6 rad/s; the drive cannot go faster, so a higher limit would never act. With another motor in
+[motor] (or another [safety] belt_ratio) the bound is that motor's no-load speed through that belt."""
+# [control] scalars: (lo, hi, lo_open, hi_open, unit); the first two rows are the AK60-6's bounds, replaced by the
+# profile's motor and belt in _check_control
 CONTROL_RANGES: dict[str, tuple[float, float, bool, bool, str]] = {
     "current_limit_a": (0.0, PEAK_CURRENT_A, True, False, "A (the AK60-6's peak current)"),
     "velocity_limit_rad_s": (0.0, MAX_VELOCITY_RAD_S, True, False, "rad/s (the AK60-6's no-load speed at the ankle)"),
@@ -93,6 +99,7 @@ class FirmwareConfig:
     velocity_gains: PidGains = PidGains(0.2, 3.0)
     feedforward_params: FeedforwardParams = FeedforwardParams(0.0495, 1.176, 0.150, 0.078, 28.0, 0.855)
     safety: SafetyLimits = SafetyLimits()
+    thermal: ThermalLimits = ThermalLimits()  # [thermal]: derating and OVER_TEMPERATURE (firmware.safety_limits)
     task_cycles: dict[str, Callable[[object], int]] = field(default_factory=dict)  # CostModel or any such callable
     motor_link: str = "uart"  # [motor] link: a name of firmware.drivers.motor_links.MOTOR_LINKS
     motor_can_id: int = 1  # [motor] can_id: the motor's driver id on a CAN link
@@ -117,11 +124,16 @@ class FirmwareConfig:
         if self.full_values_hz > self.control_hz:
             raise ValueError(
                 f"full_values_hz {self.full_values_hz} out of range: <= control_hz {self.control_hz}")
-        _check_control(lambda name: getattr(self, name), self.control_hz)
+        _check_control(lambda name: getattr(self, name), self.control_hz, self.safety.motor, self.safety.belt_ratio)
         check_range("host_watchdog_s", self.host_watchdog_s, *HOST_WATCHDOG_RANGE_S, unit="s")
         unknown = sorted(set(self.task_cycles) - set(TASK_NAMES))
         if unknown:
             raise ValueError(f"task {unknown[0]!r} is not a firmware task: one of {', '.join(TASK_NAMES)}")
+
+    @property
+    def motor(self) -> MotorRatings:
+        """The motor's ratings ([motor] of the profile; the AK60-6's by default)."""
+        return self.safety.motor
 
     def cost(self, task: str) -> Callable[[object], int]:
         """The cost model of `task` (a small default if the profile does not name it)."""
@@ -134,9 +146,16 @@ class FirmwareConfig:
         return replace(self, **changes)
 
 
-def _check_control(value: Callable[[str], Any], control_hz: int) -> None:
-    """Check the [control] scalars, read through value(name)."""
-    for name, (lo, hi, lo_open, hi_open, unit) in CONTROL_RANGES.items():
+def _check_control(value: Callable[[str], Any], control_hz: int, motor: MotorRatings | None = None,
+                   belt_ratio: float | None = None) -> None:
+    """Check the [control] scalars, read through value(name); the current and velocity bounds are the motor's."""
+    ranges = dict(CONTROL_RANGES)
+    if motor is not None and motor != MotorRatings():  # the AK60-6's bounds are the table's (its 14:3 belt)
+        name = "AK60-6" if motor.model == "ak60_6" else motor.model
+        ranges["current_limit_a"] = (0.0, motor.peak_current_a, True, False, f"A (the {name}'s peak current)")
+        ranges["velocity_limit_rad_s"] = (0.0, motor.no_load_ankle_speed_rad_s(belt_ratio or SafetyLimits.belt_ratio),
+                                          True, False, f"rad/s (the {name}'s no-load speed at the ankle)")
+    for name, (lo, hi, lo_open, hi_open, unit) in ranges.items():
         check_range(name, value(name), lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
     check_int_range("imu_lowpass_order", value("imu_lowpass_order"), *ORDER_RANGE)
     if not value("velocity_cutoff_hz") < control_hz / 2:
@@ -176,7 +195,7 @@ def _safety(table: dict[str, Any]) -> dict[str, Any]:
 
     The angles are checked here in the profile's degrees, so that a message names the key as written.
     """
-    known = {f.name for f in fields(SafetyLimits)}
+    known = {f.name for f in fields(SafetyLimits)} - {"motor"}
     out = {}
     for key, value in table.items():
         degrees = key.endswith("_deg")
@@ -199,10 +218,11 @@ def _safety(table: dict[str, Any]) -> dict[str, Any]:
 
 def _safety_keys() -> list[str]:
     """The [safety] keys of a profile: SafetyLimits' fields, angles in degrees."""
-    return [f.name.removesuffix("_rad") + "_deg" if f.name.endswith("_rad") else f.name for f in fields(SafetyLimits)]
+    return [f.name.removesuffix("_rad") + "_deg" if f.name.endswith("_rad") else f.name for f in fields(SafetyLimits)
+            if f.name != "motor"]
 
 
-def _control(table: dict[str, Any], control_hz: int) -> dict[str, Any]:
+def _control(table: dict[str, Any], control_hz: int, motor: MotorRatings, belt_ratio: float) -> dict[str, Any]:
     """[control] scalars as FirmwareConfig fields, each checked; ValueError names an unknown key."""
     known = (*CONTROL_RANGES, "feedforward", "imu_lowpass_order")
     for key in table:
@@ -211,7 +231,7 @@ def _control(table: dict[str, Any], control_hz: int) -> dict[str, Any]:
                              "tables [control.position], [control.velocity]")
     # the checks of FirmwareConfig that concern [control], made here so that the error names the section
     defaults = FirmwareConfig()
-    _check_control(lambda name: table.get(name, getattr(defaults, name)), control_hz)
+    _check_control(lambda name: table.get(name, getattr(defaults, name)), control_hz, motor, belt_ratio)
     return table
 
 
@@ -268,18 +288,31 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
     if not doc:
         raise ValueError(f"firmware profile {p} is empty: no section of {', '.join(f'[{n}]' for n in SECTIONS)} "
                          "(start from the shipped profiles/firmware.toml)")
-    unknown = sorted(set(doc) - set(SECTIONS))
+    unknown = sorted(set(doc) - set(SECTIONS) - set(HOST_SECTIONS))
     if unknown:
         raise ValueError(f"firmware profile {p}: unknown section [{unknown[0]}]: the sections are "
-                         f"{', '.join(f'[{n}]' for n in SECTIONS)}")
+                         f"{', '.join(f'[{n}]' for n in SECTIONS + HOST_SECTIONS)}")
+    for name in HOST_SECTIONS:
+        if name in doc and not isinstance(doc[name], dict):
+            raise ValueError(f"firmware profile {p}: {name} must be a table [{name}], got {doc[name]!r}")
     section = "rates_hz"
     try:
         rates = _rates(_section(doc, "rates_hz"))
+        section = "motor"
+        motor = _section(doc, "motor")
+        unknown = sorted(set(motor) - {"link", "can_id", *RATING_KEYS})
+        if unknown:
+            raise ValueError(f"has no key {unknown[0]!r}: its keys are link, can_id, {', '.join(RATING_KEYS)}")
+        ratings = MotorRatings.from_table(motor)
+        section = "safety"
+        safety_table = _safety(_section(doc, "safety"))
+        belt_ratio = safety_table.get("belt_ratio", SafetyLimits.belt_ratio)
         section = "control"
         ctl = dict(_section(doc, "control"))
         pos, vel = ctl.pop("position", {}), ctl.pop("velocity", {})
         control_hz = rates.get("control_hz", FirmwareConfig.control_hz)
-        _control(ctl, control_hz if isinstance(control_hz, int) else FirmwareConfig.control_hz)
+        _control(ctl, control_hz if isinstance(control_hz, int) else FirmwareConfig.control_hz, ratings,
+                 belt_ratio if is_number(belt_ratio) and belt_ratio > 0 else SafetyLimits.belt_ratio)
         section = "control.position"
         position_gains = _parameters(PidGains, pos)
         section = "control.velocity"
@@ -287,14 +320,12 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         section = "feedforward"
         feedforward_params = _parameters(FeedforwardParams, _section(doc, "feedforward"))
         section = "safety"
-        safety = SafetyLimits(**_safety(_section(doc, "safety")))
+        safety = SafetyLimits(**safety_table, motor=ratings)
+        section = "thermal"
+        thermal = _parameters(ThermalLimits, _section(doc, "thermal"))
         section = "task_cycles"
         task_cycles = _task_cycles(_section(doc, "task_cycles"))
         section = "motor"
-        motor = _section(doc, "motor")
-        unknown = sorted(set(motor) - {"link", "can_id"})
-        if unknown:
-            raise ValueError(f"has no key {unknown[0]!r}: its keys are link, can_id")
         links = {"motor_link": motor["link"]} if "link" in motor else {}
         if "link" in motor:
             from firmware.drivers.motor_links import MOTOR_LINKS  # imports firmware.config
@@ -310,8 +341,9 @@ def load_firmware_config(path: str | Path | None = None) -> FirmwareConfig:
         host_watchdog = _host_watchdog(_section(doc, "host_watchdog"))
         section = "rates_hz"  # what is left: checks across sections, which name their keys
         return FirmwareConfig(**rates, position_gains=position_gains, velocity_gains=velocity_gains,
-                              feedforward_params=feedforward_params, safety=safety, task_cycles=task_cycles,
-                              **links, **controller, **host_watchdog, **ctl, ground_sensors=ground_sensors)
+                              feedforward_params=feedforward_params, safety=safety, thermal=thermal,
+                              task_cycles=task_cycles, **links, **controller, **host_watchdog, **ctl,
+                              ground_sensors=ground_sensors)
     except ValueError as e:
         msg = str(e)
         where = "" if msg.startswith("[") else f"[{section}] "

@@ -12,13 +12,13 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from firmware.safety_limits import SafetyLimits
+from firmware.safety_limits import SafetyLimits, ThermalLimits
 from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
 
 __all__ = ["FaultReason", "MotorEncoderGap", "SafetyInputs", "SafetyLimits", "SafeCommand", "Supervisor",
-           "SupervisorState"]
+           "SupervisorState", "ThermalGuard", "ThermalLimits"]
 
 
 @dataclass
@@ -37,6 +37,7 @@ class SafetyInputs:
     estop_pressed: bool = False
     link_lost: bool = False
     motor_encoder_gap_rad: float = 0.0
+    motor_temp_c: float = math.nan  # the motor's winding temperature, fresh (ThermalGuard.fresh_c) or NaN
 
 
 @dataclass(frozen=True)
@@ -50,9 +51,11 @@ class SafeCommand:
 class Supervisor:
     """Latched safety state machine: INIT until the sensors speak, RUN, then SAFE on any fault."""
 
-    def __init__(self, limits: SafetyLimits | None = None) -> None:
+    def __init__(self, limits: SafetyLimits | None = None, thermal: ThermalLimits | None = None) -> None:
         """Start in INIT with no fault."""
         self.limits = limits or SafetyLimits()
+        self.thermal = thermal or ThermalLimits()
+        self._fault_c = self.thermal.fault_c
         self.state = SupervisorState.INIT
         self.reason = FaultReason.NONE
         self.tripped_at_s: float | None = None
@@ -117,6 +120,8 @@ class Supervisor:
         if reason is FaultReason.ANGLE_LIMIT:
             return f"angle {math.degrees(x.angle_rad):.2f} deg outside " \
                    f"{math.degrees(lim.angle_min_rad):.1f}..{math.degrees(lim.angle_max_rad):.1f} deg"
+        if reason is FaultReason.OVER_TEMPERATURE:
+            return f"motor temperature {x.motor_temp_c:.1f} C > {self._fault_c:.1f} C"
         if reason is FaultReason.CURRENT_LIMIT:
             return f"current {x.current_meas_a:.2f} A beyond {lim.current_limit_a:.1f} A"
         return ""
@@ -155,6 +160,8 @@ class Supervisor:
         last_s = x.last_imu_frame_s
         if (now_s > lim.startup_grace_s) if last_s is None else (now_s - last_s > lim.imu_timeout_s):
             return FaultReason.IMU_TIMEOUT
+        if x.motor_temp_c > self._fault_c:  # NaN (no fresh reading) never latches
+            return FaultReason.OVER_TEMPERATURE
         if self.state is _RUN:
             if not lim.angle_min_rad <= x.angle_rad <= lim.angle_max_rad:
                 return FaultReason.ANGLE_LIMIT
@@ -198,6 +205,43 @@ class MotorEncoderGap:
             self._encoder0, self._motor0 = encoder_rad, motor_position_rad
         self.gap_rad = abs((encoder_rad - self._encoder0) - (motor_position_rad - self._motor0) / self.belt_ratio)
         return self.gap_rad
+
+
+class ThermalGuard:
+    """The motor's reported winding temperature, taken only while fresh, and the current limit it allows.
+
+    A reading older than ``max_age_s`` (or none, or not finite) is NaN: it neither derates nor latches; a
+    motor that stopped replying is MOTOR_TIMEOUT's to catch. ``derating_since_s`` is when the limit first fell
+    below the full one (None: never).
+    """
+
+    def __init__(self, limits: ThermalLimits) -> None:
+        """No reading yet: the full limit."""
+        self.limits = limits
+        self.max_age_s = limits.max_age_s
+        self._start_c = limits.derate_start_c  # native copy: the common case (cool) makes no call into the limits
+        self.derating_since_s: float | None = None
+        self.factor = 1.0
+
+    def fresh_c(self, temp_c: float, received_s: float | None, now_s: float) -> float:
+        """temp_c if it was received at most max_age_s before now_s and is finite, else NaN."""
+        if received_s is None or now_s - received_s > self.max_age_s or not math.isfinite(temp_c):
+            return math.nan
+        return temp_c
+
+    def limit_a(self, limit_a: float, temp_c: float, received_s: float | None, now_s: float) -> float:
+        """The current limit allowed now: limit_a derated by the fresh temperature (limit_a itself without one)."""
+        t = self.fresh_c(temp_c, received_s, now_s)
+        if not t > self._start_c:  # cool, or no fresh reading (NaN): the full limit
+            self.factor = 1.0
+            return limit_a
+        factor = self.limits.derating(t)
+        self.factor = factor
+        if self.derating_since_s is None:
+            self.derating_since_s = now_s
+            log.warning("derating at %.4f s: motor temperature %.1f C, current limit %.2f A", now_s, t,
+                        limit_a * factor)
+        return limit_a * factor
 
 
 # Enum members as module constants: the per-period checks compare against them without the enum's

@@ -7,15 +7,20 @@ Interpreted on purpose (docs/compiled.md, "Values checked as given"); the compil
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from firmware.control.validation import check_int_range, check_range
+from firmware.motor_ratings import MotorRatings
 
 __all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "MISS_STREAK_MAX", "PEAK_CURRENT_A",
-           "STARTUP_GRACE_MAX_S", "TIMEOUT_MAX_S", "SafetyLimits"]
+           "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S", "SafetyLimits",
+           "ThermalLimits"]
 
 # The hardware's bounds on every limit; a limit beyond them is no limit at all (or asks the motor for what it
-# cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C).
+# cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C). The two
+# currents are the AK60-6's, the default motor: a profile whose [motor] states another motor's ratings
+# (firmware.motor_ratings.MotorRatings) bounds the limits with that motor's figures instead.
 PEAK_CURRENT_A = 22.7
 """AK60-6 peak phase current (report Table B2; maker 22.7 A): the motor cannot carry more, so a current limit
 above it never trips and a command above it is not what the motor will do."""
@@ -59,9 +64,17 @@ class SafetyLimits:
     # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
+    # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
+    # is read as MotorRatings)
+    motor: MotorRatings = field(default_factory=MotorRatings)
 
     def __post_init__(self) -> None:
-        """Reject limits that cannot describe a working supervisor or lie beyond the hardware (module constants)."""
+        """Reject limits that cannot describe a working supervisor or lie beyond the hardware (the motor's ratings)."""
+        motor: Any = self.motor
+        if isinstance(motor, dict):
+            object.__setattr__(self, "motor", MotorRatings(**motor))
+        elif not isinstance(motor, MotorRatings):
+            raise ValueError(f"motor = {motor!r} is not allowed: the motor's ratings (MotorRatings)")
         for name in ("angle_min_rad", "angle_max_rad"):
             check_range(name, getattr(self, name), -ANGLE_LIMIT_RAD, ANGLE_LIMIT_RAD, unit="rad (+-90 deg)")
         if not self.angle_min_rad < self.angle_max_rad:
@@ -72,10 +85,12 @@ class SafetyLimits:
         check_range("disagreement_rad", self.disagreement_rad, 0.0, span, lo_open=True,
                     unit="rad (at most the span of the angle limits: a wider one could not tell any two readings "
                          "inside them apart)")
-        check_range("current_limit_a", self.current_limit_a, 0.0, PEAK_CURRENT_A, lo_open=True,
-                    unit="A (the AK60-6's peak current)")
-        check_range("brake_current_a", self.brake_current_a, 0.0, BRAKE_CURRENT_MAX_A, lo_open=True,
-                    unit="A (the AK60-6's rated continuous current)")
+        m = self.motor
+        name = "AK60-6" if m.model == "ak60_6" else m.model
+        check_range("current_limit_a", self.current_limit_a, 0.0, m.peak_current_a, lo_open=True,
+                    unit=f"A (the {name}'s peak current)")
+        check_range("brake_current_a", self.brake_current_a, 0.0, m.rated_current_a, lo_open=True,
+                    unit=f"A (the {name}'s rated continuous current)")
         for name in ("motor_timeout_s", "command_timeout_s", "imu_timeout_s"):
             check_range(name, getattr(self, name), 0.0, TIMEOUT_MAX_S, lo_open=True,
                         unit="s (a stale peak-current command crosses any range of motion in 0.1 s)")
@@ -86,3 +101,65 @@ class SafetyLimits:
         check_range("motor_encoder_gap_rad", self.motor_encoder_gap_rad, 0.0, span, lo_open=True,
                     unit="rad (at most the span of the angle limits)")
         check_range("belt_ratio", self.belt_ratio, 0.0, 100.0, lo_open=True, unit="(output over input pulley)")
+
+
+TEMPERATURE_RANGE_C = (40.0, 180.0)
+"""Allowed [thermal] thresholds. Above 180 C no catalogue winding holds (IEC 60085 thermal class H, 180 C, the
+cap the motor profiles put on max_winding_c); below 40 C a warm day's ambient would derate a motor at rest."""
+TEMPERATURE_MAX_AGE_S = 5.0
+"""Longest age of a temperature reading the firmware still acts on. The UART driver asks for the full GET_VALUES
+(with temp_motor) at [rates_hz] full_values, 10 Hz by default; the CAN status frames carry it at every frame.
+The winding's time constant is tens of seconds (profiles/motors/, [thermal]), so a few seconds old is still
+current; an older one is no reading, and a lost reply is MOTOR_TIMEOUT's hazard, not this one's."""
+
+
+@dataclass(frozen=True)
+class ThermalLimits:
+    """The firmware's response to the motor's reported winding temperature ([thermal] of the profile), degrees C.
+
+    Between ``derate_start_c`` and ``derate_end_c`` the current limit falls linearly from the full limit to zero;
+    above ``fault_c`` the supervisor latches OVER_TEMPERATURE (zero current, then the brake). Defaults and
+    sources (docs/safety.md, "Over-temperature"):
+
+    * ``derate_end_c`` 100: VESC's ``l_temp_motor_end`` default (``MCCONF_L_LIM_TEMP_MOTOR_END`` 100.0 in
+      vedderb/bldc mcconf_default.h), where the AK60-6's own driver cuts the motor (the device model's
+      ``temp_motor_max_c``): the firmware's limit reaches zero where the driver would drop it anyway.
+    * ``derate_start_c`` 70: [I] choice, 15 K below VESC's ``l_temp_motor_start`` default (85.0, the same
+      file): the firmware's own derating starts before the driver's, so the limit the user feels is the one
+      the firmware announces (in its telemetry and summary), not the driver's unannounced one.
+    * ``fault_c`` 90: [I] choice, 10 K below the driver's cutoff, so the firmware's stop path (zero current, then
+      the brake) acts before the driver lets go on its own; far below the insulation's limit (CubeMars lists
+      class C, above 180 C; IEC 60085 class H 180 C): the limit is the driver's, not the copper's.
+    * ``max_age_s`` 1.0: [I] ten full GET_VALUES periods at 10 Hz (see TEMPERATURE_MAX_AGE_S).
+    """
+
+    derate_start_c: float = 70.0
+    derate_end_c: float = 100.0
+    fault_c: float = 90.0
+    max_age_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        """Thresholds inside TEMPERATURE_RANGE_C, the derating a rising ramp, the fault above its start."""
+        lo, hi = TEMPERATURE_RANGE_C
+        for name in ("derate_start_c", "derate_end_c", "fault_c"):
+            check_range(name, getattr(self, name), lo, hi, unit="C (IEC 60085 class H at most)")
+        if not self.derate_start_c < self.derate_end_c:
+            raise ValueError(f"derate_start_c = {self.derate_start_c!r} must be below derate_end_c = "
+                             f"{self.derate_end_c!r} C (the current limit falls from the one to the other)")
+        if not self.fault_c > self.derate_start_c:
+            raise ValueError(f"fault_c = {self.fault_c!r} must be above derate_start_c = {self.derate_start_c!r} C "
+                             "(the firmware derates before it stops)")
+        check_range("max_age_s", self.max_age_s, 0.0, TEMPERATURE_MAX_AGE_S, lo_open=True,
+                    unit="s (a reading older than this is no reading)")
+
+    def derating(self, temp_c: float) -> float:
+        """Fraction of the current limit allowed at winding temperature ``temp_c`` (1.0 for NaN: no reading).
+
+        >>> ThermalLimits().derating(70.0), ThermalLimits().derating(85.0), ThermalLimits().derating(100.0)
+        (1.0, 0.5, 0.0)
+        """
+        if not temp_c > self.derate_start_c:  # NaN too
+            return 1.0
+        if temp_c >= self.derate_end_c:
+            return 0.0
+        return (self.derate_end_c - temp_c) / (self.derate_end_c - self.derate_start_c)

@@ -29,7 +29,7 @@ from firmware.drivers.ground_sensors import GroundSensorDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor_links import make_motor_driver
 from firmware.logger import TelemetryLogger
-from firmware.safety import FaultReason, MotorEncoderGap, SafetyInputs, Supervisor, SupervisorState
+from firmware.safety import FaultReason, MotorEncoderGap, SafetyInputs, Supervisor, SupervisorState, ThermalGuard
 from hal.interfaces import Board
 from protocol.rvc import RVC_RATE_HZ
 from rtos import Job
@@ -74,7 +74,8 @@ class FirmwareTasks:
         self.imu = ImuDriver(board.imu_uart)
         self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (motor_links.MOTOR_LINKS)
         self.logger = TelemetryLogger(board.telemetry_uart)
-        self.supervisor = Supervisor(c.safety)
+        self.supervisor = Supervisor(c.safety, c.thermal)
+        self.thermal = ThermalGuard(c.thermal)  # derating from the motor's reported winding temperature
         self.motor_encoder_gap = MotorEncoderGap(c.safety.belt_ratio)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
         self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
@@ -96,7 +97,7 @@ class FirmwareTasks:
         feedforward = Feedforward(c.feedforward_params)
         self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
         self.load_detector = LoadDetector(self.ts_s, feedforward.nm_per_a, feedforward.inertia_kg_m2,
-                                          feedforward.gravity_moment_nm, c.com_angle_rad)
+                                          feedforward.gravity_moment_nm, c.com_angle_rad, feedforward=feedforward)
         # gait events from the load cell and FSRs, on boards with the ADC; the load detector is the fallback
         self.ground_events: GroundEvents | None = (
             GroundEvents(GroundSensorDriver(board.adc, c.ground_sensors, self.ts_s)) if board.adc is not None else None)
@@ -145,6 +146,7 @@ class FirmwareTasks:
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
                                                                 feedback.received_s, x.now_s)
         x.motor_fault_code = feedback.fault
+        x.motor_temp_c = self.thermal.fresh_c(feedback.temp_motor_c, feedback.temp_received_s, x.now_s)
         x.estop_pressed = self.board.estop.read()
         x.link_lost = link_lost = self.motor.link_lost or self.imu.link_lost
         if link_lost and self.link_lost_seen_s is None:
@@ -227,7 +229,8 @@ class FirmwareTasks:
         if not math.isfinite(current) or (brake and current < 0.0):
             self._controller_failed(now_s, None, returned)
             return
-        limit = self._current_limit_a
+        fb = self.motor.feedback
+        limit = self.thermal.limit_a(self._current_limit_a, fb.temp_motor_c, fb.temp_received_s, now_s)
         if current > limit:
             current = limit
         elif current < -limit:

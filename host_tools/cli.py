@@ -23,6 +23,7 @@ COMMANDS = Registry("command", {
     "replay": "host_tools.commands.replay",
     "fit": "host_tools.commands.fit",
     "faults": "host_tools.commands.faults",
+    "design": "host_tools.commands.design",
 }, group="pafp.commands")
 """Subcommand name -> its module, which defines HELP, add_arguments(parser) and run(args) -> int."""
 

@@ -79,6 +79,9 @@ class ProbeBody:
         self.actions = actions
         self.world = bench.world
         self.plant = bench.plant.raw  # the probe brings the world up to its job's start itself
+        self.listeners: list[Callable[[float], None]] = []  # called with the time of every listen_every-th sample
+        self.listen_every = 10  # the heat log at 50 Hz: per-stride rows to 20 ms, at a tenth of the calls
+        self._until_listen = 1
 
     def __call__(self, job: Job) -> None:
         """Run the actions due, advance the world to job.start, record one sample."""
@@ -89,3 +92,9 @@ class ProbeBody:
             actions.pop(0)[1](self.bench, self.fw)
         self.world.advance_to(start)
         self.probe.sample(t, self.fw, self.plant.output_angle_rad(t))
+        if self.listeners:
+            self._until_listen -= 1
+            if self._until_listen <= 0:
+                self._until_listen = self.listen_every
+                for listener in self.listeners:
+                    listener(t)

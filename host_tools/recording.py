@@ -17,7 +17,7 @@ from pathlib import Path
 from firmware.config import TASK_NAMES, CostModel, FirmwareConfig
 from firmware.control.pid import FeedforwardParams, PidGains
 from firmware.drivers.ground_sensor_config import GroundSensorConfig
-from firmware.safety import SafetyLimits
+from firmware.safety import SafetyLimits, ThermalLimits
 from hal.interfaces import Board
 from hal.record.recorder import Recorder, SectionedBody
 from host_tools.build_info import describe, version
@@ -45,6 +45,8 @@ def config_from_dict(d: dict) -> FirmwareConfig:
                              "velocity_gains": PidGains(**d["velocity_gains"]),
                              "feedforward_params": FeedforwardParams(**d["feedforward_params"]),
                              "safety": SafetyLimits(**d["safety"]),
+                             # [thermal] (issue 23); a record written before it has none: the defaults
+                             "thermal": ThermalLimits(**d.get("thermal", {})),
                              "task_cycles": {k: CostModel(**v) for k, v in d["task_cycles"].items()},
                              "ground_sensors": GroundSensorConfig.from_table(
                                  {**d["ground_sensors"],

@@ -27,10 +27,15 @@ from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.devices.bno08x_config import imu_reading_of
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
+from hal.virtual.plant.battery import load_battery
+from hal.virtual.plant.design import Design, plant_params_for
 from hal.virtual.plant.draw import draw_plant, drawn_values
+from hal.virtual.plant.motors import load_motor
 from hal.virtual.plant.readings import DRIVERS, geometry_of
+from hal.virtual.plant.thermal import ThermalParams
 from hal.virtual.plant.walking import walk
 from host_tools.probe import Action, Probe, ProbeBody
+from host_tools.reports.heat_log import HeatLog
 from host_tools.reports.run_files import RunFiles
 from host_tools.reports.tracking_stream import probe_stream
 from host_tools.walk import SCENARIOS, SPEEDS, all_speeds_path, ground_reaction, walking_load
@@ -112,6 +117,14 @@ class RunConfig:
     # fault injectors and instruments (hal/virtual/faults), armed on the bench, the controller and the task costs
     faults: tuple = ()
     duration_s: float | None = None  # simulated time to run (None: settle + ramp + strides x stride + 50 ms)
+    # the design profile's [design] (hal.virtual.plant.design): the plant is its motor, belt and spring around the
+    # nominal foot, unless plant_file is given (which wins)
+    design: Design | None = None
+    ambient_c: float = 25.0  # the motor's surroundings: the winding starts at and cools towards it
+    # a battery profile (profiles/batteries/ name or file) the motor draws from; None: the design's battery if it
+    # names one, else the ideal supply (the plant profile's voltage behind the driver's source resistance)
+    battery: str | Path | None = None
+    thermal: bool = True  # the two-node winding model (hal.virtual.plant.thermal) behind the reported temperature
 
     def __post_init__(self) -> None:
         """Reject values the bench cannot run."""
@@ -133,6 +146,9 @@ class RunConfig:
         if self.duration_s is not None and not (isinstance(self.duration_s, (int, float)) and
                                                 0.0 < self.duration_s <= 86_400.0):
             raise ValueError(f"duration_s {self.duration_s!r} out of range: a number in (0, 86400] s")
+        if isinstance(self.ambient_c, bool) or not isinstance(self.ambient_c, (int, float)) or \
+                not -40.0 <= self.ambient_c <= 80.0:
+            raise ValueError(f"ambient temperature {self.ambient_c!r} C out of range: a number in [-40, 80] C")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
@@ -141,6 +157,15 @@ class RunConfig:
         """Whether the bench has the ground sensors (by default when walking)."""
         return self.scenario == "walk" if self.ground_sensors is None else bool(self.ground_sensors)
 
+    def design_bench_options(self) -> dict:
+        """The virtual motor's MIT ranges when the design names a motor (its plant is in bench_setup)."""
+        if self.design is None:
+            return {}
+        from protocol.can_mit import MitLimits
+
+        m = self.design.motor_spec()
+        return {"can_options": {"limits": MitLimits(m.p_max_rad, m.v_max_rad_s, m.t_max_nm)}}
+
     def bench_setup(self) -> tuple[dict, dict]:
         """(VirtualBench arguments of the plant and the imperfections, their record for summary.json).
 
@@ -148,11 +173,16 @@ class RunConfig:
         """
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
         nominal = load_plant_params(self.plant_file)
+        if self.design is not None and self.plant_file is None:
+            nominal = plant_params_for(self.design, nominal)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
-        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.bench_options}
+        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.design_bench_options(),
+                         **self.bench_options}
         params = options["plant_params"]
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
                             "file": None if self.plant_file is None else str(self.plant_file),
+                            **({} if self.design is None else
+                               {"design": self.design.as_table(), "design_used": self.plant_file is None}),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
                             "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
                   # the readings of the report the bench ran under (hal.virtual.plant.readings, docs/bench.md)
@@ -180,6 +210,8 @@ class RunResult:
     complete: bool = True  # False when should_stop ended the run early
     stopped_by: str | None = None  # what should_stop answered (a signal's name), when it ended the run
     bench_record: dict = field(default_factory=dict)  # the plant drawn and the imperfections (summary.json)
+    # the thermal model, battery and heat log of the run (runner.attach_heat; host_tools/reports/thermal.py)
+    heat: dict = field(default_factory=dict)
 
 
 def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
@@ -198,6 +230,23 @@ class _Sporadic:
     name: str
     period: int
     cost_cycles: int
+
+
+def attach_heat(bench: VirtualBench, cfg: RunConfig) -> dict:
+    """Fit the winding's thermal model and the battery the run asks for on the bench; return what was fitted.
+
+    The thermal model takes the design's motor (``cfg.design.motor``) or the AK60-6 without a design; the
+    battery is ``cfg.battery``, else the design's, else none (the ideal supply).
+    """
+    design = getattr(cfg, "design", None)  # RunConfig.design: a design profile's [design] table (issue 23)
+    motor = getattr(design, "motor", None) or "ak60_6"
+    record: dict = {"ambient_c": float(cfg.ambient_c), "motor": motor, "thermal": cfg.thermal, "battery": None}
+    if cfg.thermal:
+        record["winding"] = bench.attach_thermal(ThermalParams.from_motor(load_motor(motor)), float(cfg.ambient_c))
+    battery = cfg.battery if cfg.battery is not None else getattr(design, "battery", None)
+    if battery is not None:
+        record["battery"] = bench.attach_battery(load_battery(battery))
+    return record
 
 
 def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
@@ -225,6 +274,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,
                          can_id=fw_cfg.motor_can_id, **bench_options)
     bench_record["imperfections"]["imu_bias_rad"] = bench.imu.pitch_bias_rad  # drawn at power-up
+    heat_record = attach_heat(bench, cfg)
     for fault in cfg.sensor_faults:
         part, _, mode = fault.partition(":")
         assert bench.ground_sensors is not None  # RunConfig checked
@@ -255,6 +305,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     probe = Probe()
     # bench instrument, not firmware: zero cycles, lowest priority
     probe_body = ProbeBody(probe, bench, fw, f_cpu, sorted(cfg.actions, key=lambda a: a[0]))
+    heat = HeatLog(bench.motor.meter, fw.motor.feedback, lambda: fw.gait_start_s, fw_cfg.stride_s)
+    probe_body.listeners.append(heat.sample)
     probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
     interrupts = bench.interrupt_sources(isr)
     trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
@@ -316,6 +368,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     if files is not None:
         files.close()
     bench_record["imperfections"]["backlash_crossings"] = bench.plant.raw.gap_crossings
+    heat_record["log"] = heat
     telemetry = bench.telemetry_bytes() if files is None else b""
     return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
-                     files, complete, stopped_by=stopped_by, bench_record=bench_record)
+                     files, complete, stopped_by=stopped_by, bench_record=bench_record, heat=heat_record)

@@ -12,7 +12,9 @@ answers every command with ``[driver_id, p>>8, p&0xFF, v>>4, (v&0xF)<<4 | t>>8, 
 error]`` on the master ID :data:`MASTER_ID` (its fourth field: torque, or q current by firmware
 version, in the t range). Three special 8-byte frames: ``FF..FF FC`` enter motor mode, ``FF..FF FD``
 exit motor mode (torque off), ``FF..FF FE`` set the present position as zero.
-Ranges are the AK60-6's as published (:data:`AK60_6`).
+The ranges differ per motor (:class:`MitLimits`; the motor catalogue's ``[can_mit]``): every function takes
+them, the AK60-6's as published (:data:`AK60_6`) by default; the firmware's driver takes its profile's
+(``[motor] mit_*``, firmware/motor_ratings.py).
 
 No import from the rest of pafp: the codec stands alone (firmware, device models and host tools use it).
 """

@@ -63,6 +63,7 @@ class FaultReason(IntEnum):
     COMMAND_STALE = 12
     CONTROLLER_ERROR = 13
     MOTOR_ENCODER_DISAGREEMENT = 14
+    OVER_TEMPERATURE = 15
 
 
 def _wire(fmt: str, default: Any = MISSING) -> Any:

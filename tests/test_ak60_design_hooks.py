@@ -74,3 +74,23 @@ def test_regeneration_flows_into_the_battery() -> None:
     meter.sample(meter.t_s + 0.5, -2.0, 200.0, 0.0)
     assert battery.current_a < 0.0 and battery.soc > 0.5
     assert battery.regenerated_j > 0.0 and meter.watt_seconds_charged > 0.0
+
+
+def test_the_plant_back_emf_limit_follows_the_battery() -> None:
+    # a one-cell pack (about 3.7 V at half charge): at rest the plant can push at most V_bus / R = 18 A into the
+    # winding, below the 20 A the 24 V supply carries; the driver's undervoltage cutoff is set out of the way
+    from dataclasses import replace
+
+    one_cell = replace(load_battery("molicel_p42a_6s1p"), series=1)
+    rig = Rig(Ak60Config(min_input_voltage_v=1.0), initial_angle_rad=0.6283)
+    battery = Battery(one_cell, soc=0.5)
+    rig.motor.meter.attach_battery(battery)
+    hold_current(rig, 20.0, 0.3)
+    v = values_at(rig, 0.3)
+    assert v.fault == 0
+    limit = battery.bus_v / rig.plant.params.phase_resistance_ohm
+    assert limit < 19.0
+    assert rig.plant.current_q_a(rig.plant.latest_time_s) == pytest.approx(limit, abs=0.5)
+    full = _held(20.0, 0.3)
+    values_at(full, 0.3)
+    assert full.plant.current_q_a(full.plant.latest_time_s) == pytest.approx(20.0, abs=0.1)

@@ -299,3 +299,21 @@ def test_initial_current_holds_a_stuck_foot():
     dropped.set_current_command(hold_a, 0.0)
     assert held.output_angle_rad(0.2) == 0.0
     assert dropped.output_angle_rad(0.2) < -0.01
+
+
+def test_back_emf_limit_follows_the_supply_voltage() -> None:
+    # at rest the back-EMF limit is V / R: 2 V over 0.202 ohm holds the current near 9.9 A, below a 20 A command
+    low = Plant(P, suspended(), initial_angle_rad=0.0)
+    low.set_supply_voltage(2.0, 0.0)
+    low.set_current_command(20.0, 0.0)
+    full = Plant(P, suspended(), initial_angle_rad=0.0)
+    full.set_current_command(20.0, 0.0)
+    t = 5 * P.current_time_constant_s
+    assert low.current_q_a(t) <= 2.0 / P.phase_resistance_ohm + 0.05
+    assert full.current_q_a(t) == pytest.approx(20.0, abs=0.2)
+
+
+@pytest.mark.parametrize("voltage", [0.0, -1.0, math.nan])
+def test_supply_voltage_must_be_positive_and_finite(voltage: float) -> None:
+    with pytest.raises(ValueError, match="voltage"):
+        Plant(P, suspended()).set_supply_voltage(voltage, 0.0)

@@ -31,6 +31,8 @@ class Cascade:
         """The motor current command in A for this period (within +-current_limit_a)."""
         feedforward = self.feedforward
         ref = obs.reference_rad
-        ff = (feedforward.current_a(ref + self.com_angle_rad, obs.reference_acceleration_rad_s2)
-              if feedforward is not None else 0.0)
+        ff = 0.0
+        if feedforward is not None:  # the foot's model at the reference, less what a parallel spring gives there
+            ff = (feedforward.current_a(ref + self.com_angle_rad, obs.reference_acceleration_rad_s2)
+                  - feedforward.spring_current_a(ref))
         return self.loops.update(ref, obs.reference_velocity_rad_s, obs.angle_rad, obs.velocity_rad_s, ff)

@@ -40,9 +40,18 @@ class FeedforwardParams:
     gear_ratio: float
     efficiency: float
     gravity_m_s2: float = 9.8
+    # a parallel spring at the ankle (a design profile's, docs/design.md): its moment -k (theta - theta_e) beyond the
+    # engagement angle (dorsiflexion side only unless two-sided) is taken off what the motor is asked; 0 = none
+    parallel_stiffness_nm_per_rad: float = 0.0
+    parallel_engage_deg: float = 0.0
+    parallel_two_sided: bool = False
 
     def __post_init__(self) -> None:
-        """Validate the parameters (positive, efficiency in (0, 1])."""
+        """Validate the parameters (positive, efficiency in (0, 1], the spring's stiffness and angle)."""
+        check_range("parallel_stiffness_nm_per_rad", self.parallel_stiffness_nm_per_rad, 0.0, 2000.0, unit="N m/rad")
+        check_range("parallel_engage_deg", self.parallel_engage_deg, -30.0, 30.0, unit="deg")
+        if not isinstance(self.parallel_two_sided, bool):
+            raise ValueError(f"parallel_two_sided = {self.parallel_two_sided!r} is not allowed: must be true or false")
         for name in ("inertia_kg_m2", "mass_kg", "lever_m", "gravity_m_s2"):
             check_range(name, getattr(self, name), 0.0, math.inf, hi_open=True)
         for name in ("torque_constant_nm_per_a", "gear_ratio"):

@@ -31,7 +31,9 @@ Stance parameters are per kg of body mass, from the quasi-stiffness of the norma
 (firmware/data/ankle_normative.csv, the moment-angle slope of each sub-phase): early stance
 2 N m/rad/kg about -2 deg; mid stance 5.2 N m/rad/kg about -1 deg; late stance 2.65 N m/rad/kg about
 -15 deg. In swing the equilibrium is the gait reference (a moving equilibrium, with the foot's weight
-compensated), so the suspended foot follows the gait as with the cascade. Compiled (setup.py).
+compensated), so the suspended foot follows the gait as with the cascade. With a parallel spring in the
+profile's [feedforward], the spring's moment at the measured angle is taken off the law's moment: the motor
+gives the rest. Compiled (setup.py).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ import math
 from typing import Any
 
 from firmware.control.observation import Observation
+from firmware.control.pid import parallel_spring_torque_nm
 from firmware.control.validation import check_range
 
 __all__ = ["PHASES", "Impedance", "ImpedanceParams", "impedance_from_config"]
@@ -71,7 +74,7 @@ class ImpedanceParams:
     """The checked parameters (see DEFAULTS) and the drive constants the controller needs."""
 
     def __init__(self, values: dict[str, Any], nm_per_a: float, gravity_moment_nm: float, com_angle_rad: float,
-                 inertia_kg_m2: float) -> None:
+                 inertia_kg_m2: float, spring: tuple[float, float, bool] = (0.0, 0.0, False)) -> None:
         """ValueError naming an unknown key or a value out of its range."""
         unknown = sorted(set(values) - set(DEFAULTS))
         if unknown:
@@ -84,6 +87,7 @@ class ImpedanceParams:
         self.gravity_moment_nm = gravity_moment_nm
         self.com_angle_rad = com_angle_rad
         self.inertia_kg_m2 = inertia_kg_m2
+        self.spring = spring  # the parallel spring: (stiffness N m/rad, engagement rad, two-sided)
 
 
 class Impedance:
@@ -107,6 +111,7 @@ class Impedance:
         self.gravity_moment_nm = p.gravity_moment_nm
         self.com_angle_rad = p.com_angle_rad
         self.inertia_kg_m2 = p.inertia_kg_m2
+        self.spring_k, self.spring_engage_rad, self.spring_two_sided = p.spring
         self.phase = SWING
         self.transitions = 0
         self.published: dict[str, float] = {"phase": 0.0, "stiffness_nm_per_rad": 0.0, "equilibrium_deg": 0.0,
@@ -155,6 +160,9 @@ class Impedance:
         pub["stiffness_nm_per_rad"] = k
         pub["equilibrium_deg"] = math.degrees(eq)
         pub["torque_nm"] = torque
+        if self.spring_k != 0.0:  # a parallel spring gives part of the law's moment: the motor gives the rest
+            torque -= parallel_spring_torque_nm(self.spring_k, self.spring_engage_rad, self.spring_two_sided,
+                                                obs.angle_rad)
         return torque / self.nm_per_a
 
 
@@ -162,5 +170,6 @@ def impedance_from_config(config: Any, params: dict[str, Any]) -> Impedance:
     """The impedance controller with the profile's [controller] parameters and the firmware's drive model."""
     ff = config.feedforward_params
     nm_per_a = ff.torque_constant_nm_per_a * ff.gear_ratio * ff.efficiency
+    spring = (ff.parallel_stiffness_nm_per_rad, math.radians(ff.parallel_engage_deg), ff.parallel_two_sided)
     return Impedance(ImpedanceParams(params, nm_per_a, ff.mass_kg * ff.gravity_m_s2 * ff.lever_m, config.com_angle_rad,
-                                     ff.inertia_kg_m2))
+                                     ff.inertia_kg_m2, spring))

@@ -132,15 +132,39 @@ class Feedforward:
     """
 
     def __init__(self, params: FeedforwardParams) -> None:
-        """Take J, m g d and the output torque per motor amp Kt N eta from params."""
+        """Take J, m g d, the output torque per motor amp Kt N eta and the parallel spring from params."""
         self.inertia_kg_m2 = params.inertia_kg_m2
         self.gravity_moment_nm = params.mass_kg * params.gravity_m_s2 * params.lever_m
         self.nm_per_a = params.torque_constant_nm_per_a * params.gear_ratio * params.efficiency
+        self.spring_k = float(params.parallel_stiffness_nm_per_rad)
+        self.spring_engage_rad = math.radians(params.parallel_engage_deg)
+        self.spring_two_sided = bool(params.parallel_two_sided)
+
+    def spring_current_a(self, angle_rad: float) -> float:
+        """The motor current the parallel spring's moment at this ankle angle stands for (0 without a spring)."""
+        if self.spring_k == 0.0:
+            return 0.0
+        return parallel_spring_torque_nm(self.spring_k, self.spring_engage_rad, self.spring_two_sided,
+                                         angle_rad) / self.nm_per_a
 
     def current_a(self, ref_angle_rad: float, ref_accel_rad_s2: float) -> float:
         """Motor current [A] for the reference angle [rad] and angular acceleration [rad/s^2]."""
         torque_nm = self.inertia_kg_m2 * ref_accel_rad_s2 + self.gravity_moment_nm * math.sin(ref_angle_rad)
         return torque_nm / self.nm_per_a
+
+
+def parallel_spring_torque_nm(k: float, engage_rad: float, two_sided: bool, angle_rad: float) -> float:
+    """A parallel spring's moment at the ankle: -k (theta - theta_e) beyond theta_e (both sides if two_sided), else 0.
+
+    >>> parallel_spring_torque_nm(100.0, 0.0, False, 0.1), parallel_spring_torque_nm(100.0, 0.0, False, -0.1)
+    (-10.0, 0.0)
+    >>> parallel_spring_torque_nm(100.0, 0.0, True, -0.1)
+    10.0
+    """
+    d = angle_rad - engage_rad
+    if d > 0.0 or (two_sided and d < 0.0):
+        return -k * d
+    return 0.0
 
 
 def feedforward_current_a(ref_angle_rad: float, ref_accel_rad_s2: float, params: FeedforwardParams) -> float:

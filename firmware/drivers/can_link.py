@@ -37,7 +37,12 @@ class CanLink(MotorLink):
         """The driver on the board's CAN port (HalError naming the link if the board has none)."""
         if board.can is None:
             raise HalError(f"motor link {cls.LINK} needs a CAN port on the board (Board.can is None)")
-        return cls(board.can, config.motor_can_id)
+        return cls.on_port(board.can, config)
+
+    @classmethod
+    def on_port(cls, port: CanPort, config: FirmwareConfig) -> CanLink:
+        """The driver on ``port`` for the profile's motor (a subclass adds what its mode scales by the motor)."""
+        return cls(port, config.motor_can_id)
 
     def _take(self, now_s: float) -> list[CanFrame]:
         """Every frame waiting in the FIFOs, counted; a failing port is latched as lost (frames so far kept)."""

@@ -1,4 +1,8 @@
-"""AK60-6 driver over CAN in MIT mode: a torque command each period, the motor's reply to each.
+"""AK-series driver over CAN in MIT mode: a torque command each period, the motor's reply to each.
+
+Its scalings follow the profile's motor ([motor] ratings, firmware/motor_ratings.py): the MIT ranges the fields
+are mapped onto, the output torque per q ampere (Kt x planetary) and the ERPM per output rad/s (planetary x
+pole pairs); the defaults are the AK60-6's.
 
 The firmware's controllers compute a q current; this driver sends it as MIT mode's feed-forward torque
 (``t_ff = current x nm_per_a``, kp = kd = 0, so the motor's law is a pure torque command) and the brake
@@ -17,6 +21,7 @@ import math
 from collections import deque
 from typing import ClassVar
 
+from firmware.config import FirmwareConfig
 from firmware.drivers.can_link import CanLink
 from firmware.drivers.motor_link import SafeStop
 from hal.can import CanFrame, CanPort
@@ -26,23 +31,33 @@ __all__ = ["AK60_6_NM_PER_A", "MASTER_ID", "CanMitDriver"]
 
 MASTER_ID = can_mit.MASTER_ID
 AK60_6_NM_PER_A = 0.078 * 6.0  # kt x planetary ratio: output torque per q amp (profiles/plant_ak60_6.toml)
-_ERPM_PER_RAD_S = 60.0 / (2.0 * math.pi) * 6.0 * 14  # output rad/s -> ERPM (ratio 6, 14 pole pairs)
+AK60_6_ERPM_PER_RAD_S = 60.0 / (2.0 * math.pi) * 6.0 * 14  # output rad/s -> ERPM (ratio 6, 14 pole pairs)
 
 
 class CanMitDriver(CanLink):
-    """Talks to the AK60-6 in MIT mode over ``port``; callers pass the time."""
+    """Talks to an AK-series motor (the AK60-6 by default) in MIT mode over ``port``; callers pass the time."""
 
     LINK: ClassVar[str] = "can-mit"
 
     def __init__(self, port: CanPort, driver_id: int = 1, *, nm_per_a: float = AK60_6_NM_PER_A,
-                 brake_kd: float = 1.0, limits: can_mit.MitLimits = can_mit.AK60_6) -> None:
+                 brake_kd: float = 1.0, limits: can_mit.MitLimits = can_mit.AK60_6,
+                 erpm_per_rad_s: float = AK60_6_ERPM_PER_RAD_S) -> None:
         """Prepare the frames; "enter motor mode" goes out with the first command."""
         super().__init__(port, driver_id)
         self.nm_per_a = nm_per_a
+        self.erpm_per_rad_s = erpm_per_rad_s
         self.brake_kd = brake_kd
         self.limits = limits
         self.entered = False
         self._outstanding: deque[tuple[float, bool]] = deque()  # (sent at, is a command) per frame to be answered
+
+    @classmethod
+    def on_port(cls, port: CanPort, config: FirmwareConfig) -> CanLink:
+        """The driver for the profile's motor: its MIT ranges, torque per ampere and ERPM scaling."""
+        m = config.motor
+        return cls(port, config.motor_can_id, nm_per_a=m.output_nm_per_a,
+                   limits=can_mit.MitLimits(m.mit_p_max_rad, m.mit_v_max_rad_s, m.mit_t_max_nm),
+                   erpm_per_rad_s=m.erpm_per_output_rad_s)
 
     def relink(self, port: CanPort) -> None:
         """Continue on a reopened port: motor mode is entered again with the next command."""
@@ -63,10 +78,11 @@ class CanMitDriver(CanLink):
                 continue
             r = can_mit.decode_reply(data, self.limits)
             fb.position_rad = r.p
-            fb.erpm = int(r.v * _ERPM_PER_RAD_S)
+            fb.erpm = int(r.v * self.erpm_per_rad_s)
             fb.current_a = r.t / self.nm_per_a
             fb.fault = r.error
             fb.temp_motor_c = float(r.temperature_c)
+            fb.temp_received_s = now_s
             taken += 1
             if not self._outstanding:
                 st.stale_replies += 1

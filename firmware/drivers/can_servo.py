@@ -57,6 +57,7 @@ class CanServoDriver(CanLink):
             fb.current_a = s.current_a
             fb.fault = s.error
             fb.temp_motor_c = float(s.temperature_c)
+            fb.temp_received_s = now_s
             fb.received_s = now_s
             if s.error:
                 st.stale_replies += 1

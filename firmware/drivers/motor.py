@@ -117,6 +117,7 @@ class MotorDriver(MotorLink):
                 fb.current_a, fb.erpm, fb.position_rad = msg.avg_iq_a, msg.erpm, msg.pid_pos_rad
                 fb.fault, fb.temp_motor_c, fb.temp_fet_c = msg.fault, msg.temp_motor_c, msg.temp_fet_c
                 fb.v_in_v = msg.v_in_v
+                fb.temp_received_s = now_s
                 self.stats.full_replies += 1
             else:
                 continue

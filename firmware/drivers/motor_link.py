@@ -33,6 +33,7 @@ class MotorFeedback:
     temp_fet_c: float = math.nan
     v_in_v: float = math.nan
     received_s: float | None = None
+    temp_received_s: float | None = None  # when temp_motor_c came (the UART link: with the full GET_VALUES)
 
 
 @dataclass

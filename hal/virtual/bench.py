@@ -35,7 +35,9 @@ from hal.virtual.devices.world import World
 from hal.virtual.irq import InterruptSourceBase
 from hal.virtual.mcu import VirtualMcu
 from hal.virtual.plant import Fixture, Plant, PlantParams, backdrive, spring_bench, suspended
+from hal.virtual.plant.battery import Battery, BatteryParams
 from hal.virtual.plant.ground import NoGround
+from hal.virtual.plant.thermal import ThermalParams, WindingThermal
 from hal.virtual.wiring import MOTOR_WIRING
 
 if TYPE_CHECKING:  # imported when fitted (numpy and the sensor models): a bench without them starts quicker
@@ -186,6 +188,24 @@ class VirtualBench:
         if self.can is not None:  # one CAN RX interrupt per frame received (before the SysTick, as the UARTs)
             sources.insert(len(sources) - 1, self.can.rx_interrupt(int(isr_cycles.get("can_rx_frame", CAN_RX_CYCLES))))
         return sources
+
+    def attach_thermal(self, params: ThermalParams, ambient_c: float = 25.0) -> WindingThermal:
+        """Give the motor's winding the two-node thermal model from ``ambient_c`` on; its status replies report it.
+
+        The driver's MOSFET node starts at and relaxes to the same ambient.
+        """
+        winding = WindingThermal(params, ambient_c)
+        meter = self.motor.meter
+        meter.ambient_c = ambient_c
+        meter.temp_fet_c = ambient_c
+        meter.attach_thermal(winding)
+        return winding
+
+    def attach_battery(self, params: BatteryParams, soc: float = 1.0) -> Battery:
+        """Supply the motor from this pack (full by default): the bus sags, the back-EMF limit follows it."""
+        battery = Battery(params, soc)
+        self.motor.meter.attach_battery(battery)
+        return battery
 
     # -------------------------------------------------------------------- time
     def advance_to(self, t_cycles: int) -> None:

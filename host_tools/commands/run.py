@@ -40,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"motor link on the virtual bench: {MOTOR_LINKS.spoken()} (CAN at 1 Mbit/s; "
                              "default: the firmware profile's [motor] link, uart)")
     parser.add_argument("--profile", type=Path, default=None,
-                        help="firmware profile TOML (default profiles/firmware.toml)")
+                        help="firmware profile TOML (default profiles/firmware.toml); a design profile "
+                             "(profiles/designs/, a [design] table) also sets the bench's plant (docs/design.md)")
     parser.add_argument("--board", default="stm32f4", help="board profile name (profiles/board_<name>.toml)")
     parser.add_argument("--reference", type=Path, default=None,
                         help="gait reference CSV (same columns as the normative one)")
@@ -90,6 +91,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     walk.add_argument("--sensor-fault", action="append", default=[], metavar="PART:MODE",
                       help="start with a ground sensor failed: fsr_heel:open|short, fsr_toe:open|short, "
                            "load_cell:open|stuck_high; repeatable (the firmware falls back to its motor-load estimate)")
+    heat = parser.add_argument_group("winding temperature and battery (virtual bench)")
+    heat.add_argument("--ambient-c", type=float, default=None, metavar="C",
+                      help="ambient temperature in C, -40..80 (default 25): the winding starts at it and cools "
+                           "towards it (docs/design.md, 'Winding temperature')")
+    heat.add_argument("--battery", default=None, metavar="NAME|FILE",
+                      help="supply the motor from this battery (profiles/batteries/ name or a profile file; default: "
+                           "the design's, else an ideal supply): the bus sags, summary.json gains distance per charge")
     serial = parser.add_argument_group("serial mode (the firmware on real ports, wall-clock time)")
     serial.add_argument("--motor", metavar="PORT", help="motor port: device path, pyserial URL or sim://ak60-6")
     serial.add_argument("--imu", metavar="PORT", help="IMU port: device path, pyserial URL or sim://bno08x")
@@ -174,7 +182,13 @@ def run(args: argparse.Namespace) -> int:
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
                         body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
-                        sensor_faults=tuple(args.sensor_fault))
+                        sensor_faults=tuple(args.sensor_fault), design=_design(args),
+                        battery=args.battery,
+                        ambient_c=25.0 if args.ambient_c is None else args.ambient_c)
+        if args.battery is not None:
+            from hal.virtual.plant.battery import load_battery
+
+            load_battery(args.battery)  # a bad name or profile stops here
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 
@@ -212,6 +226,10 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
         if args.strides is not None:
             return (f"--strides {args.strides} is not allowed in serial mode (--motor/--imu): a serial run lasts "
                     f"--duration S, a number of seconds > 0 (default {DURATION_S:g})")
+        for option, value in (("--ambient-c", args.ambient_c), ("--battery", args.battery)):
+            if value is not None:
+                return (f"{option} {value} is not allowed in serial mode (--motor/--imu): it sets the virtual "
+                        "bench's motor model; a real motor reports its own temperature and supply")
     elif args.duration is not None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")
@@ -236,6 +254,13 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     plant = "nominal plant" if cfg.plant_seed is None else f"plant drawn with seed {cfg.plant_seed}"
     if cfg.plant_file is not None:
         plant = plant.replace("plant", f"plant {cfg.plant_file}", 1)
+        if cfg.design is not None:
+            print(f"pafp run: note: --plant {cfg.plant_file} wins over the profile's [design] (motor {cfg.design.motor}):"
+                  " the bench runs that plant, the firmware keeps the design's limits", file=sys.stderr)
+    elif cfg.design is not None:
+        d = cfg.design
+        plant = plant.replace("plant", f"plant of the design ({d.motor}, {d.belt_driven_teeth}/{d.belt_driver_teeth} "
+                              f"belt{', spring' if d.has_spring else ''})", 1)
     ideal = f", ideal: {', '.join(cfg.ideal)}" if cfg.ideal else ", real-device imperfections"
     walking = f", walking at {cfg.body_mass_kg:g} kg" if cfg.scenario == "walk" else ""
     print(f"pafp run: {cfg.strides} strides at {cfg.baud} baud, seed {cfg.seed}, {plant}{ideal}{walking} -> {out}")
@@ -257,7 +282,15 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     for name, t in s["tasks"].items():
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
+    t = s.get("thermal")
+    if t is not None:  # the winding model and the supply (docs/design.md, "Winding temperature in a run")
+        b = s.get("battery")
+        supply = ("ideal supply" if b is None else f"{b['name']}: {b['energy_per_stride_j']} J/stride, "
+                  f"{b['distance_per_charge_km']} km per charge at {b['speed_m_s']} m/s")
+        print(f"  winding {t['winding_c_end']} C at the end (max {t['winding_c_max']}, steady state "
+              f"{t['steady_state_c']}, emulation only), motor reported max {t['motor_reported_c_max']} C; {supply}")
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
+               *(["thermal.png"] if (out / "thermal.png").exists() else []),
                *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
     print(f"  outputs: {out}/{', '.join(written)}")
     _say_controller_error(result.firmware.controller_error)
@@ -280,6 +313,15 @@ def _experiment_strides(fw_cfg, controller: object) -> int:  # FirmwareConfig, S
     import math
 
     return max(1, math.ceil((getattr(controller, "duration_s") + 0.5) / fw_cfg.stride_s))  # noqa: B009
+
+
+def _design(args: argparse.Namespace):  # -> Design | None
+    """The --profile's [design], checked (None without one or without --profile)."""
+    if args.profile is None:
+        return None
+    from hal.virtual.plant.design import load_design
+
+    return load_design(args.profile)
 
 
 def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig

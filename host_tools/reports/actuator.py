@@ -42,10 +42,10 @@ class Drive:
     control_limit_a: float
 
     @classmethod
-    def from_params(cls, p: PlantParams, control_limit_a: float) -> Drive:
-        """From the plant profile and the firmware's current limit."""
+    def from_params(cls, p: PlantParams, control_limit_a: float, rated_current_a: float = RATED_CURRENT_A) -> Drive:
+        """From the plant profile, the firmware's current limit and the motor's rated current."""
         return cls(p.output_torque_per_amp_nm, p.total_ratio, p.supply_voltage_v, p.ke_v_s_per_rad,
-                   p.phase_resistance_ohm, p.peak_current_a, RATED_CURRENT_A, control_limit_a)
+                   p.phase_resistance_ohm, p.peak_current_a, rated_current_a, control_limit_a)
 
     def torque_nm(self, speed_rad_s: np.ndarray | float, current_a: float) -> np.ndarray:
         """Deliverable ankle torque at the ankle speed with at most current_a in the motor."""
@@ -96,9 +96,10 @@ def _keeps_up_to_kg(drive: Drive, load: WalkingLoad, reference: GaitReference, c
 
 
 def design_check(params: PlantParams, control_limit_a: float, load: WalkingLoad, reference: GaitReference,
-                 masses_kg: tuple[float, ...] = (20.0, 40.0, 60.0, 80.0, 100.0)) -> dict:
+                 masses_kg: tuple[float, ...] = (20.0, 40.0, 60.0, 80.0, 100.0),
+                 rated_current_a: float = RATED_CURRENT_A) -> dict:
     """The check for the load's body mass and a table over masses_kg (JSON-able)."""
-    drive = Drive.from_params(params, control_limit_a)
+    drive = Drive.from_params(params, control_limit_a, rated_current_a)
     zero = np.zeros(1)
     return {
         "drive": {"ankle_nm_per_motor_a": round(drive.nm_per_a, 4), "ratio": round(drive.ratio, 3),
@@ -126,7 +127,7 @@ def plot_design_check(path, check: dict, params: PlantParams, load: WalkingLoad,
     import matplotlib.pyplot as plt
 
     d = check["drive"]
-    drive = Drive.from_params(params, d["control_limit_a"])
+    drive = Drive.from_params(params, d["control_limit_a"], d["rated_current_a"])
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
     w = np.linspace(0.0, drive.no_load_speed_rad_s, 300)
     for current, label, style in ((drive.peak_current_a, f"peak ({drive.peak_current_a:g} A)", "-"),
@@ -153,16 +154,34 @@ def plot_design_check(path, check: dict, params: PlantParams, load: WalkingLoad,
     plt.close(fig)
 
 
-def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray) -> tuple[dict, list[str]]:
-    """The design check of a walking run (RunResult r, directory out, the run's command over time): summary
-    entry (with the run's measured saturation), plot, report lines."""
-    from hal.virtual.plant import load_plant_params
+def stance_moment_share(t_s: np.ndarray, current_meas_a: np.ndarray, nm_per_a: float, load: WalkingLoad,
+                        start_s: float, end_s: float) -> dict:
+    """How much of the stride's stance moment the motor gave, from the current it reported (a bench figure):
+    the integral over stance of its plantarflexing moment (Kt N eta x current) over the demand's, and the same
+    for the peaks. A parallel spring's share is not counted (it is the rest)."""
+    t = np.asarray(t_s, dtype=float)
+    sel = (t >= start_s) & (t < end_s)
+    pct = ((t[sel] - start_s) / load.stride_s % 1.0) * 100.0
+    demand = np.array([load.moment_nm(float(x)) for x in pct])
+    stance = demand > 0.0
+    if not stance.any():
+        return {"stance_moment_share": None, "stance_peak_moment_share": None}
+    given = -nm_per_a * np.asarray(current_meas_a, dtype=float)[sel][stance]  # plantarflexing positive
+    return {"stance_moment_share": round(float(np.clip(given, 0.0, None).sum() / demand[stance].sum()), 4),
+            "stance_peak_moment_share": round(float(given.max() / demand[stance].max()), 4)}
+
+
+def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
+                 current_meas_a: np.ndarray | None = None) -> tuple[dict, list[str]]:
+    """The design check of a walking run (RunResult r, directory out, the run's command and measured current over
+    time): summary entry (with the run's measured saturation and stance moment), plot, report lines."""
     from host_tools.walk import walking_load
 
     cfg, fw = r.config, r.firmware
-    params = cfg.bench_options.get("plant_params") or load_plant_params()
+    params = cfg.bench_setup()[0]["plant_params"]  # the plant the bench ran (a design's, a drawn one, --plant)
     load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv, cfg.speed)
-    check = design_check(params, fw.config.current_limit_a, load, fw.reference)
+    check = design_check(params, fw.config.current_limit_a, load, fw.reference,
+                         rated_current_a=fw.config.motor.rated_current_a)
     start = r.gait_start_s if r.gait_start_s is not None else math.inf
     end = fw.supervisor.tripped_at_s if fw.supervisor.tripped_at_s is not None else math.inf
     t_s, current_cmd_a = np.asarray(t_s, dtype=float), np.asarray(current_cmd_a, dtype=float)
@@ -176,6 +195,10 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray) -> tuple[di
                     "saturated_fraction": round(float(at_limit.mean()), 4) if sel.any() else None,
                     "near_limit_fraction": round(float(near_limit.mean()), 4) if sel.any() else None,
                     "heel_strikes_sensed": fw.load_detector.heel_strikes, "toe_offs_sensed": fw.load_detector.toe_offs}
+    if current_meas_a is not None and math.isfinite(start):
+        ff = fw.config.feedforward_params
+        check["run"].update(stance_moment_share(t_s, current_meas_a, ff.torque_constant_nm_per_a * ff.gear_ratio
+                                                * ff.efficiency, load, start, end))
     plot_design_check(out / "actuator.png", check, params, load, fw.reference)
     d, dm, k = check["drive"], check["demand"], check["keeps_up_to_body_mass_kg"]
     lines = ["", f"## Actuator design check (walking, {cfg.body_mass_kg:g} kg)", "",

@@ -14,7 +14,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from host_tools.outdir import save_figure  # noqa: E402
 from host_tools.reports.metrics import StrideSet  # noqa: E402
 
-__all__ = ["plot_tracking"]
+__all__ = ["plot_per_stride", "plot_tracking"]
 
 
 def plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndarray, np.ndarray, np.ndarray],
@@ -65,4 +65,22 @@ def _plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.nda
     ax4.grid(alpha=0.3)
     ax4.legend(loc="upper right", fontsize=8)
     save_figure(fig, path, dpi=110)
+    plt.close(fig)
+
+
+def plot_per_stride(path: Path, upper: dict[str, list], upper_label: str, lower: dict[str, list], lower_label: str,
+                    title: str) -> None:
+    """Series with one value per stride (None: not known) against the stride number; a second panel if lower."""
+    fig, axes = plt.subplots(2 if lower else 1, 1, figsize=(9, 7 if lower else 4.5), constrained_layout=True,
+                             squeeze=False)
+    for ax, panel, label in zip(axes[:, 0], (upper, lower), (upper_label, lower_label), strict=False):
+        for name, values in panel.items():
+            y = np.array([np.nan if v is None else v for v in values], dtype=float)
+            ax.plot(np.arange(1, len(y) + 1), y, lw=1.2, label=name)
+        ax.set_ylabel(label)
+        ax.set_xlabel("stride")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    axes[0, 0].set_title(title)
+    save_figure(fig, path)
     plt.close(fig)

@@ -301,7 +301,7 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
                      f"{t['misses']} | {within} |")
     lines += md_extra or []
     lines += ["", "Files: `telemetry.bin` (raw telemetry UART), `telemetry.csv`, `trace.json` (Perfetto / "
-              "chrome://tracing), `tracking.png`, `summary.json`.", ""]
+              "chrome://tracing), `tracking.png`, `thermal.png`, `summary.json`.", ""]
     return "\n".join(lines)
 
 
@@ -343,8 +343,19 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     if getattr(r.config, "scenario", "suspended") == "walk":
         from host_tools.reports.actuator import walk_outputs
 
-        s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a)
+        s["actuator"], walk_md = walk_outputs(r, out, tracking.plot.t_s, tracking.plot.current_cmd_a,
+                                              tracking.plot.current_meas_a)
         md_extra = [*(md_extra or []), *walk_md]
+    if getattr(r, "heat", None):  # a virtual run: the winding model, the supply and their log (runner.attach_heat)
+        from host_tools.reports.thermal import battery_summary, thermal_lines, thermal_summary
+
+        s["thermal"] = thermal_summary(r)
+        s["battery"] = battery_summary(r, fw.config.stride_s, getattr(r.config, "speed", None))
+        md_extra = [*(md_extra or []), *thermal_lines(s["thermal"], s["battery"])]
+        if plot:
+            from host_tools.reports.thermal import plot_thermal
+
+            plot_thermal(out / "thermal.png", s["thermal"], s["battery"])
     gait = event_summary(r)
     if gait is not None:
         s["gait_events"] = gait

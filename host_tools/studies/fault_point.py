@@ -24,8 +24,6 @@ import functools
 import logging
 import math
 import time
-import traceback
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -165,7 +163,11 @@ def fault_free_arrays(p: FaultPoint) -> dict[str, np.ndarray]:
 
 def run_fault_point(p: FaultPoint) -> dict[str, Any]:
     """Run one point (its fault-free pair from the worker's cache) and return its row; failures are its error."""
-    from host_tools.studies.sweep_point import _deadline, _PointTimeout  # the sweep's per-point wall-time limit
+    from host_tools.studies.sweep_point import (  # the sweep's per-point wall-time limit
+        _deadline,
+        _PointTimeout,
+        failure_text,
+    )
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)
     t0 = time.perf_counter()
@@ -179,10 +181,7 @@ def run_fault_point(p: FaultPoint) -> dict[str, Any]:
     except _PointTimeout:
         return fault_error_row(p, "timeout", f"timeout: no result within {p.timeout_s:g} s", time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any failure of a point is its row, not the campaign's end
-        last = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
-        where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
-        return fault_error_row(p, "error", f"{type(e).__name__}: {e}{where}".replace("\n", " "),
-                               time.perf_counter() - t0)
+        return fault_error_row(p, "error", failure_text(e), time.perf_counter() - t0)
     rec = fault.record
     if not rec.fired:
         return fault_error_row(p, "not_fired", f"fault {p.fault} never fired ({fault.describe()})",

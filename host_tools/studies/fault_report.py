@@ -48,6 +48,7 @@ CONTROLS: dict[str, str] = {
     "TASK_OVERRUN": "a task overran its budget",
     "MOTOR_ENCODER_DISAGREEMENT": "implausible encoder: its motion against the motor's position through the belt",
     "ESTOP": "the e-stop",
+    "OVER_TEMPERATURE": "the motor's reported winding temperature above [thermal] fault_c",
 }
 HEAT_FIGURE = "excursion_deg"
 TRACES = 3

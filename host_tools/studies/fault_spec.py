@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from typing import Any
 from firmware.config import DEFAULT_PROFILE
 from firmware.drivers.motor_links import MOTOR_LINKS
 from hal.virtual.faults import INJECTORS, injector_class, make_injector
+from host_tools.studies.spec_values import read_spec, spec_list, spec_number, spec_range_error
 from host_tools.studies.sweep_spec import SpecError
 from profiles import profile_path
 
@@ -113,37 +113,25 @@ class FaultSpec:
         return len(self.points())
 
 
+KIND = "fault spec"
+
+
 def _err(path: Path, where: str, value: object, allowed: str) -> SpecError:
-    return SpecError(f"fault spec {path}: {where} = {value!r} out of range: {allowed}")
+    return spec_range_error(KIND, path, where, value, allowed)
 
 
 def _number(path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
-    ok = not isinstance(v, bool) and isinstance(v, (int, float)) and (lo < v if low_open else lo <= v) and v <= hi
-    if not ok:
-        raise _err(path, where, v, f"a number in {'(' if low_open else '['}{lo:g}, {hi:g}]")
-    return float(v)  # type: ignore[arg-type]
+    return spec_number(KIND, path, where, v, lo, hi, low_open)
 
 
 def _list(path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
-    v = doc.get(key, default)
-    if not isinstance(v, list) or not v:
-        raise _err(path, f"[campaign] {key}", v, "a non-empty list")
-    if len(set(map(repr, v))) != len(v):
-        raise _err(path, f"[campaign] {key}", v, "a list without repeats")
-    return v
+    return spec_list(KIND, path, "[campaign]", doc, key, default)
 
 
 def load_fault_spec(path: Path) -> FaultSpec:
     """Read and check a campaign spec; SpecError (one line naming the value, the key and the range) otherwise."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-        doc = tomllib.loads(text)
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise SpecError(f"fault spec {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
-    unknown = sorted(set(doc) - {"campaign", "scenario", "fault"})
-    if unknown:
-        raise SpecError(f"fault spec {path}: table {unknown[0]!r} unknown: [campaign], [[scenario]], [[fault]]")
+    text, doc = read_spec(KIND, path, ("[campaign]", "[[scenario]]", "[[fault]]"))
     camp = doc.get("campaign", {})
     bad = sorted(set(camp) - set(CAMPAIGN_KEYS))
     if bad:

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FIGURES", "SATURATION_LEVEL", "PointTask", "error_row", "firmware_config_of",
+__all__ = ["FIGURES", "SATURATION_LEVEL", "PointTask", "error_row", "failure_text", "firmware_config_of",
            "plant_seed_run_options", "run_config_of", "run_point", "warm_up"]
 
 SATURATION_LEVEL = 0.98  # of the control current limit: a tick at or above it counts as saturated
@@ -141,6 +141,13 @@ def _float(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
 
+def failure_text(e: BaseException) -> str:
+    """A point's failure as one line for its row: the exception, its message and where it was raised."""
+    last = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
+    where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
+    return f"{type(e).__name__}: {e}{where}".replace("\n", " ")
+
+
 def warm_up() -> str:
     """Import what a point needs (run once on every worker before the first point); returns the build."""
     from host_tools.build_info import describe
@@ -166,10 +173,7 @@ def run_point(task: PointTask, plant_options: Callable[[int], dict[str, Any]] = 
         return error_row(task, "timeout", f"timeout: no result within {task.timeout_s:g} s",
                          time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any failure of a point is its row, not the sweep's end
-        last = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
-        where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
-        return error_row(task, "error", f"{type(e).__name__}: {e}{where}".replace("\n", " "),
-                         time.perf_counter() - t0)
+        return error_row(task, "error", failure_text(e), time.perf_counter() - t0)
     p = r.probe.arrays()
     start = r.gait_start_s if r.gait_start_s is not None else math.inf
     gait = p["t_s"] >= start

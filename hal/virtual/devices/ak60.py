@@ -64,6 +64,9 @@ _GET_VALUES_SELECTIVE: Final = 13
 _GET_VALUES: Final = 14
 _GET_FW_VERSION: Final = 15
 _FIRST_QUERY: Final = _GET_VALUES_SELECTIVE
+BUS_STEP_V: Final = 0.05
+"""With a battery attached, the plant's bus voltage is updated when the meter's has moved by more than this
+(0.2 % of 24 V: each update restarts the plant's step grid, so not at every sample)."""
 
 
 class DriveMode(Enum):
@@ -107,6 +110,7 @@ class Ak60(EventDevice):
         t0_s = plant.latest_time_s
         current_a, self._velocity, self._angle = plant.motor_sample(t0_s)
         self.meter = Ak60Meter(cfg, p, t0_s, self._angle, current_a, self._velocity)
+        self._plant_bus_v = p.supply_voltage_v  # the bus voltage the plant was last given
         self._latency = world.ticks(cfg.reply_latency_s)
         self._stream_period = max(1, world.ticks(cfg.stream_period_s))
         self._loop_period = max(1, world.ticks(cfg.inner_loop_period_s))
@@ -227,6 +231,9 @@ class Ak60(EventDevice):
         self._velocity = w
         meter = self.meter
         meter.sample(t_s, i, w, self._angle)
+        if meter.battery is not None and abs(meter.v_in_v - self._plant_bus_v) > BUS_STEP_V:
+            self._plant_bus_v = meter.v_in_v  # the plant's back-EMF limit follows the sagging bus
+            self.plant.set_supply_voltage(max(meter.v_in_v, 0.1), t_s)
         if self._next_target is not None:
             meter.target_a, self._next_target = self._next_target, None
         if self.mode is DriveMode.BRAKE:

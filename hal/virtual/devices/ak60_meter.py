@@ -27,6 +27,10 @@ from hal.virtual.plant.thermal import WindingThermal
 __all__ = ["Ak60Meter", "tach_steps"]
 
 _TACH_PER_E_REV: Final = 6  # tachometer steps per electrical revolution (VESC mcpwm_foc.c, 60 deg resolution)
+THERMAL_STEP_S: Final = 0.01
+"""The attached two-node model is stepped with the interval's mean square current once this much time has gathered
+(100 Hz: 1/1700 of the AK60-6's 17 s winding time constant; the firmware reads the temperature at 10 Hz), not at
+every sample, which costs a fifth of a run's time."""
 _QUANTITIES = {"current": 1, "iq": 1, "input_current": 2, "vq": 3}
 """Averaged quantity -> its integral: 1 q current, 2 input current, 3 v_q."""
 
@@ -85,6 +89,10 @@ class Ak60Meter:
         self._marks = {quantity: _Mark(index) for quantity, index in _QUANTITIES.items()}
         self._winding: WindingThermal | None = None
         self._battery: Battery | None = None
+        self._heat_s = 0.0  # time and integral of i^2 gathered for the next step of the attached winding model
+        self._heat_a2s = 0.0
+        self.v_in_min_v = self.v_in_v
+        """The lowest input voltage since the last ``reset_v_in_min`` (every sample, for the per-stride sag)."""
 
     def attach_thermal(self, winding: WindingThermal) -> None:
         """From now on the reported motor temperature is this two-node model's winding temperature."""
@@ -94,7 +102,23 @@ class Ak60Meter:
     def attach_battery(self, battery: Battery) -> None:
         """From now on the input power is drawn from (and regenerated into) this pack, not a fixed supply."""
         self._battery = battery
-        self.v_in_v = battery.bus_v
+        self.v_in_v = self.v_in_min_v = battery.bus_v
+
+    @property
+    def winding(self) -> WindingThermal | None:
+        """The attached two-node winding model (None: the single-node estimate)."""
+        return self._winding
+
+    @property
+    def battery(self) -> Battery | None:
+        """The attached pack (None: the fixed supply)."""
+        return self._battery
+
+    def reset_v_in_min(self) -> float:
+        """The lowest input voltage since the previous reset; from now on the present one."""
+        lowest = self.v_in_min_v
+        self.v_in_min_v = self.v_in_v
+        return lowest
 
     def sample(self, t_s: float, current_a: float, motor_velocity_rad_s: float, motor_angle_rad: float) -> None:
         """Take the plant's values at t_s (>= the previous sample) and integrate the interval since then."""
@@ -119,6 +143,8 @@ class Ak60Meter:
                 v_in = battery.step_power(dt, power_w)
                 i_in = battery.current_a
             self.input_current_a, self.v_in_v = i_in, v_in
+            if v_in < self.v_in_min_v:
+                self.v_in_min_v = v_in
             self._time_total += dt
             self._current_total += int_i
             self._input_current_total += i_in * dt
@@ -134,8 +160,12 @@ class Ak60Meter:
                 ss_w = self.ambient_c + self.r_ohm * mean_i2 * self._rth_w
                 self.temp_motor_c = ss_w + (self.temp_motor_c - ss_w) * math.exp(-dt / self._tau_w)
             else:
-                winding.step(dt, math.sqrt(mean_i2))
-                self.temp_motor_c = winding.winding_c
+                self._heat_s += dt
+                self._heat_a2s += int_i2
+                if self._heat_s >= THERMAL_STEP_S:
+                    winding.step(self._heat_s, math.sqrt(self._heat_a2s / self._heat_s))
+                    self._heat_s = self._heat_a2s = 0.0
+                    self.temp_motor_c = winding.winding_c
             ss_f = self.ambient_c + self.r_fet_ohm * mean_i2 * self._rth_f
             self.temp_fet_c = ss_f + (self.temp_fet_c - ss_f) * math.exp(-dt / self._tau_f)
         self.t_s = max(self.t_s, t_s)

@@ -20,7 +20,7 @@ class Coefficients:
 
     def __init__(self, *, inv_j: float, kto: float, ks: float, c0: float, kd: float, mg: float, psi0: float,
                  lo: float, hi: float, kst: float, cst: float, tc: float, tsx: float, tau: float, ker: float,
-                 bscale: float, ipk: float = math.inf) -> None:
+                 bscale: float, ipk: float = math.inf, kp: float = 0.0, pe: float = 0.0, p2: bool = False) -> None:
         """Store the constants (keyword arguments, in SI units divided by J where noted)."""
         self.inv_j = inv_j  # 1 / J_total [1/(kg m^2)]
         self.kto = kto  # ankle torque per ampere / J
@@ -39,6 +39,23 @@ class Coefficients:
         self.ker = ker  # back-EMF per output rad/s over R: Ke*N/R [A s/rad]
         self.bscale = bscale  # N / brake speed scale: tanh argument per output rad/s
         self.ipk = ipk  # peak current [A]: the voltage mode's target is clamped to it (current mode: before)
+        self.kp = kp  # parallel spring stiffness / J; 0 without one
+        self.pe = pe  # its engagement angle [rad]
+        self.p2 = p2  # two-sided (else only theta > pe, the dorsiflexion side)
+
+
+def parallel_spring(kp: float, pe: float, two: bool, th: float) -> float:
+    """The parallel spring's k_p (theta - theta_e) / J where it is engaged, else 0 (subtracted from the acceleration).
+
+    >>> parallel_spring(100.0, 0.1, False, 0.3), parallel_spring(100.0, 0.1, False, 0.0)
+    (20.0, 0.0)
+    >>> parallel_spring(100.0, 0.1, True, 0.0)
+    -10.0
+    """
+    d = th - pe
+    if d > 0.0 or (two and d < 0.0):
+        return kp * d
+    return 0.0
 
 
 @mypyc_attr(free_list_len=1, acyclic=True)  # one made per input event: allocation from a free list, no GC
@@ -58,6 +75,8 @@ class Drive:
 def static_accel(c: Coefficients, th: float, i: float, ext: float) -> float:
     """Acceleration at rest (omega = 0) without friction: decides sticking and breakaway."""
     a = c.kto * i + ext * c.inv_j + c.c0 + c.ks * th - c.mg * math.sin(th + c.psi0)
+    if c.kp != 0.0:
+        a -= parallel_spring(c.kp, c.pe, c.p2, th)
     if th > c.hi:
         a -= c.kst * (th - c.hi)
     elif th < c.lo:
@@ -73,6 +92,8 @@ def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) ->
             return 0.0
         return a - c.tc if a > 0 else a + c.tc
     a = c.kto * i + ext * c.inv_j + c.c0 - c.tc * s + c.ks * th - c.mg * math.sin(th + c.psi0) - c.kd * w
+    if c.kp != 0.0:
+        a -= parallel_spring(c.kp, c.pe, c.p2, th)
     if th > c.hi:
         x = c.kst * (th - c.hi) + c.cst * w
         if x > 0.0:
@@ -101,6 +122,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
     th, w, i, s = state
     inv_j, kto, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.ks, c.c0, c.kd, c.mg, c.psi0
     lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk
+    kp, pe, p2 = c.kp, c.pe, c.p2
     tgt, brake, vr, emf = d.target_a, d.brake_a, d.v_over_r, d.emf
     hh = 0.5 * h
     h6 = h / 6.0
@@ -135,6 +157,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         i_e = tg + dev * e1
         if s == 0:  # stuck: stays until the static torque exceeds breakaway
             a = kto * i + x1 + c0 + ks * th - mg * math.sin(th + psi0)
+            if kp != 0.0:
+                a -= parallel_spring(kp, pe, p2, th)
             if th > hi:
                 a -= kst * (th - hi)
             elif th < lo:
@@ -148,6 +172,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         u2 = kto * i_m + f + x2
         u4 = kto * i_e + f + x4
         a1 = u1 + ks * th - mg * math.sin(th + psi0) - kd * w
+        if kp != 0.0:
+            a1 -= parallel_spring(kp, pe, p2, th)
         if th > hi:
             x = kst * (th - hi) + cst * w
             if x > 0.0:
@@ -159,6 +185,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         th2 = th + hh * w
         w2 = w + hh * a1
         a2 = u2 + ks * th2 - mg * math.sin(th2 + psi0) - kd * w2
+        if kp != 0.0:
+            a2 -= parallel_spring(kp, pe, p2, th2)
         if th2 > hi:
             x = kst * (th2 - hi) + cst * w2
             if x > 0.0:
@@ -170,6 +198,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         th3 = th + hh * w2
         w3 = w + hh * a2
         a3 = u2 + ks * th3 - mg * math.sin(th3 + psi0) - kd * w3
+        if kp != 0.0:
+            a3 -= parallel_spring(kp, pe, p2, th3)
         if th3 > hi:
             x = kst * (th3 - hi) + cst * w3
             if x > 0.0:
@@ -181,6 +211,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         th4 = th + h * w3
         w4 = w + h * a3
         a4 = u4 + ks * th4 - mg * math.sin(th4 + psi0) - kd * w4
+        if kp != 0.0:
+            a4 -= parallel_spring(kp, pe, p2, th4)
         if th4 > hi:
             x = kst * (th4 - hi) + cst * w4
             if x > 0.0:
@@ -194,6 +226,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
         i = i_e
         if w * s <= 0.0:  # velocity reached or crossed zero inside the step: stick or reverse
             a = kto * i + x4 + c0 + ks * th - mg * math.sin(th + psi0)
+            if kp != 0.0:
+                a -= parallel_spring(kp, pe, p2, th)
             if th > hi:
                 a -= kst * (th - hi)
             elif th < lo:

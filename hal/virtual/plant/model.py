@@ -11,7 +11,16 @@ from typing import Final
 from mypy_extensions import mypyc_attr
 
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, check_load, suspended
-from hal.virtual.plant.integrator import Coefficients, Drive, accel, hermite, integrate, lag_factors, lag_target
+from hal.virtual.plant.integrator import (
+    Coefficients,
+    Drive,
+    accel,
+    hermite,
+    integrate,
+    lag_factors,
+    lag_target,
+    parallel_spring,
+)
 from hal.virtual.plant.params import PlantParams, load_plant_params
 from hal.virtual.plant.readings import check_reading
 
@@ -144,7 +153,8 @@ class Plant:
             kst=p.stop_stiffness_nm_per_rad * inv_j, cst=p.stop_damping_nm_s_per_rad * inv_j,
             tc=p.coulomb_friction_nm * inv_j, tsx=p.static_friction_nm * inv_j, tau=tau,
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
-            bscale=p.total_ratio / p.brake_speed_scale_rad_s, ipk=p.peak_current_a)
+            bscale=p.total_ratio / p.brake_speed_scale_rad_s, ipk=p.peak_current_a,
+            kp=p.parallel_stiffness_nm_per_rad * inv_j, pe=p.parallel_engage_rad, p2=p.parallel_two_sided)
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
         self._grid_lag = lag_factors(step_s, self._c.tau)  # current-lag factors of one grid step
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
@@ -215,6 +225,21 @@ class Plant:
         if not self._powered:
             th, w, _, s = self._x
             self._x = (th, w, 0.0, s)
+        self._drive = self._make_drive()
+
+    def set_supply_voltage(self, voltage_v: float, t_s: float) -> None:
+        """From t_s on, the driver's bus is at voltage_v (a battery sagging): the back-EMF limit follows it.
+
+        In the voltage-amplifier reading the duty held is kept: its current scales with the bus.
+        """
+        _check_finite("voltage_v", voltage_v)
+        if voltage_v <= 0.0:
+            raise ValueError(f"supply voltage {voltage_v!r} V out of range: > 0")
+        self._commit_event(t_s)
+        v_over_r = voltage_v / self.params.phase_resistance_ohm
+        if self._emf:
+            self._command_a *= v_over_r / self._v_over_r
+        self._v_over_r = v_over_r
         self._drive = self._make_drive()
 
     def set_external_torque(self, load: Load, t_s: float) -> None:
@@ -365,6 +390,9 @@ class Plant:
         e = 0.5 * self.output_inertia_kg_m2 * w * w
         e -= self._gravity_moment_nm * math.cos(th + p.com_angle_at_zero_rad)
         e += 0.5 * self._spring_k * (th + self._spring_offset) ** 2
+        c = self._c
+        if c.kp != 0.0:  # the parallel spring: parallel_spring gives k d / J where engaged
+            e += 0.5 * self.output_inertia_kg_m2 * parallel_spring(c.kp, c.pe, c.p2, th) * (th - c.pe)
         over = 0.0
         if th > p.stop_max_rad:
             over = th - p.stop_max_rad

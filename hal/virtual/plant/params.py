@@ -54,7 +54,13 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "spring_offset_rad": ("spring_bench", -math.pi, math.pi),
     "load_masses_kg": ("spring_bench", 0.0, 100.0),
     "load_lever_m": ("spring_bench", 0.0, 1.0),
+    "parallel_stiffness_nm_per_rad": ("spring", 0.0, 2000.0),
+    "parallel_engage_rad": ("spring", -math.pi / 6, math.pi / 6),
+    "parallel_two_sided": ("spring", 0, 1),
 }
+OPTIONAL = {"parallel_stiffness_nm_per_rad": 0.0, "parallel_engage_rad": 0.0, "parallel_two_sided": False}
+"""Keys a plant profile may leave out, with their values then: [spring] (no parallel spring)."""
+_BOOLS = ("parallel_two_sided",)
 
 #: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
 BELT_RATIO_TOLERANCE = 0.02
@@ -101,6 +107,11 @@ class PlantParams:
     spring_offset_rad: float
     load_masses_kg: tuple[float, ...]
     load_lever_m: float
+    # the parallel spring at the ankle (design profiles, docs/design.md "Parallel spring"): -k (theta - theta_e)
+    # beyond theta_e, dorsiflexion side only unless two-sided; stiffness 0 = none
+    parallel_stiffness_nm_per_rad: float = 0.0
+    parallel_engage_rad: float = 0.0
+    parallel_two_sided: bool = False
 
     def __post_init__(self) -> None:
         """Check every value against its allowed range and the cross-field rules."""
@@ -150,6 +161,13 @@ class PlantParams:
         """Breakaway friction at the ankle: the actuator's back-drive torque times the belt ratio."""
         return self.actuator_backdrive_torque_nm * self.belt_ratio
 
+    def parallel_spring_torque_nm(self, angle_rad: float) -> float:
+        """The parallel spring's moment at the ankle: -k (theta - theta_e) where engaged, else 0."""
+        from hal.virtual.plant.integrator import parallel_spring
+
+        return -parallel_spring(self.parallel_stiffness_nm_per_rad, self.parallel_engage_rad, self.parallel_two_sided,
+                                angle_rad)
+
     @property
     def spring_stiffness_nm_per_rad(self) -> float:
         """Bench spring as a torsional stiffness at the ankle, k_l = k * lever^2."""
@@ -169,6 +187,10 @@ def validate_plant_params(p: PlantParams) -> None:
     for f in fields(p):
         table, lo, hi = _RANGES[f.name]
         value = getattr(p, f.name)
+        if f.name in _BOOLS:
+            if not isinstance(value, bool):
+                raise ValueError(f"plant parameter {table}.{f.name} = {value!r} must be true or false")
+            continue
         values = value if isinstance(value, tuple) else (value,)
         for v in values:
             bad_type = isinstance(v, bool) or not isinstance(v, (int, float))
@@ -217,10 +239,10 @@ def plant_params_from_mapping(data: dict[str, Any], where: str = "") -> PlantPar
                 raise ValueError(f"plant profile{at}: unknown key {table_name}.{key}")
             if isinstance(value, list):
                 value = tuple(value)
-            elif isinstance(value, int) and not isinstance(value, bool) and key != "pole_pairs":
+            elif isinstance(value, int) and not isinstance(value, bool) and key != "pole_pairs" and key not in _BOOLS:
                 value = float(value)
             values[key] = value
-    missing = [f"{_RANGES[n][0]}.{n}" for n in _RANGES if n not in values]
+    missing = [f"{_RANGES[n][0]}.{n}" for n in _RANGES if n not in values and n not in OPTIONAL]
     if missing:
         raise ValueError(f"plant profile{at}: missing keys {', '.join(missing)}")
     if not isinstance(values["load_masses_kg"], tuple):

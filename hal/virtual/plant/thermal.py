@@ -98,6 +98,7 @@ class WindingThermal:
         self.winding_c = ambient_c
         self.housing_c = ambient_c
         self.copper_energy_j = 0.0
+        self.amp2_seconds = 0.0  # integral of the current squared: the RMS current over any span
 
     def resistance_ohm(self) -> float:
         """Phase-to-phase winding resistance at the present winding temperature."""
@@ -127,6 +128,7 @@ class WindingThermal:
         winding = (r1 * m22 - m12 * r2) / det
         housing = (m11 * r2 - m21 * r1) / det
         self.copper_energy_j += (a + b * winding) * dt_s
+        self.amp2_seconds += current_a * current_a * dt_s
         self.winding_c, self.housing_c = winding, housing
 
     def steady_state_c(self, current_a: float) -> tuple[float, float]:
