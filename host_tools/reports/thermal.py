@@ -3,8 +3,9 @@
 ``thermal``: the two-node winding model's temperatures (emulation only: a bench has no sensor in the copper), the
 temperature the motor reported in its status replies (the bench figure), the steady state the walk tends to
 (the model's steady state at the RMS current of the strides completed before any trip) and when the firmware
-began derating or latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's terminals,
-regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking speed.
+began derating or latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's
+terminals, regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking
+speed.
 
 Walking speed: Schwartz et al. 2008 give each speed group's dimensionless speed v* = v / sqrt(g L)
 (0.17, 0.29, 0.43 free, 0.56, 0.69; /work/shared/data/gait/README.md); v = v* sqrt(g L) with the leg length
