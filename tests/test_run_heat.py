@@ -109,6 +109,7 @@ def test_a_hot_walk_derates_then_latches_over_temperature_and_the_summary_says_w
     assert t["derating_started_s"] is not None and t["over_temperature_at_s"] is not None
     assert 1.5 < t["derating_started_s"] < t["over_temperature_at_s"]  # heated past 41 C first, then past 43 C
     assert t["motor_reported_c_max"] > 43.0
+    assert t["steady_state_c"] > 43.0  # the strides before the trip (not the safe state after it) tend above it
     # the telemetry says it too: the supervisor in SAFE for OVER_TEMPERATURE from the trip on, the motor told zero
     # current and then the brake (the shipped 2 A brake current)
     records = TelemetryDecoder().feed((tmp_path / "out" / "telemetry.bin").read_bytes())

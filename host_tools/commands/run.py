@@ -283,7 +283,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
         print(f"  {name:<11}{t['jobs']:>8}{t['wcrt_us']!s:>11}{t['bound_us']!s:>11}{t['deadline_us']!s:>10}"
               f"{t['misses']:>8}")
     t = s.get("thermal")
-    if t is not None:  # the winding model and the supply (docs/design.md, "Winding temperature in a run")
+    if t is not None:  # the winding model and the supply (docs/design.md, "Winding temperature and battery in a run")
         b = s.get("battery")
         supply = ("ideal supply" if b is None else f"{b['name']}: {b['energy_per_stride_j']} J/stride, "
                   f"{b['distance_per_charge_km']} km per charge at {b['speed_m_s']} m/s")

@@ -91,12 +91,13 @@ class HeatLog:
         w = self.meter.winding
         return math.nan if w is None else float(w.amp2_seconds)
 
-    def rms_current_a(self) -> float:
-        """RMS q current over the completed strides (NaN without strides or without the two-node model)."""
-        if not self.strides:
+    def rms_current_a(self, until_s: float = math.inf) -> float:
+        """RMS q current over the strides completed by until_s (NaN without one or without the two-node model)."""
+        done = [row for row in self.strides if row.end_s <= until_s]
+        if not done:
             return math.nan
-        span = self.strides[-1].end_s - self.gait_t_s
-        return math.sqrt((self.strides[-1].amp2_s - self.gait_amp2_s) / span) if span > 0 else math.nan
+        span = done[-1].end_s - self.gait_t_s
+        return math.sqrt((done[-1].amp2_s - self.gait_amp2_s) / span) if span > 0 else math.nan
 
     def stride_energies_j(self) -> list[float]:
         """Net supply energy of each completed stride (the first counted from the gait's start)."""

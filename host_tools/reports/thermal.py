@@ -2,9 +2,10 @@
 
 ``thermal``: the two-node winding model's temperatures (emulation only: a bench has no sensor in the copper), the
 temperature the motor reported in its status replies (the bench figure), the steady state the walk tends to
-(the model's steady state at the RMS current of the completed strides) and when the firmware began derating or
-latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's terminals,
-regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking speed.
+(the model's steady state at the RMS current of the strides completed before any trip) and when the firmware
+began derating or latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's
+terminals, regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking
+speed.
 
 Walking speed: Schwartz et al. 2008 give each speed group's dimensionless speed v* = v / sqrt(g L)
 (0.17, 0.29, 0.43 free, 0.56, 0.69; /work/shared/data/gait/README.md); v = v* sqrt(g L) with the leg length
@@ -52,7 +53,8 @@ def thermal_summary(r: Any) -> dict:
     end_w, end_h = (winding.winding_c, winding.housing_c) if winding is not None else \
         (log.meter.temp_motor_c, math.nan)
     steady = math.nan
-    rms = log.rms_current_a()
+    tripped = sup.tripped_at_s if sup.tripped_at_s is not None else math.inf
+    rms = log.rms_current_a(tripped)  # the walk's, not the safe state's after a trip
     if winding is not None and math.isfinite(rms):
         steady = winding.steady_state_c(rms)[0]  # depends on the ambient only, not the state
     fast, slow = winding.params.time_constants_s() if winding is not None else (math.nan, math.nan)

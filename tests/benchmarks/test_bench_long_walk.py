@@ -3,7 +3,8 @@
 ``pafp run --scenario walk --strides 1000 --body-mass 20 --battery molicel_p42a_6s1p`` runs once in a
 subprocess (one round: it takes minutes); ``extra_info`` holds its wall time, the child's peak RSS
 (``ru_maxrss``), and the summary's winding temperature after strides 1, 100, 500 and 1000, the steady state,
-the energy per stride and the distance per charge (docs/design.md, "Winding temperature in a run"). The goals:
+the energy per stride and the distance per charge (docs/design.md, "Winding temperature and battery in a run").
+The goals:
 memory bounded (peak RSS under 600 MB, a 100-stride walk's plus a margin: the run streams its outputs and
 keeps one heat row per stride) and fast (under 20 minutes on the 2-core machine).
 """
