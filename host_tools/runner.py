@@ -238,7 +238,7 @@ def attach_heat(bench: VirtualBench, cfg: RunConfig) -> dict:
     The thermal model takes the design's motor (``cfg.design.motor``) or the AK60-6 without a design; the
     battery is ``cfg.battery``, else the design's, else none (the ideal supply).
     """
-    design = getattr(cfg, "design", None)  # RunConfig.design: a design profile's [design] table (issue 23)
+    design = cfg.design  # a design profile's [design] table, or None
     motor = getattr(design, "motor", None) or "ak60_6"
     record: dict = {"ambient_c": float(cfg.ambient_c), "motor": motor, "thermal": cfg.thermal, "battery": None}
     if cfg.thermal:

@@ -6,7 +6,8 @@ walking load, hal/virtual/plant/walking.py); speed = the gait reference's angula
 torque at an ankle speed w: ``min(I x Kt N eta, (V - Ke w N) / R x Kt N eta)`` for I = the peak
 (22.7 A) or rated (6.5 A, maker) current, or the firmware's control limit -- the current limit or the
 back-EMF limit of the 24 V supply, whichever is lower. Power: mechanical ``|torque w|``, electrical
-``I^2 R + Ke w N I`` for the motor current the torque needs.
+``I^2 R + Kt w N I`` for the motor current the torque needs (the rotor's torque times its speed plus the
+copper loss).
 """
 
 from __future__ import annotations
@@ -40,12 +41,13 @@ class Drive:
     peak_current_a: float
     rated_current_a: float
     control_limit_a: float
+    kt_nm_per_a: float  # motor side: the rotor converts Kt i w (Ke is the voltage constant)
 
     @classmethod
     def from_params(cls, p: PlantParams, control_limit_a: float, rated_current_a: float = RATED_CURRENT_A) -> Drive:
         """From the plant profile, the firmware's current limit and the motor's rated current."""
         return cls(p.output_torque_per_amp_nm, p.total_ratio, p.supply_voltage_v, p.ke_v_s_per_rad,
-                   p.phase_resistance_ohm, p.peak_current_a, rated_current_a, control_limit_a)
+                   p.phase_resistance_ohm, p.peak_current_a, rated_current_a, control_limit_a, p.kt_nm_per_a)
 
     def torque_nm(self, speed_rad_s: np.ndarray | float, current_a: float) -> np.ndarray:
         """Deliverable ankle torque at the ankle speed with at most current_a in the motor."""
@@ -71,7 +73,7 @@ def _one_mass(drive: Drive, load: WalkingLoad, reference: GaitReference, mass_kg
     need_a = np.abs(torque) / drive.nm_per_a
     w_motor = np.abs(speed) * drive.ratio
     p_mech = np.abs(torque * speed)
-    p_elec = need_a ** 2 * drive.resistance_ohm + drive.ke_v_s_per_rad * w_motor * need_a
+    p_elec = need_a ** 2 * drive.resistance_ohm + drive.kt_nm_per_a * w_motor * need_a
     mag = np.abs(torque)
     return {
         "body_mass_kg": mass_kg,
@@ -154,21 +156,39 @@ def plot_design_check(path, check: dict, params: PlantParams, load: WalkingLoad,
     plt.close(fig)
 
 
+def moment_share(t_s: np.ndarray, delivered_nm: np.ndarray, demand_nm: np.ndarray, stance: np.ndarray) -> float:
+    """The share of the stance demand delivered: each stance sample's delivered moment counted in the demand's
+    direction and capped at the demand (an overshoot at one instant does not make up for a shortfall at another),
+    over the whole demand; NaN without stance samples. The design check's motor share and the design search's
+    actuator share (motor + parallel spring, docs/design.md) are this one figure of different deliveries.
+
+    >>> t = np.arange(4.0)
+    >>> moment_share(t, np.array([1.0, 3.0, -1.0, 0.0]), np.array([2.0, 2.0, 2.0, 5.0]), np.ones(4, bool)) * 11
+    3.0
+    """
+    if not stance.any():
+        return math.nan
+    d = demand_nm[stance]
+    got = np.clip(delivered_nm[stance] * np.sign(d), 0.0, np.abs(d))
+    total = float(np.sum(np.abs(d)))
+    return float(np.sum(got)) / total if total > 0 else math.nan
+
+
 def stance_moment_share(t_s: np.ndarray, current_meas_a: np.ndarray, nm_per_a: float, load: WalkingLoad,
                         start_s: float, end_s: float) -> dict:
-    """How much of the stride's stance moment the motor gave, from the current it reported (a bench figure):
-    the integral over stance of its plantarflexing moment (Kt N eta x current) over the demand's, and the same
-    for the peaks. A parallel spring's share is not counted (it is the rest)."""
+    """How much of the stance moment the motor gave, from the current it reported (a bench figure): its
+    plantarflexing moment (Kt N eta x current) against the demand, as ``moment_share`` counts it, and the ratio of
+    the peaks (not capped). A parallel spring's part is not counted here (the design search adds it)."""
     t = np.asarray(t_s, dtype=float)
     sel = (t >= start_s) & (t < end_s)
     pct = ((t[sel] - start_s) / load.stride_s % 1.0) * 100.0
     demand = np.array([load.moment_nm(float(x)) for x in pct])
     stance = demand > 0.0
     if not stance.any():
-        return {"stance_moment_share": None, "stance_peak_moment_share": None}
-    given = -nm_per_a * np.asarray(current_meas_a, dtype=float)[sel][stance]  # plantarflexing positive
-    return {"stance_moment_share": round(float(np.clip(given, 0.0, None).sum() / demand[stance].sum()), 4),
-            "stance_peak_moment_share": round(float(given.max() / demand[stance].max()), 4)}
+        return {"motor_stance_moment_share": None, "motor_stance_peak_moment_share": None}
+    given = -nm_per_a * np.asarray(current_meas_a, dtype=float)[sel]  # plantarflexing positive
+    return {"motor_stance_moment_share": round(moment_share(t[sel], given, demand, stance), 4),
+            "motor_stance_peak_moment_share": round(float(given[stance].max() / demand[stance].max()), 4)}
 
 
 def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,

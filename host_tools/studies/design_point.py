@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from host_tools.reports.actuator import moment_share
 from host_tools.studies.design_spec import DesignPoint
 
 __all__ = ["AXES", "FIGURES", "design_error_row", "moment_share", "point_run_config", "rerun_command",
@@ -71,8 +72,6 @@ def rerun_command(p: DesignPoint) -> str:
 
 def point_run_config(p: DesignPoint, trace: bool = False) -> Any:
     """The RunConfig of the point, as `pafp run` builds it from rerun_command's options."""
-    import dataclasses
-
     from firmware.config import load_firmware_config
     from hal.virtual.plant.design import load_design
     from host_tools.commands.run import controller_for
@@ -83,11 +82,9 @@ def point_run_config(p: DesignPoint, trace: bool = False) -> Any:
     if fw.controller != p.controller:
         fw = fw.with_changes(controller=p.controller, controller_params={})
     extra: dict[str, Any] = {} if trace else {"trace_capacity": 0}
-    if "design" in {f.name for f in dataclasses.fields(RunConfig)}:
-        extra["design"] = load_design(path)
     return RunConfig(strides=p.strides, seed=p.seed, firmware=fw, scenario="walk", body_mass_kg=p.body_mass_kg,
                      speed=p.speed, controller=controller_for(fw, "walk", p.body_mass_kg), ambient_c=p.ambient_c,
-                     **extra)
+                     design=load_design(path), **extra)
 
 
 def spring_moment_nm(params: Any, angle_rad: np.ndarray) -> np.ndarray:
@@ -96,22 +93,6 @@ def spring_moment_nm(params: Any, angle_rad: np.ndarray) -> np.ndarray:
     if not getattr(params, "parallel_stiffness_nm_per_rad", 0.0):
         return np.zeros_like(angle_rad)
     return np.array([params.parallel_spring_torque_nm(float(a)) for a in angle_rad])
-
-
-def moment_share(t_s: np.ndarray, delivered_nm: np.ndarray, demand_nm: np.ndarray, stance: np.ndarray) -> float:
-    """The share of the stance demand delivered (see the module docstring): demand and delivered in the same sign
-    convention (the moment the actuator must apply); NaN without stance samples.
-
-    >>> t = np.arange(4.0)
-    >>> moment_share(t, np.array([1.0, 3.0, -1.0, 0.0]), np.array([2.0, 2.0, 2.0, 5.0]), np.ones(4, bool)) * 11
-    3.0
-    """
-    if not stance.any():
-        return math.nan
-    d = demand_nm[stance]
-    got = np.clip(delivered_nm[stance] * np.sign(d), 0.0, np.abs(d))
-    total = float(np.sum(np.abs(d)))
-    return float(np.sum(got)) / total if total > 0 else math.nan
 
 
 def _demand(p: DesignPoint, r: Any, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -183,7 +164,7 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
     w_motor = np.abs(np.gradient(a["fused_angle_rad"].astype(float), a["t_s"].astype(float))) * params.total_ratio \
         if len(a["t_s"]) > 1 else np.zeros(len(a["t_s"]))
     i = np.abs(i_meas)
-    power = i ** 2 * params.phase_resistance_ohm + params.ke_v_s_per_rad * w_motor * i
+    power = i ** 2 * params.phase_resistance_ohm + params.kt_nm_per_a * w_motor * i  # the rotor converts Kt i w
     motor = load_motor(p.motor)
     sup = r.firmware.supervisor
     fault = ",".join(s["faults"])

@@ -53,6 +53,11 @@ class Ak60Meter:
         self.r_ohm = params.phase_resistance_ohm
         self.r_fet_ohm = cfg.fet_resistance_ohm
         self.ke = params.ke_v_s_per_rad
+        # the power the rotor converts is its torque times its speed, Kt i w: energy is conserved whatever the
+        # maker's Ke (the voltage constant, kept for the back-EMF in vq); Ke < Kt for every catalogue motor (the
+        # makers' Kv and Kt follow different conventions), so Ke i w would draw less from the supply than the
+        # rotor delivers
+        self.kt = params.kt_nm_per_a
         self.tau_s = params.current_time_constant_s
         self.pole_pairs = params.pole_pairs
         self.max_duty = cfg.max_duty
@@ -134,7 +139,7 @@ class Ak60Meter:
             int_wi = 0.5 * dt * (w0 * i0 + w1 * i1)
             int_w = 0.5 * dt * (w0 + w1)
             mean_i2 = int_i2 / dt
-            power_w = ((self.r_ohm + self.r_fet_ohm) * int_i2 + self.ke * int_wi) / dt
+            power_w = ((self.r_ohm + self.r_fet_ohm) * int_i2 + self.kt * int_wi) / dt
             battery = self._battery
             if battery is None:
                 i_in = self._input_current(power_w)
