@@ -31,7 +31,7 @@ from host_tools.recording import RECORD_NAME
 
 __all__ = ["PARAMS", "Experiment", "FitParam", "fit_percentage", "load_experiment", "plant_with", "simulate"]
 
-BACKLASH_DEG = 0.55  # the maker's figure (profiles/bench_imperfections.toml [gearbox_backlash]) unless fitted
+BACKLASH_DEG = 0.55  # the maker's figure (profiles/bench_imperfections.toml [gearbox_backlash]) for a base without the key
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 SKIP_S = 0.01  # residuals skip the first samples of a window (the current state starts at the command)
 # below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
@@ -74,7 +74,7 @@ def base_values(p: PlantParams) -> dict[str, float]:
     """The fit parameters' values of a plant profile (the start of the search; measurement ones at 0)."""
     return {"output_inertia_kg_m2": p.output_inertia_kg_m2, "foot_damping_nm_s_per_rad": p.foot_damping_nm_s_per_rad,
             "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
-            "gravity_moment_nm": p.gravity_moment_nm, "backlash_deg": BACKLASH_DEG, "torque_constant_scale": 1.0,
+            "gravity_moment_nm": p.gravity_moment_nm, "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
             "current_time_constant_s": p.current_time_constant_s, "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
             "encoder_offset_deg": 0.0}
 
@@ -91,7 +91,8 @@ def plant_with(base: PlantParams, v: dict[str, float]) -> PlantParams:
     return replace(base, foot_inertia_kg_m2=jc, foot_com_distance_m=d,
                    foot_damping_nm_s_per_rad=v["foot_damping_nm_s_per_rad"], coulomb_friction_nm=tc,
                    actuator_backdrive_torque_nm=ts / base.belt_ratio, kt_nm_per_a=base.kt_nm_per_a * scale,
-                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"])
+                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"],
+                   backlash_deg=v["backlash_deg"])
 
 
 @dataclass

@@ -36,6 +36,7 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "belt_efficiency": ("transmission", 0.1, 1.0),
     "actuator_output_inertia_kg_m2": ("transmission", 0.0, 1.0),
     "ankle_pulley_inertia_kg_m2": ("transmission", 0.0, 1.0),
+    "backlash_deg": ("transmission", 0.0, 10.0),
     "foot_inertia_kg_m2": ("foot", 1e-5, 10.0),
     "foot_mass_kg": ("foot", 0.0, 50.0),
     "foot_com_distance_m": ("foot", 0.0, 1.0),
@@ -55,6 +56,10 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "load_masses_kg": ("spring_bench", 0.0, 100.0),
     "load_lever_m": ("spring_bench", 0.0, 1.0),
 }
+
+#: Keys a plant profile may leave out (the field's default applies: for backlash_deg, None = the bench
+#: imperfection's figure, profiles/bench_imperfections.toml [gearbox_backlash]).
+OPTIONAL_KEYS: frozenset[str] = frozenset({"backlash_deg"})
 
 #: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
 BELT_RATIO_TOLERANCE = 0.02
@@ -101,6 +106,8 @@ class PlantParams:
     spring_offset_rad: float
     load_masses_kg: tuple[float, ...]
     load_lever_m: float
+    # gearbox free play at the actuator (gearbox) output, degrees; None: the bench imperfection's figure
+    backlash_deg: float | None = None
 
     def __post_init__(self) -> None:
         """Check every value against its allowed range and the cross-field rules."""
@@ -169,6 +176,8 @@ def validate_plant_params(p: PlantParams) -> None:
     for f in fields(p):
         table, lo, hi = _RANGES[f.name]
         value = getattr(p, f.name)
+        if value is None and f.name in OPTIONAL_KEYS:
+            continue
         values = value if isinstance(value, tuple) else (value,)
         for v in values:
             bad_type = isinstance(v, bool) or not isinstance(v, (int, float))
@@ -220,7 +229,7 @@ def plant_params_from_mapping(data: dict[str, Any], where: str = "") -> PlantPar
             elif isinstance(value, int) and not isinstance(value, bool) and key != "pole_pairs":
                 value = float(value)
             values[key] = value
-    missing = [f"{_RANGES[n][0]}.{n}" for n in _RANGES if n not in values]
+    missing = [f"{_RANGES[n][0]}.{n}" for n in _RANGES if n not in values and n not in OPTIONAL_KEYS]
     if missing:
         raise ValueError(f"plant profile{at}: missing keys {', '.join(missing)}")
     if not isinstance(values["load_masses_kg"], tuple):
