@@ -123,8 +123,9 @@ def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
     tmp.replace(out / "fit.png")
     fig, ax = plt.subplots(figsize=(7, 6))
     im = ax.imshow(r.correlations, vmin=-1, vmax=1, cmap="coolwarm")
-    ax.set_xticks(range(len(r.names)), r.names, rotation=90, fontsize=7)
-    ax.set_yticks(range(len(r.names)), r.names, fontsize=7)
+    names = r.jac_names or r.names
+    ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(names)), names, fontsize=7)
     ax.set_title("parameter correlations (normalised Jacobian)")
     fig.colorbar(im)
     fig.tight_layout()
