@@ -14,7 +14,6 @@ between segments (a stop signal: the run ends there, marked incomplete).
 from __future__ import annotations
 
 import math
-
 import time
 import tomllib
 from collections.abc import Callable

@@ -1,4 +1,5 @@
-"""The gearbox backlash is a plant-profile key: a plant file sets the bench's, --plant-seed draws it, --ideal clears it."""
+"""The gearbox backlash is a plant-profile key: a plant file sets the bench's, --plant-seed draws it, --ideal clears
+it."""
 
 from __future__ import annotations
 

@@ -51,8 +51,9 @@ def profile_text(base_text: str, base: PlantParams, r: FitResult, run_dir: str) 
         line = f"{key} = {value!r}  # fitted from {run_dir}: {'; '.join(verdicts)}"
         text, n = re.subn(rf"^{re.escape(key)}\s*=[^\n]*", line.replace("\\", "\\\\"), text, count=1, flags=re.M)
         if n == 0 and key in _TABLE:  # an optional key: it goes at the top of its table
-            text, n = re.subn(rf"^\[{_TABLE[key]}\][^\n]*\n", lambda m: m.group(0) + line + "\n", text, count=1,
-                              flags=re.M)
+            head = re.search(rf"^\[{_TABLE[key]}\][^\n]*\n", text, flags=re.M)
+            if head is not None:
+                text, n = text[:head.end()] + line + "\n" + text[head.end():], 1
         if n != 1:
             raise ValueError(f"base plant profile has no line for {key}")
     extra = [f"# {n} = {r.values[n]:.6g} ± {r.ci95[n]:.3g} ({PARAMS[n].meaning}; not a plant-profile key)"

@@ -31,7 +31,7 @@ from host_tools.recording import RECORD_NAME
 
 __all__ = ["PARAMS", "Experiment", "FitParam", "fit_percentage", "load_experiment", "plant_with", "simulate"]
 
-BACKLASH_DEG = 0.55  # the maker's figure (profiles/bench_imperfections.toml [gearbox_backlash]) for a base without the key
+BACKLASH_DEG = 0.55  # the maker's (bench_imperfections.toml [gearbox_backlash]) for a base without the key
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 SKIP_S = 0.01  # residuals skip the first samples of a window (the current state starts at the command)
 # below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
@@ -76,7 +76,8 @@ def base_values(p: PlantParams) -> dict[str, float]:
     """The fit parameters' values of a plant profile (the start of the search; measurement ones at 0)."""
     return {"output_inertia_kg_m2": p.output_inertia_kg_m2, "foot_damping_nm_s_per_rad": p.foot_damping_nm_s_per_rad,
             "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
-            "gravity_moment_nm": p.gravity_moment_nm, "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
+            "gravity_moment_nm": p.gravity_moment_nm,
+            "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
             "current_time_constant_s": p.current_time_constant_s, "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
             "encoder_offset_deg": 0.0}
 
@@ -88,11 +89,11 @@ def plant_with(base: PlantParams, v: dict[str, float]) -> PlantParams:
     reflected = base.reflected_inertia_kg_m2
     jc = max(1e-5, v["output_inertia_kg_m2"] - reflected - m * d * d)
     scale = v["torque_constant_scale"]
-    tc = v["coulomb_friction_nm"]
-    ts = max(v["static_friction_nm"], tc)
+    backdrive = max(v["static_friction_nm"], v["coulomb_friction_nm"]) / base.belt_ratio
+    tc = min(v["coulomb_friction_nm"], backdrive * base.belt_ratio)  # the same product the profile's check takes
     return replace(base, foot_inertia_kg_m2=jc, foot_com_distance_m=d,
                    foot_damping_nm_s_per_rad=v["foot_damping_nm_s_per_rad"], coulomb_friction_nm=tc,
-                   actuator_backdrive_torque_nm=ts / base.belt_ratio, kt_nm_per_a=base.kt_nm_per_a * scale,
+                   actuator_backdrive_torque_nm=backdrive, kt_nm_per_a=base.kt_nm_per_a * scale,
                    ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"],
                    backlash_deg=v["backlash_deg"])
 
@@ -463,11 +464,18 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     t0, t1 = float(exp.t[0]), float(exp.t[-1])
     fit_part, held = exp.interleave(HELD_OUT_EVERY)
     start = base_values(base)
+    # the encoder's zero is where the foot was at power-up: set at its zero mark by eye, within a degree or so
+    # (the offset starts at 0), unless the IMU's absolute pitch over the first 0.2 s says it was further off than
+    # the offset's bounds (a serial bench's foot may have hung on its stop): then +-4 deg around the IMU's figure
+    first = exp.t < exp.t[0] + 0.2
+    zero = round(math.degrees(float(np.median((exp.imu - exp.angle)[first]))), 3)
+    zero = zero if abs(zero) > PARAMS["encoder_offset_deg"].hi else 0.0
+    start["encoder_offset_deg"] = zero
     all_names = tuple(names)
     scan = "backlash_deg" in names  # profiled, not in the least squares (`_backlash_profile`)
     names = tuple(n for n in names if n != "backlash_deg")
-    lo = np.array([PARAMS[n].lo for n in names])
-    hi = np.array([PARAMS[n].hi for n in names])
+    lo = np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
+    hi = np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
     x0 = np.clip(np.array([start[n] for n in names]), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
     scale = np.maximum(np.abs(x0), 0.05 * (hi - lo))
 
