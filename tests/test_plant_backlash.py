@@ -99,3 +99,11 @@ def test_fit_writes_its_backlash_verdict_into_the_key(tmp_path):
                           {"backlash_deg": False}, np.eye(1), {}, 1, 0.0, 0.0, (0.0, 1.0), "", {})
     text = profile_text((ROOT / "profiles" / "plant_ak60_6.toml").read_text(), base, not_ident, "runs/x")
     assert re.search(r"^backlash_deg = 0\.55  # fitted from runs/x: backlash_deg not identifiable \(kept\)", text, re.M)
+
+
+def test_backlash_alone_is_refused(tmp_path, capsys):
+    from host_tools.cli import main
+
+    assert main(["fit", str(tmp_path), "--params", "backlash_deg"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "backlash_deg is profiled with other parameters" in err[0]
