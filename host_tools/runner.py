@@ -13,6 +13,7 @@ between segments (a stop signal: the run ends there, marked incomplete).
 
 from __future__ import annotations
 
+import math
 import time
 import tomllib
 from collections.abc import Callable
@@ -176,7 +177,8 @@ class RunConfig:
         if self.design is not None and self.plant_file is None:
             nominal = plant_params_for(self.design, nominal)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
-        options: dict = {"plant_params": params, **imp.bench_options(self.seed), **self.design_bench_options(),
+        options: dict = {"plant_params": params, **imp.bench_options(self.seed, params.backlash_deg),
+                         **self.design_bench_options(),
                          **self.bench_options}
         params = options["plant_params"]
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
@@ -184,7 +186,8 @@ class RunConfig:
                             **({} if self.design is None else
                                {"design": self.design.as_table(), "design_used": self.plant_file is None}),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
-                            "output_torque_per_amp_nm": params.output_torque_per_amp_nm},
+                            "output_torque_per_amp_nm": params.output_torque_per_amp_nm,
+                            "backlash_deg": round(math.degrees(options.get("backlash_rad", 0.0)), 9)},
                   # the readings of the report the bench ran under (hal.virtual.plant.readings, docs/bench.md)
                   "readings": {"geometry": geometry_of(params), "driver": DRIVERS[0],
                                "imu": imu_reading_of(options["imu_config"])},

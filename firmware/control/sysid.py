@@ -89,6 +89,7 @@ class SysidExperiment:
         self._prbs_bit = 0
         self._prbs_value = 1.0
         self._t0: float | None = None
+        self._zero = 0.0  # the fused angle minus the encoder's at the start (set at the first update)
         self.published = {"sysid_segment": 0.0, "sysid_target_deg": 0.0, "sysid_excitation_a": 0.0}
 
     def reset(self) -> None:
@@ -135,9 +136,16 @@ class SysidExperiment:
         """The current command for this period: PD hold on the target plus the excitation, guarded."""
         if self._t0 is None:
             self._t0 = obs.t_s
+            # the incremental encoder reads 0 wherever the foot was at power-up, which should be its zero mark
+            # (within a degree or two, by eye). A foot further off than the margin (it hung on its stop before
+            # the run, as the emulated serial bench's does) would sweep into the stop: its zero is then taken
+            # from the fused angle, absolute through the IMU, once -- the targets and the guard become absolute
+            # as the [safety] limits are, and the hold stays on the encoder's counts
+            zero = obs.angle_rad - obs.encoder_angle_rad
+            self._zero = zero if abs(zero) > math.radians(self.p["margin_deg"]) else 0.0
         t = obs.t_s - self._t0
         target, excitation = self.target_and_excitation(t)
-        angle = obs.encoder_angle_rad
+        angle = obs.encoder_angle_rad + self._zero
         p = self.p
         current = p["kp_a_per_rad"] * (target - angle) - p["kd_a_s_per_rad"] * obs.velocity_rad_s + excitation
         if angle > self.hi:  # the guard: beyond the margin, push back towards the centre, no excitation

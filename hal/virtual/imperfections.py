@@ -63,11 +63,13 @@ class Imperfections:
     def _value(self, name: str, key: str) -> float:
         return float(self.tables[name][key]) if self.enabled(name) else 0.0
 
-    def bench_options(self, seed: int) -> dict[str, Any]:
+    def bench_options(self, seed: int, backlash_deg: float | None = None) -> dict[str, Any]:
         """VirtualBench arguments for the enabled imperfections: imu_config, initial_angle_rad, backlash_rad.
 
         The encoder is incremental (the firmware's angle is 0 at its first sample), so its offset is
         the foot's pose at power-up: the bench starts the foot there instead of at the zero mark.
+        backlash_deg is the plant profile's figure (its optional ``[transmission] backlash_deg``), which wins
+        over this table's; None: this table's. Switched off, the backlash is 0 either way.
         """
         imu = Bno08xConfig(
             bias_sigma_rad=math.radians(self._value("imu_bias", "sigma_deg")),
@@ -77,7 +79,9 @@ class Imperfections:
         max_offset = math.radians(self._value("encoder_offset", "max_deg"))
         rng = np.random.default_rng((seed, 0xE0C))  # its own stream: the other draws do not move it
         offset = float(rng.uniform(-max_offset, max_offset)) if max_offset > 0 else 0.0
-        backlash = math.radians(self._value("gearbox_backlash", "actuator_output_deg"))
+        if backlash_deg is None or not self.enabled("gearbox_backlash"):
+            backlash_deg = self._value("gearbox_backlash", "actuator_output_deg")
+        backlash = math.radians(backlash_deg)
         return {"imu_config": imu, "initial_angle_rad": offset, "backlash_rad": backlash}
 
     def as_dict(self) -> dict[str, dict[str, Any]]:

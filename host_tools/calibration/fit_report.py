@@ -25,7 +25,8 @@ _KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per
          "coulomb_friction_nm": ("coulomb_friction_nm",), "static_friction_nm": ("actuator_backdrive_torque_nm",),
          "gravity_moment_nm": ("foot_com_distance_m", "foot_inertia_kg_m2"),
          "torque_constant_scale": ("kt_nm_per_a", "ke_v_s_per_rad"),
-         "current_time_constant_s": ("current_time_constant_s",)}
+         "current_time_constant_s": ("current_time_constant_s",), "backlash_deg": ("backlash_deg",)}
+_TABLE = {"backlash_deg": "transmission"}  # optional keys a base profile may lack: written into this table
 
 
 def used_values(r: FitResult) -> dict[str, float]:
@@ -49,6 +50,10 @@ def profile_text(base_text: str, base: PlantParams, r: FitResult, run_dir: str) 
         value = getattr(fitted, key)
         line = f"{key} = {value!r}  # fitted from {run_dir}: {'; '.join(verdicts)}"
         text, n = re.subn(rf"^{re.escape(key)}\s*=[^\n]*", line.replace("\\", "\\\\"), text, count=1, flags=re.M)
+        if n == 0 and key in _TABLE:  # an optional key: it goes at the top of its table
+            head = re.search(rf"^\[{_TABLE[key]}\][^\n]*\n", text, flags=re.M)
+            if head is not None:
+                text, n = text[:head.end()] + line + "\n" + text[head.end():], 1
         if n != 1:
             raise ValueError(f"base plant profile has no line for {key}")
     extra = [f"# {n} = {r.values[n]:.6g} ± {r.ci95[n]:.3g} ({PARAMS[n].meaning}; not a plant-profile key)"
@@ -119,8 +124,9 @@ def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
     tmp.replace(out / "fit.png")
     fig, ax = plt.subplots(figsize=(7, 6))
     im = ax.imshow(r.correlations, vmin=-1, vmax=1, cmap="coolwarm")
-    ax.set_xticks(range(len(r.names)), r.names, rotation=90, fontsize=7)
-    ax.set_yticks(range(len(r.names)), r.names, fontsize=7)
+    names = r.jac_names or r.names
+    ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(names)), names, fontsize=7)
     ax.set_title("parameter correlations (normalised Jacobian)")
     fig.colorbar(im)
     fig.tight_layout()

@@ -31,7 +31,7 @@ from host_tools.recording import RECORD_NAME
 
 __all__ = ["PARAMS", "Experiment", "FitParam", "fit_percentage", "load_experiment", "plant_with", "simulate"]
 
-BACKLASH_DEG = 0.55  # the maker's figure (profiles/bench_imperfections.toml [gearbox_backlash]) unless fitted
+BACKLASH_DEG = 0.55  # the maker's (bench_imperfections.toml [gearbox_backlash]) for a base without the key
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 SKIP_S = 0.01  # residuals skip the first samples of a window (the current state starts at the command)
 # below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
@@ -64,17 +64,20 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("imu_bias_deg", "deg", -6.0, 6.0, "IMU pitch bias"),
     FitParam("encoder_offset_deg", "deg", -4.0, 4.0, "true angle minus the encoder's at power-up"),
 )}
-# backlash is not fitted by default: its effect (a dead time at each reversal of the command) moves the
-# residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope (docs/calibration.md)
+# backlash is not in the least squares: its effect (a dead time at each reversal of the command) moves the
+# residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope; it is profiled over a grid
+# (`_backlash_profile`, docs/calibration.md)
 DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
-               "gravity_moment_nm", "current_time_constant_s", "imu_lag_s", "imu_bias_deg", "encoder_offset_deg")
+               "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
+               "encoder_offset_deg")
 
 
 def base_values(p: PlantParams) -> dict[str, float]:
     """The fit parameters' values of a plant profile (the start of the search; measurement ones at 0)."""
     return {"output_inertia_kg_m2": p.output_inertia_kg_m2, "foot_damping_nm_s_per_rad": p.foot_damping_nm_s_per_rad,
             "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
-            "gravity_moment_nm": p.gravity_moment_nm, "backlash_deg": BACKLASH_DEG, "torque_constant_scale": 1.0,
+            "gravity_moment_nm": p.gravity_moment_nm,
+            "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
             "current_time_constant_s": p.current_time_constant_s, "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
             "encoder_offset_deg": 0.0}
 
@@ -86,12 +89,13 @@ def plant_with(base: PlantParams, v: dict[str, float]) -> PlantParams:
     reflected = base.reflected_inertia_kg_m2
     jc = max(1e-5, v["output_inertia_kg_m2"] - reflected - m * d * d)
     scale = v["torque_constant_scale"]
-    tc = v["coulomb_friction_nm"]
-    ts = max(v["static_friction_nm"], tc)
+    backdrive = max(v["static_friction_nm"], v["coulomb_friction_nm"]) / base.belt_ratio
+    tc = min(v["coulomb_friction_nm"], backdrive * base.belt_ratio)  # the same product the profile's check takes
     return replace(base, foot_inertia_kg_m2=jc, foot_com_distance_m=d,
                    foot_damping_nm_s_per_rad=v["foot_damping_nm_s_per_rad"], coulomb_friction_nm=tc,
-                   actuator_backdrive_torque_nm=ts / base.belt_ratio, kt_nm_per_a=base.kt_nm_per_a * scale,
-                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"])
+                   actuator_backdrive_torque_nm=backdrive, kt_nm_per_a=base.kt_nm_per_a * scale,
+                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"],
+                   backlash_deg=v["backlash_deg"])
 
 
 @dataclass
@@ -106,6 +110,8 @@ class Experiment:
     current: np.ndarray
     source: str
     vel: np.ndarray  # the encoder angle's velocity (`encoder_velocity`)
+    t_req: np.ndarray  # when each feedback request reached the motor (the driver's averages reset there)
+    req_of: np.ndarray  # per sample: the request whose reply its current is (index into t_req; -1: none yet)
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
         """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
@@ -117,14 +123,14 @@ class Experiment:
 
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
-                          self.source, self.vel[keep])
+                          self.source, self.vel[keep], self.t_req, self.req_of[keep])
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
         k = (self.t >= t0) & (self.t < t1)
         c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
-                          self.source, self.vel[k])
+                          self.source, self.vel[k], self.t_req, self.req_of[k])
 
 
 def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -136,24 +142,68 @@ def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return savgol_filter(angle, 15, 2, deriv=1, delta=float(np.median(np.diff(t))))
 
 
-def _commands(record: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(times, currents) of the SetCurrent commands the firmware wrote, up to the first brake or stop."""
+COMMAND_DELAY_S = 1.5e-4  # a command reaches the motor this long after its job starts (frame at 921600 baud)
+_COMMAND_FRAME_BYTES = 10  # a SetCurrent frame: start, length, id, 4 bytes, CRC, end
+FREE_V0 = True  # each moving window's initial velocity is projected out (`_project_initial_velocity`)
+FREE_IMU_OFFSET = True  # each window's IMU offset is projected out (the bias drifts over the experiment)
+
+
+@dataclass
+class _Wire:
+    """What the motor port carried: the current commands, the feedback requests and when replies came in."""
+
+    t_cmd: np.ndarray  # job start of each SetCurrent (s)
+    i_cmd: np.ndarray  # its current (A)
+    t_req: np.ndarray  # when each feedback request reached the motor (s)
+    t_req_job: np.ndarray  # the job start that sent it (s)
+    t_reply: np.ndarray  # job starts whose read brought a feedback reply (s)
+
+
+def _wire(record: Path) -> _Wire:
+    """The motor port's traffic in a record, up to the first brake or stop.
+
+    A write is the command frame then (usually) a feedback request: the request reaches the motor
+    COMMAND_DELAY_S plus its own frame's wire time after the job's start; the driver's averages (``avg_iq``)
+    reset there. A reply is the firmware's from the job whose read decoded it.
+    """
     from protocol import vesc
+    from protocol.vesc_values import Values, ValuesSelective
 
     reader = RecordReader(record)
     f_cpu = int(reader.header["f_cpu_hz"])
-    dec = vesc.Decoder(direction="to-motor")
-    times, currents = [], []
-    key = Kind.WRITE << 2
+    baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
+    to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
+    times, currents, t_req, t_req_job, t_reply = [], [], [], [], []
+    write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
     for s in reader.sections():
-        for accepted, data in s.outputs.get(key, ()):
-            for msg in dec.feed(data[:accepted]):
+        t = s.start / f_cpu
+        for data in s.inputs.get(read_key, ()):
+            if any(isinstance(m, (Values, ValuesSelective)) for m in from_motor.feed(data)):
+                t_reply.append(t)
+        for accepted, data in s.outputs.get(write_key, ()):
+            sent = data[:accepted]
+            for msg in to_motor.feed(sent):
                 if isinstance(msg, vesc.SetCurrent):
-                    times.append(s.start / f_cpu)
+                    times.append(t)
                     currents.append(msg.current_a)
+                elif isinstance(msg, (vesc.GetValues, vesc.GetValuesSelective)) and times and times[-1] == t:
+                    frame = len(sent) - _COMMAND_FRAME_BYTES  # the request's frame follows the command's
+                    t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
+                    t_req_job.append(t)
                 elif isinstance(msg, vesc.SetCurrentBrake):
-                    return np.array(times), np.array(currents)
-    return np.array(times), np.array(currents)
+                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
+    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
+
+
+def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
+    """Per sample: the request the current it carries answers (-1: none). A sample shows the last reply the
+    firmware read at or before it, and a reply answers the last request sent before the job that read it
+    (a full GET_VALUES reply takes most of a period, so the next period sends no request)."""
+    if len(w.t_reply) == 0 or len(w.t_req_job) == 0:
+        return np.full(len(t), -1)
+    reply = np.searchsorted(w.t_reply, t, side="right") - 1
+    answered = np.searchsorted(w.t_req_job, w.t_reply, side="left") - 1
+    return np.where(reply >= 0, answered[np.maximum(reply, 0)], -1)
 
 
 def load_experiment(run_dir: Path) -> Experiment:
@@ -166,7 +216,8 @@ def load_experiment(run_dir: Path) -> Experiment:
         if not f.is_file():
             raise ValueError(f"{f}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
                              "`pafp run --experiment sysid`, or any serial run)")
-    t_cmd, i_cmd = _commands(record)
+    w = _wire(record)
+    t_cmd, i_cmd = w.t_cmd, w.i_cmd
     cols = ("time_s", "encoder_angle_rad", "imu_pitch_rad", "current_meas_a", "supervisor_state_name")
     rows: list[tuple[float, float, float, float]] = []
     with tel.open(encoding="utf-8", newline="") as f:
@@ -191,20 +242,22 @@ def load_experiment(run_dir: Path) -> Experiment:
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
     a = np.array(rows)
     return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
-                      encoder_velocity(a[:, 0], a[:, 1]))
+                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w))
 
 
-COMMAND_DELAY_S = 1.5e-4  # a command reaches the motor this long after its job starts (frame at 921600 baud)
 
 
-def simulate(base: PlantParams, v: dict[str, float], exp: Experiment,
-             window_s: float = WINDOW_S) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: float = WINDOW_S,
+             free_v0: bool = FREE_V0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(angle as the encoder reads it, current as the firmware last heard it, IMU pitch, used-sample mask)
     simulated at exp.t, each window of window_s from the measured state.
 
-    The measured current a telemetry sample carries is the motor's reply to the previous period's request,
-    and the driver reports the mean current since the request before (ak60_meter.py, as VESC's
-    ``read_reset_avg``): the model takes the exact mean of the first-order lag over that interval.
+    The measured current a telemetry sample carries is the mean the driver reported (``avg_iq``, reset at
+    each request: ak60_meter.py, as VESC's ``read_reset_avg``) in the last reply the firmware read: the mean
+    between the two requests before it (`Experiment.req_of`). As the driver's meter does, the mean integrates
+    the first-order lag towards the command from the plant's current at each event (a command or a request
+    reaching the motor): while the rotor crosses the backlash the plant's current falls towards 0
+    (hal/virtual/plant/model.py, Plant._cross_gap) and each event restarts the integral from it.
     """
     params = plant_with(base, v)
     offset = math.radians(v["encoder_offset_deg"])
@@ -217,53 +270,98 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment,
     vel = exp.vel
     fixture = suspended()
     lo, hi = params.stop_min_rad, params.stop_max_rad
-    t_cmd, i_cmd = exp.t_cmd, exp.i_cmd
-    n_cmd = len(t_cmd)
+    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req, exp.req_of
+    n_cmd, n_req = len(t_cmd), len(t_req)
+    tau = params.current_time_constant_s
+    peak = params.peak_current_a
     k = 0
     while k < n:
         t0 = float(exp.t[k])
         end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
         start_angle = min(hi, max(lo, exp.angle[k] + offset))
         v0 = float(vel[k])
-        plant = Plant(params, fixture, initial_angle_rad=start_angle,
-                      initial_velocity_rad_s=0.0 if abs(v0) < REST_RAD_S else v0, start_time_s=t0,
-                      backlash_rad=backlash, initial_current_a=float(exp.current[k]))
-        c = int(np.searchsorted(t_cmd, t0, side="right")) - 1
+        moving = abs(v0) >= REST_RAD_S
+        i0 = float(exp.current[k])
+        plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v0 if moving else 0.0,
+                      start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
+        c = int(np.searchsorted(t_cmd, t0 - COMMAND_DELAY_S, side="right")) - 1  # the command acting at t0
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
-        c += 1
-        tau = params.current_time_constant_s
-        peak = params.peak_current_a
-        t_last = t0
-        i_last = plant.current_q_a(t0)
-        heard = prev_heard = i_last  # the mean currents the last two replies carried
         target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
-        filt = exp.imu[k] - bias
+        c += 1
+        r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
+        means: dict[int, float] = {}  # request index -> the mean its reply carries
+        r_prev = r - 1
+        t_mark = float(t_req[r_prev]) if r_prev >= 0 else t0  # the driver's averages reset here
+        acc = i0 * (t0 - t_mark)  # before t0 the current is taken as the measured one
+        t_last, i_last = t0, i0
+        # the IMU's lag state: following the start's motion (its offset at the start is the window's own, below)
+        filt = start_angle - lag * (v0 if moving else 0.0)
         t_prev = t0
         for j in range(k, end):
             tj = float(exp.t[j])
-            while c < n_cmd and t_cmd[c] <= tj:
-                ta = float(t_cmd[c]) + COMMAND_DELAY_S
-                if ta > tj:
+            while True:  # the events up to tj, in time order: commands arriving, requests arriving
+                ta = float(t_cmd[c]) + COMMAND_DELAY_S if c < n_cmd else math.inf
+                tr = float(t_req[r]) if r < n_req else math.inf
+                te = min(ta, tr)
+                if te > tj:
                     break
-                i_now = plant.current_q_a(ta)
-                span = ta - t_last
-                mean = target + (i_last - target) * (tau / span) * (1.0 - math.exp(-span / tau)) if span > 0 else i_now
-                prev_heard, heard = heard, mean
-                t_last, i_last = ta, i_now
-                target = max(-peak, min(peak, float(i_cmd[c])))
-                plant.set_current_command(float(i_cmd[c]), ta)
-                c += 1
+                span = te - t_last
+                if span > 0:
+                    acc += target * span + (i_last - target) * tau * -math.expm1(-span / tau)
+                    i_last, t_last = plant.current_q_a(te), te
+                if tr <= ta:
+                    means[r] = acc / (te - t_mark) if te > t_mark else i_last
+                    acc, t_mark = 0.0, te
+                    r += 1
+                else:
+                    plant.set_current_command(float(i_cmd[c]), te)
+                    target = max(-peak, min(peak, float(i_cmd[c])))
+                    c += 1
             th = plant.output_angle_rad(tj)
             angle[j] = th - offset
-            current[j] = prev_heard
+            q = int(req_of[j])
+            heard = means.get(q)
+            # None: its request reached the motor before this window (only within SKIP_S of its start, unused)
+            current[j] = exp.current[j] if heard is None else heard
             filt += (th - filt) * (1.0 - math.exp(-(tj - t_prev) / lag))
             t_prev = tj
             imu[j] = filt + bias
             if tj - t0 < SKIP_S:
                 mask[j] = False
+        if free_v0 and moving:
+            _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
+        if FREE_IMU_OFFSET:
+            used = mask[k:end]
+            if used.any():  # the IMU's bias drifts (Gauss-Markov, tau ~10 s): each window's own offset
+                imu[k:end] += float(np.mean((exp.imu[k:end] - imu[k:end])[used]))
         k = end
     return angle, current, imu, mask
+
+
+def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angle: np.ndarray, imu: np.ndarray,
+                              mask: np.ndarray, params: PlantParams) -> None:
+    """Correct window [k, end)'s simulation for the least-squares initial velocity (in place).
+
+    The window starts at the encoder's velocity estimate, which a smoothing derivative attenuates at the
+    chirp's and the PRBS's frequencies (a 15-sample quadratic Savitzky-Golay slope keeps 89 % of a 12 Hz
+    sine's): a start that is systematically too slow, which the fit made up for with a longer mechanical
+    time constant (inertia up, damping down: the bias docs/calibration.md used to report). Each moving window's
+    initial velocity is instead a nuisance parameter, eliminated by variable projection: a velocity error dv
+    moves the angle by dv * tm * (1 - exp(-t / tm)) (tm = J / b, the free motion's decay), the projection takes
+    the dv that best explains the window's encoder residual, as MATLAB's ``compare`` estimates initial
+    conditions. The IMU, which sees the same angle through a lag of a few tens of ms, gets the same shift.
+    """
+    tm = params.output_inertia_kg_m2 / max(params.foot_damping_nm_s_per_rad, 1e-9)
+    t = exp.t[k:end] - t0
+    sens = tm * -np.expm1(-t / tm)
+    used = mask[k:end]
+    ss = float(np.dot(sens[used], sens[used]))
+    if ss <= 0.0:
+        return
+    dv = -float(np.dot((angle[k:end] - exp.angle[k:end])[used], sens[used])) / ss
+    angle[k:end] += dv * sens
+    imu[k:end] += dv * sens
 
 
 def window_ids(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
@@ -327,6 +425,7 @@ class FitResult:
     span_s: tuple[float, float]
     message: str
     fixed_checks: dict[str, float]  # parameters kept fixed: their collinearity with the fitted ones
+    jac_names: tuple[str, ...] = ()  # the parameters of the Jacobian (and `correlations`), in its order
 
 
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
@@ -365,8 +464,18 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     t0, t1 = float(exp.t[0]), float(exp.t[-1])
     fit_part, held = exp.interleave(HELD_OUT_EVERY)
     start = base_values(base)
-    lo = np.array([PARAMS[n].lo for n in names])
-    hi = np.array([PARAMS[n].hi for n in names])
+    # the encoder's zero is where the foot was at power-up: set at its zero mark by eye, within a degree or so
+    # (the offset starts at 0), unless the IMU's absolute pitch over the first 0.2 s says it was further off than
+    # the offset's bounds (a serial bench's foot may have hung on its stop): then +-4 deg around the IMU's figure
+    first = exp.t < exp.t[0] + 0.2
+    zero = round(math.degrees(float(np.median((exp.imu - exp.angle)[first]))), 3)
+    zero = zero if abs(zero) > PARAMS["encoder_offset_deg"].hi else 0.0
+    start["encoder_offset_deg"] = zero
+    all_names = tuple(names)
+    scan = "backlash_deg" in names  # profiled, not in the least squares (`_backlash_profile`)
+    names = tuple(n for n in names if n != "backlash_deg")
+    lo = np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
+    hi = np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
     x0 = np.clip(np.array([start[n] for n in names]), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
     scale = np.maximum(np.abs(x0), 0.05 * (hi - lo))
 
@@ -378,10 +487,17 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
 
     res = least_squares(fun, x0, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev,
                         method="trf")
-    jac = np.asarray(res.jac)
+    profile: tuple[float, float, bool] | None = None
+    if scan:  # over the whole grid, the others at their fit (from a start far off, the grid misleads: not before)
+        profile = _backlash_profile(base, values(res.x), fit_part, res)
+        if abs(profile[0] - start["backlash_deg"]) > BACKLASH_REFIT_DEG:  # the others again, at the profile's best
+            start = {**start, "backlash_deg": profile[0]}
+            res = least_squares(fun, res.x, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev,
+                                method="trf")
+            profile = _backlash_profile(base, values(res.x), fit_part, res, around=profile[0])
+    jac, r = _secant_jacobian(lambda x: residuals(base, values(x), fit_part), np.asarray(res.x), scale)
     m, n = jac.shape
-    s2 = 2.0 * float(res.cost) / max(1, m - n)
-    r = np.asarray(res.fun)
+    s2 = float(np.dot(r, r)) / max(1, m - n)
     rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
     inflation = (1.0 + rho) / (1.0 - rho)  # AR(1) residuals: m samples carry m (1 - rho) / (1 + rho) of information
     bread = np.linalg.pinv(jac.T @ jac)
@@ -397,6 +513,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
     v = values(res.x)
+    if profile is not None:
+        v["backlash_deg"] = profile[0]
     ident = {}
     norms = np.linalg.norm(jac, axis=0)
     for k, name in enumerate(names):
@@ -410,7 +528,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     if "torque_constant_scale" not in names:  # the one a current-only torque measure cannot separate
         h = 1e-2
         plus = residuals(base, {**v, "torque_constant_scale": v["torque_constant_scale"] + h}, fit_part)
-        col = ((plus - res.fun) / h)[:, None]
+        col = ((plus - residuals(base, v, fit_part)) / h)[:, None]
         c_all, _ = _collinearity(np.hstack([jac, col]))
         fixed_checks["torque_constant_scale"] = float(c_all[-1])
     pct = {}
@@ -419,7 +537,75 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         pct[label] = {"angle": fit_percentage(part.angle[mask], a[mask]),
                       "current": fit_percentage(part.current[mask], c[mask]),
                       "imu": fit_percentage(part.imu[mask], i[mask])}
-    return FitResult(tuple(names), v, start, {nm: float(ci[k]) for k, nm in enumerate(names)},
-                     {nm: float(coll[k]) for k, nm in enumerate(names)}, ident, corr, pct, int(res.nfev),
+    ci95 = {nm: float(ci[k]) for k, nm in enumerate(names)}
+    collinearity = {nm: float(coll[k]) for k, nm in enumerate(names)}
+    if profile is not None:  # its interval from the profile; not in the Jacobian, so no collinearity index
+        ci95["backlash_deg"], collinearity["backlash_deg"], ident["backlash_deg"] = profile[1], math.nan, profile[2]
+    start = {**start, "backlash_deg": base_values(base)["backlash_deg"]}  # what the fit started from
+    return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, int(res.nfev),
                      float(res.cost), time.perf_counter() - wall0, (t0, t1), str(res.message),
-                     fixed_checks)
+                     fixed_checks, tuple(names))
+
+
+SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the intervals come from
+
+
+def _secant_jacobian(fun, x: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Jacobian from forward steps of SECANT_STEP x each parameter's scale, the residuals at x).
+
+    The solver's own Jacobian takes tiny steps (1e-3 relative): the simulation's stick-slip and backlash switch
+    discretely, so a tiny step that flips one of them gives a column made of the jump -- and an interval that
+    is confidently narrow and wrong (seen: an encoder offset 85 half-widths off; a Coulomb friction column 3.8
+    times too steep). A step of 2 % of the scale averages over many switchings: the intervals are taken from it.
+    """
+    r0 = fun(x)
+    cols = []
+    for k in range(len(x)):
+        h = SECANT_STEP * float(scale[k])
+        xk = x.copy()
+        xk[k] += h
+        cols.append((fun(xk) - r0) / h)
+    return np.column_stack(cols), r0
+
+
+BACKLASH_GRID_DEG = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0)
+BACKLASH_REFIT_DEG = 0.1  # the others are fitted again when the profile's best is further than this from the start
+
+
+def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, res: object,
+                      around: float | None = None) -> tuple[float, float, bool]:
+    """(best backlash, 95 % half-width, identified) from the cost over a grid of backlash values, the other
+    parameters held at `v` (a conditional profile: the others are fitted again at the best, not at each point).
+
+    Backlash acts through a dead time at each reversal: the simulation error moves in steps as it grows, which
+    a finite-difference Jacobian sees as zero or as a spurious slope; a scan over the whole range does not.
+    The interval is where the cost stays within the 95 % quantile of chi-square(1) / 2, in units of the
+    residual variance inflated for the residuals' lag-1 correlation (as the Jacobian's intervals); identified
+    when that interval closes inside the grid and is no wider than `_ABS_CI`.
+    """
+    grid = np.array(BACKLASH_GRID_DEG if around is None else
+                    sorted(set(np.clip(around + np.linspace(-0.5, 0.5, 11), 0.0, PARAMS["backlash_deg"].hi))))
+    cost = np.array([0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": float(b)}, part) ** 2)) for b in grid])
+    k = int(np.argmin(cost))
+    r = np.asarray(res.fun)  # type: ignore[attr-defined]
+    m, n = len(r), len(np.asarray(res.x))  # type: ignore[attr-defined]
+    s2 = float(np.dot(r, r)) / max(1, m - n)
+    rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
+    threshold = 0.5 * 3.841 * s2 * (1.0 + rho) / (1.0 - rho)
+    best = float(grid[k])
+    if 0 < k < len(grid) - 1:  # the parabola through the best and its neighbours
+        x, y = grid[k - 1:k + 2], cost[k - 1:k + 2]
+        a = np.polyfit(x, y, 2)
+        if a[0] > 0:
+            best = float(np.clip(-a[1] / (2 * a[0]), x[0], x[2]))
+    inside = cost - cost[k] <= threshold
+    lo_i, hi_i = k, k
+    while lo_i > 0 and inside[lo_i - 1]:
+        lo_i -= 1
+    while hi_i < len(grid) - 1 and inside[hi_i + 1]:
+        hi_i += 1
+    closed = (lo_i > 0 or grid[0] == 0.0) and hi_i < len(grid) - 1
+    lower = float(grid[lo_i - 1]) if lo_i > 0 else float(grid[0])  # the interval reaches the first point outside it
+    upper = float(grid[hi_i + 1]) if hi_i < len(grid) - 1 else float(grid[-1])
+    half = max(best - lower, upper - best)
+    return best, half, bool(closed and half <= _ABS_CI["backlash_deg"])

@@ -81,7 +81,10 @@ def draw_plant(params: PlantParams, seed: int, tolerances: tuple[Tolerance, ...]
     rng = np.random.default_rng(seed)
     drawn = {}
     for t in tol:
-        lo, hi = t.bounds(getattr(params, t.name))
+        nominal = getattr(params, t.name)
+        if nominal is None and t.rel is not None:  # an optional key the profile leaves out: nothing to draw around
+            continue
+        lo, hi = t.bounds(nominal)
         drawn[t.name] = float(rng.uniform(lo, hi))
     if "kt_nm_per_a" in drawn and "ke_v_s_per_rad" not in drawn:  # one machine constant: Ke follows Kt
         drawn["ke_v_s_per_rad"] = params.ke_v_s_per_rad * drawn["kt_nm_per_a"] / params.kt_nm_per_a

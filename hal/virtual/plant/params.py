@@ -36,6 +36,7 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "belt_efficiency": ("transmission", 0.1, 1.0),
     "actuator_output_inertia_kg_m2": ("transmission", 0.0, 1.0),
     "ankle_pulley_inertia_kg_m2": ("transmission", 0.0, 1.0),
+    "backlash_deg": ("transmission", 0.0, 10.0),
     "foot_inertia_kg_m2": ("foot", 1e-5, 10.0),
     "foot_mass_kg": ("foot", 0.0, 50.0),
     "foot_com_distance_m": ("foot", 0.0, 1.0),
@@ -58,8 +59,10 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "parallel_engage_rad": ("spring", -math.pi / 6, math.pi / 6),
     "parallel_two_sided": ("spring", 0, 1),
 }
-OPTIONAL = {"parallel_stiffness_nm_per_rad": 0.0, "parallel_engage_rad": 0.0, "parallel_two_sided": False}
-"""Keys a plant profile may leave out, with their values then: [spring] (no parallel spring)."""
+OPTIONAL = {"parallel_stiffness_nm_per_rad": 0.0, "parallel_engage_rad": 0.0, "parallel_two_sided": False,
+            "backlash_deg": None}
+"""Keys a plant profile may leave out, with their values then: [spring] (no parallel spring); backlash_deg None =
+the bench imperfection's figure (profiles/bench_imperfections.toml [gearbox_backlash])."""
 _BOOLS = ("parallel_two_sided",)
 
 #: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
@@ -112,6 +115,8 @@ class PlantParams:
     parallel_stiffness_nm_per_rad: float = 0.0
     parallel_engage_rad: float = 0.0
     parallel_two_sided: bool = False
+    # gearbox free play at the actuator (gearbox) output, degrees; None: the bench imperfection's figure
+    backlash_deg: float | None = None
 
     def __post_init__(self) -> None:
         """Check every value against its allowed range and the cross-field rules."""
@@ -190,6 +195,8 @@ def validate_plant_params(p: PlantParams) -> None:
         if f.name in _BOOLS:
             if not isinstance(value, bool):
                 raise ValueError(f"plant parameter {table}.{f.name} = {value!r} must be true or false")
+            continue
+        if value is None and f.name in OPTIONAL:
             continue
         values = value if isinstance(value, tuple) else (value,)
         for v in values:

@@ -1,0 +1,118 @@
+"""Issue 21's done-when through serial mode: `pafp emulate bench --pty --plant FILE` on one side, `pafp run --motor
+PTY --imu PTY --experiment sysid` on the other, then `pafp fit` on that run (a 10 s experiment: the test stays
+short)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from host_tools.cli import main
+from tests.test_serial_run import SETTLE_S, STALL_FAULTS, _stop, _summary
+
+ROOT = Path(__file__).resolve().parents[1]
+HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
+SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
+         'prbs_s = 2.0\n')
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
+
+
+def _emulator(*options: str) -> tuple[subprocess.Popen, str, str]:
+    """`pafp emulate bench --pty`; its paths once the foot is at rest (tests/test_serial_run.py's, longer).
+
+    Not at real-time priority: with the emulator under `chrt -f 5` beside the firmware's SCHED_FIFO 10 loop, four
+    runs out of four stalled 88-97 ms (COMMAND_STALE): both spin, and the kernel's real-time throttling
+    (sched_rt_runtime_us 950000 of 1000000) is the likely cause."""
+    proc = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "bench", "--pty",
+                             "--duration", "40", *options], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    paths = dict(proc.stdout.readline().strip().split(": ") for _ in range(2))  # type: ignore[union-attr]
+    time.sleep(SETTLE_S)
+    return proc, paths["motor"], paths["imu"]
+
+
+@pytest.fixture(scope="module")
+def serial_fit(tmp_path_factory):
+    d = tmp_path_factory.mktemp("serial_fit")
+    (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
+    stalls: list[str] = []
+    for attempt in range(4):  # a stall of this shared host may latch a link fault (justly): run again
+        out = d / f"run{attempt}"
+        proc, motor, imu = _emulator("--plant", str(HANDMADE))
+        try:  # a process of its own, as `pafp run` is on a bench (not this test process's heap and threads)
+            code = subprocess.run([sys.executable, "-m", "host_tools", "run", "--motor", motor, "--imu", imu,
+                                   "--experiment", "sysid", "--profile", str(d / "fw.toml"), "--out", str(out),
+                                   "--quiet", "--no-plot"], cwd=ROOT, capture_output=True, timeout=120).returncode
+        finally:
+            _stop(proc)
+        s = _summary(out)
+        if s["faults"] and s["faults"][0] in STALL_FAULTS:
+            stalls.append(f"{s['faults'][0]} ({s['fault']['detail']})")
+            continue
+        break
+    else:  # every run latched a fault a host stall explains: the fit is untested here, and said so
+        pytest.skip(f"this host stalled on every attempt: {'; '.join(stalls)}")
+    assert code == 0 and not s["faults"], s["faults"]
+    assert main(["fit", str(out), "--no-plot", "--out", str(d / "fit")]) == 0
+    return json.loads((d / "fit" / "fit.json").read_text())
+
+
+# the hand-made plant's truth (emulation only)
+TRUTH = {"output_inertia_kg_m2": 0.0645854, "foot_damping_nm_s_per_rad": 0.5, "coulomb_friction_nm": 0.25,
+         "gravity_moment_nm": 1.72872}
+
+
+def test_serial_run_is_fitted(serial_fit):
+    p = serial_fit["params"]
+    for name in ("output_inertia_kg_m2", "gravity_moment_nm"):
+        assert p[name]["identifiable"], name
+        assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
+    # the foot rested on its -30 deg stop before the run: the encoder's zero is found through the IMU
+    assert -34.0 < p["encoder_offset_deg"]["value"] < -26.0, p["encoder_offset_deg"]
+    assert serial_fit["fit_percent"]["held_out"]["angle"] >= 90
+    assert serial_fit["fit_percent"]["held_out"]["current"] >= 75
+    b = p["backlash_deg"]  # what holds through a pty (docs/calibration.md, "Through serial mode")
+    assert b["identifiable"] and abs(b["value"] - 1.5) <= 0.5, b
+
+
+@pytest.mark.xfail(reason="through a pty the damping came out -7 to -17 % and the Coulomb friction +4 to +12 % "
+                          "over four runs (the command delay the fit does not model: docs/calibration.md)")
+def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
+    p = serial_fit["params"]
+    for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):
+        assert p[name]["identifiable"], name
+        assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
+
+
+@pytest.mark.xfail(reason="through a pty a command reaches the emulator later than the fit's 0.15 ms: the current "
+                          "lag comes out +28 to +71 % and the backlash once 1.3 deg, outside their intervals "
+                          "(docs/calibration.md)")
+def test_serial_backlash_and_current_lag_within_their_intervals(serial_fit):
+    p = serial_fit["params"]
+    b, tau = p["backlash_deg"], p["current_time_constant_s"]
+    assert abs(b["value"] - 1.5) <= b["ci95_half_width"], b
+    assert abs(tau["value"] - 0.00114) <= tau["ci95_half_width"], tau
+
+
+def test_sysid_takes_its_zero_from_the_fused_angle_only_when_the_foot_is_off_its_mark():
+    """A foot that hung on its -30 deg stop (encoder 0 there) is held at the absolute centre; one set at its mark
+    within the margin keeps the encoder's zero (the virtual bench's runs are unchanged)."""
+    from firmware.config import load_firmware_config
+    from firmware.control.observation import Observation
+    from firmware.control.registry import build_controller
+
+    cfg = load_firmware_config()
+    for fused_deg, expect_zero in ((-30.0, True), (-1.0, False)):
+        c = build_controller("sysid", cfg, {})
+        obs = Observation()
+        obs.t_s, obs.encoder_angle_rad, obs.angle_rad = 0.0, 0.0, math.radians(fused_deg)
+        first = c.update(obs)
+        centre = c.target_and_excitation(0.0)[0]
+        error = centre - (math.radians(fused_deg) if expect_zero else 0.0)
+        assert first == pytest.approx(max(-c.limit, min(c.limit, c.p["kp_a_per_rad"] * error)))
