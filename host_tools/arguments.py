@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
 
 from firmware.control.validation import interval
 
-__all__ = ["add_study_options", "float_in", "int_in", "seed"]
+__all__ = ["add_study_options", "float_in", "int_in", "seed", "study_cluster"]
 
 
 def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
@@ -81,3 +82,17 @@ def add_study_options(parser: argparse.ArgumentParser, what: str) -> None:
     parser.add_argument("--resume", action="store_true", help="keep the finished rows in --out and run the rest")
     parser.add_argument("--point", type=int, default=None, metavar="N",
                         help="run only point N here with the full outputs of `pafp run` (tracking.png, ...)")
+
+
+def study_cluster(args: argparse.Namespace) -> tuple[int, str]:
+    """(workers, where the study runs) from the options of add_study_options; ValueError in one line for a --workers
+    out of range or a --scheduler that is neither a file nor an address with a port (before any cluster starts)."""
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+    if args.scheduler is not None:
+        from host_tools.studies.sweep_engine import check_scheduler  # Dask only for the studies
+
+        check_scheduler(args.scheduler)
+    workers = args.workers or os.cpu_count() or 1
+    where = f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster of {workers} workers on 127.0.0.1"
+    return workers, where

@@ -182,9 +182,9 @@ def test_run_with_a_design_profile_runs_the_design_plant(tmp_path: Path) -> None
     assert main(["run", "--quiet", "--no-plot", "--no-trace", "--strides", "1", "--profile", str(profile),
                  "--out", str(out)]) == 0
     s = json.loads((out / "summary.json").read_text())
-    assert s["bench"]["plant"]["design"]["motor"] == "ak80_9" if "bench" in s else s["plant"]["design"]["motor"] == "ak80_9"
+    plant = s["plant"]
+    assert plant["design"]["motor"] == "ak80_9"
     expected = plant_params_for(Design("ak80_9", 20, 100, 2.0), load_plant_params()).output_torque_per_amp_nm
-    plant = s["bench"]["plant"] if "bench" in s else s["plant"]
     assert plant["output_torque_per_amp_nm"] == pytest.approx(expected)
     assert plant["design_used"] is True
 
@@ -351,4 +351,5 @@ def test_the_stance_moment_share_is_the_motor_moment_over_the_demand() -> None:
     assert half == {"motor_stance_moment_share": 0.5, "motor_stance_peak_moment_share": 0.5}
     wrong_way = stance_moment_share(t, demand / nm_per_a, nm_per_a, load, start, math.inf)  # dorsiflexing: none given
     assert wrong_way["motor_stance_moment_share"] == 0.0
-    assert stance_moment_share(t, 0 * t, nm_per_a, load, 5.0, math.inf)["motor_stance_moment_share"] is None  # no stance
+    no_stance = stance_moment_share(t, 0 * t, nm_per_a, load, 5.0, math.inf)
+    assert no_stance["motor_stance_moment_share"] is None

@@ -16,8 +16,7 @@ from firmware.control.observation import Observation
 from firmware.control.pid import Feedforward, parallel_spring_torque_nm
 from hal.virtual.plant import Plant, load_plant_params
 from hal.virtual.plant.params import plant_params_from_mapping
-from profiles import read_toml
-from profiles import profile_path
+from profiles import profile_path, read_toml
 
 K, ENGAGE = 200.0, 0.25  # N m/rad, rad: values whose products are exact in binary
 

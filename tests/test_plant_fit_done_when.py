@@ -55,8 +55,9 @@ def _errors_in_half_widths(s: dict, truth: dict[str, float]) -> dict[str, float]
             if p["identifiable"] and n in truth and p["ci95_half_width"]}
 
 
-@pytest.mark.xfail(strict=True, reason="issue 21 not met yet: a residual model mismatch leaves biases of 1-2.5 half-widths "
-                          "(damping, current lag, inertia, static friction: docs/calibration.md, Limits)")
+@pytest.mark.xfail(strict=True,
+                   reason="issue 21 not met yet: a residual model mismatch leaves biases of 1-2.5 half-widths "
+                   "(damping, current lag, inertia, static friction: docs/calibration.md, Limits)")
 def test_identified_parameters_are_within_their_intervals(fitted):
     s, truth = fitted
     errors = _errors_in_half_widths(s, truth)
@@ -77,8 +78,9 @@ def test_residual_bias_is_within_three_half_widths(fitted):
 def test_dynamics_within_ten_percent(fitted, name, request):
     s, truth = fitted
     if name == "coulomb_friction_nm" and "seed7" in request.node.callspec.id:
-        request.applymarker(pytest.mark.xfail(strict=True, reason="seed 7 draws 0.045 N m of Coulomb friction: the fit's "
-                                                     "+0.005 N m bias is 10-20 % of it (docs/calibration.md)"))
+        request.applymarker(pytest.mark.xfail(strict=True,
+                                              reason="seed 7 draws 0.045 N m of Coulomb friction: the fit's "
+                                              "+0.005 N m bias is 10-20 % of it (docs/calibration.md)"))
     p = s["params"][name]
     assert p["identifiable"], name
     assert abs(p["value"] / truth[name] - 1) < 0.10, (name, p["value"], truth[name])

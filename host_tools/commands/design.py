@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from pathlib import Path
 
-from host_tools.arguments import add_study_options
+from host_tools.arguments import add_study_options, study_cluster
 
 HELP = ("search actuator designs (motor x belt x spring x battery x body mass x speed), each a walking run of the "
         "firmware, on Dask: results.parquet, design.md (Pareto front, the lightest design that walks each body mass "
@@ -66,14 +65,11 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.design_report import write_design_report
     from host_tools.studies.design_spec import load_design_spec
     from host_tools.studies.interrupt import Interrupted, interrupting
-    from host_tools.studies.sweep_engine import check_scheduler, dask_client, run_tasks
+    from host_tools.studies.sweep_engine import dask_client, run_tasks
     from host_tools.studies.sweep_table import check_out, read_rows
 
     try:
-        if args.workers is not None and not 1 <= args.workers <= 1024:
-            raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
-        if args.scheduler is not None:
-            check_scheduler(args.scheduler)
+        workers, where = study_cluster(args)
         spec = load_design_spec(args.spec)
         out: Path = args.out or Path("runs") / f"design-{spec.path.stem}"
         points = spec.points(out)
@@ -87,8 +83,6 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         print(f"pafp design: cannot write the design profiles: {e}", file=sys.stderr)
         return 2
-    workers = args.workers or os.cpu_count() or 1
-    where = f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster of {workers} workers on 127.0.0.1"
     print(f"pafp design: {len(points)} points ({len(spec.designs())} designs) on {where} -> {out}")
     try:
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:

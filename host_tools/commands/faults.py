@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-from host_tools.arguments import add_study_options
+from host_tools.arguments import add_study_options, study_cluster
 
 HELP = ("run a fault-injection campaign (faults x onsets x durations x scenarios x controllers x links) on Dask: "
         "results.parquet and a hazard table; exit 1 when a criterion is not met")
@@ -59,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.sweep_table import check_out
 
     try:
-        if args.workers is not None and not 1 <= args.workers <= 1024:
-            raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
+        workers, where = study_cluster(args)
         spec = load_fault_spec(args.spec)
         criteria = load_criteria(spec.criteria)
         out: Path = args.out or Path("runs") / f"faults-{spec.path.stem}"
@@ -70,8 +68,6 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"pafp faults: {e}", file=sys.stderr)
         return 2
-    workers = args.workers or os.cpu_count() or 1
-    where = f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster of {workers} workers on 127.0.0.1"
     points = spec.points()
     print(f"pafp faults: {len(points)} points on {where} -> {out}")
     try:

@@ -255,8 +255,9 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     if cfg.plant_file is not None:
         plant = plant.replace("plant", f"plant {cfg.plant_file}", 1)
         if cfg.design is not None:
-            print(f"pafp run: note: --plant {cfg.plant_file} wins over the profile's [design] (motor {cfg.design.motor}):"
-                  " the bench runs that plant, the firmware keeps the design's limits", file=sys.stderr)
+            print(f"pafp run: note: --plant {cfg.plant_file} wins over the profile's [design] "
+                  f"(motor {cfg.design.motor}): the bench runs that plant, the firmware keeps the design's limits",
+                  file=sys.stderr)
     elif cfg.design is not None:
         d = cfg.design
         plant = plant.replace("plant", f"plant of the design ({d.motor}, {d.belt_driven_teeth}/{d.belt_driver_teeth} "

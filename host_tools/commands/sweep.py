@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-from host_tools.arguments import add_study_options
+from host_tools.arguments import add_study_options, study_cluster
 
 HELP = "sweep a spec's grid / Monte Carlo points on Dask (local or a cluster): results.parquet/.csv and a report"
 
@@ -58,16 +57,13 @@ def run(args: argparse.Namespace) -> int:
     """
     from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.studies.interrupt import Interrupted, interrupting
-    from host_tools.studies.sweep_engine import check_points, check_scheduler, dask_client, run_sweep
+    from host_tools.studies.sweep_engine import check_points, dask_client, run_sweep
     from host_tools.studies.sweep_report import write_report
     from host_tools.studies.sweep_spec import load_spec
     from host_tools.studies.sweep_table import check_out, read_rows
 
     try:
-        if args.workers is not None and not 1 <= args.workers <= 1024:
-            raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
-        if args.scheduler is not None:
-            check_scheduler(args.scheduler)
+        workers, where = study_cluster(args)
         spec = load_spec(args.spec)
         out: Path = args.out or Path("runs") / f"sweep-{spec.path.stem}"
         if args.point is not None:
@@ -78,8 +74,6 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"pafp sweep: {e}", file=sys.stderr)
         return 2
-    workers = args.workers or os.cpu_count() or 1
-    where = f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster of {workers} workers on 127.0.0.1"
     print(f"pafp sweep: {spec.n_points} points of {spec.run['strides']} strides on {where} -> {out}")
     kept = f"every row finished before it is in {out}/rows.jsonl (--resume runs the rest)"
     try:

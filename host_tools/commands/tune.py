@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
-from host_tools.arguments import seed
+from host_tools.arguments import seed, study_cluster
 
 HELP = "automatic PID gain search on the emulator (differential evolution on Dask, seeded): writes a tuned profile"
 
@@ -82,18 +81,11 @@ def run(args: argparse.Namespace) -> int:
         base = load_firmware_config(source)
         if not 1 <= args.strides <= 100:
             raise ValueError(f"strides {args.strides!r} out of range: an int in 1..100")
-        if args.workers is not None and not 1 <= args.workers <= 1024:
-            raise ValueError(f"--workers {args.workers!r} out of range: an int in 1..1024")
-        if args.scheduler is not None:
-            from host_tools.studies.sweep_engine import check_scheduler
-
-            check_scheduler(args.scheduler)
+        workers, where = study_cluster(args)
         tuning.check_budget(args.budget)
         plant = tuning.TunePlant(args.plant, args.plant_seed)
         plant.check()
         check_writable(args.out)
-        workers = args.workers or os.cpu_count() or 1
-        where = f"scheduler {args.scheduler}" if args.scheduler else f"{workers} workers"
         on = "" if args.plant is None else f" on plant {args.plant}"
         on += "" if args.plant_seed is None else f" drawn with seed {args.plant_seed}"
         print(f"pafp tune: budget {args.budget} runs of {args.strides} strides on {where}, seed {args.seed}{on} "

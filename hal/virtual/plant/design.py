@@ -245,7 +245,8 @@ def belt_for_ratio(ratio: float, pitch_mm: float | None = None) -> tuple[int, in
     pulley; ValueError naming the nearest pairs when no whole pair does."""
     pitch = 2.0 if pitch_mm is None else float(pitch_mm)
     if pitch not in BELT_PITCHES:
-        raise ValueError(f"belt pitch {pitch_mm!r} mm is not allowed: one of {', '.join(f'{p:g}' for p in BELT_PITCHES)}")
+        allowed = ", ".join(f"{p:g}" for p in BELT_PITCHES)
+        raise ValueError(f"belt pitch {pitch_mm!r} mm is not allowed: one of {allowed}")
     if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and ratio > 0):
         raise ValueError(f"belt ratio {ratio!r} is not allowed: a positive number")
     _, fewest = BELT_PITCHES[pitch]
