@@ -60,6 +60,7 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("backlash_deg", "deg", 0.0, 5.0, "gearbox free play at the actuator output"),
     FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
     FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
+    FitParam("command_delay_s", "s", 0.0, 0.005, "when a command reaches the motor after its job's start"),
     FitParam("imu_lag_s", "s", 1e-4, 0.1, "IMU pitch lag (first order, with the frame hold)"),
     FitParam("imu_bias_deg", "deg", -6.0, 6.0, "IMU pitch bias"),
     FitParam("encoder_offset_deg", "deg", -4.0, 4.0, "true angle minus the encoder's at power-up"),
@@ -78,7 +79,8 @@ def base_values(p: PlantParams) -> dict[str, float]:
             "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
             "gravity_moment_nm": p.gravity_moment_nm,
             "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
-            "current_time_constant_s": p.current_time_constant_s, "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
+            "current_time_constant_s": p.current_time_constant_s, "command_delay_s": COMMAND_DELAY_S,
+            "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
             "encoder_offset_deg": 0.0}
 
 
@@ -110,8 +112,9 @@ class Experiment:
     current: np.ndarray
     source: str
     vel: np.ndarray  # the encoder angle's velocity (`encoder_velocity`)
-    t_req: np.ndarray  # when each feedback request reached the motor (the driver's averages reset there)
+    t_req: np.ndarray  # when each feedback request reached the motor less the command delay (averages reset there)
     req_of: np.ndarray  # per sample: the request whose reply its current is (index into t_req; -1: none yet)
+    angle_from_reply: bool = False  # the encoder angle is the motor reply's position (serial mode's `--encoder motor`)
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
         """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
@@ -123,14 +126,14 @@ class Experiment:
 
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
-                          self.source, self.vel[keep], self.t_req, self.req_of[keep])
+                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply)
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
         k = (self.t >= t0) & (self.t < t1)
         c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
-                          self.source, self.vel[k], self.t_req, self.req_of[k])
+                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply)
 
 
 def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -154,7 +157,7 @@ class _Wire:
 
     t_cmd: np.ndarray  # job start of each SetCurrent (s)
     i_cmd: np.ndarray  # its current (A)
-    t_req: np.ndarray  # when each feedback request reached the motor (s)
+    t_req: np.ndarray  # when each feedback request reached the motor less the command delay (s)
     t_req_job: np.ndarray  # the job start that sent it (s)
     t_reply: np.ndarray  # job starts whose read brought a feedback reply (s)
 
@@ -163,8 +166,8 @@ def _wire(record: Path) -> _Wire:
     """The motor port's traffic in a record, up to the first brake or stop.
 
     A write is the command frame then (usually) a feedback request: the request reaches the motor
-    COMMAND_DELAY_S plus its own frame's wire time after the job's start; the driver's averages (``avg_iq``)
-    reset there. A reply is the firmware's from the job whose read decoded it.
+    its own frame's wire time after the command (the command delay, `command_delay_s`, is added in `simulate`);
+    the driver's averages (``avg_iq``) reset there. A reply is the firmware's from the job whose read decoded it.
     """
     from protocol import vesc
     from protocol.vesc_values import Values, ValuesSelective
@@ -188,7 +191,7 @@ def _wire(record: Path) -> _Wire:
                     currents.append(msg.current_a)
                 elif isinstance(msg, (vesc.GetValues, vesc.GetValuesSelective)) and times and times[-1] == t:
                     frame = len(sent) - _COMMAND_FRAME_BYTES  # the request's frame follows the command's
-                    t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
+                    t_req.append(t + 10.0 * max(frame, 0) / baud)
                     t_req_job.append(t)
                 elif isinstance(msg, vesc.SetCurrentBrake):
                     return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
@@ -242,7 +245,22 @@ def load_experiment(run_dir: Path) -> Experiment:
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
     a = np.array(rows)
     return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
-                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w))
+                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w),
+                      _encoder_source(run_dir) == "motor")
+
+
+def _encoder_source(run_dir: Path) -> str:
+    """Where a serial run's encoder angle came from (summary.json's ``encoder_source``; "" for the virtual bench,
+    whose encoder reads the plant at the job's time). ValueError (one line) for a damaged summary."""
+    import json
+
+    summary = run_dir / "summary.json"
+    if not summary.is_file():
+        return ""
+    try:
+        return str(json.loads(summary.read_text(encoding="utf-8")).get("encoder_source", ""))
+    except (ValueError, AttributeError):
+        raise ValueError(f"{summary}: not a run summary (not a JSON object)") from None
 
 
 
@@ -270,7 +288,8 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     vel = exp.vel
     fixture = suspended()
     lo, hi = params.stop_min_rad, params.stop_max_rad
-    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req, exp.req_of
+    delay = v.get("command_delay_s", COMMAND_DELAY_S)
+    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + delay, exp.req_of
     n_cmd, n_req = len(t_cmd), len(t_req)
     tau = params.current_time_constant_s
     peak = params.peak_current_a
@@ -284,13 +303,14 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         i0 = float(exp.current[k])
         plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v0 if moving else 0.0,
                       start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
-        c = int(np.searchsorted(t_cmd, t0 - COMMAND_DELAY_S, side="right")) - 1  # the command acting at t0
+        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
         target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
         c += 1
         r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
         means: dict[int, float] = {}  # request index -> the mean its reply carries
+        positions: dict[int, float] = {}  # request index -> the output angle its reply carries
         r_prev = r - 1
         t_mark = float(t_req[r_prev]) if r_prev >= 0 else t0  # the driver's averages reset here
         acc = i0 * (t0 - t_mark)  # before t0 the current is taken as the measured one
@@ -301,7 +321,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         for j in range(k, end):
             tj = float(exp.t[j])
             while True:  # the events up to tj, in time order: commands arriving, requests arriving
-                ta = float(t_cmd[c]) + COMMAND_DELAY_S if c < n_cmd else math.inf
+                ta = float(t_cmd[c]) + delay if c < n_cmd else math.inf
                 tr = float(t_req[r]) if r < n_req else math.inf
                 te = min(ta, tr)
                 if te > tj:
@@ -312,6 +332,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                     i_last, t_last = plant.current_q_a(te), te
                 if tr <= ta:
                     means[r] = acc / (te - t_mark) if te > t_mark else i_last
+                    positions[r] = plant.output_angle_rad(te)
                     acc, t_mark = 0.0, te
                     r += 1
                 else:
@@ -319,8 +340,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                     target = max(-peak, min(peak, float(i_cmd[c])))
                     c += 1
             th = plant.output_angle_rad(tj)
-            angle[j] = th - offset
             q = int(req_of[j])
+            # through serial mode the encoder angle is the position of the last reply read, taken when its request
+            # reached the motor; on the virtual bench the encoder reads the plant at the sample's time
+            angle[j] = (positions.get(q, th) if exp.angle_from_reply else th) - offset
             heard = means.get(q)
             # None: its request reached the motor before this window (only within SKIP_S of its start, unused)
             current[j] = exp.current[j] if heard is None else heard
