@@ -18,7 +18,7 @@ def _experiment(from_reply: bool) -> Experiment:
     i_cmd = np.where((t // 0.05) % 2 == 0, 1.5, -1.5)
     zeros = np.zeros_like(t)
     req_of = np.arange(len(t)) - 1
-    return Experiment(t, i_cmd, t, zeros, zeros, zeros, "hand-built", zeros, t - COMMAND_DELAY_S, req_of,
+    return Experiment(t, i_cmd, t, zeros, zeros, zeros, "hand-built", zeros, t, req_of,
                       from_reply)
 
 
@@ -27,7 +27,7 @@ def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
     v = base_values(base)
     plain, _, _, mask = simulate(base, v, _experiment(False), free_v0=False)
     reply, _, _, _ = simulate(base, v, _experiment(True), free_v0=False)
-    # requests arrive at the samples' times (t_req + the command delay): a sample's reply angle is the previous
+    # requests arrive at the samples' times (the default command delay): a sample's reply angle is the previous
     # sample's plant angle, within each window (the first sample of a window has no request in it: masked)
     used = np.flatnonzero(mask)[1:]
     assert np.ptp(plain) > 0.01  # the foot moves: the comparison can fail

@@ -112,7 +112,7 @@ class Experiment:
     current: np.ndarray
     source: str
     vel: np.ndarray  # the encoder angle's velocity (`encoder_velocity`)
-    t_req: np.ndarray  # when each feedback request reached the motor less the command delay (averages reset there)
+    t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (the averages reset there)
     req_of: np.ndarray  # per sample: the request whose reply its current is (index into t_req; -1: none yet)
     angle_from_reply: bool = False  # the encoder angle is the motor reply's position (serial mode's `--encoder motor`)
 
@@ -157,7 +157,7 @@ class _Wire:
 
     t_cmd: np.ndarray  # job start of each SetCurrent (s)
     i_cmd: np.ndarray  # its current (A)
-    t_req: np.ndarray  # when each feedback request reached the motor less the command delay (s)
+    t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (s)
     t_req_job: np.ndarray  # the job start that sent it (s)
     t_reply: np.ndarray  # job starts whose read brought a feedback reply (s)
 
@@ -166,8 +166,9 @@ def _wire(record: Path) -> _Wire:
     """The motor port's traffic in a record, up to the first brake or stop.
 
     A write is the command frame then (usually) a feedback request: the request reaches the motor
-    its own frame's wire time after the command (the command delay, `command_delay_s`, is added in `simulate`);
-    the driver's averages (``avg_iq``) reset there. A reply is the firmware's from the job whose read decoded it.
+    COMMAND_DELAY_S plus its own frame's wire time after the job's start (`simulate` moves it by a fitted
+    `command_delay_s`'s difference); the driver's averages (``avg_iq``) reset there. A reply is the firmware's
+    from the job whose read decoded it.
     """
     from protocol import vesc
     from protocol.vesc_values import Values, ValuesSelective
@@ -191,7 +192,7 @@ def _wire(record: Path) -> _Wire:
                     currents.append(msg.current_a)
                 elif isinstance(msg, (vesc.GetValues, vesc.GetValuesSelective)) and times and times[-1] == t:
                     frame = len(sent) - _COMMAND_FRAME_BYTES  # the request's frame follows the command's
-                    t_req.append(t + 10.0 * max(frame, 0) / baud)
+                    t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
                     t_req_job.append(t)
                 elif isinstance(msg, vesc.SetCurrentBrake):
                     return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
@@ -289,7 +290,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     fixture = suspended()
     lo, hi = params.stop_min_rad, params.stop_max_rad
     delay = v.get("command_delay_s", COMMAND_DELAY_S)
-    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + delay, exp.req_of
+    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + (delay - COMMAND_DELAY_S), exp.req_of
     n_cmd, n_req = len(t_cmd), len(t_req)
     tau = params.current_time_constant_s
     peak = params.peak_current_a
