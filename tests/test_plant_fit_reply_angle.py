@@ -54,3 +54,19 @@ def test_the_encoder_source_comes_from_the_run_summary(tmp_path):
     (tmp_path / "summary.json").write_text("[1, 2")
     with pytest.raises(ValueError, match="summary.json"):
         _encoder_source(tmp_path)
+
+
+def test_the_command_delay_is_bounded_below_the_reply_round_trip():
+    """A delay longer than a period would leave samples whose reply's request has not arrived in the simulation:
+    they carry the measured current and cost nothing (the artefact the bound keeps out: docs/calibration.md)."""
+    from host_tools.calibration.plant_fit import PARAMS
+
+    base = load_plant_params()
+    v = base_values(base)
+    exp = _experiment(False)  # the measured current is 0 throughout; each sample carries the previous request's
+    hi = PARAMS["command_delay_s"].hi
+    assert hi < 1e-3
+    _, at_bound, _, mask = simulate(base, {**v, "command_delay_s": hi}, exp, free_v0=False)
+    _, too_late, _, _ = simulate(base, {**v, "command_delay_s": 1.5e-3}, exp, free_v0=False)
+    assert np.all(at_bound[mask] != 0.0)  # every used sample's current is simulated
+    assert np.all(too_late[mask] == 0.0)  # past a period every one is the measured current

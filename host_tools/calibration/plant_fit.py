@@ -60,7 +60,10 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("backlash_deg", "deg", 0.0, 5.0, "gearbox free play at the actuator output"),
     FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
     FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
-    FitParam("command_delay_s", "s", 0.0, 0.005, "when a command reaches the motor after its job's start"),
+    # at most 0.8 ms: the record shows the firmware reading most replies one 1 ms period after their request, so the
+    # request (after the command, with its own wire time) arrived sooner; a longer delay would also leave samples
+    # whose reply's request has not yet arrived in the simulation, which then carry the measured current (no error)
+    FitParam("command_delay_s", "s", 0.0, 8e-4, "when a command reaches the motor after its job's start"),
     FitParam("imu_lag_s", "s", 1e-4, 0.1, "IMU pitch lag (first order, with the frame hold)"),
     FitParam("imu_bias_deg", "deg", -6.0, 6.0, "IMU pitch bias"),
     FitParam("encoder_offset_deg", "deg", -4.0, 4.0, "true angle minus the encoder's at power-up"),
