@@ -54,9 +54,9 @@ class Ak60Meter:
         self.r_fet_ohm = cfg.fet_resistance_ohm
         self.ke = params.ke_v_s_per_rad
         # the power the rotor converts is its torque times its speed, Kt i w: energy is conserved whatever the
-        # maker's Ke (the voltage constant, kept for the back-EMF in vq); Ke < Kt for every catalogue motor (the
-        # makers' Kv and Kt follow different conventions), so Ke i w would draw less from the supply than the
-        # rotor delivers
+        # maker's Ke (the voltage constant, kept for the back-EMF in vq); Ke (from Kv, or Table B2's) is below Kt for
+        # four of the five catalogue motors and about equal for the AK80-9 (the makers' Kv and Kt follow different
+        # conventions), so Ke i w would draw less from the supply than the rotor delivers
         self.kt = params.kt_nm_per_a
         self.tau_s = params.current_time_constant_s
         self.pole_pairs = params.pole_pairs
