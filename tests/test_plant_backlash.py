@@ -82,7 +82,8 @@ def test_fit_writes_its_backlash_verdict_into_the_key(tmp_path):
     import numpy as np
 
     from host_tools.calibration.fit_report import profile_text
-    from host_tools.calibration.plant_fit import FitResult, base_values
+    from host_tools.calibration.fit_model import base_values
+    from host_tools.calibration.plant_fit import FitResult
 
     base = load_plant_params()
     start = base_values(base)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hal.virtual.plant import load_plant_params
-from host_tools.calibration.plant_fit import fit_percentage
+from host_tools.calibration.fit_model import fit_percentage
 from host_tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from hal.virtual.plant import load_plant_params
-from host_tools.calibration.plant_fit import COMMAND_DELAY_S, Experiment, _encoder_source, base_values, simulate
+from host_tools.calibration.fit_data import COMMAND_DELAY_S, Experiment, _encoder_source
+from host_tools.calibration.fit_model import base_values, simulate
 
 
 def _experiment(from_reply: bool) -> Experiment:
@@ -59,7 +60,7 @@ def test_the_encoder_source_comes_from_the_run_summary(tmp_path):
 def test_the_command_delay_is_bounded_below_the_reply_round_trip():
     """A delay longer than a period would leave samples whose reply's request has not arrived in the simulation:
     they carry the measured current and cost nothing (the artefact the bound keeps out: docs/calibration.md)."""
-    from host_tools.calibration.plant_fit import PARAMS
+    from host_tools.calibration.fit_model import PARAMS
 
     base = load_plant_params()
     v = base_values(base)

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from hal.virtual.plant import PlantParams
-from host_tools.calibration.plant_fit import PARAMS, Experiment, FitResult, fit_percentage, plant_with, simulate
+from host_tools.calibration.fit_data import Experiment
+from host_tools.calibration.fit_model import PARAMS, fit_percentage, plant_with, simulate
+from host_tools.calibration.plant_fit import FitResult
 from host_tools.outdir import write_atomic
 
 __all__ = ["figure", "fit_json", "validate", "write_fit_outputs"]

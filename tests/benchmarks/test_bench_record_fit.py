@@ -26,7 +26,9 @@ import time
 import warnings
 from pathlib import Path
 
-from host_tools.calibration.plant_fit import fit_plant, load_base, load_experiment
+from host_tools.calibration.fit_data import load_experiment
+from host_tools.calibration.fit_model import load_base
+from host_tools.calibration.plant_fit import fit_plant
 from host_tools.calibration.replay_run import replay_record
 from host_tools.cli import main
 from host_tools.recording import RECORD_NAME

@@ -1,0 +1,184 @@
+"""`pafp fit`'s data: what a bench measured in a run directory, never the emulator's truth.
+
+From record.bin's motor port: the current commands the firmware sent (each at its job's time), the feedback
+requests that followed them and the jobs whose reads brought a reply; from telemetry.csv, over the span the
+supervisor was in RUN: the encoder angle, the IMU pitch and the motor's measured current (`load_experiment`).
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hal.record.format import Kind
+from hal.record.replay import RecordReader
+from host_tools.recording import RECORD_NAME
+
+__all__ = ["COMMAND_DELAY_S", "WINDOW_S", "Experiment", "encoder_velocity", "load_experiment"]
+
+WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
+
+
+@dataclass
+class Experiment:
+    """What the bench measured: commands (time, A, brake) and samples (time, encoder, IMU, current)."""
+
+    t_cmd: np.ndarray
+    i_cmd: np.ndarray
+    t: np.ndarray
+    angle: np.ndarray
+    imu: np.ndarray
+    current: np.ndarray
+    source: str
+    vel: np.ndarray  # the encoder angle's velocity (`encoder_velocity`)
+    t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (the averages reset there)
+    req_of: np.ndarray  # per sample: the request whose reply its current is (index into t_req; -1: none yet)
+    angle_from_reply: bool = False  # the encoder angle is the motor reply's position (serial mode's `--encoder motor`)
+
+    def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
+        """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
+
+        Stretches are whole numbers of simulation windows, so each is simulated from its own start."""
+        k = ((self.t - self.t[0]) // window_s).astype(int)
+        held = (k % every) == every - 1
+        return self._select(~held), self._select(held)
+
+    def _select(self, keep: np.ndarray) -> Experiment:
+        return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
+                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply)
+
+    def span(self, t0: float, t1: float) -> Experiment:
+        """The part between t0 and t1 (s)."""
+        k = (self.t >= t0) & (self.t < t1)
+        c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
+        return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
+                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply)
+
+
+def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """The encoder angle's velocity: a Savitzky-Golay derivative over about 30 ms (the counts' steps smoothed)."""
+    if len(t) < 17:
+        return np.zeros_like(t)
+    from scipy.signal import savgol_filter
+
+    return savgol_filter(angle, 15, 2, deriv=1, delta=float(np.median(np.diff(t))))
+
+
+COMMAND_DELAY_S = 1.5e-4  # a command reaches the motor this long after its job starts (frame at 921600 baud)
+_COMMAND_FRAME_BYTES = 10  # a SetCurrent frame: start, length, id, 4 bytes, CRC, end
+
+
+@dataclass
+class _Wire:
+    """What the motor port carried: the current commands, the feedback requests and when replies came in."""
+
+    t_cmd: np.ndarray  # job start of each SetCurrent (s)
+    i_cmd: np.ndarray  # its current (A)
+    t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (s)
+    t_req_job: np.ndarray  # the job start that sent it (s)
+    t_reply: np.ndarray  # job starts whose read brought a feedback reply (s)
+
+
+def _wire(record: Path) -> _Wire:
+    """The motor port's traffic in a record, up to the first brake or stop.
+
+    A write is the command frame then (usually) a feedback request: the request reaches the motor
+    COMMAND_DELAY_S plus its own frame's wire time after the job's start (`simulate` moves it by a fitted
+    `command_delay_s`'s difference); the driver's averages (``avg_iq``) reset there. A reply is the firmware's
+    from the job whose read decoded it.
+    """
+    from protocol import vesc
+    from protocol.vesc_values import Values, ValuesSelective
+
+    reader = RecordReader(record)
+    f_cpu = int(reader.header["f_cpu_hz"])
+    baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
+    to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
+    times, currents, t_req, t_req_job, t_reply = [], [], [], [], []
+    write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
+    for s in reader.sections():
+        t = s.start / f_cpu
+        for data in s.inputs.get(read_key, ()):
+            if any(isinstance(m, (Values, ValuesSelective)) for m in from_motor.feed(data)):
+                t_reply.append(t)
+        for accepted, data in s.outputs.get(write_key, ()):
+            sent = data[:accepted]
+            for msg in to_motor.feed(sent):
+                if isinstance(msg, vesc.SetCurrent):
+                    times.append(t)
+                    currents.append(msg.current_a)
+                elif isinstance(msg, (vesc.GetValues, vesc.GetValuesSelective)) and times and times[-1] == t:
+                    frame = len(sent) - _COMMAND_FRAME_BYTES  # the request's frame follows the command's
+                    t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
+                    t_req_job.append(t)
+                elif isinstance(msg, vesc.SetCurrentBrake):
+                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
+    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
+
+
+def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
+    """Per sample: the request the current it carries answers (-1: none). A sample shows the last reply the
+    firmware read at or before it, and a reply answers the last request sent before the job that read it
+    (a full GET_VALUES reply takes most of a period, so the next period sends no request)."""
+    if len(w.t_reply) == 0 or len(w.t_req_job) == 0:
+        return np.full(len(t), -1)
+    reply = np.searchsorted(w.t_reply, t, side="right") - 1
+    answered = np.searchsorted(w.t_req_job, w.t_reply, side="left") - 1
+    return np.where(reply >= 0, answered[np.maximum(reply, 0)], -1)
+
+
+def load_experiment(run_dir: Path) -> Experiment:
+    """The commands (record.bin) and the measurements (telemetry.csv) of a run, over its RUN span.
+
+    ValueError (one line, naming the file) when a file is missing, damaged or holds too little.
+    """
+    record, tel = run_dir / RECORD_NAME, run_dir / "telemetry.csv"
+    for f in (record, tel):
+        if not f.is_file():
+            raise ValueError(f"{f}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
+                             "`pafp run --experiment sysid`, or any serial run)")
+    w = _wire(record)
+    t_cmd, i_cmd = w.t_cmd, w.i_cmd
+    cols = ("time_s", "encoder_angle_rad", "imu_pitch_rad", "current_meas_a", "supervisor_state_name")
+    rows: list[tuple[float, float, float, float]] = []
+    with tel.open(encoding="utf-8", newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [c for c in cols if c not in (reader.fieldnames or [])]
+        if missing:
+            raise ValueError(f"{tel}: not a telemetry table (no column {missing[0]!r})")
+        started = False
+        for line, r in enumerate(reader, start=2):
+            if r["supervisor_state_name"] != "RUN":
+                if started:
+                    break  # the first RUN span only (a fault ends the experiment)
+                continue
+            started = True
+            try:
+                rows.append((float(r["time_s"]), float(r["encoder_angle_rad"]), float(r["imu_pitch_rad"]),
+                             float(r["current_meas_a"])))
+            except ValueError:
+                raise ValueError(f"{tel}: line {line} is not numeric") from None
+    if len(rows) < 100 or len(t_cmd) < 100:
+        raise ValueError(f"{run_dir}: too short to fit: {len(rows)} samples in RUN and {len(t_cmd)} current "
+                         "commands (at least 100 of each; run `pafp run --experiment sysid`)")
+    a = np.array(rows)
+    return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
+                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w),
+                      _encoder_source(run_dir) == "motor")
+
+
+def _encoder_source(run_dir: Path) -> str:
+    """Where a serial run's encoder angle came from (summary.json's ``encoder_source``; "" for the virtual bench,
+    whose encoder reads the plant at the job's time). ValueError (one line) for a damaged summary."""
+    import json
+
+    summary = run_dir / "summary.json"
+    if not summary.is_file():
+        return ""
+    try:
+        return str(json.loads(summary.read_text(encoding="utf-8")).get("encoder_source", ""))
+    except (ValueError, AttributeError):
+        raise ValueError(f"{summary}: not a run summary (not a JSON object)") from None

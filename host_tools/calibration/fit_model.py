@@ -1,0 +1,262 @@
+"""`pafp fit`'s model: the fit parameters and the windowed simulation of the bench that the fit minimises.
+
+The model is the plant of the virtual bench itself (`hal.virtual.plant.Plant`, the code the bench runs),
+driven by the recorded commands. Its simulation error is taken over windows of ``WINDOW_S``: each window
+starts from the measured angle and velocity (the suspended foot under gravity is not self-regulating, so
+one 30 s open-loop simulation drifts with any error in the gravity moment; windows keep the error about
+the dynamics), and the residuals are the encoder angle, the measured current and the IMU pitch (through
+a first-order lag and a bias), each divided by its noise scale (`residuals`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
+from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment
+
+__all__ = ["DEFAULT_FIT", "PARAMS", "FitParam", "base_values", "fit_percentage", "plant_with", "residuals",
+           "simulate"]
+
+BACKLASH_DEG = 0.55  # the maker's (bench_imperfections.toml [gearbox_backlash]) for a base without the key
+
+SKIP_S = 0.01  # residuals skip the first samples of a window (the current state starts at the command)
+# below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
+# starts at rest, so a foot held by static friction starts stuck, not sliding on a velocity made of count noise
+REST_RAD_S = 0.03
+SIGMA = {"angle": math.radians(0.1), "current": 0.1, "imu": math.radians(0.3)}  # residual scales (rad, A, rad)
+
+
+@dataclass(frozen=True)
+class FitParam:
+    """One fitted parameter: its name, unit, bounds and the plant-profile keys it sets."""
+
+    name: str
+    unit: str
+    lo: float
+    hi: float
+    meaning: str
+
+
+PARAMS: dict[str, FitParam] = {p.name: p for p in (
+    FitParam("output_inertia_kg_m2", "kg m^2", 0.005, 0.5, "inertia at the ankle: foot + reflected transmission"),
+    FitParam("foot_damping_nm_s_per_rad", "N m s/rad", 0.0, 5.0, "viscous damping at the ankle"),
+    FitParam("coulomb_friction_nm", "N m", 0.0, 2.0, "kinetic (Coulomb) friction at the ankle"),
+    FitParam("static_friction_nm", "N m", 0.0, 4.0, "breakaway friction at the ankle (>= Coulomb)"),
+    FitParam("gravity_moment_nm", "N m", 0.3, 6.0, "m g d of the foot"),
+    FitParam("backlash_deg", "deg", 0.0, 5.0, "gearbox free play at the actuator output"),
+    FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
+    FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
+    # at most 0.8 ms: the record shows the firmware reading most replies one 1 ms period after their request, so the
+    # request (after the command, with its own wire time) arrived sooner; a longer delay would also leave samples
+    # whose reply's request has not yet arrived in the simulation, which then carry the measured current (no error)
+    FitParam("command_delay_s", "s", 0.0, 8e-4, "when a command reaches the motor after its job's start"),
+    FitParam("imu_lag_s", "s", 1e-4, 0.1, "IMU pitch lag (first order, with the frame hold)"),
+    FitParam("imu_bias_deg", "deg", -6.0, 6.0, "IMU pitch bias"),
+    FitParam("encoder_offset_deg", "deg", -4.0, 4.0, "true angle minus the encoder's at power-up"),
+)}
+# backlash is not in the least squares: its effect (a dead time at each reversal of the command) moves the
+# residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope; it is profiled over a grid
+# (`_backlash_profile`, docs/calibration.md)
+DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
+               "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
+               "encoder_offset_deg")
+
+
+def base_values(p: PlantParams) -> dict[str, float]:
+    """The fit parameters' values of a plant profile (the start of the search; measurement ones at 0)."""
+    return {"output_inertia_kg_m2": p.output_inertia_kg_m2, "foot_damping_nm_s_per_rad": p.foot_damping_nm_s_per_rad,
+            "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
+            "gravity_moment_nm": p.gravity_moment_nm,
+            "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
+            "current_time_constant_s": p.current_time_constant_s, "command_delay_s": COMMAND_DELAY_S,
+            "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
+            "encoder_offset_deg": 0.0}
+
+
+def plant_with(base: PlantParams, v: dict[str, float]) -> PlantParams:
+    """The base profile with the fit parameters' values in it (the keys each one sets)."""
+    g, m = base.gravity_m_s2, base.foot_mass_kg
+    d = v["gravity_moment_nm"] / (m * g)
+    reflected = base.reflected_inertia_kg_m2
+    jc = max(1e-5, v["output_inertia_kg_m2"] - reflected - m * d * d)
+    scale = v["torque_constant_scale"]
+    backdrive = max(v["static_friction_nm"], v["coulomb_friction_nm"]) / base.belt_ratio
+    tc = min(v["coulomb_friction_nm"], backdrive * base.belt_ratio)  # the same product the profile's check takes
+    return replace(base, foot_inertia_kg_m2=jc, foot_com_distance_m=d,
+                   foot_damping_nm_s_per_rad=v["foot_damping_nm_s_per_rad"], coulomb_friction_nm=tc,
+                   actuator_backdrive_torque_nm=backdrive, kt_nm_per_a=base.kt_nm_per_a * scale,
+                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"],
+                   backlash_deg=v["backlash_deg"])
+
+
+FREE_V0 = True  # each moving window's initial velocity is projected out (`_project_initial_velocity`)
+FREE_IMU_OFFSET = True  # each window's IMU offset is projected out (the bias drifts over the experiment)
+
+
+def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: float = WINDOW_S,
+             free_v0: bool = FREE_V0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(angle as the encoder reads it, current as the firmware last heard it, IMU pitch, used-sample mask)
+    simulated at exp.t, each window of window_s from the measured state.
+
+    The measured current a telemetry sample carries is the mean the driver reported (``avg_iq``, reset at
+    each request: ak60_meter.py, as VESC's ``read_reset_avg``) in the last reply the firmware read: the mean
+    between the two requests before it (`Experiment.req_of`). As the driver's meter does, the mean integrates
+    the first-order lag towards the command from the plant's current at each event (a command or a request
+    reaching the motor): while the rotor crosses the backlash the plant's current falls towards 0
+    (hal/virtual/plant/model.py, Plant._cross_gap) and each event restarts the integral from it.
+    """
+    params = plant_with(base, v)
+    offset = math.radians(v["encoder_offset_deg"])
+    backlash = math.radians(v["backlash_deg"])
+    bias = math.radians(v["imu_bias_deg"])
+    lag = max(1e-6, v["imu_lag_s"])
+    n = len(exp.t)
+    angle, current, imu = np.zeros(n), np.zeros(n), np.zeros(n)
+    mask = np.ones(n, dtype=bool)
+    vel = exp.vel
+    fixture = suspended()
+    lo, hi = params.stop_min_rad, params.stop_max_rad
+    delay = v.get("command_delay_s", COMMAND_DELAY_S)
+    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + (delay - COMMAND_DELAY_S), exp.req_of
+    n_cmd, n_req = len(t_cmd), len(t_req)
+    tau = params.current_time_constant_s
+    peak = params.peak_current_a
+    k = 0
+    while k < n:
+        t0 = float(exp.t[k])
+        end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
+        start_angle = min(hi, max(lo, exp.angle[k] + offset))
+        v0 = float(vel[k])
+        moving = abs(v0) >= REST_RAD_S
+        i0 = float(exp.current[k])
+        plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v0 if moving else 0.0,
+                      start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
+        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
+        if c >= 0:
+            plant.set_current_command(float(i_cmd[c]), t0)
+        target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
+        c += 1
+        r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
+        means: dict[int, float] = {}  # request index -> the mean its reply carries
+        positions: dict[int, float] = {}  # request index -> the output angle its reply carries
+        r_prev = r - 1
+        t_mark = float(t_req[r_prev]) if r_prev >= 0 else t0  # the driver's averages reset here
+        acc = i0 * (t0 - t_mark)  # before t0 the current is taken as the measured one
+        t_last, i_last = t0, i0
+        # the IMU's lag state: following the start's motion (its offset at the start is the window's own, below)
+        filt = start_angle - lag * (v0 if moving else 0.0)
+        t_prev = t0
+        for j in range(k, end):
+            tj = float(exp.t[j])
+            while True:  # the events up to tj, in time order: commands arriving, requests arriving
+                ta = float(t_cmd[c]) + delay if c < n_cmd else math.inf
+                tr = float(t_req[r]) if r < n_req else math.inf
+                te = min(ta, tr)
+                if te > tj:
+                    break
+                span = te - t_last
+                if span > 0:
+                    acc += target * span + (i_last - target) * tau * -math.expm1(-span / tau)
+                    i_last, t_last = plant.current_q_a(te), te
+                if tr <= ta:
+                    means[r] = acc / (te - t_mark) if te > t_mark else i_last
+                    positions[r] = plant.output_angle_rad(te)
+                    acc, t_mark = 0.0, te
+                    r += 1
+                else:
+                    plant.set_current_command(float(i_cmd[c]), te)
+                    target = max(-peak, min(peak, float(i_cmd[c])))
+                    c += 1
+            th = plant.output_angle_rad(tj)
+            q = int(req_of[j])
+            # through serial mode the encoder angle is the position of the last reply read, taken when its request
+            # reached the motor; on the virtual bench the encoder reads the plant at the sample's time
+            angle[j] = (positions.get(q, th) if exp.angle_from_reply else th) - offset
+            heard = means.get(q)
+            # None: its request reached the motor before this window (only within SKIP_S of its start, unused)
+            current[j] = exp.current[j] if heard is None else heard
+            filt += (th - filt) * (1.0 - math.exp(-(tj - t_prev) / lag))
+            t_prev = tj
+            imu[j] = filt + bias
+            if tj - t0 < SKIP_S:
+                mask[j] = False
+        if free_v0 and moving:
+            _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
+        if FREE_IMU_OFFSET:
+            used = mask[k:end]
+            if used.any():  # the IMU's bias drifts (Gauss-Markov, tau ~10 s): each window's own offset
+                imu[k:end] += float(np.mean((exp.imu[k:end] - imu[k:end])[used]))
+        k = end
+    return angle, current, imu, mask
+
+
+def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angle: np.ndarray, imu: np.ndarray,
+                              mask: np.ndarray, params: PlantParams) -> None:
+    """Correct window [k, end)'s simulation for the least-squares initial velocity (in place).
+
+    The window starts at the encoder's velocity estimate, which a smoothing derivative attenuates at the
+    chirp's and the PRBS's frequencies (a 15-sample quadratic Savitzky-Golay slope keeps 89 % of a 12 Hz
+    sine's): a start that is systematically too slow, which the fit made up for with a longer mechanical
+    time constant (inertia up, damping down: the bias docs/calibration.md used to report). Each moving window's
+    initial velocity is instead a nuisance parameter, eliminated by variable projection: a velocity error dv
+    moves the angle by dv * tm * (1 - exp(-t / tm)) (tm = J / b, the free motion's decay), the projection takes
+    the dv that best explains the window's encoder residual, as MATLAB's ``compare`` estimates initial
+    conditions. The IMU, which sees the same angle through a lag of a few tens of ms, gets the same shift.
+    """
+    tm = params.output_inertia_kg_m2 / max(params.foot_damping_nm_s_per_rad, 1e-9)
+    t = exp.t[k:end] - t0
+    sens = tm * -np.expm1(-t / tm)
+    used = mask[k:end]
+    ss = float(np.dot(sens[used], sens[used]))
+    if ss <= 0.0:
+        return
+    dv = -float(np.dot((angle[k:end] - exp.angle[k:end])[used], sens[used])) / ss
+    angle[k:end] += dv * sens
+    imu[k:end] += dv * sens
+
+
+def window_ids(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
+    """The simulation window of each used sample (as `simulate` cuts them), in the order `residuals` lists them."""
+    ids = np.zeros(len(exp.t), dtype=int)
+    k, w = 0, 0
+    while k < len(exp.t):
+        end = max(int(np.searchsorted(exp.t, exp.t[k] + window_s)), k + 1)
+        ids[k:end] = w
+        k, w = end, w + 1
+    mask = exp.t - exp.t[ids_start(ids)] >= SKIP_S
+    return ids[mask]
+
+
+def ids_start(ids: np.ndarray) -> np.ndarray:
+    """For each sample, the index of its window's first sample."""
+    first = np.r_[0, np.flatnonzero(np.diff(ids)) + 1]
+    return first[ids]
+
+
+def residuals(base: PlantParams, v: dict[str, float], exp: Experiment) -> np.ndarray:
+    """The scaled simulation errors: encoder angle, measured current and IMU pitch, on the used samples."""
+    angle, current, imu, mask = simulate(base, v, exp)
+    return np.concatenate([(angle - exp.angle)[mask] / SIGMA["angle"], (current - exp.current)[mask] / SIGMA["current"],
+                           (imu - exp.imu)[mask] / SIGMA["imu"]])
+
+
+def fit_percentage(y: np.ndarray, y_hat: np.ndarray) -> float:
+    """100 (1 - |y - y_hat| / |y - mean y|), as MATLAB's compare reports it (-inf..100).
+
+    >>> round(fit_percentage(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0])), 1)
+    100.0
+    """
+    den = float(np.linalg.norm(y - np.mean(y)))
+    if den == 0.0:
+        return float("nan")
+    return 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / den)
+
+
+def load_base(path: Path | None) -> PlantParams:
+    """The plant profile the fit starts from and whose other keys it keeps (default: the packaged one)."""
+    return load_plant_params(path)
