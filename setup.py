@@ -87,6 +87,9 @@ COMPILED = [
     "protocol/telemetry_frame.py",
     "host_tools/probe.py",
     "hal/record/recorder.py",
+    "hal/record/reader.py",
+    "hal/record/streams.py",
+    "hal/record/replay_peripherals.py",
     "hal/record/replay.py",
 ]
 

@@ -10,8 +10,8 @@ import pytest
 from firmware.config import load_firmware_config
 from hal.errors import HalError
 from hal.record.format import Kind, RecordError
+from hal.record.reader import RecordReader
 from hal.record.recorder import Recorder
-from hal.record.replay import RecordReader
 from host_tools.calibration.replay_run import replay_record
 from host_tools.cli import main
 from host_tools.recording import RECORD_NAME, config_dict, config_from_dict

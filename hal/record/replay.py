@@ -1,316 +1,38 @@
 """The replay backend: a `Board` whose peripherals and clock serve back what a record says they returned.
 
-A record (hal/record/format.py) is read one section (one job) at a time: its inputs in recorded order
-(each with its key: call kind and port), its outputs into the list the replayed job is compared with. Each
-call of the replayed firmware takes the next recorded result of the same kind on the same port (the first
-not yet taken: a job makes a handful of calls, a scan is cheaper than a queue per key), so a firmware that
-makes its calls in another order still gets the same bytes; a call beyond the record gets a neutral
-answer (no bytes, the last CNT) and is counted (``starved``). What the firmware writes is kept for the
-comparison (`ReplayBoard.finish`), never sent anywhere. The firmware does not know it is replayed.
+A record is read one section (one job) at a time (hal/record/reader.py). Each call of the replayed firmware
+takes the next recorded result of the same kind on the same port (the first not yet taken: a job makes a
+handful of calls, a scan is cheaper than a queue per key), so a firmware that makes its calls in another
+order still gets the same bytes; a call beyond the record gets a neutral answer (no bytes, the last CNT)
+and is counted (``starved``). What the firmware writes is kept for the comparison (`ReplayBoard.finish`),
+never sent anywhere (the peripherals: hal/record/replay_peripherals.py). The firmware does not know it is
+replayed.
 
 `replay_sections` is the replay loop: each section's job run at its recorded time, its outputs compared
-and added to each port's stream (`Stream`: counts and SHA-256 of the bytes recorded and replayed). The
-module is compiled (setup.py's COMPILED): the loop, the decoding and the calls the firmware makes are
-what a replay costs beyond the firmware's own work.
+and added to each port's stream (hal/record/streams.py: counts and SHA-256 of the bytes recorded and
+replayed). The module is compiled (setup.py's COMPILED): the loop and the board are what a replay costs
+beyond the firmware's own work.
 """
 
 from __future__ import annotations
 
-import hashlib
-import struct
-from collections import deque
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any, BinaryIO, Final
 
-from hal.can import CanFrame, CanPort
 from hal.errors import HalError
-from hal.interfaces import Board, DigitalIn, DigitalOut, EncoderTimer, Uart, UartErrors, Watchdog
-from hal.record.format import FIXED, VARIABLE, Kind, RecordError, read_chunks, read_header
+from hal.interfaces import Board
+from hal.record.format import Kind
+from hal.record.reader import Section
 from hal.record.recorder import PORTS
+from hal.record.replay_peripherals import ReplayCan, ReplayEncoder, ReplayLed, ReplayPin, ReplayUart, ReplayWatchdog
+from hal.record.streams import Stream, item_bytes_all, port_name
 from rtos.job import Job
 
-__all__ = ["OUTPUT_KINDS", "RecordReader", "ReplayBoard", "Section", "Stream", "item_bytes", "port_name",
-           "replay_sections"]
+__all__ = ["ReplayBoard", "replay_sections"]
 
-OUTPUT_KINDS: Final = frozenset({Kind.WRITE, Kind.ENC_SET, Kind.LED, Kind.KICK, Kind.CAN_TX})
-_PORT_NAMES: Final = {v: k for k, v in PORTS.items()}
-_OUTPUT_NAMES: Final = {Kind.ENC_SET: "encoder", Kind.LED: "led", Kind.KICK: "watchdog", Kind.CAN_TX: "can"}
-_WRITE: Final = Kind.WRITE
-_RAISE: Final = Kind.RAISE
-_CAN_RX: Final = Kind.CAN_RX
-_CAN_TX: Final = Kind.CAN_TX
 _CLOCK_KEY: Final = Kind.CLOCK << 2
 _HEALTH_KEY: Final = Kind.HEALTH << 2
-_ENC_CNT_KEY: Final = Kind.ENC_CNT << 2
-_ENC_DIR_KEY: Final = Kind.ENC_DIR << 2
-_ENC_SET_KEY: Final = Kind.ENC_SET << 2
-_ESTOP_KEY: Final = Kind.ESTOP << 2
-_LED_KEY: Final = Kind.LED << 2
-_KICK_KEY: Final = Kind.KICK << 2
 _FLUSH_BYTES: Final = 1 << 16  # a stream hashes its bytes once this many are pending (one update per ~64 KB)
-
-
-def port_name(key: int) -> str:
-    """The name of an output key (``kind << 2 | port``): motor, imu, telemetry, can, encoder, led, watchdog."""
-    kind, port = key >> 2, key & 3
-    return _PORT_NAMES[port] if kind == _WRITE else _OUTPUT_NAMES.get(kind, f"kind{kind}")
-
-
-def item_bytes(key: int, item: Any) -> bytes:
-    """The bytes an output item stands for in its port's stream (a write: the bytes the port accepted)."""
-    kind = key >> 2
-    if kind == _WRITE:
-        accepted, data = item
-        return data if accepted == len(data) else data[:accepted]
-    if kind == _CAN_TX:
-        ok, frame = item
-        return bytes([ok, frame.extended]) + frame.arbitration_id.to_bytes(4, "little") + frame.data
-    return repr(item).encode()
-
-
-class Section:
-    """One recorded job: its task, start and index, the results of its calls and what it sent.
-
-    The results are `keys` and `values` in recorded order; a result taken by the replay has its key set to -1.
-    """
-
-    def __init__(self, task_id: int, start: int, index: int) -> None:
-        """A section with no call results yet."""
-        self.task_id = task_id
-        self.start = start
-        self.index = index
-        self.keys: list[int] = []
-        self.values: list[Any] = []
-        self.outputs: dict[int, list] = {}
-
-    @property
-    def inputs(self) -> dict[int, deque]:
-        """The results not taken yet, by key, in order (for reading a record; the replay uses `take`)."""
-        out: dict[int, deque] = {}
-        for key, value in zip(self.keys, self.values, strict=True):
-            if key >= 0:
-                out.setdefault(key, deque()).append(value)
-        return out
-
-    def find(self, key: int) -> int:
-        """The index of the first result of `key` not taken yet, -1 when there is none."""
-        keys = self.keys
-        for i in range(len(keys)):
-            if keys[i] == key:
-                return i
-        return -1
-
-    def untaken(self) -> int:
-        """How many results were not taken."""
-        n = 0
-        for key in self.keys:
-            if key >= 0:
-                n += 1
-        return n
-
-
-class RecordReader:
-    """Reads a record: `header` at once, then `sections()` in time order; `footer` once they are all read."""
-
-    def __init__(self, path: Path) -> None:
-        """Open `path` and read its header (RecordError naming the offset when it is not a readable record)."""
-        self.path = path
-        try:
-            self._file = path.open("rb")
-        except OSError as e:
-            raise RecordError(f"record {path}: cannot be read ({e.strerror})") from None
-        try:
-            self.header: dict = read_header(self._file, path)
-        except BaseException:
-            self._file.close()
-            raise
-        self.footer: dict = {}
-
-    def close(self) -> None:
-        """Close the file."""
-        self._file.close()
-
-    def sections(self) -> Iterator[Section]:
-        """Every section in order (the events before the first job, if any, are dropped: there are none)."""
-        section: Section | None = None
-        try:
-            for offset, raw in read_chunks(self._file, self.path, self.footer):
-                for s in self._parse(offset, raw):
-                    if section is not None:
-                        yield section
-                    section = s
-        finally:
-            self._file.close()
-        if section is not None:
-            yield section
-
-    def _parse(self, offset: int, raw: bytes) -> list[Section]:
-        """The sections a chunk holds (a chunk starts with a job: the recorder cuts chunks there).
-
-        The common kinds are decoded here byte by byte (compiled: no call, no tuple); the others by their
-        struct (format.FIXED, format.VARIABLE).
-        """
-        pos, start, n = 0, 0, len(raw)
-        out: list[Section] = []
-        section: Section | None = None
-        try:
-            while pos < n:
-                start = pos
-                tag = raw[pos]
-                kind = tag >> 2
-                shape = _SHAPES[kind]
-                if shape < 0:
-                    raise RecordError(f"record {self.path}: unknown event kind {kind} in the chunk at byte "
-                                      f"offset {offset} (event byte {start})")
-                pos += 1
-                if shape == _S_JOB:
-                    section = Section(raw[pos], _u64(raw, pos + 1), _u32(raw, pos + 9))
-                    pos += 13
-                    out.append(section)
-                    continue
-                if section is None:
-                    raise RecordError(f"record {self.path}: the chunk at byte offset {offset} does not start "
-                                      "with a job")
-                key = tag
-                value: Any
-                if shape == _S_U8:
-                    value = raw[pos]
-                    pos += 1
-                elif shape == _S_U32:
-                    value = _u32(raw, pos)
-                    pos += 4
-                elif shape == _S_U64:
-                    value = _u64(raw, pos)
-                    pos += 8
-                elif shape == _S_PAIR:
-                    value = (_u32(raw, pos), _u32(raw, pos + 4))
-                    pos += 8
-                elif shape == _S_NONE:
-                    value = None
-                else:
-                    vals: tuple = ()
-                    if shape == _S_WRITE:
-                        vals = (raw[pos] | raw[pos + 1] << 8,)
-                        pos += 2
-                    elif shape != _S_READ:
-                        st = _STRUCTS[kind]
-                        vals = st.unpack_from(raw, pos)
-                        pos += st.size
-                    data = b""
-                    if shape != _S_FIXED:
-                        length = raw[pos] | raw[pos + 1] << 8
-                        pos += 2
-                        if pos + length > n:
-                            raise IndexError("short data")
-                        data = raw[pos:pos + length]
-                        pos += length
-                    if shape == _S_READ:
-                        value = data
-                    elif shape == _S_WRITE:
-                        value = (vals[0], data)
-                    elif kind == _RAISE:
-                        key, value = vals[0] << 2 | tag & 3, HalError(data.decode("utf-8", "replace"))
-                    elif kind == _CAN_RX:
-                        value = CanFrame(vals[1], data, bool(vals[0] & 2)) if vals[0] & 1 else None
-                    elif kind == _CAN_TX:
-                        value = (vals[0], CanFrame(vals[2], data, bool(vals[1])))
-                    elif len(vals) == 1:
-                        value = vals[0]
-                    else:
-                        value = vals
-                if _OUTPUTS[kind]:
-                    outs = section.outputs
-                    out_list = outs.get(key)
-                    if out_list is None:
-                        outs[key] = [value]
-                    else:
-                        out_list.append(value)
-                else:
-                    section.keys.append(key)
-                    section.values.append(value)
-        except (struct.error, IndexError):
-            raise RecordError(f"record {self.path}: the chunk at byte offset {offset} ends inside an event "
-                              f"(the event at byte {start} of the chunk)") from None
-        return out
-
-
-def _u32(raw: bytes, p: int) -> int:
-    return raw[p] | raw[p + 1] << 8 | raw[p + 2] << 16 | raw[p + 3] << 24
-
-
-def _u64(raw: bytes, p: int) -> int:
-    return _u32(raw, p) | _u32(raw, p + 4) << 32
-
-
-# How _parse decodes each kind: its shape (-1: no such kind), its struct, whether it is an output
-_S_JOB: Final = 0
-_S_U8: Final = 1
-_S_U32: Final = 2
-_S_U64: Final = 3
-_S_PAIR: Final = 4  # two u32
-_S_NONE: Final = 5
-_S_READ: Final = 6  # <H length + bytes
-_S_WRITE: Final = 7  # <H accepted, <H length + bytes
-_S_FIXED: Final = 8  # another fixed layout (its struct)
-_S_VARIABLE: Final = 9  # another fixed part + <H length + bytes (its struct)
-_BY_FORMAT: Final = {"<BQI": _S_JOB, "<B": _S_U8, "<I": _S_U32, "<Q": _S_U64, "<II": _S_PAIR, "": _S_NONE}
-
-
-def _shapes() -> tuple[list[int], list[Any], list[bool]]:
-    shapes: list[int] = [-1] * 64
-    structs: list[Any] = [None] * 64
-    outputs: list[bool] = [False] * 64
-    for k, st in FIXED.items():
-        shapes[k], structs[k] = _BY_FORMAT.get(st.format, _S_FIXED), st
-    for k, st in VARIABLE.items():
-        shapes[k], structs[k] = _S_VARIABLE, st
-    shapes[Kind.READ], shapes[Kind.WRITE] = _S_READ, _S_WRITE
-    assert VARIABLE[Kind.READ].format == "" and VARIABLE[Kind.WRITE].format == "<H"
-    for k in OUTPUT_KINDS:
-        outputs[k] = True
-    return shapes, structs, outputs
-
-
-_TABLES: Final = _shapes()
-_SHAPES: Final[list[int]] = _TABLES[0]
-_STRUCTS: Final[list[Any]] = _TABLES[1]
-_OUTPUTS: Final[list[bool]] = _TABLES[2]
-
-
-class Stream:
-    """The bytes one port carried, in the record and in the replay: counts and SHA-256 (hashed ~64 KB at a time).
-
-    `sink` (a binary file) receives the replayed bytes as they are hashed: the replay's telemetry.bin.
-    """
-
-    def __init__(self, sink: BinaryIO | None = None) -> None:
-        """Empty; `sink` gets the replayed bytes."""
-        self.expected_hash: Any = hashlib.sha256()
-        self.produced_hash: Any = hashlib.sha256()
-        self.expected = bytearray()
-        self.produced = bytearray()
-        self.expected_n = 0
-        self.produced_n = 0
-        self.sink = sink
-
-    def flush(self) -> None:
-        """Hash (and write to the sink) the pending bytes."""
-        if self.expected:
-            self.expected_hash.update(self.expected)
-            self.expected = bytearray()
-        if self.produced:
-            self.produced_hash.update(self.produced)
-            if self.sink is not None:
-                self.sink.write(self.produced)
-            self.produced = bytearray()
-
-    def as_dict(self) -> dict:
-        """Counts, digests and whether the replayed bytes are the recorded ones (flushes first)."""
-        self.flush()
-        same = self.expected_hash.digest() == self.produced_hash.digest() and self.expected_n == self.produced_n
-        return {"recorded_items": self.expected_n, "replayed_items": self.produced_n, "identical": same,
-                "recorded_sha256": self.expected_hash.hexdigest(), "replayed_sha256": self.produced_hash.hexdigest()}
 
 
 class ReplayBoard:
@@ -431,12 +153,6 @@ class ReplayBoard:
         return int(h[0]), int(h[1])
 
 
-def item_bytes_all(key: int, items: list) -> bytes:
-    """The bytes of a job's output items on one key, joined."""
-    if len(items) == 1:
-        return item_bytes(key, items[0])
-    return b"".join([item_bytes(key, item) for item in items])
-
 
 def replay_sections(replay: ReplayBoard, sections: Iterator[Section],
                     bodies: dict[int, tuple[Callable[[Job], object], Job]], control_task: int, stop_task: int,
@@ -470,133 +186,3 @@ def replay_sections(replay: ReplayBoard, sections: Iterator[Section],
         if progress is not None and jobs % 8192 == 0:
             progress(last)
     return jobs, last
-
-
-class ReplayUart(Uart):
-    """A UART that answers from the record and keeps what is written."""
-
-    def __init__(self, replay: ReplayBoard, port: int, baud: int, name: str) -> None:
-        """The recorded port's baud and name."""
-        super().__init__(baud, name)
-        self.replay, self.port = replay, port
-        self._write_key, self._read_key = Kind.WRITE << 2 | port, Kind.READ << 2 | port
-        self._rx_key, self._tx_key = Kind.IN_WAITING << 2 | port, Kind.TX_FREE << 2 | port
-        self._flush_key, self._errors_key = Kind.FLUSH << 2 | port, Kind.ERRORS << 2 | port
-
-    def _send(self, data: bytes) -> int:
-        key = self._write_key
-        replay = self.replay
-        s = replay.section
-        i = s.find(key)
-        if i >= 0 and isinstance(s.values[i], HalError):  # the recorded write raised
-            s.keys[i] = -1
-            raise HalError(str(s.values[i]))
-        accepted = replay.expected_accept(key, data)
-        replay.put(key, (accepted, data))
-        return accepted
-
-    def _receive(self, max_bytes: int) -> bytes:
-        data: bytes = self.replay.take(self._read_key, b"")
-        self.replay.last.pop(self._read_key, None)  # a starved read returns nothing, not the last bytes
-        return data
-
-    def _rx_count(self) -> int:
-        return int(self.replay.take(self._rx_key, 0))
-
-    def _tx_space(self) -> int:
-        return int(self.replay.take(self._tx_key, 1 << 12))
-
-    def _drain(self, timeout_s: float) -> bool:
-        return bool(self.replay.take(self._flush_key, True))
-
-    def _refresh_errors(self) -> None:
-        e = self.replay.take(self._errors_key, (0, 0, 0, 0, 0))
-        self._errors = UartErrors(*e)
-
-
-class ReplayEncoder(EncoderTimer):
-    """The encoder timer: recorded CNT and DIR readings; CNT writes kept."""
-
-    def __init__(self, replay: ReplayBoard, bits: int, arr: int) -> None:
-        """The recorded timer's width and auto-reload."""
-        super().__init__(bits, arr)
-        self.replay = replay
-
-    def cnt(self) -> int:
-        """The recorded CNT."""
-        return int(self.replay.take(_ENC_CNT_KEY, 0))
-
-    def counting_down(self) -> bool:
-        """The recorded DIR bit."""
-        return bool(self.replay.take(_ENC_DIR_KEY, False))
-
-    def _write_cnt(self, value: int) -> None:
-        self.replay.put(_ENC_SET_KEY, value)
-
-
-class ReplayPin(DigitalIn):
-    """The e-stop input: the recorded levels."""
-
-    def __init__(self, replay: ReplayBoard) -> None:
-        """Read from `replay`."""
-        self.replay = replay
-
-    def read(self) -> bool:
-        """The recorded level."""
-        return bool(self.replay.take(_ESTOP_KEY, False))
-
-
-class ReplayLed(DigitalOut):
-    """The status LED: levels kept for the comparison."""
-
-    def __init__(self, replay: ReplayBoard, initial: bool) -> None:
-        """Start at the recorded initial level."""
-        super().__init__(initial)
-        self.replay = replay
-
-    def _drive(self, level: bool) -> None:
-        self.replay.put(_LED_KEY, int(level))
-
-
-class ReplayWatchdog(Watchdog):
-    """The watchdog: kicks kept for the comparison."""
-
-    def __init__(self, replay: ReplayBoard) -> None:
-        """Kicks go to `replay`."""
-        self.replay = replay
-
-    def kick(self) -> None:
-        """Keep the kick."""
-        self.replay.put(_KICK_KEY, None)
-
-
-class ReplayCan(CanPort):
-    """The CAN port: recorded received frames; sent frames kept."""
-
-    def __init__(self, replay: ReplayBoard, bitrate: int) -> None:
-        """The recorded bus's bit rate."""
-        super().__init__(bitrate, "can (replay)")
-        self.replay = replay
-        port = PORTS["can"]
-        self._tx_key, self._rx_key = Kind.CAN_TX << 2 | port, Kind.CAN_RX << 2 | port
-        self._pending_key, self._flush_key = Kind.CAN_PENDING << 2 | port, Kind.CAN_FLUSH << 2 | port
-
-    def _send(self, frame: CanFrame) -> bool:
-        key = self._tx_key
-        recorded = self.replay.section.outputs.get(key, [])
-        done = self.replay.produced.get(key)
-        i = 0 if done is None else len(done)
-        ok = bool(recorded[i][0]) if i < len(recorded) else True
-        self.replay.put(key, (int(ok), frame))
-        return ok
-
-    def _receive(self) -> CanFrame | None:
-        frame: CanFrame | None = self.replay.take(self._rx_key, None)
-        self.replay.last.pop(self._rx_key, None)
-        return frame
-
-    def _tx_pending(self) -> int:
-        return int(self.replay.take(self._pending_key, 0))
-
-    def _drain(self, timeout_s: float) -> bool:
-        return bool(self.replay.take(self._flush_key, True))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hal.record.format import Kind
-from hal.record.replay import RecordReader
+from hal.record.reader import RecordReader
 from host_tools.recording import RECORD_NAME
 
 __all__ = ["COMMAND_DELAY_S", "WINDOW_S", "Experiment", "encoder_velocity", "load_experiment"]

@@ -20,7 +20,9 @@ from typing import BinaryIO
 from firmware.app import Firmware
 from firmware.config import TASK_NAMES, FirmwareConfig
 from hal.record.format import Kind, RecordError
-from hal.record.replay import RecordReader, ReplayBoard, Section, item_bytes, port_name, replay_sections
+from hal.record.reader import RecordReader, Section
+from hal.record.replay import ReplayBoard, replay_sections
+from hal.record.streams import item_bytes, port_name
 from host_tools.recording import INIT_TASK, RECORD_NAME, STOP_TASK, config_from_dict
 from host_tools.runner import gait_reference
 from rtos import Job

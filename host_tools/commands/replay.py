@@ -39,7 +39,7 @@ def _message_line(msgs: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     """Check the inputs, replay, write the outputs, print the verdict."""
     from hal.record.format import RecordError
-    from hal.record.replay import RecordReader
+    from hal.record.reader import RecordReader
     from host_tools.calibration.replay_run import find_record, replay_record
     from host_tools.outdir import OutDirError, RunDir, write_atomic
     from host_tools.recording import config_from_dict
