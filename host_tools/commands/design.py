@@ -61,12 +61,13 @@ def run(args: argparse.Namespace) -> int:
     Exit 2 for a bad spec, option or --out (before any run); 1 when a point gave no figures (error, timeout);
     128 + N after signal N (design.md holds the points finished so far; --resume runs the rest).
     """
+    from host_tools.command_errors import study_error
     from host_tools.studies.design_point import design_error_row, run_design_point
     from host_tools.studies.design_report import write_design_report
     from host_tools.studies.design_spec import load_design_spec
     from host_tools.studies.interrupt import Interrupted, interrupting
     from host_tools.studies.sweep_engine import dask_client, run_tasks
-    from host_tools.studies.sweep_table import check_out, read_rows
+    from host_tools.studies.sweep_table import JOURNAL, check_out, read_rows
 
     try:
         workers, where = study_cluster(args)
@@ -96,13 +97,11 @@ def run(args: argparse.Namespace) -> int:
         if rows:
             write_design_report(spec, points, rows, out, math.nan, f"{where}, stopped by {stop.signal}")
         return stop.exit_code
-    except ValueError as e:
-        print(f"pafp design: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:
-        what = f"cannot reach the Dask scheduler {args.scheduler}" if args.scheduler else "cannot write the results"
-        print(f"pafp design: {what}: {e}", file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as e:  # --out holds another study, a result file, the scheduler or the cluster
+        line, status = study_error("design", args.scheduler, e, f"every row finished before it is in {out}/{JOURNAL} "
+                                   "(--resume runs the rest)")
+        print(line, file=sys.stderr)
+        return status
     report = write_design_report(spec, points, outcome.rows, out, outcome.wall_time_s, where)
     errors = [r for r in outcome.rows if r["status"] not in ("ok", "fault")]
     print(f"  {outcome.ran} points run, {outcome.skipped} kept from before, in {outcome.wall_time_s:.1f} s; "

@@ -51,11 +51,12 @@ def _one_point(spec: object, index: int, out: Path) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Check the spec and criteria whole, run the points not yet finished, write the table and report.md."""
+    from host_tools.command_errors import study_error
     from host_tools.studies.fault_point import fault_error_row, run_fault_point
     from host_tools.studies.fault_report import check_criteria, load_criteria, write_fault_report
     from host_tools.studies.fault_spec import load_fault_spec
     from host_tools.studies.sweep_engine import dask_client, run_tasks
-    from host_tools.studies.sweep_table import check_out
+    from host_tools.studies.sweep_table import JOURNAL, check_out
 
     try:
         workers, where = study_cluster(args)
@@ -74,13 +75,11 @@ def run(args: argparse.Namespace) -> int:
         with dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_tasks(points, run_fault_point, out, client, columns=columns(), digest=spec.digest,
                                 error_row=fault_error_row, resume=args.resume, progress=not args.quiet)
-    except ValueError as e:
-        print(f"pafp faults: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:
-        what = f"cannot reach the Dask scheduler {args.scheduler}" if args.scheduler else "cannot write the results"
-        print(f"pafp faults: {what}: {e}", file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as e:  # --out holds another study, a result file, the scheduler or the cluster
+        line, status = study_error("faults", args.scheduler, e, f"every row finished before it is in {out}/{JOURNAL} "
+                                   "(--resume runs the rest)")
+        print(line, file=sys.stderr)
+        return status
     failures = check_criteria(outcome.rows, criteria)
     report = write_fault_report(spec, outcome.rows, out, failures, criteria, outcome.wall_time_s, where,
                                 traces=not args.no_traces)

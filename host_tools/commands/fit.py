@@ -35,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.calibration.fit_data import load_experiment
     from host_tools.calibration.fit_model import DEFAULT_FIT, PARAMS, load_base
     from host_tools.calibration.plant_fit import fit_plant
-    from host_tools.outdir import OutDirError, RunDir
+    from host_tools.command_errors import input_error
+    from host_tools.outdir import RunDir
     from profiles import profile_path
 
     try:
@@ -52,11 +53,8 @@ def run(args: argparse.Namespace) -> int:
         exp = load_experiment(args.run_dir)
         other = load_experiment(args.validate) if args.validate is not None else None
         run_dir = RunDir(args.out or args.run_dir / "fit")
-    except OSError as e:
-        print(f"pafp fit: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
-        return 2
-    except (ValueError, OutDirError) as e:  # RecordError is a ValueError
-        print(f"pafp fit: {e}", file=sys.stderr)
+    except (OSError, ValueError) as e:  # a file that cannot be read, a bad value (OutDirError, RecordError too)
+        print(input_error("fit", e), file=sys.stderr)
         return 2
     print(f"pafp fit: {args.run_dir}: {len(exp.t)} samples, {len(exp.t_cmd)} commands, fitting {len(names)} "
           f"parameters -> {run_dir.out}", flush=True)

@@ -41,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
     from hal.record.format import RecordError
     from hal.record.reader import RecordReader
     from host_tools.calibration.replay_run import find_record, replay_record
-    from host_tools.outdir import OutDirError, RunDir, write_atomic
+    from host_tools.command_errors import input_error
+    from host_tools.outdir import RunDir, write_atomic
     from host_tools.recording import config_from_dict
 
     out = args.out or Path("runs") / (time.strftime("%Y%m%d-%H%M%S") + "-replay")
@@ -64,11 +65,8 @@ def run(args: argparse.Namespace) -> int:
             controller = build_controller(fw_cfg.controller, fw_cfg, dict(fw_cfg.controller_params))
         changed = args.profile is not None or args.controller is not None
         run_dir = RunDir(out)
-    except OSError as e:
-        print(f"pafp replay: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
-        return 2
-    except (ValueError, OutDirError) as e:  # RecordError is a ValueError
-        print(f"pafp replay: {e}", file=sys.stderr)
+    except (OSError, ValueError) as e:  # a file that cannot be read, a bad value (OutDirError, RecordError too)
+        print(input_error("replay", e), file=sys.stderr)
         return 2
     print(f"pafp replay: {path} ({header.header.get('mode')} run)"
           + (" with a changed configuration" if changed else "") + f" -> {out}")

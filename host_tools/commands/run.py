@@ -167,7 +167,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_serial(args)
     args.strides = STRIDES if args.strides is None else args.strides
     args.body_mass = BODY_MASS_KG if args.body_mass is None else args.body_mass
-    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, check_capture_dir, write_failed
+    from host_tools.command_errors import input_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, RunDir, check_capture_dir, write_failed
     from host_tools.runner import RunConfig, board_profile
 
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
@@ -202,11 +203,8 @@ def run(args: argparse.Namespace) -> int:
         if args.capture is not None:
             check_capture_dir(args.capture)
         run_dir = RunDir(out)  # --out checked and the staging directory made: before the run
-    except OSError as e:
-        print(f"pafp run: cannot read {e.filename}: {e.strerror}", file=sys.stderr)
-        return 2
-    except (ValueError, OutDirError) as e:
-        print(f"pafp run: {e}", file=sys.stderr)
+    except (OSError, ValueError) as e:  # a file that cannot be read, a bad value (OutDirError too)
+        print(input_error("run", e), file=sys.stderr)
         return 2
     try:
         return _run_virtual(args, cfg, run_dir)

@@ -55,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     sweep (the journal keeps every row written before); 128 + N after signal N (the report says how far the
     sweep got; --resume finishes it).
     """
+    from host_tools.command_errors import study_error
     from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.studies.interrupt import Interrupted, interrupting
     from host_tools.studies.sweep_engine import check_points, dask_client, run_sweep
@@ -79,18 +80,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_sweep(spec, out, client, resume=args.resume, progress=not args.quiet)
-    except ValueError as e:  # --out holds another sweep, or rows without --resume
-        print(f"pafp sweep: {e}", file=sys.stderr)
-        return 2
     except Interrupted as stop:  # the table was flushed and the cluster closed on the way out
         return _interrupted(spec, out, read_rows(out), stop, where)
-    except OSError as e:
-        if e.filename is not None:  # a result file (the tables name theirs)
-            print(write_failed("sweep", e, kept), file=sys.stderr)
-            return EXIT_WRITE_FAILED
-        what = f"cannot reach the Dask scheduler {args.scheduler}" if args.scheduler else "cannot start the cluster"
-        print(f"pafp sweep: {what}: {e}", file=sys.stderr)
-        return 2
+    except (ValueError, OSError) as e:  # --out holds another sweep, a result file, the scheduler or the cluster
+        line, status = study_error("sweep", args.scheduler, e, kept)
+        print(line, file=sys.stderr)
+        return status
     try:
         report = write_report(spec, outcome.rows, out, wall_time_s=outcome.wall_time_s, where=where)
     except OSError as e:

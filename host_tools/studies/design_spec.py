@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from firmware.config import DEFAULT_PROFILE
-from host_tools.studies.spec_values import read_spec, spec_int, spec_list, spec_number, spec_range_error
+from host_tools.studies.spec_values import SpecValues
 from host_tools.studies.sweep_spec import SpecError
 
 __all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "WalkCriteria", "load_design_spec", "pick_battery"]
@@ -176,22 +176,8 @@ def pick_battery(name: str, motor: str) -> str:
 
 
 KIND = "design spec"
-
-
-def _err(path: Path, where: str, value: object, allowed: str) -> SpecError:
-    return spec_range_error(KIND, path, where, value, allowed)
-
-
-def _number(path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
-    return spec_number(KIND, path, where, v, lo, hi, low_open)
-
-
-def _int(path: Path, where: str, v: object, lo: int, hi: int) -> int:
-    return spec_int(KIND, path, where, v, lo, hi)
-
-
-def _list(path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
-    return spec_list(KIND, path, "[search]", doc, key, default)
+_SPEC = SpecValues(KIND, "[search]")
+_err, _number, _int, _list = _SPEC.error, _SPEC.number, _SPEC.integer, _SPEC.nonempty_list
 
 
 def _names(path: Path, key: str, values: list[Any], known: list[str], extra: tuple[str, ...] = ()) -> tuple[str, ...]:
@@ -269,7 +255,7 @@ def load_design_spec(path: Path) -> DesignSpec:
     """Read and check a search spec and build every design's profile; SpecError (one line naming the file, the
     key, the value and the allowed range) otherwise."""
     path = Path(path)
-    text, doc = read_spec(KIND, path, ("[search]", "[[belt]]", "[[spring]]"))
+    text, doc = _SPEC.read(path, ("[search]", "[[belt]]", "[[spring]]"))
     s = doc.get("search", {})
     bad = sorted(set(s) - set(SEARCH_KEYS))
     if bad:

@@ -37,7 +37,7 @@ from typing import Any
 from firmware.config import DEFAULT_PROFILE
 from firmware.drivers.motor_links import MOTOR_LINKS
 from hal.virtual.faults import INJECTORS, injector_class, make_injector
-from host_tools.studies.spec_values import read_spec, spec_list, spec_number, spec_range_error
+from host_tools.studies.spec_values import SpecValues
 from host_tools.studies.sweep_spec import SpecError
 from profiles import profile_path
 
@@ -114,24 +114,14 @@ class FaultSpec:
 
 
 KIND = "fault spec"
-
-
-def _err(path: Path, where: str, value: object, allowed: str) -> SpecError:
-    return spec_range_error(KIND, path, where, value, allowed)
-
-
-def _number(path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
-    return spec_number(KIND, path, where, v, lo, hi, low_open)
-
-
-def _list(path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
-    return spec_list(KIND, path, "[campaign]", doc, key, default)
+_SPEC = SpecValues(KIND, "[campaign]")
+_err, _number, _list = _SPEC.error, _SPEC.number, _SPEC.nonempty_list
 
 
 def load_fault_spec(path: Path) -> FaultSpec:
     """Read and check a campaign spec; SpecError (one line naming the value, the key and the range) otherwise."""
     path = Path(path)
-    text, doc = read_spec(KIND, path, ("[campaign]", "[[scenario]]", "[[fault]]"))
+    text, doc = _SPEC.read(path, ("[campaign]", "[[scenario]]", "[[fault]]"))
     camp = doc.get("campaign", {})
     bad = sorted(set(camp) - set(CAMPAIGN_KEYS))
     if bad:

@@ -1,5 +1,7 @@
 """Checks shared by the study specs read from TOML (`pafp faults`, `pafp design`): each failure is one SpecError line
-``<kind> <path>: <where> = <value> out of range: <allowed>``, where kind names the spec ("fault spec", ...)."""
+``<kind> <path>: <where> = <value> out of range: <allowed>``, where kind names the spec ("fault spec", ...).
+
+A spec module makes one `SpecValues` (its kind and the table its lists sit in) and uses its checks."""
 
 from __future__ import annotations
 
@@ -10,55 +12,59 @@ from typing import Any
 
 from host_tools.studies.sweep_spec import SpecError
 
-__all__ = ["read_spec", "spec_int", "spec_list", "spec_number", "spec_range_error"]
+__all__ = ["SpecValues"]
 
 
-def spec_range_error(kind: str, path: Path, where: str, value: object, allowed: str) -> SpecError:
-    """The one-line error of a value out of range."""
-    return SpecError(f"{kind} {path}: {where} = {value!r} out of range: {allowed}")
+class SpecValues:
+    """The checks of one kind of spec ("fault spec"), whose lists sit in ``table`` ("[campaign]")."""
 
+    def __init__(self, kind: str, table: str) -> None:
+        """Errors name `kind`; `nonempty_list` names `table`."""
+        self.kind = kind
+        self.table = table
 
-def spec_number(kind: str, path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
-    """v as a float when it is a finite number in [lo, hi] (``(lo, hi]`` when low_open).
+    def error(self, path: Path, where: str, value: object, allowed: str) -> SpecError:
+        """The one-line error of a value out of range."""
+        return SpecError(f"{self.kind} {path}: {where} = {value!r} out of range: {allowed}")
 
-    >>> spec_number("x spec", Path("s.toml"), "[a] b", 2.0, 0.0, 1.0)
-    Traceback (most recent call last):
-    ...
-    host_tools.studies.sweep_spec.SpecError: x spec s.toml: [a] b = 2.0 out of range: a number in [0, 1]
-    """
-    ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-          and (lo < v if low_open else lo <= v) and v <= hi)
-    if not ok:
-        raise spec_range_error(kind, path, where, v, f"a number in {'(' if low_open else '['}{lo:g}, {hi:g}]")
-    return float(v)  # type: ignore[arg-type]
+    def number(self, path: Path, where: str, v: object, lo: float, hi: float, low_open: bool = False) -> float:
+        """v as a float when it is a finite number in [lo, hi] (``(lo, hi]`` when low_open).
 
+        >>> SpecValues("x spec", "[a]").number(Path("s.toml"), "[a] b", 2.0, 0.0, 1.0)
+        Traceback (most recent call last):
+        ...
+        host_tools.studies.sweep_spec.SpecError: x spec s.toml: [a] b = 2.0 out of range: a number in [0, 1]
+        """
+        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+              and (lo < v if low_open else lo <= v) and v <= hi)
+        if not ok:
+            raise self.error(path, where, v, f"a number in {'(' if low_open else '['}{lo:g}, {hi:g}]")
+        return float(v)  # type: ignore[arg-type]
 
-def spec_int(kind: str, path: Path, where: str, v: object, lo: int, hi: int) -> int:
-    """v when it is an int (not a bool) in lo..hi."""
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        raise spec_range_error(kind, path, where, v, f"an int in {lo}..{hi}")
-    return v
+    def integer(self, path: Path, where: str, v: object, lo: int, hi: int) -> int:
+        """v when it is an int (not a bool) in lo..hi."""
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise self.error(path, where, v, f"an int in {lo}..{hi}")
+        return v
 
+    def nonempty_list(self, path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
+        """doc[key] (default if absent) when it is a non-empty list without repeats (doc is the spec's table)."""
+        v = doc.get(key, default)
+        if not isinstance(v, list) or not v:
+            raise self.error(path, f"{self.table} {key}", v, "a non-empty list")
+        if len(set(map(repr, v))) != len(v):
+            raise self.error(path, f"{self.table} {key}", v, "a list without repeats")
+        return v
 
-def spec_list(kind: str, path: Path, table: str, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
-    """doc[key] (default if absent) when it is a non-empty list without repeats; ``table`` names doc ("[campaign]")."""
-    v = doc.get(key, default)
-    if not isinstance(v, list) or not v:
-        raise spec_range_error(kind, path, f"{table} {key}", v, "a non-empty list")
-    if len(set(map(repr, v))) != len(v):
-        raise spec_range_error(kind, path, f"{table} {key}", v, "a list without repeats")
-    return v
-
-
-def read_spec(kind: str, path: Path, tables: tuple[str, ...]) -> tuple[str, dict[str, Any]]:
-    """(the text, the parsed TOML) of a spec whose top-level tables are among ``tables`` (``"[[fault]]"`` for an
-    array of tables)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-        doc = tomllib.loads(text)
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise SpecError(f"{kind} {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
-    unknown = sorted(set(doc) - {t.strip("[]") for t in tables})
-    if unknown:
-        raise SpecError(f"{kind} {path}: table {unknown[0]!r} unknown: {', '.join(tables)}")
-    return text, doc
+    def read(self, path: Path, tables: tuple[str, ...]) -> tuple[str, dict[str, Any]]:
+        """(the text, the parsed TOML) of a spec whose top-level tables are among ``tables`` (``"[[fault]]"`` for an
+        array of tables)."""
+        try:
+            text = path.read_text(encoding="utf-8")
+            doc = tomllib.loads(text)
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+            raise SpecError(f"{self.kind} {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
+        unknown = sorted(set(doc) - {t.strip("[]") for t in tables})
+        if unknown:
+            raise SpecError(f"{self.kind} {path}: table {unknown[0]!r} unknown: {', '.join(tables)}")
+        return text, doc
