@@ -58,6 +58,24 @@ def test_bus_sags_by_i_r_and_coulombs_are_counted() -> None:
     assert b.loss_j == pytest.approx(4.2**2 * p.resistance_ohm * 360)
 
 
+def test_a_sag_caps_the_emf_behind_the_pack_resistance_and_ends() -> None:
+    """The supply_sag fault's hook: E is at most the sag voltage, the bus is E - R I, the charge still counts."""
+    b = Battery(load_battery("molicel_p42a_6s1p"), soc=0.8)
+    full = b.open_circuit_v()
+    b.sag(7.0)
+    assert b.open_circuit_v() == 7.0
+    soc = b.soc
+    assert b.step_current(1.0, 2.0) == pytest.approx(7.0 - 2.0 * b.params.resistance_ohm)
+    assert b.soc < soc
+    b.sag(100.0)  # above the pack's EMF: no effect
+    assert b.open_circuit_v() == pytest.approx(b.params.open_circuit_v(b.soc))
+    b.sag(None)
+    assert b.open_circuit_v() == pytest.approx(b.params.open_circuit_v(b.soc)) and b.open_circuit_v() < full
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="sag voltage"):
+            b.sag(bad)
+
+
 def test_power_solve_gives_the_requested_terminal_power_and_detects_overload() -> None:
     b = Battery(_pack(), soc=0.5)
     for power in (5.0, 100.0, 400.0, -50.0):

@@ -127,3 +127,20 @@ def test_rewrite_frames_touches_whole_frames_only():
     assert rewrite_frames(b"banner\r\n", lambda fr: fr) == b"banner\r\n"
     assert rewrite_frames(f[:10], lambda fr: fr) == f[:10]
     assert not math.isnan(RvcFrame.from_bytes(out[19:]).pitch_rad)
+
+
+@pytest.mark.parametrize("battery", ["molicel_p42a_6s1p", "molicel_p42a_12s1p"])
+def test_supply_sag_acts_on_a_fitted_battery(battery):
+    """With a battery the sag caps the pack's EMF in its window: the driver's input falls below its 8 V
+    under-voltage trip as on the fixed supply, the supervisor latches MOTOR_FAULT and the safe command leaves
+    the wire; after the window the pack is itself again."""
+    logging.getLogger("firmware.safety").setLevel(logging.ERROR)
+    fault, obs = make_injector("supply_sag", ONSET_S, DURATION_S, seed=3), Observer()
+    r = run_virtual(RunConfig(strides=1, trace_capacity=0, faults=(obs, fault), duration_s=RUN_S, battery=battery))
+    pack = r.heat["battery"]
+    assert pack is not None and pack.emf_limit_v is None  # recovered at the window's end (1.8 s < RUN_S)
+    sup = r.firmware.supervisor
+    assert fault.record.fired and fault.record.what
+    assert sup.reason.name == "MOTOR_FAULT" and ONSET_S <= sup.tripped_at_s < ONSET_S + DURATION_S
+    safe = obs.safe_on_wire_s(sup.tripped_at_s)
+    assert safe is not None and sup.tripped_at_s < safe < sup.tripped_at_s + 0.005

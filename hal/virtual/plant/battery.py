@@ -129,10 +129,20 @@ class Battery:
         self.regenerated_j = 0.0     # energy accepted at the terminals from regeneration
         self.rejected_j = 0.0        # regeneration the pack could not take
         self.loss_j = 0.0            # I^2 R in the pack
+        self.emf_limit_v: float | None = None
+        """A supply sag (a weak cell, a loose lead): the pack's EMF is at most this; None: its OCV."""
 
     def open_circuit_v(self) -> float:
-        """Open-circuit voltage at the present state of charge."""
-        return self.params.open_circuit_v(self.soc)
+        """Open-circuit voltage at the present state of charge (at most ``emf_limit_v`` during a sag)."""
+        e = self.params.open_circuit_v(self.soc)
+        limit = self.emf_limit_v
+        return e if limit is None or e <= limit else limit
+
+    def sag(self, voltage_v: float | None) -> None:
+        """From now on the pack's EMF is at most ``voltage_v`` (>= 0) behind its own resistance; None ends the sag."""
+        if voltage_v is not None and not (math.isfinite(voltage_v) and voltage_v >= 0.0):
+            raise ValueError(f"battery sag voltage {voltage_v!r} is outside the allowed range: a finite number >= 0")
+        self.emf_limit_v = voltage_v
 
     @property
     def empty(self) -> bool:
