@@ -136,3 +136,36 @@ def test_speed_picks_the_speed_groups_moment_and_reference():
     assert a.firmware.reference.sample(0.3)[0] != b.firmware.reference.sample(0.3)[0]
     with pytest.raises(ValueError, match="speed 'warp' unknown"):
         RunConfig(speed="warp")
+
+
+def test_keeps_up_to_leaves_the_instants_beyond_the_no_load_speed_to_the_speed_envelope():
+    """A drive whose no-load speed is below the walk's peak speed: the limit mass is the largest whose demand stays
+    in the envelope at every stance instant the motor can reach (it was 0 kg: one unreachable instant gave 0)."""
+    import dataclasses
+
+    from host_tools.reports.actuator import Drive, _demand
+
+    params = dataclasses.replace(load_plant_params(), supply_voltage_v=11.0)  # no-load 52 rpm at the ankle
+    ref = GaitReference.normative(stride_s=1.1)
+    check = design_check(params, 12.0, walking_load(80.0, 1.1), ref, masses_kg=())
+    speed_env, keeps = check["speed_envelope"], check["keeps_up_to_body_mass_kg"]
+    assert speed_env["no_load_speed_rpm"] < speed_env["peak_demand_speed_rpm"] == check["demand"]["peak_speed_rpm"]
+    assert 0.0 < speed_env["stance_fraction_above_no_load"] < 0.1
+    assert 0.0 < speed_env["stride_fraction_above_no_load"] < 0.1
+    drive, load = Drive.from_params(params, 12.0), walking_load(80.0, 1.1)
+    for name, current in (("peak", drive.peak_current_a), ("control_limit", 12.0),
+                          ("continuous", drive.rated_current_a)):
+        limit_kg = keeps[name]
+        assert limit_kg > 0.1
+        for mass, inside in ((limit_kg - 0.06, True), (limit_kg + 0.06, False)):  # the figure is rounded to 0.1 kg
+            _, torque, speed = _demand(load, ref, mass)
+            reach = (np.abs(torque) > 0) & (np.abs(speed) < drive.no_load_speed_rad_s)
+            assert bool(np.all(np.abs(torque[reach]) <= drive.torque_nm(speed[reach], current))) == inside, (name, mass)
+
+
+def test_a_drive_within_the_speed_envelope_counts_no_instant_apart():
+    check = design_check(load_plant_params(), 12.0, walking_load(80.0, 1.1), GaitReference.normative(stride_s=1.1),
+                         masses_kg=())
+    assert check["speed_envelope"]["stance_fraction_above_no_load"] == 0.0
+    assert check["speed_envelope"]["stride_fraction_above_no_load"] == 0.0
+    assert check["keeps_up_to_body_mass_kg"]["peak"] == pytest.approx(34.6, abs=0.5)

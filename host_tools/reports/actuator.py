@@ -8,6 +8,11 @@ torque at an ankle speed w: ``min(I x Kt N eta, (V - Ke w N) / R x Kt N eta)`` f
 back-EMF limit of the 24 V supply, whichever is lower. Power: mechanical ``|torque w|``, electrical
 ``I^2 R + Kt w N I`` for the motor current the torque needs (the rotor's torque times its speed plus the
 copper loss).
+
+"Keeps up to": the largest body mass whose demand torque stays within the deliverable torque at every
+torque-bearing instant of the stride whose demanded speed is below the no-load speed. The instants at or above
+it (the demand's speed does not scale with mass, and the motor gives no torque there at any current) bound no
+mass: they are counted apart (``speed_envelope``), and the figure is None when no instant is left.
 """
 
 from __future__ import annotations
@@ -89,12 +94,29 @@ def _one_mass(drive: Drive, load: WalkingLoad, reference: GaitReference, mass_kg
     }
 
 
-def _keeps_up_to_kg(drive: Drive, load: WalkingLoad, reference: GaitReference, current_a: float) -> float:
-    """The largest body mass whose demand stays within the envelope at current_a (demand scales with mass)."""
+def _keeps_up_to_kg(drive: Drive, load: WalkingLoad, reference: GaitReference, current_a: float) -> float | None:
+    """The largest body mass whose demand stays within the envelope at current_a over the instants the motor can
+    reach (demand torque scales with mass, speed does not): the instants at or above the no-load speed bound no mass
+    (no torque there at any current) and are counted apart (`_speed_envelope`). None when no torque-bearing
+    instant is below the no-load speed."""
     _, torque, speed = _demand(load, reference, 1.0)
     per_kg = np.abs(torque)
-    ok = per_kg > 0
+    ok = (per_kg > 0) & (np.abs(speed) < drive.no_load_speed_rad_s)
+    if not ok.any():
+        return None
     return round(float(np.min(drive.torque_nm(speed[ok], current_a) / per_kg[ok])), 1)
+
+
+def _speed_envelope(drive: Drive, load: WalkingLoad, reference: GaitReference) -> dict:
+    """The instants whose demanded ankle speed is at or above the no-load speed: shares of the stride and of its
+    torque-bearing (stance) instants, and the demand's peak speed against the no-load speed."""
+    _, torque, speed = _demand(load, reference, 1.0)
+    above = np.abs(speed) >= drive.no_load_speed_rad_s
+    stance = np.abs(torque) > 0
+    return {"no_load_speed_rpm": round(drive.no_load_speed_rad_s * _RPM, 1),
+            "peak_demand_speed_rpm": round(float(np.abs(speed).max() * _RPM), 1),
+            "stride_fraction_above_no_load": round(float(above.mean()), 4),
+            "stance_fraction_above_no_load": round(float(above[stance].mean()), 4) if stance.any() else 0.0}
 
 
 def design_check(params: PlantParams, control_limit_a: float, load: WalkingLoad, reference: GaitReference,
@@ -117,6 +139,7 @@ def design_check(params: PlantParams, control_limit_a: float, load: WalkingLoad,
             "peak": _keeps_up_to_kg(drive, load, reference, drive.peak_current_a),
             "continuous": _keeps_up_to_kg(drive, load, reference, drive.rated_current_a),
             "control_limit": _keeps_up_to_kg(drive, load, reference, control_limit_a)},
+        "speed_envelope": _speed_envelope(drive, load, reference),
         "by_body_mass": [_one_mass(drive, load, reference, m) for m in masses_kg],
     }
 
@@ -220,7 +243,10 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
         check["run"].update(stance_moment_share(t_s, current_meas_a, ff.torque_constant_nm_per_a * ff.gear_ratio
                                                 * ff.efficiency, load, start, end))
     plot_design_check(out / "actuator.png", check, params, load, fw.reference)
-    d, dm, k = check["drive"], check["demand"], check["keeps_up_to_body_mass_kg"]
+    d, dm, k, se = check["drive"], check["demand"], check["keeps_up_to_body_mass_kg"], check["speed_envelope"]
+    beyond = (f" (not counting the {se['stance_fraction_above_no_load']} of the stance that asks for the no-load "
+              f"speed {se['no_load_speed_rpm']} rpm or more, up to {se['peak_demand_speed_rpm']} rpm: no torque "
+              "there at any mass)" if se["stance_fraction_above_no_load"] > 0 else "")
     lines = ["", f"## Actuator design check (walking, {cfg.body_mass_kg:g} kg)", "",
              f"Deliverable at the ankle: peak {d['peak_torque_nm']} N·m ({d['peak_current_a']} A), continuous "
              f"{d['continuous_torque_nm']} N·m ({d['rated_current_a']} A), firmware limit "
@@ -230,7 +256,8 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
              f"{dm['peak_torque_nm']} N·m, {dm['peak_speed_rpm']} rpm, mechanical "
              f"{dm['peak_mechanical_power_w']} W, "
              f"electrical {dm['peak_electrical_power_w']} W. It keeps up to {k['peak']} kg at peak current, "
-             f"{k['control_limit']} kg at the firmware limit, {k['continuous']} kg continuously. In this run the "
+             f"{k['control_limit']} kg at the firmware limit, {k['continuous']} kg continuously{beyond}. In this run "
+             f"the "
              f"command sat at the current limit {check['run']['saturated_fraction']} (within 5 % of it "
              f"{check['run']['near_limit_fraction']}) of the "
              f"{check['run']['seconds_walked']} s walked (until a fault, if any). Plot: `actuator.png`.", "",
