@@ -14,6 +14,8 @@ The blocks:
   the workers (docs/sweeps.md), so these are the sweep's rows.
 * ``motor_catalogue`` (docs/design.md): every ``profiles/motors/`` file with its winding figures from
   ``hal.virtual.plant.thermal`` and every ``profiles/batteries/`` pack.
+* ``over_temperature_row`` (docs/safety.md): the hazard table's OVER_TEMPERATURE row, from the hot walk and its
+  pair (``host_tools.studies.fault_heat``).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from typing import Any
 __all__ = ["BLOCKS", "FILES", "check", "render", "write"]
 
 ROOT = Path(__file__).resolve().parents[2]
-FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md")
+FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md", "docs/safety.md")
 """The Markdown files (relative to the checkout) that hold generated blocks."""
 
 
@@ -128,8 +130,16 @@ def motor_catalogue() -> str:
     return "\n".join(lines)
 
 
+def over_temperature_row() -> str:
+    """The hazard table's OVER_TEMPERATURE row (docs/safety.md)."""
+    from host_tools.studies.fault_heat import hot_walk_table
+
+    return hot_walk_table()
+
+
 BLOCKS: dict[str, Callable[[], str]] = {"baud_gains": baud_gains, "baud_gains_summary": baud_gains_summary,
-                                        "motor_catalogue": motor_catalogue}
+                                        "motor_catalogue": motor_catalogue,
+                                        "over_temperature_row": over_temperature_row}
 
 
 def _pattern(name: str) -> re.Pattern[str]:

@@ -107,9 +107,9 @@ def _stride_of(p: FaultPoint) -> float:
     return float(_firmware(p).stride_s)
 
 
-def figures(p: FaultPoint, onset_s: float, faulted: dict[str, np.ndarray], base: dict[str, np.ndarray],
-            trip_s: float | None, reason: str, safe_s: float | None) -> dict[str, Any]:
-    """The point's figures from the two runs' observer arrays (see the module docstring)."""
+def figures(onset_s: float, faulted: dict[str, np.ndarray], base: dict[str, np.ndarray], trip_s: float | None,
+            reason: str, safe_s: float | None) -> dict[str, Any]:
+    """A point's figures from the two runs' observer arrays (see the module docstring)."""
     from hal.virtual.plant import load_plant_params
 
     n = min(len(faulted["t_s"]), len(base["t_s"]))
@@ -192,7 +192,6 @@ def run_fault_point(p: FaultPoint) -> dict[str, Any]:
     row = _base_row(p)
     row.update({"status": "ok", "error": "", "onset_s": round(onset_s, 6), "fired": True,
                 "fired_first_s": rec.first_s, "fired_count": rec.count, "fired_what": rec.what})
-    row.update(figures(p, onset_s, obs.arrays(), base, trip_s, sup.reason.name if trip_s is not None else "",
-                       safe_s))
+    row.update(figures(onset_s, obs.arrays(), base, trip_s, sup.reason.name if trip_s is not None else "", safe_s))
     row.update({"sim_time_s": round(r.sim_time_s, 6), "wall_time_s": round(time.perf_counter() - t0, 4)})
     return row
