@@ -106,8 +106,12 @@ def test_too_little_excitation_is_not_identifiable(tmp_path):
                  "--no-trace", "--out", str(run)]) == 0
     assert main(["fit", str(run), "--no-plot"]) == 0
     p = json.loads((run / "fit" / "fit.json").read_text())["params"]
-    for name in ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "current_time_constant_s"):
+    for name in ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad"):
         assert not p[name]["identifiable"], (name, p[name])
+    # the driver's lag shows in the current's response to the hold's own commands: not a number, or a right one
+    lag = p["current_time_constant_s"]
+    true_lag = load_plant_params().current_time_constant_s
+    assert not lag["identifiable"] or abs(lag["value"] - true_lag) <= lag["ci95_half_width"], lag
     text = (run / "fit" / "plant_fitted.toml").read_text()
     assert "output_inertia_kg_m2 not identifiable (kept)" in text
     assert main(["fit", str(run), "--no-plot"]) == 0  # a second fit replaces the first one's directory
