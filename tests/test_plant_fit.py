@@ -115,3 +115,14 @@ def test_too_little_excitation_is_not_identifiable(tmp_path):
     text = (run / "fit" / "plant_fitted.toml").read_text()
     assert "output_inertia_kg_m2 not identifiable (kept)" in text
     assert main(["fit", str(run), "--no-plot"]) == 0  # a second fit replaces the first one's directory
+
+
+def test_fit_reports_its_noise_scales_and_the_samples_left_out(experiment):
+    """Each signal is weighed by its own residual RMS (fit.json, fit.md); on the virtual bench every used sample's
+    current has a simulated counterpart, so none is left out."""
+    _, _, out, _ = experiment
+    s = json.loads((out / "fit.json").read_text())
+    ns = s["noise_scales"]
+    assert 0.005 < ns["angle_deg"] < 0.1 and 0.001 < ns["current_a"] < 0.1 and 0.01 < ns["imu_deg"] < 0.5, ns
+    assert s["current_samples_without_simulation"] == {"fit": 0, "held_out": 0}
+    assert "Residuals weighed by each signal's own RMS" in (out / "fit.md").read_text()

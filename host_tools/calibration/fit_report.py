@@ -164,6 +164,12 @@ def _markdown(s: dict) -> str:
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():
         lines.append(f"| {seg} | {d['angle']} | {d['current']} | {d['imu']} |")
+    ns, unheard = s["noise_scales"], s["current_samples_without_simulation"]
+    lines += ["", "Residuals weighed by each signal's own RMS at the first solution: angle "
+              f"{_g(ns['angle_deg'], '.3g')} deg, current {_g(ns['current_a'], '.3g')} A, IMU "
+              f"{_g(ns['imu_deg'], '.3g')} deg. Samples whose current has no simulated counterpart, left out of "
+              f"the current: {unheard.get('fit', 0)} (fit), "
+              f"{unheard.get('held_out', 0)} (held out)."]
     lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals), "
               "`correlations.png`. The fitted profile is `plant_fitted.toml`: `pafp run --plant` takes it."]
     return "\n".join(lines) + "\n"
