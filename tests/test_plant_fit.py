@@ -126,3 +126,13 @@ def test_fit_reports_its_noise_scales_and_the_samples_left_out(experiment):
     assert 0.005 < ns["angle_deg"] < 0.1 and 0.001 < ns["current_a"] < 0.1 and 0.01 < ns["imu_deg"] < 0.5, ns
     assert s["current_samples_without_simulation"] == {"fit": 0, "held_out": 0}
     assert "Residuals weighed by each signal's own RMS" in (out / "fit.md").read_text()
+
+
+def test_the_lag_and_the_backlash_alone_are_fitted(experiment, tmp_path):
+    """--params with only the two that the first solution leaves out: the lag is fitted alone first."""
+    _, run, _, _ = experiment
+    assert main(["fit", str(run), "--params", "backlash_deg,current_time_constant_s", "--no-plot",
+                 "--out", str(tmp_path / "fit")]) == 0
+    p = json.loads((tmp_path / "fit" / "fit.json").read_text())["params"]
+    assert set(p) == {"backlash_deg", "current_time_constant_s"}
+    assert p["current_time_constant_s"]["identifiable"], p

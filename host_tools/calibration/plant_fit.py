@@ -103,6 +103,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:
     # 0.28 ms for 1.14 ms with a backlash of 0.55 deg for none) and the second fit starts from there
     first_names = tuple(n for n in names if n not in ("backlash_deg", "current_time_constant_s"))
+    if not first_names:  # only the lag (and the backlash) asked for: the lag alone first
+        first_names = tuple(n for n in names if n != "backlash_deg")
     scales = dict(SIGMA)
     last: list[tuple[tuple[str, ...], np.ndarray, np.ndarray]] = []
 
