@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from hal.virtual.plant import load_plant_params
 from host_tools.cli import main
 from host_tools.runner import RunConfig
 
@@ -24,14 +25,23 @@ QUIET = ["--quiet", "--no-plot", "--no-trace"]
 
 
 def truth_of(plant: list[str]) -> dict[str, float]:
-    """The bench's true values of the fit parameters (emulation only: the test's yardstick, never the fit's input)."""
+    """The bench's true values of the fit parameters (emulation only: the test's yardstick, never the fit's input).
+
+    The torques (inertia, damping, friction, gravity) are in the base profile's torque per ampere, as the fit
+    reports them: the current is the bench's only torque measure, so the fit sees each torque over the true
+    torque per ampere times the base's (docs/calibration.md: the torque constant's scale is not identifiable).
+    Seed 7 draws a torque per ampere 0.11 % above the base's (Kt, gearbox and belt efficiencies): within the
+    gravity moment's interval of about 0.07 % that is what tells the two apart.
+    """
     cfg = RunConfig(plant_file=Path(plant[1]) if plant[0] == "--plant" else None,
                     plant_seed=int(plant[1]) if plant[0] == "--plant-seed" else None)
     options, _ = cfg.bench_setup()
     p = options["plant_params"]
-    return {"output_inertia_kg_m2": p.output_inertia_kg_m2, "foot_damping_nm_s_per_rad": p.foot_damping_nm_s_per_rad,
-            "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
-            "gravity_moment_nm": p.gravity_moment_nm, "current_time_constant_s": p.current_time_constant_s,
+    k = load_plant_params().output_torque_per_amp_nm / p.output_torque_per_amp_nm
+    return {"output_inertia_kg_m2": k * p.output_inertia_kg_m2,
+            "foot_damping_nm_s_per_rad": k * p.foot_damping_nm_s_per_rad,
+            "coulomb_friction_nm": k * p.coulomb_friction_nm, "static_friction_nm": k * p.static_friction_nm,
+            "gravity_moment_nm": k * p.gravity_moment_nm, "current_time_constant_s": p.current_time_constant_s,
             "backlash_deg": math.degrees(options["backlash_rad"]),
             "encoder_offset_deg": math.degrees(options["initial_angle_rad"])}
 
@@ -55,18 +65,19 @@ def _errors_in_half_widths(s: dict, truth: dict[str, float]) -> dict[str, float]
             if p["identifiable"] and n in truth and p["ci95_half_width"]}
 
 
-@pytest.mark.xfail(strict=True,
-                   reason="issue 21 not met yet: a residual model mismatch leaves biases of 1-2.5 half-widths "
-                   "(damping, current lag, inertia, static friction: docs/calibration.md, Limits)")
-def test_identified_parameters_are_within_their_intervals(fitted):
+def test_identified_parameters_are_within_their_intervals(fitted, request):
     s, truth = fitted
+    if "seed7" in request.node.callspec.id:
+        request.applymarker(pytest.mark.xfail(strict=True, reason="seed 7's static friction comes out -0.4 %, 1.1 "
+                                              "half-widths off (every other parameter within 0.8): "
+                                              "docs/calibration.md, Limits"))
     errors = _errors_in_half_widths(s, truth)
     assert len(errors) >= 5
     assert all(e <= 1.0 for e in errors.values()), errors
 
 
 def test_residual_bias_is_within_three_half_widths(fitted):
-    """What holds today (the bound docs/calibration.md states): every identified parameter within 3 half-widths."""
+    """A looser bound kept beside the strict one: every identified parameter within 3 half-widths."""
     s, truth = fitted
     errors = _errors_in_half_widths(s, truth)
     assert len(errors) >= 5 and "backlash_deg" in errors
@@ -75,12 +86,8 @@ def test_residual_bias_is_within_three_half_widths(fitted):
 
 @pytest.mark.parametrize("name", ["output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "gravity_moment_nm",
                                   "coulomb_friction_nm"])
-def test_dynamics_within_ten_percent(fitted, name, request):
+def test_dynamics_within_ten_percent(fitted, name):
     s, truth = fitted
-    if name == "coulomb_friction_nm" and "seed7" in request.node.callspec.id:
-        request.applymarker(pytest.mark.xfail(strict=True,
-                                              reason="seed 7 draws 0.045 N m of Coulomb friction: the fit's "
-                                              "+0.005 N m bias is 10-20 % of it (docs/calibration.md)"))
     p = s["params"][name]
     assert p["identifiable"], name
     assert abs(p["value"] / truth[name] - 1) < 0.10, (name, p["value"], truth[name])

@@ -19,8 +19,8 @@ import numpy as np
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
 from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment
 
-__all__ = ["DEFAULT_FIT", "PARAMS", "FitParam", "base_values", "fit_percentage", "plant_with", "residuals",
-           "simulate"]
+__all__ = ["DEFAULT_FIT", "IMU_FRAME_AGE_S", "PARAMS", "SIGMA", "FitParam", "base_values", "fit_percentage",
+           "fit_percentages", "noise_scales", "plant_with", "residuals", "simulate"]
 
 BACKLASH_DEG = 0.55  # the maker's (bench_imperfections.toml [gearbox_backlash]) for a base without the key
 
@@ -99,9 +99,14 @@ FREE_IMU_OFFSET = True  # each window's IMU offset is projected out (the bias dr
 
 
 def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: float = WINDOW_S,
-             free_v0: bool = FREE_V0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+             free_v0: bool = FREE_V0, heard_out: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(angle as the encoder reads it, current as the firmware last heard it, IMU pitch, used-sample mask)
     simulated at exp.t, each window of window_s from the measured state.
+
+    A sample whose reply answers a request that reached the motor before its window (or that the simulation
+    has not reached yet) has no simulated current: it carries the measured one, and `heard_out` (a boolean
+    array of len(exp.t), when given) is False there, so that `residuals` leaves it out of the current's errors.
 
     The measured current a telemetry sample carries is the mean the driver reported (``avg_iq``, reset at
     each request: ak60_meter.py, as VESC's ``read_reset_avg``) in the last reply the firmware read: the mean
@@ -178,8 +183,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             # reached the motor; on the virtual bench the encoder reads the plant at the sample's time
             angle[j] = (positions.get(q, th) if exp.angle_from_reply else th) - offset
             heard = means.get(q)
-            # None: its request reached the motor before this window (only within SKIP_S of its start, unused)
+            # None: its request reached the motor before this window, or has not yet in the simulation
             current[j] = exp.current[j] if heard is None else heard
+            if heard_out is not None:
+                heard_out[j] = heard is not None
             filt += (th - filt) * (1.0 - math.exp(-(tj - t_prev) / lag))
             t_prev = tj
             imu[j] = filt + bias
@@ -187,6 +194,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                 mask[j] = False
         if free_v0 and moving:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
+        imu[k:end] = imu[k:end][_frame_sources(exp, k, end)]
         if FREE_IMU_OFFSET:
             used = mask[k:end]
             if used.any():  # the IMU's bias drifts (Gauss-Markov, tau ~10 s): each window's own offset
@@ -220,6 +228,26 @@ def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angl
     imu[k:end] += dv * sens
 
 
+# a telemetry sample's IMU pitch is the last UART-RVC frame the firmware read: the lagged pitch when the frame left
+# the sensor, its 19 bytes' wire time at 115200 baud (1.65 ms) and half the IMU task's 2 ms poll (1 ms) before the
+# first sample that shows it, then held until the next frame (100 Hz); the frames are where the recorded pitch changes
+IMU_FRAME_AGE_S = 2.7e-3
+
+
+def _frame_sources(exp: Experiment, k: int, end: int) -> np.ndarray:
+    """Per sample of window [k, end): the window sample whose lagged pitch its IMU frame carries (its frame's
+    first sample, IMU_FRAME_AGE_S earlier; a frame is where the recorded pitch changes, as the firmware read it).
+
+    Modelled as a continuous lag sampled at each sample, the pitch's 10 ms steps were a mismatch of their own
+    (with the IMU's noise and drift off, its fit percentage 98 % for 99 % with the frames)."""
+    t = exp.t[k:end]
+    y = exp.imu[k:end]
+    new = np.r_[True, y[1:] != y[:-1]]
+    first = np.maximum.accumulate(np.where(new, np.arange(len(t)), 0))
+    src = np.searchsorted(t, t[first] - IMU_FRAME_AGE_S, side="left")
+    return np.minimum(src, first)
+
+
 def window_ids(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
     """The simulation window of each used sample (as `simulate` cuts them), in the order `residuals` lists them."""
     ids = np.zeros(len(exp.t), dtype=int)
@@ -238,11 +266,38 @@ def ids_start(ids: np.ndarray) -> np.ndarray:
     return first[ids]
 
 
-def residuals(base: PlantParams, v: dict[str, float], exp: Experiment) -> np.ndarray:
-    """The scaled simulation errors: encoder angle, measured current and IMU pitch, on the used samples."""
-    angle, current, imu, mask = simulate(base, v, exp)
-    return np.concatenate([(angle - exp.angle)[mask] / SIGMA["angle"], (current - exp.current)[mask] / SIGMA["current"],
-                           (imu - exp.imu)[mask] / SIGMA["imu"]])
+def residuals(base: PlantParams, v: dict[str, float], exp: Experiment,
+              scales: dict[str, float] | None = None) -> np.ndarray:
+    """The scaled simulation errors: encoder angle, measured current and IMU pitch, on the used samples, each
+    divided by its scale (`SIGMA` unless given: `noise_scales`)."""
+    s = SIGMA if scales is None else scales
+    heard = np.zeros(len(exp.t), dtype=bool)
+    angle, current, imu, mask = simulate(base, v, exp, heard_out=heard)
+    # a sample without a simulated current (it carries the measured one) has no current error: 0, not counted
+    current_error = np.where(heard, current - exp.current, 0.0)
+    return np.concatenate([(angle - exp.angle)[mask] / s["angle"], current_error[mask] / s["current"],
+                           (imu - exp.imu)[mask] / s["imu"]])
+
+
+def fit_percentages(base: PlantParams, v: dict[str, float], exp: Experiment) -> tuple[dict[str, float], int]:
+    """({signal: fit percentage} of the simulation on exp, the used samples without a simulated current).
+
+    The current's percentage leaves those samples out (they carry the measured current: no error)."""
+    heard = np.zeros(len(exp.t), dtype=bool)
+    a, c, i, mask = simulate(base, v, exp, heard_out=heard)
+    used = mask & heard
+    return ({"angle": fit_percentage(exp.angle[mask], a[mask]), "current": fit_percentage(exp.current[used], c[used]),
+             "imu": fit_percentage(exp.imu[mask], i[mask])}, int(np.count_nonzero(mask & ~heard)))
+
+
+def noise_scales(r: np.ndarray, scales: dict[str, float]) -> dict[str, float]:
+    """Each signal's residual RMS (rad, A, rad) from residuals `r` scaled by `scales`: the noise scales that weigh
+    the three signals by their own size (the maximum-likelihood weights for independent Gaussian errors)."""
+    out = {}
+    for name, part in zip(SIGMA, np.split(r, 3), strict=True):
+        part = part[part != 0.0]  # a current error left out (`residuals`) is exactly 0
+        out[name] = scales[name] * max(float(np.sqrt(np.mean(part ** 2))) if len(part) else 1.0, 1e-3)
+    return out
 
 
 def fit_percentage(y: np.ndarray, y_hat: np.ndarray) -> float:

@@ -16,7 +16,7 @@ import numpy as np
 
 from hal.virtual.plant import PlantParams
 from host_tools.calibration.fit_data import Experiment
-from host_tools.calibration.fit_model import PARAMS, fit_percentage, plant_with, simulate
+from host_tools.calibration.fit_model import PARAMS, fit_percentages, plant_with, simulate
 from host_tools.calibration.plant_fit import FitResult
 from host_tools.outdir import write_atomic
 
@@ -82,14 +82,18 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
             "fit_percent": {k: {s: num(v) for s, v in d.items()} for k, d in r.fit_pct.items()},
             "span_s": [num(r.span_s[0]), num(r.span_s[1])], "samples": len(exp.t), "commands": len(exp.t_cmd),
             "evaluations": r.nfev, "cost": num(r.cost), "wall_time_s": round(r.wall_s, 3), "solver": r.message,
+            # the residual scales the signals were weighed by (each one's RMS at the first solution)
+            "noise_scales": {"angle_deg": num(math.degrees(r.noise_scales.get("angle", math.nan))),
+                             "current_a": num(r.noise_scales.get("current", math.nan)),
+                             "imu_deg": num(math.degrees(r.noise_scales.get("imu", math.nan)))},
+            # used samples whose reply answers a request with no simulated counterpart: out of the current's errors
+            "current_samples_without_simulation": dict(r.unheard),
             **(extra or {})}
 
 
 def validate(base: PlantParams, r: FitResult, other: Experiment) -> dict[str, float]:
     """Fit percentages of the fitted plant on another recording (windowed simulation, as the fit)."""
-    a, c, i, mask = simulate(base, used_values(r), other)
-    return {"angle": fit_percentage(other.angle[mask], a[mask]),
-            "current": fit_percentage(other.current[mask], c[mask]), "imu": fit_percentage(other.imu[mask], i[mask])}
+    return fit_percentages(base, used_values(r), other)[0]
 
 
 def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
@@ -160,6 +164,12 @@ def _markdown(s: dict) -> str:
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():
         lines.append(f"| {seg} | {d['angle']} | {d['current']} | {d['imu']} |")
+    ns, unheard = s["noise_scales"], s["current_samples_without_simulation"]
+    lines += ["", "Residuals weighed by each signal's own RMS at the first solution: angle "
+              f"{_g(ns['angle_deg'], '.3g')} deg, current {_g(ns['current_a'], '.3g')} A, IMU "
+              f"{_g(ns['imu_deg'], '.3g')} deg. Samples whose current has no simulated counterpart, left out of "
+              f"the current: {unheard.get('fit', 0)} (fit), "
+              f"{unheard.get('held_out', 0)} (held out)."]
     lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals), "
               "`correlations.png`. The fitted profile is `plant_fitted.toml`: `pafp run --plant` takes it."]
     return "\n".join(lines) + "\n"

@@ -2,7 +2,9 @@
 
 The data are `fit_data`'s (commands, replies, encoder, IMU, current; never the emulator's truth), the model
 `fit_model`'s windowed simulation of the bench's own plant. `scipy.optimize.least_squares` minimises its
-residuals within bounds (`PARAMS`). The Jacobian at the solution gives 95 % intervals and the identifiability
+residuals within bounds (`PARAMS`): a first solution without the backlash and the current lag, the backlash's
+profile, each signal weighed by its own residual RMS, then all of them together (`fit_plant`; docs/calibration.md
+says why in this order). The Jacobian at the solution gives 95 % intervals and the identifiability
 verdict: a parameter whose column is (nearly) a combination of the others' (variance inflation, from the
 normalised Jacobian's conditioning) is reported "not identifiable", not given a confident number.
 """
@@ -10,7 +12,7 @@ normalised Jacobian's conditioning) is reported "not identifiable", not given a 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,10 +21,11 @@ from host_tools.calibration.fit_data import Experiment
 from host_tools.calibration.fit_model import (
     DEFAULT_FIT,
     PARAMS,
+    SIGMA,
     base_values,
-    fit_percentage,
+    fit_percentages,
+    noise_scales,
     residuals,
-    simulate,
     window_ids,
 )
 
@@ -47,6 +50,8 @@ class FitResult:
     message: str
     fixed_checks: dict[str, float]  # parameters kept fixed: their collinearity with the fitted ones
     jac_names: tuple[str, ...] = ()  # the parameters of the Jacobian (and `correlations`), in its order
+    noise_scales: dict[str, float] = field(default_factory=dict)  # signal -> the residual scale it was weighed by
+    unheard: dict[str, int] = field(default_factory=dict)  # segment -> used samples without a simulated current
 
 
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
@@ -93,30 +98,60 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     zero = zero if abs(zero) > PARAMS["encoder_offset_deg"].hi else 0.0
     start["encoder_offset_deg"] = zero
     all_names = tuple(names)
-    scan = "backlash_deg" in names  # profiled, not in the least squares (`_backlash_profile`)
-    names = tuple(n for n in names if n != "backlash_deg")
-    lo = np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
-    hi = np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
-    x0 = np.clip(np.array([start[n] for n in names]), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-    scale = np.maximum(np.abs(x0), 0.05 * (hi - lo))
+    scan = "backlash_deg" in names  # profiled first, then in the least squares (`_backlash_profile`)
+    # the first solution leaves out the backlash and the driver's current lag: both shape the current at each
+    # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:
+    # 0.28 ms for 1.14 ms with a backlash of 0.55 deg for none) and the second fit starts from there
+    first_names = tuple(n for n in names if n not in ("backlash_deg", "current_time_constant_s"))
+    if not first_names:  # only the lag (and the backlash) asked for: the lag alone first
+        first_names = tuple(n for n in names if n != "backlash_deg")
+    scales = dict(SIGMA)
+    last: list[tuple[tuple[str, ...], np.ndarray, np.ndarray]] = []
 
-    def values(x: np.ndarray) -> dict[str, float]:
+    def values(names: tuple[str, ...], x: np.ndarray) -> dict[str, float]:
         return {**start, **{n: float(v) for n, v in zip(names, x, strict=True)}}
 
-    def fun(x: np.ndarray) -> np.ndarray:
-        return residuals(base, values(x), fit_part)
+    def solve(names: tuple[str, ...], x0: np.ndarray | None = None) -> tuple[object, np.ndarray, np.ndarray]:
+        """least_squares over `names` from x0 (default: their start values): (result, steps, upper bounds)."""
+        lo = np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
+        hi = np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
+        if x0 is None:
+            x0 = np.clip(np.array([start[n] for n in names]), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        scale = np.maximum(np.abs(x0), 0.05 * (hi - lo))
+        steps = np.array([BACKLASH_STEP_DEG if n == "backlash_deg" else SECANT_STEP * float(c)
+                          for n, c in zip(names, scale, strict=True)])
 
-    res = least_squares(fun, x0, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev,
-                        method="trf")
+        def fun(x: np.ndarray) -> np.ndarray:
+            if last and last[0][0] == names and np.array_equal(last[0][1], x):
+                return last[0][2]
+            r = residuals(base, values(names, x), fit_part, scales)
+            last[:] = [(names, np.array(x), r)]
+            return r
+
+        res = least_squares(fun, x0, bounds=(lo, hi), x_scale=scale, max_nfev=max_nfev, method="trf",
+                            jac=lambda x: _secant_jacobian(fun, np.asarray(x, dtype=float), steps, hi)[0])
+        return res, steps, hi
+
+    res, steps, hi = solve(first_names)
+    names = first_names
     profile: tuple[float, float, bool] | None = None
     if scan:  # over the whole grid, the others at their fit (from a start far off, the grid misleads: not before)
-        profile = _backlash_profile(base, values(res.x), fit_part, res)
-        if abs(profile[0] - start["backlash_deg"]) > BACKLASH_REFIT_DEG:  # the others again, at the profile's best
-            start = {**start, "backlash_deg": profile[0]}
-            res = least_squares(fun, res.x, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev,
-                                method="trf")
-            profile = _backlash_profile(base, values(res.x), fit_part, res, around=profile[0])
-    jac, r = _secant_jacobian(lambda x: residuals(base, values(x), fit_part), np.asarray(res.x), scale)
+        profile = _backlash_profile(base, values(names, res.x), fit_part, scales, len(names))
+        start = {**start, "backlash_deg": profile[0]}
+    # the three signals weighed by their own residual size at this first solution (the maximum-likelihood weights),
+    # then everything fitted again from it, the backlash with the others: it and the driver's current lag trade
+    # off against each other (both shape the current at each reversal), so neither is right fitted alone
+    scales = noise_scales(residuals(base, values(names, res.x), fit_part, scales), scales)
+    first = values(first_names, res.x)
+    # none at all is a model of its own: any gap, however small, frees the rotor until the next command (a period's
+    # dead time at each reversal), so a profile at 0 keeps it there (the solver's interior start would be 5e-9 deg)
+    names = tuple(n for n in all_names if n != "backlash_deg" or start["backlash_deg"] > 0.0)
+    res, steps, hi = solve(names, np.array([first[n] for n in names]))
+    if profile is not None:  # the interval from the profile on a finer grid about the fit, the others at theirs
+        profile = _backlash_profile(base, values(names, res.x), fit_part, scales, len(names),
+                                    around=values(names, res.x)["backlash_deg"])
+    jac, r = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), np.asarray(res.x),
+                              steps, hi)
     m, n = jac.shape
     s2 = float(np.dot(r, r)) / max(1, m - n)
     rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
@@ -133,12 +168,12 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
-    v = values(res.x)
-    if profile is not None:
-        v["backlash_deg"] = profile[0]
+    v = values(names, res.x)
     ident = {}
     norms = np.linalg.norm(jac, axis=0)
     for k, name in enumerate(names):
+        if name == "backlash_deg":
+            continue  # judged on its profile (below)
         ok = coll[k] <= COLLINEARITY_LIMIT and norms[k] > 1e-9 * max(1.0, float(norms.max()))
         if name in _ZERO_OK:
             ok = ok and ci[k] <= _ABS_CI[name]
@@ -148,41 +183,43 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     fixed_checks = {}
     if "torque_constant_scale" not in names:  # the one a current-only torque measure cannot separate
         h = 1e-2
-        plus = residuals(base, {**v, "torque_constant_scale": v["torque_constant_scale"] + h}, fit_part)
-        col = ((plus - residuals(base, v, fit_part)) / h)[:, None]
+        plus = residuals(base, {**v, "torque_constant_scale": v["torque_constant_scale"] + h}, fit_part, scales)
+        col = ((plus - residuals(base, v, fit_part, scales)) / h)[:, None]
         c_all, _ = _collinearity(np.hstack([jac, col]))
         fixed_checks["torque_constant_scale"] = float(c_all[-1])
-    pct = {}
+    pct, unheard = {}, {}
     for label, part in (("fit", fit_part), ("held_out", held)):
-        a, c, i, mask = simulate(base, v, part)
-        pct[label] = {"angle": fit_percentage(part.angle[mask], a[mask]),
-                      "current": fit_percentage(part.current[mask], c[mask]),
-                      "imu": fit_percentage(part.imu[mask], i[mask])}
+        pct[label], unheard[label] = fit_percentages(base, v, part)
     ci95 = {nm: float(ci[k]) for k, nm in enumerate(names)}
     collinearity = {nm: float(coll[k]) for k, nm in enumerate(names)}
-    if profile is not None:  # its interval from the profile; not in the Jacobian, so no collinearity index
-        ci95["backlash_deg"], collinearity["backlash_deg"], ident["backlash_deg"] = profile[1], math.nan, profile[2]
+    if profile is not None:  # its interval from the profile (a secant over its switching steps is no curvature)
+        ci95["backlash_deg"], ident["backlash_deg"] = profile[1], profile[2]
+        collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
     start = {**start, "backlash_deg": base_values(base)["backlash_deg"]}  # what the fit started from
     return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, int(res.nfev),
                      float(res.cost), time.perf_counter() - wall0, (t0, t1), str(res.message),
-                     fixed_checks, tuple(names))
+                     fixed_checks, tuple(names), scales, unheard)
 
 
-SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the intervals come from
+SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the solver and the intervals use
+BACKLASH_STEP_DEG = 0.1  # the backlash's: its residuals move in steps as each reversal's crossing ends a period later
 
 
-def _secant_jacobian(fun, x: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(Jacobian from forward steps of SECANT_STEP x each parameter's scale, the residuals at x).
+def _secant_jacobian(fun, x: np.ndarray, steps: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Jacobian from forward steps `steps`, the residuals at x); a step that would pass the upper bound goes back.
 
     The solver's own Jacobian takes tiny steps (1e-3 relative): the simulation's stick-slip and backlash switch
     discretely, so a tiny step that flips one of them gives a column made of the jump -- and an interval that
     is confidently narrow and wrong (seen: an encoder offset 85 half-widths off; a Coulomb friction column 3.8
-    times too steep). A step of 2 % of the scale averages over many switchings: the intervals are taken from it.
+    times too steep), and a solver that stops early. Steps of 2 % of each parameter's scale (the backlash:
+    BACKLASH_STEP_DEG) average over many switchings: the solver and the intervals both use them.
     """
     r0 = fun(x)
     cols = []
     for k in range(len(x)):
-        h = SECANT_STEP * float(scale[k])
+        h = float(steps[k])
+        if x[k] + h > hi[k]:
+            h = -h
         xk = x.copy()
         xk[k] += h
         cols.append((fun(xk) - r0) / h)
@@ -190,10 +227,9 @@ def _secant_jacobian(fun, x: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray,
 
 
 BACKLASH_GRID_DEG = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0)
-BACKLASH_REFIT_DEG = 0.1  # the others are fitted again when the profile's best is further than this from the start
 
 
-def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, res: object,
+def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float], n: int,
                       around: float | None = None) -> tuple[float, float, bool]:
     """(best backlash, 95 % half-width, identified) from the cost over a grid of backlash values, the other
     parameters held at `v` (a conditional profile: the others are fitted again at the best, not at each point).
@@ -206,10 +242,11 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
     """
     grid = np.array(BACKLASH_GRID_DEG if around is None else
                     sorted(set(np.clip(around + np.linspace(-0.5, 0.5, 11), 0.0, PARAMS["backlash_deg"].hi))))
-    cost = np.array([0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": float(b)}, part) ** 2)) for b in grid])
+    cost = np.array([0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": float(b)}, part, scales) ** 2))
+                     for b in grid])
     k = int(np.argmin(cost))
-    r = np.asarray(res.fun)  # type: ignore[attr-defined]
-    m, n = len(r), len(np.asarray(res.x))  # type: ignore[attr-defined]
+    r = residuals(base, v, part, scales)
+    m = len(r)
     s2 = float(np.dot(r, r)) / max(1, m - n)
     rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
     threshold = 0.5 * 3.841 * s2 * (1.0 + rho) / (1.0 - rho)

@@ -1,0 +1,82 @@
+"""pafp fit's measurement models and weights on hand-built experiments: the IMU's 100 Hz frames, the samples whose
+current has no simulated counterpart, and the noise scales the three signals are weighed by."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hal.virtual.plant import load_plant_params
+from host_tools.calibration.fit_data import Experiment
+from host_tools.calibration.fit_model import (
+    IMU_FRAME_AGE_S,
+    SIGMA,
+    base_values,
+    fit_percentages,
+    noise_scales,
+    residuals,
+    simulate,
+)
+
+
+def _experiment(imu: np.ndarray | None = None, req_of: np.ndarray | None = None) -> Experiment:
+    """0.5 s at 1 kHz: a current square wave, a request at each sample, each sample carrying the previous one's."""
+    t = np.arange(500) * 1e-3
+    i_cmd = np.where((t // 0.05) % 2 == 0, 1.5, -1.5)
+    zeros = np.zeros_like(t)
+    req = np.arange(len(t)) - 1 if req_of is None else req_of
+    return Experiment(t, i_cmd, t, zeros, zeros if imu is None else imu, zeros, "hand-built", zeros, t, req)
+
+
+def test_the_imu_sample_is_its_frames_lagged_pitch_held():
+    """A telemetry sample carries the last 100 Hz frame the firmware read: the lagged pitch when that frame left the
+    sensor (IMU_FRAME_AGE_S before the first sample that shows it), held until the next frame."""
+    base = load_plant_params()
+    v = {**base_values(base), "imu_lag_s": 0.0195}
+    frames = np.repeat(np.arange(50) * 0.01, 10)  # a new value every 10 samples: the frames as the data show them
+    held, _, imu, mask = simulate(base, v, _experiment(imu=frames), free_v0=False)
+    assert np.ptp(held) > 0.01  # the foot moves: the lagged pitch changes from sample to sample
+    used = np.flatnonzero(mask)
+    steps = np.flatnonzero(np.diff(imu[used]) != 0.0)
+    assert len(steps) > 10
+    frame_starts = np.flatnonzero(np.diff(frames) != 0.0) + 1
+    # the simulated IMU changes only where a frame starts (within the used samples)
+    assert set(used[steps + 1]) <= set(frame_starts)
+    # and within a frame it is constant: the same simulation with a frame at every sample is not
+    _, _, every, _ = simulate(base, v, _experiment(imu=np.arange(500) * 1e-3), free_v0=False)
+    assert np.count_nonzero(np.diff(every[used]) != 0.0) > 5 * len(steps)
+    assert 1e-3 < IMU_FRAME_AGE_S < 0.01
+
+
+def test_samples_without_a_simulated_current_are_left_out_of_the_current_errors():
+    base = load_plant_params()
+    v = base_values(base)
+    req_of = np.arange(500) - 1
+    req_of[200:260] = 10_000  # a request the simulation never reaches: no simulated current
+    exp = _experiment(req_of=req_of)
+    r = residuals(base, v, exp)
+    current = np.split(r, 3)[1]
+    _, c, _, mask = simulate(base, v, exp, free_v0=True)
+    unheard = mask.copy()
+    unheard[:200] = unheard[260:] = False
+    assert unheard.sum() > 40
+    assert np.all(current[unheard[mask]] == 0.0)  # no error where nothing was simulated
+    assert np.all(c[unheard] == exp.current[unheard])  # (they carry the measured current)
+    assert np.count_nonzero(current[~unheard[mask]]) > 0.9 * np.count_nonzero(~unheard[mask])
+    pct, count = fit_percentages(base, v, exp)
+    assert count == int(unheard.sum())
+    _, count_all_heard = fit_percentages(base, v, _experiment())
+    assert count_all_heard == 0
+    assert set(pct) == {"angle", "current", "imu"}
+
+
+def test_noise_scales_are_each_signals_residual_rms():
+    rng = np.random.default_rng(3)
+    n = 4000
+    angle, current, imu = 0.5 * rng.standard_normal(n), 2.0 * rng.standard_normal(n), rng.standard_normal(n)
+    current[:1000] = 0.0  # left out (samples without a simulated current): not counted
+    s = noise_scales(np.concatenate([angle, current, imu]), SIGMA)
+    assert math.isclose(s["angle"] / SIGMA["angle"], 0.5, rel_tol=0.05)
+    assert math.isclose(s["current"] / SIGMA["current"], 2.0, rel_tol=0.05)
+    assert math.isclose(s["imu"] / SIGMA["imu"], 1.0, rel_tol=0.05)
