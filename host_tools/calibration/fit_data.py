@@ -37,6 +37,9 @@ class Experiment:
     t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (the averages reset there)
     req_of: np.ndarray  # per sample: the request whose reply its current is (index into t_req; -1: none yet)
     angle_from_reply: bool = False  # the encoder angle is the motor reply's position (serial mode's `--encoder motor`)
+    # per sample: the request whose reply's position the encoder angle is (None: the same as req_of). The encoder
+    # task opens each period, before the motor task reads that period's reply: its angle is one reply older
+    angle_req_of: np.ndarray | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
         """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
@@ -48,14 +51,16 @@ class Experiment:
 
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
-                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply)
+                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply,
+                          None if self.angle_req_of is None else self.angle_req_of[keep])
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
         k = (self.t >= t0) & (self.t < t1)
         c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
-                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply)
+                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply,
+                          None if self.angle_req_of is None else self.angle_req_of[k])
 
 
 def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -80,6 +85,7 @@ class _Wire:
     t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (s)
     t_req_job: np.ndarray  # the job start that sent it (s)
     t_reply: np.ndarray  # job starts whose read brought a feedback reply (s)
+    t_enc: np.ndarray  # the encoder task's job starts (s): each period's first job, before the motor task's
 
 
 def _wire(record: Path) -> _Wire:
@@ -97,10 +103,14 @@ def _wire(record: Path) -> _Wire:
     f_cpu = int(reader.header["f_cpu_hz"])
     baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
     to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
-    times, currents, t_req, t_req_job, t_reply = [], [], [], [], []
+    times, currents, t_req, t_req_job, t_reply, t_enc = [], [], [], [], [], []
     write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
+    tasks = list(reader.header.get("tasks", ()))
+    encoder_task = tasks.index("encoder") if "encoder" in tasks else -1
     for s in reader.sections():
         t = s.start / f_cpu
+        if s.task_id == encoder_task:
+            t_enc.append(t)
         for data in s.inputs.get(read_key, ()):
             if any(isinstance(m, (Values, ValuesSelective)) for m in from_motor.feed(data)):
                 t_reply.append(t)
@@ -115,17 +125,33 @@ def _wire(record: Path) -> _Wire:
                     t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
                     t_req_job.append(t)
                 elif isinstance(msg, vesc.SetCurrentBrake):
-                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
-    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
+                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc)))
+    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc)))
 
 
 def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
     """Per sample: the request the current it carries answers (-1: none). A sample shows the last reply the
     firmware read at or before it, and a reply answers the last request sent before the job that read it
     (a full GET_VALUES reply takes most of a period, so the next period sends no request)."""
+    return _answered(np.searchsorted(w.t_reply, t, side="right") - 1, w)
+
+
+def _angle_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
+    """Per sample: the request whose reply's position its encoder angle is (serial mode's `--encoder motor`).
+
+    The encoder task opens each period and reads the position of the last reply read before it: the one the
+    motor task read in an earlier period, not the reply of the sample's own period that its current is."""
+    if len(w.t_enc) == 0:
+        return _reply_requests(t, w)
+    t_enc = w.t_enc[np.maximum(np.searchsorted(w.t_enc, t, side="right") - 1, 0)]
+    return _answered(np.searchsorted(w.t_reply, t_enc, side="left") - 1, w)
+
+
+def _answered(reply: np.ndarray, w: _Wire) -> np.ndarray:
+    """The request each reply index (into w.t_reply; -1: none) answers: the last one sent before the job that
+    read it (-1: none)."""
     if len(w.t_reply) == 0 or len(w.t_req_job) == 0:
-        return np.full(len(t), -1)
-    reply = np.searchsorted(w.t_reply, t, side="right") - 1
+        return np.full(len(reply), -1)
     answered = np.searchsorted(w.t_req_job, w.t_reply, side="left") - 1
     return np.where(reply >= 0, answered[np.maximum(reply, 0)], -1)
 
@@ -165,9 +191,10 @@ def load_experiment(run_dir: Path) -> Experiment:
         raise ValueError(f"{run_dir}: too short to fit: {len(rows)} samples in RUN and {len(t_cmd)} current "
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
     a = np.array(rows)
+    from_reply = _encoder_source(run_dir) == "motor"
     return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
-                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w),
-                      _encoder_source(run_dir) == "motor")
+                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w), from_reply,
+                      _angle_requests(a[:, 0], w) if from_reply else None)
 
 
 def _encoder_source(run_dir: Path) -> str:

@@ -123,6 +123,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     lo, hi = params.stop_min_rad, params.stop_max_rad
     delay = v.get("command_delay_s", COMMAND_DELAY_S)
     t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + (delay - COMMAND_DELAY_S), exp.req_of
+    angle_of = req_of if exp.angle_req_of is None else exp.angle_req_of  # the reply whose position the encoder is
     n_cmd, n_req = len(t_cmd), len(t_req)
     tau = params.current_time_constant_s
     peak = params.peak_current_a
@@ -176,7 +177,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             q = int(req_of[j])
             # through serial mode the encoder angle is the position of the last reply read, taken when its request
             # reached the motor; on the virtual bench the encoder reads the plant at the sample's time
-            angle[j] = (positions.get(q, th) if exp.angle_from_reply else th) - offset
+            angle[j] = (positions.get(int(angle_of[j]), th) if exp.angle_from_reply else th) - offset
             heard = means.get(q)
             # None: its request reached the motor before this window (only within SKIP_S of its start, unused)
             current[j] = exp.current[j] if heard is None else heard
