@@ -9,31 +9,50 @@ import numpy as np
 import pytest
 
 from hal.virtual.plant import load_plant_params
-from host_tools.calibration.fit_data import COMMAND_DELAY_S, Experiment, _encoder_source
+from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment, _encoder_source
 from host_tools.calibration.fit_model import base_values, simulate
 
 
-def _experiment(from_reply: bool) -> Experiment:
-    """0.5 s at 1 kHz: a current square wave, a request at each sample, each sample carrying the previous one's."""
+def _experiment(from_reply: bool, shift_s: float = 0.0, angle_back: int = 0) -> Experiment:
+    """0.5 s at 1 kHz: a current square wave, a request at each ms, each sample carrying the previous one's.
+
+    shift_s moves the samples earlier (not the commands or requests); angle_back > 0 makes the encoder angle
+    that many replies older than the current (serial mode's encoder task reads before the motor task)."""
     t = np.arange(500) * 1e-3
     i_cmd = np.where((t // 0.05) % 2 == 0, 1.5, -1.5)
     zeros = np.zeros_like(t)
     req_of = np.arange(len(t)) - 1
-    return Experiment(t, i_cmd, t, zeros, zeros, zeros, "hand-built", zeros, t, req_of,
-                      from_reply)
+    return Experiment(t, i_cmd, t - shift_s, zeros, zeros, zeros, "hand-built", zeros, t, req_of,
+                      from_reply, np.maximum(req_of - angle_back, -1) if angle_back else None)
 
 
 def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
     base = load_plant_params()
     v = base_values(base)
-    plain, _, _, mask = simulate(base, v, _experiment(False), free_v0=False)
-    reply, _, _, _ = simulate(base, v, _experiment(True), free_v0=False)
-    # requests arrive at the samples' times (the default command delay): a sample's reply angle is the previous
-    # sample's plant angle, within each window (the first sample of a window has no request in it: masked)
-    used = np.flatnonzero(mask)[1:]
-    assert np.ptp(plain) > 0.01  # the foot moves: the comparison can fail
-    assert np.allclose(reply[used], plain[used - 1], atol=1e-12)
+    reply, _, _, mask = simulate(base, v, _experiment(True), free_v0=False)
+    # requests arrive at the commands' times (the default command delay), one period before the sample: the reply's
+    # angle is the plant's then, and the window starts there (the start angle is a reply's too). The same plant read
+    # directly at samples one period earlier (same windows, same commands) gives the same angles
+    earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=1e-3), free_v0=False)
+    plain, _, _, _ = simulate(base, v, _experiment(False), free_v0=False)
+    used = np.flatnonzero(mask & (np.arange(len(mask)) > WINDOW_S / 1e-3))  # the first window's first sample has
+    assert np.ptp(plain) > 0.01  # no reply yet: it starts at its own time (later windows are compared)  # the foot moves: the comparison can fail
+    assert np.allclose(reply[used], earlier[used], atol=1e-12)
     assert not np.allclose(reply[used], plain[used], atol=1e-6)
+
+
+def test_the_encoder_angle_can_be_an_older_reply_than_the_current():
+    """Serial mode: the encoder task opens the period and reads the reply the motor task read a period before."""
+    base = load_plant_params()
+    v = base_values(base)
+    older, current_older, _, mask = simulate(base, v, _experiment(True, angle_back=1), free_v0=False)
+    earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=2e-3), free_v0=False)
+    same, current_same, _, _ = simulate(base, v, _experiment(True), free_v0=False)
+    used = np.flatnonzero(mask & (np.arange(len(mask)) > WINDOW_S / 1e-3))
+    assert np.allclose(older[used], earlier[used], atol=1e-12)  # two periods old, window started there
+    assert not np.allclose(older[used], same[used], atol=1e-6)
+    # the current is the latest reply's in both: only the window's start moved, by one period
+    assert np.max(np.abs(current_older - current_same)[used]) < 0.5
 
 
 def test_the_command_delay_moves_the_simulated_response():
@@ -71,3 +90,31 @@ def test_the_command_delay_is_bounded_below_the_reply_round_trip():
     _, too_late, _, _ = simulate(base, {**v, "command_delay_s": 1.5e-3}, exp, free_v0=False)
     assert np.all(at_bound[mask] != 0.0)  # every used sample's current is simulated
     assert np.all(too_late[mask] == 0.0)  # past a period every one is the measured current
+
+
+def test_the_encoder_angle_is_the_reply_read_before_the_periods_encoder_job():
+    """The record's job starts: encoder at k ms, motor 20 us later reading the reply of the request sent a period
+    before; a sample (the logger's job, 90 us in) carries that reply's current, and the encoder angle of the reply
+    read one period earlier."""
+    from host_tools.calibration.fit_data import _angle_requests, _reply_requests, _Wire
+
+    k = np.arange(1, 20) * 1e-3
+    t_req_job = k + 20e-6  # the motor task sends a command and a request each period
+    w = _Wire(t_req_job, np.zeros_like(k), t_req_job + 2e-4, t_req_job, t_req_job[1:], k)  # replies read from 2 ms
+    samples = k[3:] + 90e-6
+    current_of = _reply_requests(samples, w)
+    angle_of = _angle_requests(samples, w)
+    assert np.array_equal(current_of, np.arange(3, 19) - 1)  # the reply read this period: last period's request
+    assert np.array_equal(angle_of, current_of - 1)
+
+
+def test_a_swing_up_from_the_stop_is_not_fitted():
+    from host_tools.calibration.fit_data import _swing_up
+
+    t = np.arange(1000) * 2e-3
+    rest = np.where(t < 0.1, np.radians(30.0) * (t / 0.1 - 1.0), 0.0)  # 30 deg up in 0.1 s, then at rest
+    start = _swing_up(t, rest)
+    assert 0.1 <= t[start] <= 0.11
+    sag = np.where(t < 0.1, np.radians(0.3) * t / 0.1, np.radians(0.3))  # the virtual bench's small sag: kept
+    assert _swing_up(t, sag) == 0
+    assert _swing_up(t, np.sin(t * 20)) == 0  # never at rest: nothing dropped

@@ -8,6 +8,7 @@ supervisor was in RUN: the encoder angle, the IMU pitch and the motor's measured
 from __future__ import annotations
 
 import csv
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -190,11 +191,38 @@ def load_experiment(run_dir: Path) -> Experiment:
     if len(rows) < 100 or len(t_cmd) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(rows)} samples in RUN and {len(t_cmd)} current "
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
-    a = np.array(rows)
+    a = np.array(rows)[_swing_up(np.array([r[0] for r in rows]), np.array([r[1] for r in rows])):]
+    if len(a) < 100:
+        raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
+                         "(at least 100; run `pafp run --experiment sysid`)")
     from_reply = _encoder_source(run_dir) == "motor"
     return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
                       encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w), from_reply,
                       _angle_requests(a[:, 0], w) if from_reply else None)
+
+
+SWING_DEG = 4.0  # a start further than this from where the foot comes to rest is a swing-up (the foot hung on a stop)
+SETTLED_S, SETTLED_DEG = 0.05, 0.05  # at rest: the encoder angle moves less than SETTLED_DEG over SETTLED_S
+
+
+def _swing_up(t: np.ndarray, angle: np.ndarray) -> int:
+    """The first sample at which the foot rests after a swing-up at RUN's start; 0 when there was none.
+
+    A foot that hung on its stop before the run (a serial bench whose foot was not set at its zero mark)
+    swings to the experiment's centre when RUN begins: tens of degrees in a tenth of a second against the
+    current limit, leaving the stop. The fit starts once the foot has come to rest there: over the swing the
+    IMU (a lagging sensor) gives the encoder's zero several degrees off (`fit_plant` takes the zero from the
+    first 0.2 s it fits), which biased the damping and the Coulomb friction (docs/calibration.md).
+    """
+    limit = math.radians(SETTLED_DEG)
+    for i in range(len(t)):
+        j = int(np.searchsorted(t, t[i] + SETTLED_S))
+        if j >= len(t):
+            return 0
+        if float(np.ptp(angle[i:j + 1])) < limit:
+            moved = float(np.max(np.abs(angle[:i + 1] - angle[i]))) if i else 0.0
+            return i if moved > math.radians(SWING_DEG) else 0
+    return 0
 
 
 def _encoder_source(run_dir: Path) -> str:

@@ -129,8 +129,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     peak = params.peak_current_a
     k = 0
     while k < n:
-        t0 = float(exp.t[k])
+        t0 = t_first = float(exp.t[k])
         end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
+        if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
+            t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
         start_angle = min(hi, max(lo, exp.angle[k] + offset))
         v0 = float(vel[k])
         moving = abs(v0) >= REST_RAD_S
@@ -184,7 +186,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             filt += (th - filt) * (1.0 - math.exp(-(tj - t_prev) / lag))
             t_prev = tj
             imu[j] = filt + bias
-            if tj - t0 < SKIP_S:
+            if tj - t_first < SKIP_S:
                 mask[j] = False
         if free_v0 and moving:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
