@@ -118,3 +118,25 @@ def test_a_swing_up_from_the_stop_is_not_fitted():
     sag = np.where(t < 0.1, np.radians(0.3) * t / 0.1, np.radians(0.3))  # the virtual bench's small sag: kept
     assert _swing_up(t, sag) == 0
     assert _swing_up(t, np.sin(t * 20)) == 0  # never at rest: nothing dropped
+
+
+def test_replies_answer_their_requests_in_order_even_when_read_late():
+    """A request each 1 ms job; the link stalls: replies 5-11 come together at 12 ms, and the reply to request 14 is
+    lost. Counting (FIFO) maps each reply to its own request; a lost reply is given up after LOST_AFTER_S."""
+    from host_tools.calibration.fit_data import LOST_AFTER_S, _reply_answers
+
+    jobs = np.arange(200) * 1e-3
+    t_req_job = jobs.copy()
+    answered = [k for k in range(199) if k != 14]
+    read_at = np.array([jobs[12] if 5 <= k <= 11 else jobs[k + 1] for k in answered])
+    order = np.argsort(read_at, kind="stable")
+    t_reply, truth = read_at[order], np.array(answered)[order]
+    got = _reply_answers(t_reply, t_req_job)
+    last_before = np.searchsorted(t_req_job, t_reply, side="left") - 1
+    stalled = (truth >= 5) & (truth <= 10)
+    assert not np.array_equal(last_before[stalled], truth[stalled])  # the old rule is wrong there: the test can fail
+    assert np.array_equal(got[truth < 14], truth[truth < 14])
+    # after the lost reply each is matched one request early until the gap is given up
+    assert got[truth == 15][0] == 14
+    recovered = t_reply > t_reply[truth == 15][0] + LOST_AFTER_S + 2e-3
+    assert np.array_equal(got[recovered], truth[recovered])
