@@ -140,3 +140,16 @@ def test_replies_answer_their_requests_in_order_even_when_read_late():
     assert got[truth == 15][0] == 14
     recovered = t_reply > t_reply[truth == 15][0] + LOST_AFTER_S + 2e-3
     assert np.array_equal(got[recovered], truth[recovered])
+
+
+def test_wire_truth_refuses_bad_input_in_one_line(tmp_path, capsys):
+    from host_tools.calibration.wire_truth import main
+
+    assert main([str(tmp_path / "no_run"), str(tmp_path / "no_capture")]) == 2
+    assert main([str(tmp_path), str(tmp_path), "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "no_run" in err[0] and "BAUD 0" in err[1], err
+    from host_tools.calibration.wire_truth import emulator_link
+
+    with pytest.raises(ValueError, match="no_capture: not an emulator's capture"):
+        emulator_link(tmp_path / "no_capture")

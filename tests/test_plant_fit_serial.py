@@ -43,8 +43,8 @@ def serial_fit(tmp_path_factory):
     (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
     stalls: list[str] = []
     for attempt in range(4):  # a stall of this shared host may latch a link fault (justly): run again
-        out = d / f"run{attempt}"
-        proc, motor, imu = _emulator("--plant", str(HANDMADE))
+        out, capture = d / f"run{attempt}", d / f"emulator{attempt}"
+        proc, motor, imu = _emulator("--plant", str(HANDMADE), "--capture", str(capture))
         try:  # a process of its own, as `pafp run` is on a bench (not this test process's heap and threads)
             code = subprocess.run([sys.executable, "-m", "host_tools", "run", "--motor", motor, "--imu", imu,
                                    "--experiment", "sysid", "--profile", str(d / "fw.toml"), "--out", str(out),
@@ -60,7 +60,7 @@ def serial_fit(tmp_path_factory):
         pytest.skip(f"this host stalled on every attempt: {'; '.join(stalls)}")
     assert code == 0 and not s["faults"], s["faults"]
     assert main(["fit", str(out), "--no-plot", "--out", str(d / "fit")]) == 0
-    return json.loads((d / "fit" / "fit.json").read_text())
+    return {**json.loads((d / "fit" / "fit.json").read_text()), "run": out, "capture": capture}
 
 
 # the hand-made plant's truth (emulation only)
@@ -81,9 +81,18 @@ def test_serial_run_is_fitted(serial_fit):
     assert b["identifiable"] and abs(b["value"] - 1.5) <= 0.5, b
 
 
-@pytest.mark.xfail(reason="through a pty the damping came out -7.7 to -11.8 % and the Coulomb friction +5.5 to "
-                          "+10.1 % over six runs of seven (not the command delay, which the record bounds under 1 ms: "
-                          "docs/calibration.md)")
+def test_the_fits_timing_is_the_emulators(serial_fit):
+    """Emulation only: which request's reply each sample's current and encoder angle carry, as `pafp fit` infers it
+    from the record, against the emulator's capture (host_tools/calibration/wire_truth.py)."""
+    from host_tools.calibration.wire_truth import compare
+
+    truth = compare(serial_fit["run"], serial_fit["capture"])
+    assert truth["commands"]["record"] > 1000 and truth["replies"]["read_unmatched"] == 0, truth
+    for signal in ("current", "angle"):
+        assert truth[signal]["samples"] > 1000, truth
+        assert truth[signal]["same_request"] >= 0.99, (signal, truth)
+
+
 def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
     p = serial_fit["params"]
     for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):
