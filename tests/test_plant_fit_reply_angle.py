@@ -30,13 +30,14 @@ def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
     base = load_plant_params()
     v = base_values(base)
     reply, _, _, mask = simulate(base, v, _experiment(True), free_v0=False)
-    # requests arrive at the commands' times (the default command delay), one period before the sample: the reply's
-    # angle is the plant's then, and the window starts there (the start angle is a reply's too). The same plant read
-    # directly at samples one period earlier (same windows, same commands) gives the same angles
+    # each sample carries the reply to the request that reached the motor one period before it: the reply's angle is
+    # the plant's then, and a window starts there (its start angle is a reply's too). The same plant read directly
+    # at samples one period earlier (same windows, same commands) gives the same angles; the first window's first
+    # sample has no reply yet and starts at its own time, so later windows are compared
     earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=1e-3), free_v0=False)
     plain, _, _, _ = simulate(base, v, _experiment(False), free_v0=False)
-    used = np.flatnonzero(mask & (np.arange(len(mask)) > WINDOW_S / 1e-3))  # the first window's first sample has
-    assert np.ptp(plain) > 0.01  # no reply yet: it starts at its own time (later windows are compared)  # the foot moves: the comparison can fail
+    used = np.flatnonzero(mask & (np.arange(len(mask)) > WINDOW_S / 1e-3))
+    assert np.ptp(plain) > 0.01  # the foot moves: the comparison can fail
     assert np.allclose(reply[used], earlier[used], atol=1e-12)
     assert not np.allclose(reply[used], plain[used], atol=1e-6)
 
