@@ -102,13 +102,17 @@ def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
         assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
 
 
-@pytest.mark.xfail(reason="through a pty the current lag comes out +24 to +41 % over six runs, 1.1 to 4.5 "
-                          "half-widths (the backlash 1.42-1.54 deg, within its interval: docs/calibration.md)")
-def test_serial_backlash_and_current_lag_within_their_intervals(serial_fit):
+@pytest.mark.xfail(reason="in none of 13 serial recordings (9 runs of this test, 4 fitted offline; load 2.6-5.3) was "
+                          "every one within its interval: the current lag +3 to +34 % was outside in 12 (up to 2.5 "
+                          "half-widths; +11 %, 2.8 on the virtual bench), static friction in 5 (1.3-1.6), gravity in 4 "
+                          "(1.1-1.4), inertia, backlash, damping, Coulomb in one each (docs/calibration.md)")
+def test_serial_identified_parameters_within_their_intervals(serial_fit):
+    """The done-when's coverage: every identified plant parameter within its 95 % interval of the truth."""
     p = serial_fit["params"]
-    b, tau = p["backlash_deg"], p["current_time_constant_s"]
-    assert abs(b["value"] - 1.5) <= b["ci95_half_width"], b
-    assert abs(tau["value"] - 0.00114) <= tau["ci95_half_width"], tau
+    truth = {**TRUTH, "static_friction_nm": 0.933333, "backlash_deg": 1.5, "current_time_constant_s": 0.00114}
+    for name, value in truth.items():
+        assert p[name]["identifiable"], name
+        assert abs(p[name]["value"] - value) <= p[name]["ci95_half_width"], (name, p[name], value)
 
 
 def test_sysid_takes_its_zero_from_the_fused_angle_only_when_the_foot_is_off_its_mark():
