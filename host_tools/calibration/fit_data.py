@@ -131,8 +131,7 @@ def _wire(record: Path) -> _Wire:
 
 def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
     """Per sample: the request the current it carries answers (-1: none). A sample shows the last reply the
-    firmware read at or before it, and a reply answers the last request sent before the job that read it
-    (a full GET_VALUES reply takes most of a period, so the next period sends no request)."""
+    firmware read at or before it; which request that reply answers: `_reply_answers`."""
     return _answered(np.searchsorted(w.t_reply, t, side="right") - 1, w)
 
 
@@ -219,7 +218,8 @@ def load_experiment(run_dir: Path) -> Experiment:
     if len(rows) < 100 or len(t_cmd) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(rows)} samples in RUN and {len(t_cmd)} current "
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
-    a = np.array(rows)[_swing_up(np.array([r[0] for r in rows]), np.array([r[1] for r in rows])):]
+    a = np.array(rows)
+    a = a[_swing_up(a[:, 0], a[:, 1]):]
     if len(a) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
                          "(at least 100; run `pafp run --experiment sysid`)")

@@ -177,8 +177,9 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                     c += 1
             th = plant.output_angle_rad(tj)
             q = int(req_of[j])
-            # through serial mode the encoder angle is the position of the last reply read, taken when its request
-            # reached the motor; on the virtual bench the encoder reads the plant at the sample's time
+            # through serial mode the encoder angle is a reply's position (one reply older than the current's),
+            # taken when its request reached the motor; on the virtual bench the encoder reads the plant at the
+            # sample's time
             angle[j] = (positions.get(int(angle_of[j]), th) if exp.angle_from_reply else th) - offset
             heard = means.get(q)
             # None: its request reached the motor before this window (only within SKIP_S of its start, unused)
