@@ -154,3 +154,21 @@ def test_wire_truth_refuses_bad_input_in_one_line(tmp_path, capsys):
 
     with pytest.raises(ValueError, match="no_capture: not an emulator's capture"):
         emulator_link(tmp_path / "no_capture")
+
+
+def test_wire_truth_dates_each_message_at_its_last_bytes_arrival(tmp_path):
+    """A chunk read at 10 ms holding a command and a request: the request's last byte ended at 10 ms, the
+    command's one request frame earlier (the bytes back to back at the link's baud)."""
+    from hal.serial.sim_port import NS_PER_S
+    from host_tools.calibration.wire_truth import emulator_link
+    from protocol import vesc
+
+    command, request = vesc.SetCurrent(1.5).encode(), vesc.GetValuesSelective(1).encode()
+    (tmp_path / "motor.rx.bin").write_bytes(command + request)
+    (tmp_path / "motor.tx.bin").write_bytes(b"")
+    (tmp_path / "index.csv").write_text(f"t_s,file,offset,bytes\n0.010000000,motor.rx.bin,0,{len(command + request)}\n")
+    link = emulator_link(tmp_path, baud=115200)
+    byte_s = 10.0 / 115200
+    assert link.i_cmd.tolist() == [1.5]
+    assert link.t_req.tolist() == [pytest.approx(0.010, abs=1.5 / NS_PER_S)]
+    assert link.t_cmd[0] == pytest.approx(0.010 - len(request) * byte_s, abs=1.5 / NS_PER_S)

@@ -127,7 +127,8 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
     # the emulator numbers the requests it received, the fit those the record shows sent: the same from the first
     # matched command on when none is lost
     first = int(np.searchsorted(link.t_req, link.t_cmd[shift]))
-    match = _match(read, link.replies) - first  # per reply read: the request it answers, in the fit's numbering
+    sent = _match(read, link.replies)  # per reply read: its index among the replies sent (-1: none matched)
+    match = np.where(sent >= first, sent - first, -1)  # the request it answers, in the fit's numbering
     t_req = link.t_req[first:] - offset  # on the run's clock
 
     def truth(reply: np.ndarray) -> np.ndarray:
@@ -152,12 +153,12 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
     return {
         "commands": {"record": n, "emulator": int(len(link.t_cmd)), "first_matched": int(shift),
                      "arrival_after_job_ms": {p: round(float(np.percentile(spread, q)), 4)
-                                                 for p, q in (("p1", 1), ("p50", 50), ("p90", 90), ("p99", 99),
-                                                              ("p99.9", 99.9))},
+                                              for p, q in (("p1", 1), ("p50", 50), ("p90", 90), ("p99", 99),
+                                                           ("p99.9", 99.9))},
                      "arrival_after_job_ms_max": round(float(spread.max()), 4)},
         "requests": {"record": int(len(w.t_req)), "emulator": int(len(link.t_req))},
-        "replies": {"sent": len(link.replies), "read": len(read), "read_unmatched": int(np.sum(match < 0)),
-                    "never_read": len(link.replies) - int(np.sum(match >= -first))},
+        "replies": {"sent": len(link.replies), "read": len(read), "read_unmatched": int(np.sum(sent < 0)),
+                    "never_read": len(link.replies) - int(np.sum(sent >= 0))},
         "current": agreement(current, exp.req_of),
         "angle": agreement(angle, inferred_angle),
     }
