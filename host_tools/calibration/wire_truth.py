@@ -2,15 +2,17 @@
 
 `pafp emulate ... --capture DIR` stamps each chunk of bytes the emulated motor received with the time the
 emulator read it, the stop-bit end of its last byte (`hal.serial.sim_port.arrival_end_times` spaces the
-chunk's bytes back from there, as the emulator hands them to the motor model), and each reply it sent. The two
-processes have different clocks: `compare` aligns them on the frames (the n-th SetCurrent each side saw, the
-replies by their bytes) and reports, against `fit_data`'s inference from record.bin alone:
+chunk's bytes back from there, as the emulator hands them to the motor model; it also keeps them after the time
+its world has reached, which the capture does not hold: after a stall of the emulator a chunk's first bytes may
+be dated a little early here), and each reply it sent. The two processes have different clocks: `compare`
+aligns them on the frames (the n-th SetCurrent each side saw, the replies by their bytes) and reports, against
+`fit_data`'s inference from record.bin alone:
 
 * the commands' arrival after their job, the median taken as the fit's COMMAND_DELAY_S (the clocks' offset is
   unknown: a constant delay is not seen, its spread is);
 * for each telemetry sample, whether the request whose reply its current (and its encoder angle, serial mode's
   `--encoder motor`) is matches the one `fit_data` picks, and when that request reached the motor;
-* replies lost or read late.
+* replies lost, and how long after their request's job the firmware read them.
 
 This is a diagnostic of the fit's timing model (docs/calibration.md, "Through serial mode"); the fit never reads
 a capture of the emulator. ``python -m host_tools.calibration.wire_truth RUN_DIR CAPTURE_DIR`` prints it as JSON.
@@ -150,6 +152,8 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
                                           "max": round(float(error_ms.max()), 4)}}
 
     spread = (delay - offset) * 1e3
+    answered = match >= 0
+    read_after = (t_reply[answered] - w.t_req_job[np.minimum(match[answered], len(w.t_req_job) - 1)]) * 1e3
     return {
         "commands": {"record": n, "emulator": int(len(link.t_cmd)), "first_matched": int(shift),
                      "arrival_after_job_ms": {p: round(float(np.percentile(spread, q)), 4)
@@ -158,7 +162,9 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
                      "arrival_after_job_ms_max": round(float(spread.max()), 4)},
         "requests": {"record": int(len(w.t_req)), "emulator": int(len(link.t_req))},
         "replies": {"sent": len(link.replies), "read": len(read), "read_unmatched": int(np.sum(sent < 0)),
-                    "never_read": len(link.replies) - int(np.sum(sent >= 0))},
+                    "never_read": len(link.replies) - int(np.sum(sent >= 0)),
+                    "read_after_request_job_ms": {p: round(float(np.percentile(read_after, q)), 3)
+                                                  for p, q in (("p50", 50), ("p90", 90), ("p99", 99), ("max", 100))}},
         "current": agreement(current, exp.req_of),
         "angle": agreement(angle, inferred_angle),
     }
