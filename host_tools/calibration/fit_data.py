@@ -2,7 +2,8 @@
 
 From record.bin's motor port: the current commands the firmware sent (each at its job's time), the feedback
 requests that followed them and the jobs whose reads brought a reply; from telemetry.csv, over the span the
-supervisor was in RUN: the encoder angle, the IMU pitch and the motor's measured current (`load_experiment`).
+supervisor was in RUN (from the foot's first rest when it swung up from a stop: `_swing_up`): the encoder angle,
+the IMU pitch and the motor's measured current (`load_experiment`).
 """
 
 from __future__ import annotations
