@@ -21,6 +21,8 @@ HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
 SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
          'prbs_s = 2.0\n')
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
+# a host stall of 100 ms also fires the host watchdog (WATCHDOG: once in seven attempts here, at 0.04 s, load 3.3)
+RETRIED = (*STALL_FAULTS, "WATCHDOG")
 
 
 def _emulator(*options: str) -> tuple[subprocess.Popen, str, str]:
@@ -43,8 +45,8 @@ def serial_fit(tmp_path_factory):
     (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
     stalls: list[str] = []
     for attempt in range(4):  # a stall of this shared host may latch a link fault (justly): run again
-        out = d / f"run{attempt}"
-        proc, motor, imu = _emulator("--plant", str(HANDMADE))
+        out, capture = d / f"run{attempt}", d / f"emulator{attempt}"
+        proc, motor, imu = _emulator("--plant", str(HANDMADE), "--capture", str(capture))
         try:  # a process of its own, as `pafp run` is on a bench (not this test process's heap and threads)
             code = subprocess.run([sys.executable, "-m", "host_tools", "run", "--motor", motor, "--imu", imu,
                                    "--experiment", "sysid", "--profile", str(d / "fw.toml"), "--out", str(out),
@@ -52,7 +54,7 @@ def serial_fit(tmp_path_factory):
         finally:
             _stop(proc)
         s = _summary(out)
-        if s["faults"] and s["faults"][0] in STALL_FAULTS:
+        if s["faults"] and s["faults"][0] in RETRIED:
             stalls.append(f"{s['faults'][0]} ({s['fault']['detail']})")
             continue
         break
@@ -60,7 +62,7 @@ def serial_fit(tmp_path_factory):
         pytest.skip(f"this host stalled on every attempt: {'; '.join(stalls)}")
     assert code == 0 and not s["faults"], s["faults"]
     assert main(["fit", str(out), "--no-plot", "--out", str(d / "fit")]) == 0
-    return json.loads((d / "fit" / "fit.json").read_text())
+    return {**json.loads((d / "fit" / "fit.json").read_text()), "run": out, "capture": capture}
 
 
 # the hand-made plant's truth (emulation only)
@@ -81,9 +83,18 @@ def test_serial_run_is_fitted(serial_fit):
     assert b["identifiable"] and abs(b["value"] - 1.5) <= 0.5, b
 
 
-@pytest.mark.xfail(reason="through a pty the damping came out -7.7 to -11.8 % and the Coulomb friction +5.5 to "
-                          "+10.1 % over six runs of seven (not the command delay, which the record bounds under 1 ms: "
-                          "docs/calibration.md)")
+def test_the_fits_timing_is_the_emulators(serial_fit):
+    """Emulation only: which request's reply each sample's current and encoder angle carry, as `pafp fit` infers it
+    from the record, against the emulator's capture (host_tools/calibration/wire_truth.py)."""
+    from host_tools.calibration.wire_truth import compare
+
+    truth = compare(serial_fit["run"], serial_fit["capture"])
+    assert truth["commands"]["record"] > 1000 and truth["replies"]["read_unmatched"] == 0, truth
+    for signal in ("current", "angle"):
+        assert truth[signal]["samples"] > 1000, truth
+        assert truth[signal]["same_request"] >= 0.99, (signal, truth)
+
+
 def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
     p = serial_fit["params"]
     for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):
@@ -91,13 +102,17 @@ def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
         assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
 
 
-@pytest.mark.xfail(reason="through a pty the current lag comes out +24 to +41 % over six runs, 1.1 to 4.5 "
-                          "half-widths (the backlash 1.42-1.54 deg, within its interval: docs/calibration.md)")
-def test_serial_backlash_and_current_lag_within_their_intervals(serial_fit):
+@pytest.mark.xfail(reason="in none of 16 serial recordings (12 runs of this test, 4 fitted offline; load 1.6-5.3) was "
+                          "every one within its interval: the current lag +3 to +34 % was outside in 15 (up to 2.9 "
+                          "half-widths; +11 %, 2.8 on the virtual bench), static friction in 5 (1.3-1.6), gravity in 4 "
+                          "(1.1-1.4), Coulomb in 2, inertia, backlash, damping in one each (docs/calibration.md)")
+def test_serial_identified_parameters_within_their_intervals(serial_fit):
+    """The done-when's coverage: every identified plant parameter within its 95 % interval of the truth."""
     p = serial_fit["params"]
-    b, tau = p["backlash_deg"], p["current_time_constant_s"]
-    assert abs(b["value"] - 1.5) <= b["ci95_half_width"], b
-    assert abs(tau["value"] - 0.00114) <= tau["ci95_half_width"], tau
+    truth = {**TRUTH, "static_friction_nm": 0.933333, "backlash_deg": 1.5, "current_time_constant_s": 0.00114}
+    for name, value in truth.items():
+        assert p[name]["identifiable"], name
+        assert abs(p[name]["value"] - value) <= p[name]["ci95_half_width"], (name, p[name], value)
 
 
 def test_sysid_takes_its_zero_from_the_fused_angle_only_when_the_foot_is_off_its_mark():

@@ -2,12 +2,14 @@
 
 From record.bin's motor port: the current commands the firmware sent (each at its job's time), the feedback
 requests that followed them and the jobs whose reads brought a reply; from telemetry.csv, over the span the
-supervisor was in RUN: the encoder angle, the IMU pitch and the motor's measured current (`load_experiment`).
+supervisor was in RUN (from the foot's first rest when it swung up from a stop: `_swing_up`): the encoder angle,
+the IMU pitch and the motor's measured current (`load_experiment`).
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,6 +39,9 @@ class Experiment:
     t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (the averages reset there)
     req_of: np.ndarray  # per sample: the request whose reply its current is (index into t_req; -1: none yet)
     angle_from_reply: bool = False  # the encoder angle is the motor reply's position (serial mode's `--encoder motor`)
+    # per sample: the request whose reply's position the encoder angle is (None: the same as req_of). The encoder
+    # task opens each period, before the motor task reads that period's reply: its angle is one reply older
+    angle_req_of: np.ndarray | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
         """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
@@ -48,14 +53,16 @@ class Experiment:
 
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
-                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply)
+                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply,
+                          None if self.angle_req_of is None else self.angle_req_of[keep])
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
         k = (self.t >= t0) & (self.t < t1)
         c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
-                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply)
+                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply,
+                          None if self.angle_req_of is None else self.angle_req_of[k])
 
 
 def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -79,7 +86,8 @@ class _Wire:
     i_cmd: np.ndarray  # its current (A)
     t_req: np.ndarray  # when each feedback request reached the motor at COMMAND_DELAY_S (s)
     t_req_job: np.ndarray  # the job start that sent it (s)
-    t_reply: np.ndarray  # job starts whose read brought a feedback reply (s)
+    t_reply: np.ndarray  # per feedback reply read: the start of the job whose read brought it (s)
+    t_enc: np.ndarray  # the encoder task's job starts (s): each period's first job, before the motor task's
 
 
 def _wire(record: Path) -> _Wire:
@@ -97,13 +105,16 @@ def _wire(record: Path) -> _Wire:
     f_cpu = int(reader.header["f_cpu_hz"])
     baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
     to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
-    times, currents, t_req, t_req_job, t_reply = [], [], [], [], []
+    times, currents, t_req, t_req_job, t_reply, t_enc = [], [], [], [], [], []
     write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
+    tasks = list(reader.header.get("tasks", ()))
+    encoder_task = tasks.index("encoder") if "encoder" in tasks else -1
     for s in reader.sections():
         t = s.start / f_cpu
+        if s.task_id == encoder_task:
+            t_enc.append(t)
         for data in s.inputs.get(read_key, ()):
-            if any(isinstance(m, (Values, ValuesSelective)) for m in from_motor.feed(data)):
-                t_reply.append(t)
+            t_reply.extend(t for m in from_motor.feed(data) if isinstance(m, (Values, ValuesSelective)))
         for accepted, data in s.outputs.get(write_key, ()):
             sent = data[:accepted]
             for msg in to_motor.feed(sent):
@@ -115,19 +126,63 @@ def _wire(record: Path) -> _Wire:
                     t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
                     t_req_job.append(t)
                 elif isinstance(msg, vesc.SetCurrentBrake):
-                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
-    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply)))
+                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc)))
+    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc)))
 
 
 def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
     """Per sample: the request the current it carries answers (-1: none). A sample shows the last reply the
-    firmware read at or before it, and a reply answers the last request sent before the job that read it
-    (a full GET_VALUES reply takes most of a period, so the next period sends no request)."""
-    if len(w.t_reply) == 0 or len(w.t_req_job) == 0:
-        return np.full(len(t), -1)
-    reply = np.searchsorted(w.t_reply, t, side="right") - 1
-    answered = np.searchsorted(w.t_req_job, w.t_reply, side="left") - 1
-    return np.where(reply >= 0, answered[np.maximum(reply, 0)], -1)
+    firmware read at or before it; which request that reply answers: `_reply_answers`."""
+    return _answered(np.searchsorted(w.t_reply, t, side="right") - 1, w)
+
+
+def _angle_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
+    """Per sample: the request whose reply's position its encoder angle is (serial mode's `--encoder motor`).
+
+    The encoder task opens each period and reads the position of the last reply read before it: the one the
+    motor task read in an earlier period, not the reply of the sample's own period that its current is."""
+    if len(w.t_enc) == 0:
+        return _reply_requests(t, w)
+    t_enc = w.t_enc[np.maximum(np.searchsorted(w.t_enc, t, side="right") - 1, 0)]
+    return _answered(np.searchsorted(w.t_reply, t_enc, side="left") - 1, w)
+
+
+LOST_AFTER_S = 0.05  # replies behind their requests this long on end: the oldest request waiting lost its reply
+
+
+def _answered(reply: np.ndarray, w: _Wire) -> np.ndarray:
+    """The request each reply index (into w.t_reply; -1: none) answers (-1: none)."""
+    answers = _reply_answers(w.t_reply, w.t_req_job)
+    return np.where(reply >= 0, answers[np.maximum(reply, 0)], -1) if len(answers) else np.full(len(reply), -1)
+
+
+def _reply_answers(t_reply: np.ndarray, t_req_job: np.ndarray) -> np.ndarray:
+    """Per reply read (the job start that read it): the request it answers (index into t_req_job; -1: none).
+
+    Replies come back in the order of their requests, so the n-th reply read answers the n-th request sent, also
+    when a stalled link or emulator brings several in one read, two or more periods late (through a pty 7 to 26 %
+    of replies were read later than the next period; taking the last request sent before the reading job instead
+    was right for 75 to 94 % of them, counting for all: the emulator's truth, docs/calibration.md). A reply that
+    never came (lost on the wire) would shift every later one by a request: when requests have waited for their
+    replies for LOST_AFTER_S on end, the oldest one waiting is taken as lost. A link that catches up undoes a
+    wrong skip: a reply read with no request waiting is not matched (-1).
+    """
+    out = np.full(len(t_reply), -1)
+    j = 0  # the oldest request not yet answered
+    behind_since = -1.0
+    for i, t in enumerate(t_reply):
+        sent = int(np.searchsorted(t_req_job, t, side="left"))  # requests sent before the job that read it
+        if j < sent:
+            out[i] = j
+            j += 1
+        if j < sent:  # requests still wait for their replies
+            if behind_since < 0.0:
+                behind_since = float(t)
+            elif t - behind_since > LOST_AFTER_S:
+                j, behind_since = j + 1, -1.0
+        else:
+            behind_since = -1.0
+    return out
 
 
 def load_experiment(run_dir: Path) -> Experiment:
@@ -165,9 +220,38 @@ def load_experiment(run_dir: Path) -> Experiment:
         raise ValueError(f"{run_dir}: too short to fit: {len(rows)} samples in RUN and {len(t_cmd)} current "
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
     a = np.array(rows)
+    a = a[_swing_up(a[:, 0], a[:, 1]):]
+    if len(a) < 100:
+        raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
+                         "(at least 100; run `pafp run --experiment sysid`)")
+    from_reply = _encoder_source(run_dir) == "motor"
     return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
-                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w),
-                      _encoder_source(run_dir) == "motor")
+                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w), from_reply,
+                      _angle_requests(a[:, 0], w) if from_reply else None)
+
+
+SWING_DEG = 4.0  # a start further than this from where the foot comes to rest is a swing-up (the foot hung on a stop)
+SETTLED_S, SETTLED_DEG = 0.05, 0.05  # at rest: the encoder angle moves less than SETTLED_DEG over SETTLED_S
+
+
+def _swing_up(t: np.ndarray, angle: np.ndarray) -> int:
+    """The first sample at which the foot rests after a swing-up at RUN's start; 0 when there was none.
+
+    A foot that hung on its stop before the run (a serial bench whose foot was not set at its zero mark)
+    swings to the experiment's centre when RUN begins: tens of degrees in a tenth of a second against the
+    current limit, leaving the stop. The fit starts once the foot has come to rest there: over the swing the
+    IMU (a lagging sensor) gives the encoder's zero several degrees off (`fit_plant` takes the zero from the
+    first 0.2 s it fits), which biased the damping and the Coulomb friction (docs/calibration.md).
+    """
+    limit = math.radians(SETTLED_DEG)
+    for i in range(len(t)):
+        j = int(np.searchsorted(t, t[i] + SETTLED_S))
+        if j >= len(t):
+            return 0
+        if float(np.ptp(angle[i:j + 1])) < limit:
+            moved = float(np.max(np.abs(angle[:i + 1] - angle[i]))) if i else 0.0
+            return i if moved > math.radians(SWING_DEG) else 0
+    return 0
 
 
 def _encoder_source(run_dir: Path) -> str:

@@ -128,13 +128,16 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     lo, hi = params.stop_min_rad, params.stop_max_rad
     delay = v.get("command_delay_s", COMMAND_DELAY_S)
     t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + (delay - COMMAND_DELAY_S), exp.req_of
+    angle_of = req_of if exp.angle_req_of is None else exp.angle_req_of  # the reply whose position the encoder is
     n_cmd, n_req = len(t_cmd), len(t_req)
     tau = params.current_time_constant_s
     peak = params.peak_current_a
     k = 0
     while k < n:
-        t0 = float(exp.t[k])
+        t0 = t_first = float(exp.t[k])
         end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
+        if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
+            t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
         start_angle = min(hi, max(lo, exp.angle[k] + offset))
         v0 = float(vel[k])
         moving = abs(v0) >= REST_RAD_S
@@ -179,9 +182,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                     c += 1
             th = plant.output_angle_rad(tj)
             q = int(req_of[j])
-            # through serial mode the encoder angle is the position of the last reply read, taken when its request
-            # reached the motor; on the virtual bench the encoder reads the plant at the sample's time
-            angle[j] = (positions.get(q, th) if exp.angle_from_reply else th) - offset
+            # through serial mode the encoder angle is a reply's position (one reply older than the current's),
+            # taken when its request reached the motor; on the virtual bench the encoder reads the plant at the
+            # sample's time
+            angle[j] = (positions.get(int(angle_of[j]), th) if exp.angle_from_reply else th) - offset
             heard = means.get(q)
             # None: its request reached the motor before this window, or has not yet in the simulation
             current[j] = exp.current[j] if heard is None else heard
@@ -190,7 +194,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             filt += (th - filt) * (1.0 - math.exp(-(tj - t_prev) / lag))
             t_prev = tj
             imu[j] = filt + bias
-            if tj - t0 < SKIP_S:
+            if tj - t_first < SKIP_S:
                 mask[j] = False
         if free_v0 and moving:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
