@@ -81,8 +81,8 @@ def test_fit_writes_its_backlash_verdict_into_the_key(tmp_path):
     """The fitted profile carries backlash_deg: replaced in a base that has it, added to one that has not."""
     import numpy as np
 
-    from host_tools.calibration.fit_report import profile_text
     from host_tools.calibration.fit_model import base_values
+    from host_tools.calibration.fit_report import profile_text
     from host_tools.calibration.plant_fit import FitResult
 
     base = load_plant_params()

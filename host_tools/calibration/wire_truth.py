@@ -82,7 +82,7 @@ def emulator_link(capture: Path, baud: int = BAUD) -> EmulatorLink:
 def _record_replies(record: Path) -> tuple[np.ndarray, list[bytes]]:
     """(the job start that read each feedback reply, the reply's frame) from a run's record.bin, in order."""
     from hal.record.format import Kind
-    from hal.record.replay import RecordReader
+    from hal.record.reader import RecordReader
     from protocol import vesc
     from protocol.vesc_values import Values, ValuesSelective
 

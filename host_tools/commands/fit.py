@@ -30,10 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check the inputs, fit, write the outputs, print the table."""
-    from host_tools.calibration.fit_report import figure as _g
-    from host_tools.calibration.fit_report import validate, write_fit_outputs
     from host_tools.calibration.fit_data import load_experiment
     from host_tools.calibration.fit_model import DEFAULT_FIT, PARAMS, load_base
+    from host_tools.calibration.fit_report import figure as _g
+    from host_tools.calibration.fit_report import validate, write_fit_outputs
     from host_tools.calibration.plant_fit import fit_plant
     from host_tools.command_errors import input_error
     from host_tools.outdir import RunDir
