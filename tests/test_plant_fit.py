@@ -136,3 +136,19 @@ def test_the_lag_and_the_backlash_alone_are_fitted(experiment, tmp_path):
     p = json.loads((tmp_path / "fit" / "fit.json").read_text())["params"]
     assert set(p) == {"backlash_deg", "current_time_constant_s"}
     assert p["current_time_constant_s"]["identifiable"], p
+
+
+def test_fit_reports_the_rotor_sides_part_of_the_intervals(experiment):
+    """fit.json: each parameter's 95 % half-width includes the base's rotor side (Kt/J_m, spread from the tolerance
+    table), its part reported beside it; the rotor side shapes the current at each reversal, so it widens the
+    backlash's interval and the current lag's."""
+    from host_tools.calibration.fit_model import rotor_side_sd
+
+    _, _, out, _ = experiment
+    s = json.loads((out / "fit.json").read_text())
+    assert s["rotor_side_sd"] == pytest.approx(rotor_side_sd(load_plant_params()), rel=1e-6)
+    for n, p in s["params"].items():
+        assert 0.0 <= p["ci95_rotor_side"] <= p["ci95_half_width"] + 1e-12, n
+    assert s["params"]["backlash_deg"]["ci95_rotor_side"] > 0
+    assert s["params"]["current_time_constant_s"]["ci95_rotor_side"] > 0
+    assert "of which rotor side" in (out / "fit.md").read_text()

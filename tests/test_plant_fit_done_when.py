@@ -65,12 +65,11 @@ def _errors_in_half_widths(s: dict, truth: dict[str, float]) -> dict[str, float]
             if p["identifiable"] and n in truth and p["ci95_half_width"]}
 
 
-def test_identified_parameters_are_within_their_intervals(fitted, request):
+def test_identified_parameters_are_within_their_intervals(fitted):
+    """Each identified parameter within its own 95 % interval, on both plants (seed 7's static friction since the
+    intervals carry the base's rotor side: docs/calibration.md, Limits, with the intervals' coverage over six
+    plants, which is below 95 %)."""
     s, truth = fitted
-    if "seed7" in request.node.callspec.id:
-        request.applymarker(pytest.mark.xfail(strict=True, reason="seed 7's static friction comes out -0.4 %, 1.1 "
-                                              "half-widths off (every other parameter within 0.8): "
-                                              "docs/calibration.md, Limits"))
     errors = _errors_in_half_widths(s, truth)
     assert len(errors) >= 5
     assert all(e <= 1.0 for e in errors.values()), errors

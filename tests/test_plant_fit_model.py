@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from hal.virtual.plant import load_plant_params
 from host_tools.calibration.fit_data import Experiment
@@ -80,3 +81,41 @@ def test_noise_scales_are_each_signals_residual_rms():
     assert math.isclose(s["angle"] / SIGMA["angle"], 0.5, rel_tol=0.05)
     assert math.isclose(s["current"] / SIGMA["current"], 2.0, rel_tol=0.05)
     assert math.isclose(s["imu"] / SIGMA["imu"], 1.0, rel_tol=0.05)
+
+
+def test_rotor_side_spread_is_the_tolerances_rms_about_the_base(tmp_path):
+    """Kt's and J_m's RMS deviations from the base (a range not centred on it counts its offset), in quadrature."""
+    from host_tools.calibration.fit_model import rotor_side_sd
+
+    base = load_plant_params()
+    j = base.rotor_inertia_kg_m2
+    (tmp_path / "tol.toml").write_text(f"[kt_nm_per_a]\nrel = 0.1\n[rotor_inertia_kg_m2]\n"
+                                       f"range = [{j!r}, {1.2 * j!r}]\n")
+    # uniform in +-10 %: 0.1 / sqrt 3; uniform in [1, 1.2] J_m: variance 0.2^2 / 12 plus its mean's 0.1^2
+    expected = math.sqrt(0.01 / 3 + 0.04 / 12 + 0.01)
+    assert rotor_side_sd(base, tmp_path / "tol.toml") == pytest.approx(expected, rel=1e-9)
+    (tmp_path / "none.toml").write_text('[foot_mass_kg]\nrel = 0.03\n')
+    assert rotor_side_sd(base, tmp_path / "none.toml") == 0.0
+    # the packaged table: Kt in 0.068..0.080 about 0.078 (its mean 5 % below), J_m +-5 %
+    kt = math.sqrt(0.012 ** 2 / 12 + 0.004 ** 2) / 0.078
+    assert rotor_side_sd(base) == pytest.approx(math.hypot(kt, 0.05 / math.sqrt(3)), rel=1e-6)
+
+
+def test_the_rotor_side_acts_only_through_the_backlash_crossing():
+    """rotor_accel_scale moves the rotor's Kt/J_m and nothing the output sees: the output inertia and torque per
+    ampere stay; with a backlash the simulated current at each reversal changes, without one nothing does."""
+    from host_tools.calibration.fit_model import plant_with
+
+    base = load_plant_params()
+    v = base_values(base)
+    p0, p1 = plant_with(base, v), plant_with(base, {**v, "rotor_accel_scale": 1.1})
+    assert p1.output_inertia_kg_m2 == pytest.approx(p0.output_inertia_kg_m2, rel=1e-12)
+    assert p1.output_torque_per_amp_nm == pytest.approx(p0.output_torque_per_amp_nm, rel=1e-12)
+    assert (p1.kt_nm_per_a / p1.rotor_inertia_kg_m2) / (p0.kt_nm_per_a / p0.rotor_inertia_kg_m2) == pytest.approx(1.1)
+    exp = _experiment()
+    for backlash, moves in ((1.0, True), (0.0, False)):
+        w = {**v, "backlash_deg": backlash}
+        a = residuals(base, w, exp)
+        b = residuals(base, {**w, "rotor_accel_scale": 1.1}, exp)
+        assert bool(np.max(np.abs(a - b)) > 1e-3) is moves, backlash
+

@@ -20,7 +20,7 @@ from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
 from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment
 
 __all__ = ["DEFAULT_FIT", "IMU_FRAME_AGE_S", "PARAMS", "SIGMA", "FitParam", "base_values", "fit_percentage",
-           "fit_percentages", "noise_scales", "plant_with", "residuals", "simulate"]
+           "fit_percentages", "noise_scales", "plant_with", "residuals", "rotor_side_sd", "simulate"]
 
 BACKLASH_DEG = 0.55  # the maker's (bench_imperfections.toml [gearbox_backlash]) for a base without the key
 
@@ -50,6 +50,10 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("gravity_moment_nm", "N m", 0.3, 6.0, "m g d of the foot"),
     FitParam("backlash_deg", "deg", 0.0, 5.0, "gearbox free play at the actuator output"),
     FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
+    # the rotor's acceleration per ampere (Kt / J_m): it alone carries the rotor across the backlash at each
+    # reversal (the output's torque per ampere and inertia are fitted); not fitted by default: it trades off
+    # against the backlash, so its uncertainty is carried into the intervals instead (`rotor_side_sd`)
+    FitParam("rotor_accel_scale", "", 0.7, 1.3, "the rotor's Kt/J_m relative to the base profile's"),
     FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
     # at most 0.8 ms: the record shows the firmware reading most replies one 1 ms period after their request, so the
     # request (after the command, with its own wire time) arrived sooner; a longer delay would also leave samples
@@ -73,7 +77,8 @@ def base_values(p: PlantParams) -> dict[str, float]:
             "coulomb_friction_nm": p.coulomb_friction_nm, "static_friction_nm": p.static_friction_nm,
             "gravity_moment_nm": p.gravity_moment_nm,
             "backlash_deg": BACKLASH_DEG if p.backlash_deg is None else p.backlash_deg, "torque_constant_scale": 1.0,
-            "current_time_constant_s": p.current_time_constant_s, "command_delay_s": COMMAND_DELAY_S,
+            "rotor_accel_scale": 1.0, "current_time_constant_s": p.current_time_constant_s,
+            "command_delay_s": COMMAND_DELAY_S,
             "imu_lag_s": 0.0195, "imu_bias_deg": 0.0,
             "encoder_offset_deg": 0.0}
 
@@ -82,7 +87,10 @@ def plant_with(base: PlantParams, v: dict[str, float]) -> PlantParams:
     """The base profile with the fit parameters' values in it (the keys each one sets)."""
     g, m = base.gravity_m_s2, base.foot_mass_kg
     d = v["gravity_moment_nm"] / (m * g)
-    reflected = base.reflected_inertia_kg_m2
+    # the rotor's Kt/J_m relative to the base's (with Kt's scale): J_m moves, and the reflected inertia with it; the
+    # foot's part takes up the difference (the output inertia is the fitted one)
+    j_m = base.rotor_inertia_kg_m2 / v.get("rotor_accel_scale", 1.0)
+    reflected = base.reflected_inertia_kg_m2 + (j_m - base.rotor_inertia_kg_m2) * base.total_ratio ** 2
     jc = max(1e-5, v["output_inertia_kg_m2"] - reflected - m * d * d)
     scale = v["torque_constant_scale"]
     backdrive = max(v["static_friction_nm"], v["coulomb_friction_nm"]) / base.belt_ratio
@@ -90,8 +98,26 @@ def plant_with(base: PlantParams, v: dict[str, float]) -> PlantParams:
     return replace(base, foot_inertia_kg_m2=jc, foot_com_distance_m=d,
                    foot_damping_nm_s_per_rad=v["foot_damping_nm_s_per_rad"], coulomb_friction_nm=tc,
                    actuator_backdrive_torque_nm=backdrive, kt_nm_per_a=base.kt_nm_per_a * scale,
-                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, current_time_constant_s=v["current_time_constant_s"],
-                   backlash_deg=v["backlash_deg"])
+                   ke_v_s_per_rad=base.ke_v_s_per_rad * scale, rotor_inertia_kg_m2=j_m,
+                   current_time_constant_s=v["current_time_constant_s"], backlash_deg=v["backlash_deg"])
+
+
+def rotor_side_sd(base: PlantParams, path: Path | None = None) -> float:
+    """The relative spread of the bench's rotor acceleration per ampere (Kt / J_m) about the base profile's: the
+    RMS deviation from the base of Kt and of J_m drawn within their tolerances (profiles/plant_tolerances.toml),
+    in quadrature (drawn independently). The tolerance table's Kt range is not centred on the packaged 0.078 N m/A
+    (0.068-0.080: the mean 5 % below), so the RMS about the base takes in that offset: 7.4 % for the packaged
+    profile. 0 when the table gives neither."""
+    from hal.virtual.plant.draw import load_tolerances
+
+    tol = {t.name: t for t in load_tolerances(path)}
+    total = 0.0
+    for key in ("kt_nm_per_a", "rotor_inertia_kg_m2"):
+        if key in tol:
+            x0 = float(getattr(base, key))
+            lo, hi = tol[key].bounds(x0)
+            total += ((hi - lo) ** 2 / 12.0 + (0.5 * (lo + hi) - x0) ** 2) / (x0 * x0)
+    return math.sqrt(total)
 
 
 FREE_V0 = True  # each moving window's initial velocity is projected out (`_project_initial_velocity`)

@@ -27,7 +27,8 @@ _KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per
          "coulomb_friction_nm": ("coulomb_friction_nm",), "static_friction_nm": ("actuator_backdrive_torque_nm",),
          "gravity_moment_nm": ("foot_com_distance_m", "foot_inertia_kg_m2"),
          "torque_constant_scale": ("kt_nm_per_a", "ke_v_s_per_rad"),
-         "current_time_constant_s": ("current_time_constant_s",), "backlash_deg": ("backlash_deg",)}
+         "current_time_constant_s": ("current_time_constant_s",), "backlash_deg": ("backlash_deg",),
+         "rotor_accel_scale": ("rotor_inertia_kg_m2", "foot_inertia_kg_m2")}
 _TABLE = {"backlash_deg": "transmission"}  # optional keys a base profile may lack: written into this table
 
 
@@ -70,7 +71,9 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
     def num(x: float) -> float | None:
         return round(x, 9) if math.isfinite(x) else None
 
-    params = {n: {"value": num(r.values[n]), "ci95_half_width": num(r.ci95[n]), "start": num(r.start[n]),
+    params = {n: {"value": num(r.values[n]), "ci95_half_width": num(r.ci95[n]),
+                  # the part of ci95_half_width that is the base's rotor side (Kt/J_m) taken as uncertain
+                  "ci95_rotor_side": num(r.rotor_ci95.get(n, 0.0)), "start": num(r.start[n]),
                   "collinearity": num(r.collinearity[n]), "identifiable": r.identifiable[n],
                   "unit": PARAMS[n].unit, "meaning": PARAMS[n].meaning, "bounds": [PARAMS[n].lo, PARAMS[n].hi]}
               for n in r.names}
@@ -88,6 +91,8 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
                              "imu_deg": num(math.degrees(r.noise_scales.get("imu", math.nan)))},
             # used samples whose reply answers a request with no simulated counterpart: out of the current's errors
             "current_samples_without_simulation": dict(r.unheard),
+            # the base's rotor side (Kt/J_m) is taken as uncertain by this relative spread (`rotor_side_sd`)
+            "rotor_side_sd": num(r.rotor_sd),
             **(extra or {})}
 
 
@@ -153,13 +158,19 @@ _g = figure
 def _markdown(s: dict) -> str:
     lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
              f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
-             "| parameter | value | 95 % ± | collinearity | verdict |", "|---|---|---|---|---|"]
+             "| parameter | value | 95 % ± | of which rotor side | collinearity | verdict |",
+             "|---|---|---|---|---|---|"]
     for n, p in s["params"].items():
         verdict = "identified" if p["identifiable"] else "**not identifiable** (base value kept)"
         lines.append(f"| {n} ({p['unit']}) | {_g(p['value'], '.6g')} | {_g(p['ci95_half_width'], '.3g')} | "
+                     f"{_g(p['ci95_rotor_side'], '.2g')} | "
                      f"{_g(p['collinearity'], '.2f')} | {verdict} |")
     for n, p in s["fixed"].items():
-        lines.append(f"| {n} | fixed | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
+        lines.append(f"| {n} | fixed | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
+    lines += ["", "95 % ± is each parameter's interval on its own. It includes the base profile's rotor side: the "
+              "rotor's Kt/J_m, which alone carries it across the backlash at each reversal, is taken from the base "
+              f"with a relative spread of {_g(s['rotor_side_sd'], '.3f')} (the tolerance table's Kt and rotor inertia) "
+              "and the shift that spread would cause is added to the covariance; its part is in its own column."]
     lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():

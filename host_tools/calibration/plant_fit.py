@@ -26,6 +26,7 @@ from host_tools.calibration.fit_model import (
     fit_percentages,
     noise_scales,
     residuals,
+    rotor_side_sd,
     window_ids,
 )
 
@@ -52,6 +53,9 @@ class FitResult:
     jac_names: tuple[str, ...] = ()  # the parameters of the Jacobian (and `correlations`), in its order
     noise_scales: dict[str, float] = field(default_factory=dict)  # signal -> the residual scale it was weighed by
     unheard: dict[str, int] = field(default_factory=dict)  # segment -> used samples without a simulated current
+    # the part of each 95 % half-width that is the base profile's rotor side (Kt/J_m) taken as uncertain
+    rotor_ci95: dict[str, float] = field(default_factory=dict)
+    rotor_sd: float = 0.0  # the rotor side's relative spread carried into the intervals (`rotor_side_sd`)
 
 
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
@@ -166,9 +170,11 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         g = scores[clusters == c].sum(axis=0)
         meat += np.outer(g, g)
     cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
+    v = values(names, res.x)
+    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, names, jac, bread)
+    cov = cov + rotor_sd ** 2 * np.outer(rotor_shift, rotor_shift)
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
-    v = values(names, res.x)
     ident = {}
     norms = np.linalg.norm(jac, axis=0)
     for k, name in enumerate(names):
@@ -192,13 +198,38 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         pct[label], unheard[label] = fit_percentages(base, v, part)
     ci95 = {nm: float(ci[k]) for k, nm in enumerate(names)}
     collinearity = {nm: float(coll[k]) for k, nm in enumerate(names)}
-    if profile is not None:  # its interval from the profile (a secant over its switching steps is no curvature)
-        ci95["backlash_deg"], ident["backlash_deg"] = profile[1], profile[2]
+    rotor_ci95 = {nm: 1.96 * rotor_sd * abs(float(rotor_shift[k])) for k, nm in enumerate(names)}
+    if profile is not None:  # its interval from the profile (a secant over its switching steps is no curvature),
+        # with the rotor side's part added in quadrature (when the backlash is in the Jacobian)
+        rb = rotor_ci95.get("backlash_deg", 0.0)
+        ci95["backlash_deg"] = math.hypot(profile[1], rb)
+        ident["backlash_deg"] = profile[2] and ci95["backlash_deg"] <= _ABS_CI["backlash_deg"]
         collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
     start = {**start, "backlash_deg": base_values(base)["backlash_deg"]}  # what the fit started from
     return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, int(res.nfev),
                      float(res.cost), time.perf_counter() - wall0, (t0, t1), str(res.message),
-                     fixed_checks, tuple(names), scales, unheard)
+                     fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_sd)
+
+
+def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+                names: tuple[str, ...], jac: np.ndarray, bread: np.ndarray) -> tuple[float, np.ndarray]:
+    """(the rotor side's relative spread, the fitted parameters' shift per unit of it): a "consider" parameter.
+
+    The rotor's acceleration per ampere (Kt / J_m) alone carries it across the backlash at each reversal; the fit
+    takes it from the base profile (fitting it too trades off against the backlash: docs/calibration.md, Limits).
+    A bench whose Kt/J_m differs from the base's by a fraction e moves the least-squares solution by about
+    -e (J'J)^-1 J' c, c the residuals' derivative by it (a central secant over the spread: the crossings end on
+    whole periods); with e of spread `rotor_side_sd` that adds sd^2 s s' to the covariance, so the parameters the
+    rotor side biases get the intervals it allows. No term when it is fitted, or with no backlash (no crossing).
+    """
+    if "rotor_accel_scale" in names or v["backlash_deg"] <= 0.0:
+        return 0.0, np.zeros(len(names))
+    sd = rotor_side_sd(base)
+    if sd <= 0.0:
+        return 0.0, np.zeros(len(names))
+    col = (residuals(base, {**v, "rotor_accel_scale": 1.0 + sd}, part, scales)
+           - residuals(base, {**v, "rotor_accel_scale": 1.0 - sd}, part, scales)) / (2.0 * sd)
+    return sd, bread @ (jac.T @ col)
 
 
 SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the solver and the intervals use
