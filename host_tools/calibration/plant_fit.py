@@ -4,9 +4,10 @@ The data are `fit_data`'s (commands, replies, encoder, IMU, current; never the e
 `fit_model`'s windowed simulation of the bench's own plant. `scipy.optimize.least_squares` minimises its
 residuals within bounds (`PARAMS`): a first solution without the backlash and the current lag, the backlash's
 profile, each signal weighed by its own residual RMS, then all of them together (`fit_plant`; docs/calibration.md
-says why in this order). The Jacobian at the solution gives 95 % intervals and the identifiability
-verdict: a parameter whose column is (nearly) a combination of the others' (variance inflation, from the
-normalised Jacobian's conditioning) is reported "not identifiable", not given a confident number.
+says why in this order). The Jacobian at the solution gives 95 % intervals (with the base's rotor side, which the
+fit takes as given, carried into them: `_rotor_side`) and the identifiability verdict: a parameter whose column is
+(nearly) a combination of the others' (variance inflation, from the normalised Jacobian's conditioning) is reported
+"not identifiable", not given a confident number.
 """
 
 from __future__ import annotations
