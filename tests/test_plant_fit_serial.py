@@ -95,6 +95,23 @@ def test_the_fits_timing_is_the_emulators(serial_fit):
         assert truth[signal]["same_request"] >= 0.99, (signal, truth)
 
 
+def test_the_emulators_timing_can_replace_the_fits(serial_fit):
+    """Emulation only: `wire_truth.true_timing` gives the run's experiment with each command and request at the
+    emulator's arrival (the diagnostic that found the link's per-frame delays, docs/calibration.md): the same samples,
+    the commands in order and at the fit's delay in the median, the replies' requests as the fit counts them."""
+    import numpy as np
+
+    from host_tools.calibration.fit_data import load_experiment
+    from host_tools.calibration.wire_truth import true_timing
+
+    exp, true = load_experiment(serial_fit["run"]), true_timing(serial_fit["run"], serial_fit["capture"])
+    assert np.array_equal(true.t, exp.t) and np.array_equal(true.i_cmd, exp.i_cmd)
+    assert np.all(np.diff(true.t_cmd) > 0) and np.all(np.diff(true.t_req) > 0)
+    shift = true.t_cmd - exp.t_cmd
+    assert abs(float(np.median(shift))) < 5e-5, np.percentile(shift, [1, 50, 99])
+    assert float(np.mean(true.req_of == exp.req_of)) >= 0.99
+
+
 def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
     p = serial_fit["params"]
     for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):
