@@ -198,7 +198,7 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
     answered = match >= 0
     read_after = (t_reply[answered] - w.t_req_job[np.minimum(match[answered], len(w.t_req_job) - 1)]) * 1e3
     return {
-        "commands": {"record": n, "emulator": int(len(link.t_cmd)), "first_matched": int(shift),
+        "commands": {"record": n, "emulator": int(len(link.t_cmd)), "first_matched": int(a.shift),
                      "arrival_after_job_ms": {p: round(float(np.percentile(spread, q)), 4)
                                               for p, q in (("p1", 1), ("p50", 50), ("p90", 90), ("p99", 99),
                                                            ("p99.9", 99.9))},
