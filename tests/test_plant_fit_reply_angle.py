@@ -172,3 +172,49 @@ def test_wire_truth_dates_each_message_at_its_last_bytes_arrival(tmp_path):
     assert link.i_cmd.tolist() == [1.5]
     assert link.t_req.tolist() == [pytest.approx(0.010, abs=1.5 / NS_PER_S)]
     assert link.t_cmd[0] == pytest.approx(0.010 - len(request) * byte_s, abs=1.5 / NS_PER_S)
+
+
+def _late_wire(read_at: dict[int, float], n: int = 20, long: int = -1):
+    """A command and a request each 1 ms motor job from 0; each reply (23 bytes; 78 for request `long`) read by the
+    next job, except those in read_at (request -> the job that read it)."""
+    from host_tools.calibration.fit_data import COMMAND_DELAY_S, _Wire
+
+    jobs = np.arange(n + 5) * 1e-3
+    t_job = jobs[:n]
+    frame = 10.0 * 10 / 921600  # a request's frame after its command's
+    reads = np.array([read_at.get(k, t_job[k] + 1e-3) for k in range(n)])
+    size = np.where(np.arange(n) == long, 78, 23)
+    return _Wire(t_job, np.zeros(n), t_job + COMMAND_DELAY_S + frame, t_job, reads, jobs, jobs, size, np.arange(n),
+                 921600.0)
+
+
+def test_a_reply_read_a_job_late_dates_its_write_later():
+    """Request 5's reply skipped the 6 and 7 ms jobs (reply 4 read at 5 ms: the motor's UART was free): it had not
+    ended by 7 ms less LINK_READ_LATENCY_S, so the write arrived no sooner than 7 ms less that and the reply's wire
+    time; the next write waits behind it (the link keeps the bytes' order); the others keep COMMAND_DELAY_S."""
+    from host_tools.calibration.fit_data import COMMAND_DELAY_S, LINK_READ_LATENCY_S, _late_commands
+
+    w = _late_wire({5: 8e-3})
+    late = _late_commands(w)
+    request_arrival = 7e-3 - 10.0 * 23 / 921600 - LINK_READ_LATENCY_S
+    assert late[5] == pytest.approx(request_arrival - w.t_req[5], abs=1e-9)
+    assert late[5] > 0.5e-3  # the test can fail: a reply read on time dates nothing
+    assert late[6] == pytest.approx(request_arrival + 10.0 * 10 / 921600 - (6e-3 + COMMAND_DELAY_S), abs=1e-9)
+    assert np.all(late[np.r_[0:5, 7:20]] == 0.0)
+    assert np.all(_late_commands(_late_wire({})) == 0.0)
+
+
+def test_a_reply_that_waited_behind_the_one_before_dates_nothing():
+    """Replies 4 (a long one, 78 bytes) and 5 read together at 10 ms: reply 5 may have waited behind reply 4 on the
+    motor's UART, so its own lateness tells nothing of when request 5 arrived; it is dated by the link's order
+    behind request 4's write only (its request frame, then command 5's)."""
+    from host_tools.calibration.fit_data import COMMAND_DELAY_S, LINK_READ_LATENCY_S, _late_commands
+
+    late = _late_commands(_late_wire({4: 10e-3, 5: 10e-3}, long=4))
+    frame = 10.0 * 10 / 921600
+    assert late[4] == pytest.approx(9e-3 - 10.0 * 78 / 921600 - LINK_READ_LATENCY_S - (4e-3 + COMMAND_DELAY_S + frame),
+                                    abs=1e-9)
+    behind = late[4] + 2 * frame - 1e-3
+    own = 9e-3 - 10.0 * 23 / 921600 - LINK_READ_LATENCY_S - (5e-3 + COMMAND_DELAY_S + frame)
+    assert own > behind + 1e-4  # had its own late reply dated it, the test would fail
+    assert late[5] == pytest.approx(behind, abs=1e-9)

@@ -1,7 +1,8 @@
 """`pafp fit`'s data: what a bench measured in a run directory, never the emulator's truth.
 
-From record.bin's motor port: the current commands the firmware sent (each at its job's time), the feedback
-requests that followed them and the jobs whose reads brought a reply; from telemetry.csv, over the span the
+From record.bin's motor port: the current commands the firmware sent (each at its job's time, later when a late
+reply shows its write arrived late: `_late_commands`), the feedback requests that followed them and the jobs whose
+reads brought a reply; from telemetry.csv, over the span the
 supervisor was in RUN (from the foot's first rest when it swung up from a stop: `_swing_up`): the encoder angle,
 the IMU pitch and the motor's measured current (`load_experiment`).
 """
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,7 @@ WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/ca
 class Experiment:
     """What the bench measured: commands (time, A, brake) and samples (time, encoder, IMU, current)."""
 
-    t_cmd: np.ndarray
+    t_cmd: np.ndarray  # each command's job start (s), later by what the replies tell of its arrival (`_late_commands`)
     i_cmd: np.ndarray
     t: np.ndarray
     angle: np.ndarray
@@ -88,6 +89,10 @@ class _Wire:
     t_req_job: np.ndarray  # the job start that sent it (s)
     t_reply: np.ndarray  # per feedback reply read: the start of the job whose read brought it (s)
     t_enc: np.ndarray  # the encoder task's job starts (s): each period's first job, before the motor task's
+    t_motor: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the motor task's job starts (s)
+    reply_bytes: np.ndarray = field(default_factory=lambda: np.zeros(0))  # per reply read: its frame's length
+    req_cmd: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # per request: its write's command
+    baud: float = 921600.0  # the motor link's
 
 
 def _wire(record: Path) -> _Wire:
@@ -105,16 +110,27 @@ def _wire(record: Path) -> _Wire:
     f_cpu = int(reader.header["f_cpu_hz"])
     baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
     to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
-    times, currents, t_req, t_req_job, t_reply, t_enc = [], [], [], [], [], []
+    times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes, req_cmd = ([] for _ in range(9))
     write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
     tasks = list(reader.header.get("tasks", ()))
     encoder_task = tasks.index("encoder") if "encoder" in tasks else -1
+    motor_task = tasks.index("motor") if "motor" in tasks else -1
+
+    def wire() -> _Wire:
+        return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes)),
+                     np.array(req_cmd, dtype=int), baud)
+
     for s in reader.sections():
         t = s.start / f_cpu
         if s.task_id == encoder_task:
             t_enc.append(t)
+        elif s.task_id == motor_task:
+            t_motor.append(t)
         for data in s.inputs.get(read_key, ()):
-            t_reply.extend(t for m in from_motor.feed(data) if isinstance(m, (Values, ValuesSelective)))
+            for m in from_motor.feed(data):
+                if isinstance(m, (Values, ValuesSelective)):
+                    t_reply.append(t)
+                    reply_bytes.append(len(m.encode()))
         for accepted, data in s.outputs.get(write_key, ()):
             sent = data[:accepted]
             for msg in to_motor.feed(sent):
@@ -125,9 +141,10 @@ def _wire(record: Path) -> _Wire:
                     frame = len(sent) - _COMMAND_FRAME_BYTES  # the request's frame follows the command's
                     t_req.append(t + COMMAND_DELAY_S + 10.0 * max(frame, 0) / baud)
                     t_req_job.append(t)
+                    req_cmd.append(len(times) - 1)
                 elif isinstance(msg, vesc.SetCurrentBrake):
-                    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc)))
-    return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc)))
+                    return wire()
+    return wire()
 
 
 def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
@@ -185,6 +202,52 @@ def _reply_answers(t_reply: np.ndarray, t_req_job: np.ndarray) -> np.ndarray:
     return out
 
 
+# how long after its last byte's stop bit a reply may still not be readable by the firmware: the far end's write
+# granularity (`pafp emulate` writes what has ended each time its loop wakes, at most 1 ms apart; a USB adapter's
+# latency timer on a real bench). 0.5 ms: a short reply read one job late then dates nothing (its bound falls before
+# the fit's own arrival), only one that skipped two jobs or more; chosen on one recording's arrival errors against
+# the emulator's capture (0.25 ms dated 28 % of its commands, many too late: docs/calibration.md)
+LINK_READ_LATENCY_S = 5e-4
+
+
+def _late_commands(w: _Wire) -> np.ndarray:
+    """Per command: how much later than COMMAND_DELAY_S after its job it reached the motor, as far as the replies
+    tell (s, >= 0).
+
+    A command and its feedback request leave in one write, and the motor answers the request as it arrives. When
+    the reply was not read by the motor task's first job after the write but later, although the reply before it
+    had been read (the motor's UART was free), the reply's last byte had not ended LINK_READ_LATENCY_S before that
+    skipped job: the request, and the command before it, arrived no sooner than the skipped job less the reply's
+    wire time and that latency. A stalled host or emulator delays a write's arrival by up to a few ms that way
+    (docs/calibration.md, "Through serial mode"); the record shows it only through the late reply.
+    """
+    late = np.zeros(len(w.t_cmd))
+    if len(w.t_motor) == 0 or len(w.req_cmd) != len(w.t_req) or len(w.reply_bytes) != len(w.t_reply):
+        return late
+    answers = _reply_answers(w.t_reply, w.t_req_job)
+    skipped = np.searchsorted(w.t_motor, w.t_reply, side="left") - 1  # the motor job before the one that read it
+    for i, q in enumerate(answers):
+        k = int(skipped[i])
+        if q < 0 or k < 0 or w.t_motor[k] <= w.t_req_job[q]:
+            continue  # read by the first motor job after its write: no bound
+        if i > 0 and w.t_reply[i - 1] > w.t_motor[k]:
+            continue  # the reply before it was still on the wire then: it may have waited behind that one
+        frame = 10.0 * float(w.reply_bytes[i]) / w.baud
+        earliest = float(w.t_motor[k]) - frame - LINK_READ_LATENCY_S
+        c = int(w.req_cmd[q])
+        late[c] = max(late[c], earliest - float(w.t_req[q]))  # the request's frame after the command's
+    # the link keeps the order of the bytes: a write does not arrive before the one written before it has
+    frame = 10.0 * _COMMAND_FRAME_BYTES / w.baud
+    req_of_cmd = np.full(len(late), -1)
+    req_of_cmd[w.req_cmd] = np.arange(len(w.req_cmd))
+    end = -math.inf  # when the previous write's last frame arrived (s)
+    for c in range(len(late)):
+        late[c] = max(late[c], end + frame - (float(w.t_cmd[c]) + COMMAND_DELAY_S))
+        q = int(req_of_cmd[c])
+        end = float(w.t_req[q]) + late[c] if q >= 0 else float(w.t_cmd[c]) + COMMAND_DELAY_S + late[c]
+    return late
+
+
 def load_experiment(run_dir: Path) -> Experiment:
     """The commands (record.bin) and the measurements (telemetry.csv) of a run, over its RUN span.
 
@@ -225,8 +288,11 @@ def load_experiment(run_dir: Path) -> Experiment:
         raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
                          "(at least 100; run `pafp run --experiment sysid`)")
     from_reply = _encoder_source(run_dir) == "motor"
-    return Experiment(t_cmd, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
-                      encoder_velocity(a[:, 0], a[:, 1]), w.t_req, _reply_requests(a[:, 0], w), from_reply,
+    # a write that reached the motor late (`_late_commands`): its command and its request both later
+    late = _late_commands(w)
+    t_req = w.t_req + late[w.req_cmd] if len(w.req_cmd) == len(w.t_req) else w.t_req
+    return Experiment(t_cmd + late, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
+                      encoder_velocity(a[:, 0], a[:, 1]), t_req, _reply_requests(a[:, 0], w), from_reply,
                       _angle_requests(a[:, 0], w) if from_reply else None)
 
 

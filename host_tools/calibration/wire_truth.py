@@ -23,14 +23,15 @@ from __future__ import annotations
 import csv
 import json
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from hal.serial.sim_port import NS_PER_S, arrival_end_times
+from host_tools.calibration.fit_data import Experiment, _Wire
 
-__all__ = ["EmulatorLink", "compare", "emulator_link"]
+__all__ = ["EmulatorLink", "compare", "emulator_link", "true_timing"]
 
 BAUD = 921600  # the motor link's default (`pafp emulate --baud` changes it: pass it on)
 
@@ -110,8 +111,27 @@ def _match(read: list[bytes], sent: list[bytes]) -> np.ndarray:
     return out
 
 
-def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
-    """The emulator's truth against `fit_data`'s inference for a serial run (see the module's docstring)."""
+@dataclass
+class _Aligned:
+    """A serial run's record and its emulator's capture on the run's clock (`_align`)."""
+
+    exp: Experiment  # `fit_data`'s inference from the record alone
+    w: _Wire
+    link: EmulatorLink
+    shift: int  # the emulator's index of the record's first SetCurrent
+    delay: np.ndarray  # per command: its arrival minus its job's start (s, the clocks' offset included)
+    offset: float  # the clocks' offset (s), the median command taken as arriving COMMAND_DELAY_S after its job
+    t_reply: np.ndarray  # per reply read: the start of the job that read it (s)
+    read: list[bytes]  # those replies' frames
+    sent: np.ndarray  # per reply read: its index among the replies the emulator sent (-1: none matched)
+    match: np.ndarray  # per reply read: the request it answers, in the fit's numbering (-1: none matched)
+    t_req: np.ndarray  # when each request reached the motor, on the run's clock (s)
+    current: np.ndarray  # per sample: the request whose reply its current really is
+    angle: np.ndarray  # per sample: the request whose reply its encoder angle really is
+
+
+def _align(run_dir: Path, capture: Path, baud: int) -> _Aligned:
+    """Align an emulator's capture with a serial run's record on the frames; ValueError if they do not match."""
     from host_tools.calibration.fit_data import COMMAND_DELAY_S, _wire, load_experiment
     from host_tools.recording import RECORD_NAME
 
@@ -139,6 +159,29 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
     current = truth(np.searchsorted(t_reply, exp.t, side="right") - 1)
     t_enc = w.t_enc[np.maximum(np.searchsorted(w.t_enc, exp.t, side="right") - 1, 0)]
     angle = truth(np.searchsorted(t_reply, t_enc, side="left") - 1)
+    return _Aligned(exp, w, link, shift, delay, offset, t_reply, read, sent, match, t_req, current, angle)
+
+
+def true_timing(run_dir: Path, capture: Path, baud: int = BAUD) -> Experiment:
+    """Emulation only: the run's `Experiment` with the emulator's timing in place of the inferred one: each command
+    arriving when the emulated motor received it, each request likewise, and each sample carrying the replies it
+    really carried. `fit_plant` on it tells whether the link's per-frame timing is what the fit gets wrong."""
+    from host_tools.calibration.fit_data import COMMAND_DELAY_S
+
+    a = _align(run_dir, capture, baud)
+    n = len(a.w.t_cmd)
+    arrival = a.link.t_cmd[a.shift:a.shift + n] - a.offset
+    # `simulate` has a command act COMMAND_DELAY_S after its time: its time is its true arrival less that
+    return replace(a.exp, t_cmd=arrival - COMMAND_DELAY_S, t_req=a.t_req, req_of=a.current,
+                   angle_req_of=a.angle if a.exp.angle_from_reply else None)
+
+
+def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
+    """The emulator's truth against `fit_data`'s inference for a serial run (see the module's docstring)."""
+    a = _align(run_dir, capture, baud)
+    exp, w, link, t_req, match, t_reply, read = a.exp, a.w, a.link, a.t_req, a.match, a.t_reply, a.read
+    n, delay, offset, current, angle = len(w.t_cmd), a.delay, a.offset, a.current, a.angle
+    sent = a.sent
     inferred_angle = exp.angle_req_of if exp.angle_req_of is not None else exp.req_of
 
     def agreement(true: np.ndarray, inferred: np.ndarray) -> dict:
@@ -155,7 +198,7 @@ def compare(run_dir: Path, capture: Path, baud: int = BAUD) -> dict:
     answered = match >= 0
     read_after = (t_reply[answered] - w.t_req_job[np.minimum(match[answered], len(w.t_req_job) - 1)]) * 1e3
     return {
-        "commands": {"record": n, "emulator": int(len(link.t_cmd)), "first_matched": int(shift),
+        "commands": {"record": n, "emulator": int(len(link.t_cmd)), "first_matched": int(a.shift),
                      "arrival_after_job_ms": {p: round(float(np.percentile(spread, q)), 4)
                                               for p, q in (("p1", 1), ("p50", 50), ("p90", 90), ("p99", 99),
                                                            ("p99.9", 99.9))},
