@@ -33,6 +33,7 @@ from host_tools.calibration.fit_model import (
 
 __all__ = ["COLLINEARITY_LIMIT", "FitResult", "fit_plant"]
 
+
 @dataclass
 class FitResult:
     """The fitted values, their 95 % intervals and verdicts, and the fit percentages."""
