@@ -1,6 +1,6 @@
-"""The one-line errors the `pafp` commands print before exiting: an input that cannot be used, a study whose
-cluster run failed. Each names the value and where it came from; the command prints it and exits with the
-status given.
+"""The one-line errors the `pafp` commands print before exiting: an input that cannot be used, an output that
+could not be written or published, a study whose cluster run failed. Each names the value and where it came
+from; the command prints it and exits with the status given.
 
 >>> input_error("fit", FileNotFoundError(2, "No such file or directory", "runs/x/record.bin"))
 'pafp fit: cannot read runs/x/record.bin: No such file or directory'
@@ -12,9 +12,9 @@ status given.
 
 from __future__ import annotations
 
-from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
+from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, write_failed
 
-__all__ = ["input_error", "study_error"]
+__all__ = ["input_error", "output_error", "study_error"]
 
 
 def input_error(command: str, e: OSError | ValueError) -> str:
@@ -23,6 +23,17 @@ def input_error(command: str, e: OSError | ValueError) -> str:
     if isinstance(e, OSError):
         return f"pafp {command}: cannot read {e.filename}: {e.strerror}"
     return f"pafp {command}: {e}"
+
+
+def output_error(command: str, e: OSError | OutDirError, run_dir: RunDir, what: str = "nothing published") -> str:
+    """The line (exit EXIT_WRITE_FAILED) for a write into run_dir's staging directory that failed during the work
+    (an OSError naming the file; ``what`` says what happened to the work) or an --out that files not from a run took
+    meanwhile (the OutDirError from :meth:`RunDir.publish`, which names where the outputs are kept)."""
+    if isinstance(e, OutDirError):
+        return f"pafp {command}: {e} (exit {EXIT_WRITE_FAILED})"
+    if e.filename:
+        e.filename = str(e.filename).replace(str(run_dir.path), f"{run_dir.out} (staged)")
+    return write_failed(command, e, f"{what}: {run_dir.out} keeps what it held")
 
 
 def study_error(command: str, scheduler: str | None, e: OSError | ValueError, kept: str) -> tuple[str, int]:

@@ -12,6 +12,9 @@ device that goes away) is one line naming the file and the error, exit ``EXIT_WR
 of sysexits.h); the partial file is removed and the files already complete stay as they are. A staging
 directory is named after the process that made it (``.<name>.<pid>@<host>.<random>.partial``): one left by a
 killed run is removed by the next run to the same ``--out`` once that process is gone (:func:`clean_stale`).
+A path inside ``--out`` (a ``--capture`` there) is written inside the staging directory (:meth:`RunDir.staged`).
+Should files that are not a run's appear in ``--out`` during the run, publishing refuses to replace them and
+keeps the run's outputs in ``<name>.unpublished.<random>`` beside it (exit 74).
 
 >>> import tempfile
 >>> root = Path(tempfile.mkdtemp())
@@ -168,6 +171,7 @@ class RunDir:
         """Check out (:func:`check_out_dir`) and create the staging directory beside it (OutDirError if not)."""
         check_out_dir(out)
         self.out = out.absolute()
+        self.kept = False  # publish found out taken by other files: the staging directory stays
         clean_stale(self.out)
         try:
             self.out.parent.mkdir(parents=True, exist_ok=True)
@@ -177,13 +181,29 @@ class RunDir:
         except OSError as e:
             raise OutDirError(f"--out {out} is not writable: {e.strerror or e}") from None
 
+    def staged(self, path: Path) -> Path:
+        """Where ``path`` is written during the run: inside the staging directory if it lies inside ``out`` (it is
+        published with the run; out itself is replaced), else ``path`` itself."""
+        try:
+            return self.path / path.absolute().relative_to(self.out)
+        except ValueError:
+            return path
+
     def publish(self) -> None:
-        """Put the staged files at ``out``: a previous run's directory there is replaced as a whole."""
+        """Put the staged files at ``out``: a previous run's directory there is replaced as a whole. If something
+        else wrote files that are not a run's into ``out`` meanwhile, nothing is replaced and the staging
+        directory is kept (OutDirError naming it)."""
         if self.out.is_dir() and not any(self.out.iterdir()):
             self.out.rmdir()
         old = None
         if self.out.exists():
-            _check_previous_run(self.out)  # still a previous run's: replace it, never mix with it
+            try:
+                _check_previous_run(self.out)  # still a previous run's: replace it, never mix with it
+            except OutDirError as e:  # renamed out of clean_stale's way: kept until the user moves it
+                kept = Path(tempfile.mkdtemp(prefix=f"{self.out.name}.unpublished.", dir=self.out.parent))
+                os.replace(self.path, kept)
+                self.path, self.kept = kept, True
+                raise OutDirError(f"{e}; this run's outputs are kept in {kept}") from None
             old = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.{_tag()}.", suffix=".old", dir=self.out.parent))
             os.replace(self.out, old / "run")
         os.rename(self.path, self.out)
@@ -191,8 +211,10 @@ class RunDir:
             shutil.rmtree(old, ignore_errors=True)
 
     def discard(self) -> None:
-        """Remove the staging directory and what it holds (a run that will not be published)."""
-        shutil.rmtree(self.path, ignore_errors=True)
+        """Remove the staging directory and what it holds (a run that will not be published), unless
+        :meth:`publish` kept it."""
+        if not self.kept:
+            shutil.rmtree(self.path, ignore_errors=True)
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:

@@ -156,6 +156,53 @@ def test_a_capture_directory_that_cannot_be_written_is_refused_before_the_run(tm
     assert not (tmp_path / "run").exists() and _leftovers(tmp_path) == []
 
 
+def test_a_capture_inside_out_is_published_with_the_run(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["run", "--quiet", "--strides", "1", "--no-plot", "--no-trace", "--out", str(out), "--capture",
+                 str(out / "capture")])
+    capsys.readouterr()
+    assert code in (0, 1)
+    assert (out / "summary.json").exists() and (out / "capture" / "index.csv").stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+@pytest.mark.parametrize("command", ["run", "fit"])
+def test_an_out_taken_by_other_files_during_the_work_keeps_the_outputs_beside_it(tmp_path, capsys, monkeypatch,
+                                                                              command):
+    """Files that are not a run's put into --out while the work runs: one line, exit 74, nothing replaced, and the
+    outputs kept in a directory the line names (never removed by the next run's clean-up)."""
+    src = tmp_path / "src"
+    if command == "fit":
+        assert main(["run", "--experiment", "sysid", "--quiet", "--no-plot", "--no-trace", "--profile",
+                     str(_short_sysid(tmp_path)), "--out", str(src)]) == 0
+    out = tmp_path / "out"
+    publish = outdir.RunDir.publish
+
+    def intruder(self):  # another program writes into --out just before the outputs are published
+        out.mkdir(exist_ok=True)
+        (out / "notes.txt").write_text("mine")
+        publish(self)
+
+    monkeypatch.setattr(outdir.RunDir, "publish", intruder)
+    args = (["run", "--strides", "1"] if command == "run" else ["fit", str(src)])
+    code = main([*args, "--no-plot", *(["--no-trace", "--quiet"] if command == "run" else []), "--out", str(out)])
+    _, err = capsys.readouterr()
+    line = _one_line(err)
+    assert code == EXIT_WRITE_FAILED and "notes.txt" in line and "kept in" in line, err
+    kept = Path(line.split("kept in ")[1].split()[0])
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    assert (kept / "summary.json").exists() and kept.parent == tmp_path
+    assert clean_stale(out) == [] and kept.exists()
+
+
+def _short_sysid(tmp_path: Path) -> Path:
+    """A firmware profile whose identification experiment lasts about 4 s."""
+    fw = tmp_path / "fw.toml"
+    fw.write_text((ROOT / "profiles" / "firmware.toml").read_text() + '\n[controller]\nname = "sysid"\nhold_s = '
+                  '0.5\nsweep_deg = 8.0\nsweep_deg_s = 16.0\nchirp_s = 1.0\nprbs_s = 0.5\n')
+    return fw
+
+
 # ---- serial mode ------------------------------------------------------------------------------------------------
 
 SIM = ["--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--no-realtime", "--quiet"]

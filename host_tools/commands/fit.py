@@ -35,8 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.calibration.fit_report import figure as _g
     from host_tools.calibration.fit_report import validate, write_fit_outputs
     from host_tools.calibration.plant_fit import fit_plant
-    from host_tools.command_errors import input_error
-    from host_tools.outdir import RunDir
+    from host_tools.command_errors import input_error, output_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir
     from profiles import profile_path
 
     try:
@@ -63,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
         extra = {"validation": {"run": str(args.validate), "fit_percent": validate(base, r, other)}} if other else {}
         s = write_fit_outputs(run_dir.path, base, base_text, r, exp, extra, plot=not args.no_plot)
         run_dir.publish()
+    except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
+        run_dir.discard()
+        print(output_error("fit", e, run_dir), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     except BaseException:
         run_dir.discard()
         raise

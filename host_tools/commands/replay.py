@@ -41,8 +41,8 @@ def run(args: argparse.Namespace) -> int:
     from hal.record.format import RecordError
     from hal.record.reader import RecordReader
     from host_tools.calibration.replay_run import find_record, replay_record
-    from host_tools.command_errors import input_error
-    from host_tools.outdir import RunDir, write_atomic
+    from host_tools.command_errors import input_error, output_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, write_atomic
     from host_tools.recording import config_from_dict
 
     out = args.out or Path("runs") / (time.strftime("%Y%m%d-%H%M%S") + "-replay")
@@ -94,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
                      json.dumps(r.first.as_dict() if r.first else None, indent=2) + "\n")
         write_atomic(run_dir.path / "replay.md", _report(s))
         run_dir.publish()
+    except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
+        run_dir.discard()
+        print(output_error("replay", e, run_dir), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     except BaseException:
         run_dir.discard()
         raise

@@ -167,8 +167,10 @@ def run(args: argparse.Namespace) -> int:
         return _run_serial(args)
     args.strides = STRIDES if args.strides is None else args.strides
     args.body_mass = BODY_MASS_KG if args.body_mass is None else args.body_mass
-    from host_tools.command_errors import input_error
-    from host_tools.outdir import EXIT_WRITE_FAILED, RunDir, check_capture_dir, write_failed
+    from dataclasses import replace
+
+    from host_tools.command_errors import input_error, output_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, check_capture_dir
     from host_tools.runner import RunConfig, board_profile
 
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
@@ -200,19 +202,19 @@ def run(args: argparse.Namespace) -> int:
             from firmware.control.reference import GaitReference
 
             GaitReference.from_csv(args.reference, stride_s=fw_cfg.stride_s)
-        if args.capture is not None:
+        # a capture inside --out is written into the staging directory and published with the run
+        if args.capture is not None and not args.capture.absolute().is_relative_to(out.absolute()):
             check_capture_dir(args.capture)
         run_dir = RunDir(out)  # --out checked and the staging directory made: before the run
     except (OSError, ValueError) as e:  # a file that cannot be read, a bad value (OutDirError too)
         print(input_error("run", e), file=sys.stderr)
         return 2
+    if args.capture is not None:
+        cfg = replace(cfg, capture_dir=run_dir.staged(args.capture))
     try:
         return _run_virtual(args, cfg, run_dir)
-    except OSError as e:  # a write failed during the run: the staging directory is gone, --out untouched
-        if e.filename:
-            e.filename = str(e.filename).replace(str(run_dir.path), f"{run_dir.out} (staged)")
-        print(write_failed("run", e, f"the run was stopped and nothing published: {out} keeps what it held"),
-              file=sys.stderr)
+    except (OSError, OutDirError) as e:  # a write failed (staging gone, --out untouched) or --out was taken meanwhile
+        print(output_error("run", e, run_dir, "the run was stopped and nothing published"), file=sys.stderr)
         return EXIT_WRITE_FAILED
     finally:
         run_dir.discard()  # nothing left once published; everything staged if not
