@@ -166,15 +166,29 @@ def test_a_capture_inside_out_is_published_with_the_run(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
 
 
-@pytest.mark.parametrize("command", ["run", "fit"])
+@pytest.fixture(scope="module")
+def sysid_run(tmp_path_factory) -> Path:
+    """A recorded identification experiment of about 4 s (for `pafp fit` and `pafp replay`)."""
+    d = tmp_path_factory.mktemp("sysid")
+    fw = d / "fw.toml"
+    fw.write_text((ROOT / "profiles" / "firmware.toml").read_text() + '\n[controller]\nname = "sysid"\nhold_s = '
+                  '0.5\nsweep_deg = 8.0\nsweep_deg_s = 16.0\nchirp_s = 1.0\nprbs_s = 0.5\n')
+    assert main(["run", "--experiment", "sysid", "--quiet", "--no-plot", "--no-trace", "--profile", str(fw),
+                 "--out", str(d / "run")]) == 0
+    return d / "run"
+
+
+def _work(command: str, src: Path) -> list[str]:
+    return {"run": ["run", "--strides", "1", "--quiet", "--no-trace", "--no-plot"],
+            "fit": ["fit", str(src), "--no-plot"], "replay": ["replay", str(src)]}[command]
+
+
+@pytest.mark.parametrize("command", ["run", "fit", "replay"])
 def test_an_out_taken_by_other_files_during_the_work_keeps_the_outputs_beside_it(tmp_path, capsys, monkeypatch,
-                                                                              command):
+                                                                              command, request):
     """Files that are not a run's put into --out while the work runs: one line, exit 74, nothing replaced, and the
     outputs kept in a directory the line names (never removed by the next run's clean-up)."""
-    src = tmp_path / "src"
-    if command == "fit":
-        assert main(["run", "--experiment", "sysid", "--quiet", "--no-plot", "--no-trace", "--profile",
-                     str(_short_sysid(tmp_path)), "--out", str(src)]) == 0
+    src = request.getfixturevalue("sysid_run") if command != "run" else tmp_path
     out = tmp_path / "out"
     publish = outdir.RunDir.publish
 
@@ -184,8 +198,7 @@ def test_an_out_taken_by_other_files_during_the_work_keeps_the_outputs_beside_it
         publish(self)
 
     monkeypatch.setattr(outdir.RunDir, "publish", intruder)
-    args = (["run", "--strides", "1"] if command == "run" else ["fit", str(src)])
-    code = main([*args, "--no-plot", *(["--no-trace", "--quiet"] if command == "run" else []), "--out", str(out)])
+    code = main([*_work(command, src), "--out", str(out)])
     _, err = capsys.readouterr()
     line = _one_line(err)
     assert code == EXIT_WRITE_FAILED and "notes.txt" in line and "kept in" in line, err
@@ -195,12 +208,15 @@ def test_an_out_taken_by_other_files_during_the_work_keeps_the_outputs_beside_it
     assert clean_stale(out) == [] and kept.exists()
 
 
-def _short_sysid(tmp_path: Path) -> Path:
-    """A firmware profile whose identification experiment lasts about 4 s."""
-    fw = tmp_path / "fw.toml"
-    fw.write_text((ROOT / "profiles" / "firmware.toml").read_text() + '\n[controller]\nname = "sysid"\nhold_s = '
-                  '0.5\nsweep_deg = 8.0\nsweep_deg_s = 16.0\nchirp_s = 1.0\nprbs_s = 0.5\n')
-    return fw
+@pytest.mark.parametrize("command", ["fit", "replay"])
+def test_a_fit_or_replay_whose_disk_fills_is_one_line_exit_74_and_publishes_nothing(tmp_path, capsys, sysid_run,
+                                                                                   atomic_writes_fill, command):
+    out = tmp_path / "out"
+    code = main([*_work(command, sysid_run), "--out", str(out)])
+    _, err = capsys.readouterr()
+    line = _one_line(err)
+    assert code == EXIT_WRITE_FAILED and "cannot write" in line and os.strerror(errno.ENOSPC) in line, err
+    assert list(tmp_path.iterdir()) == []
 
 
 # ---- serial mode ------------------------------------------------------------------------------------------------
