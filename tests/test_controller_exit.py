@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_serial_run import _emulator, _stop, _summary, assert_stopped_safely
+from test_serial_run import STALL_FAULTS, _emulator, _stop, _summary, assert_stopped_safely
 from test_serial_stop import assert_outputs_complete, fail_encoder_read
 
 from host_tools.cli import main
@@ -22,7 +22,6 @@ from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
 HERE = Path(__file__).resolve().parent
 CONTROLLERS = HERE / "misbehaving_controllers.py"
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
-STALL_FAULTS = ("COMMAND_STALE", "MOTOR_TIMEOUT", "IMU_TIMEOUT")  # what a stall of the host latches first
 WAYS_OUT = [("Exits", "SystemExit: 0"), ("Interrupts", "KeyboardInterrupt"),
             ("ClosesGenerator", "GeneratorExit"), ("RaisesBase", "Escape: out of here")]
 
