@@ -19,6 +19,7 @@ from typing import Any
 
 from host_tools.outdir import write_atomic
 from host_tools.studies.design_spec import DesignPoint, DesignSpec, WalkCriteria
+from host_tools.studies.sweep_table import status_counts
 
 __all__ = ["REPORT_RATIO", "groups", "is_report_design", "lightest", "pareto", "walks", "write_design_report"]
 
@@ -168,11 +169,8 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
 
     by_index = {p.index: p for p in points}
     c = spec.criteria
-    status: dict[str, int] = {}
-    for r in rows:
-        status[r["status"]] = status.get(r["status"], 0) + 1
     md = [f"# Design search {spec.path.name}", "",
-          f"{len(rows)} points ({', '.join(f'{k} {v}' for k, v in sorted(status.items()))}) on {where} in "
+          f"{len(rows)} points ({status_counts(rows)}) on {where} in "
           f"{_fmt(wall_time_s, '.1f')} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
           f"A design walks the person when its run has no fault, its winding stays within the thermal limit (the "
           "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking), "

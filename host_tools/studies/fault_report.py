@@ -20,6 +20,7 @@ import numpy as np
 from hal.virtual.faults import INJECTORS, injector_class
 from host_tools.outdir import write_atomic
 from host_tools.studies.fault_spec import FaultSpec
+from host_tools.studies.sweep_table import status_counts
 
 __all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "load_criteria", "rerun_command",
            "write_fault_report"]
@@ -252,11 +253,8 @@ def write_fault_report(spec: FaultSpec, rows: list[dict[str, Any]], out: Path, f
     """Write report.md, plots/heatmap.png and the traces of the worst points into out; return report.md's path."""
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    status: dict[str, int] = {}
-    for r in rows:
-        status[r["status"]] = status.get(r["status"], 0) + 1
     md = [f"# Fault campaign {spec.path.name}", "",
-          f"{len(rows)} points ({', '.join(f'{k} {v}' for k, v in sorted(status.items()))}) on {where} in "
+          f"{len(rows)} points ({status_counts(rows)}) on {where} in "
           f"{wall_time_s:.1f} s; seed {spec.seed}; faults act from a gait phase of the first whole stride; figures "
           "against the fault-free run of the same seeds (docs/safety.md). Angles, velocities and torques are the "
           "plant's truth (emulation only).", ""]

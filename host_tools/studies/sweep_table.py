@@ -18,7 +18,7 @@ from typing import Any
 
 from host_tools.outdir import naming
 
-__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "read_rows"]
+__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "read_rows", "status_counts"]
 
 JOURNAL = "rows.jsonl"
 FLUSH_S = 1.0
@@ -44,6 +44,14 @@ def read_rows(out: Path) -> list[dict[str, Any]]:
         rows[int(row["point"])] = {k: math.nan if v is None and k not in ("sample", "plant_seed") else v
                                    for k, v in row.items()}
     return [rows[k] for k in sorted(rows)]
+
+
+def status_counts(rows: list[dict[str, Any]]) -> str:
+    """The rows' statuses counted, in name order: "fault 2, ok 14" (the reports' first line)."""
+    status: dict[str, int] = {}
+    for r in rows:
+        status[r["status"]] = status.get(r["status"], 0) + 1
+    return ", ".join(f"{k} {v}" for k, v in sorted(status.items()))
 
 
 def _atomic(path: Path, write: Any) -> None:
