@@ -265,9 +265,12 @@ def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: di
     rng = np.random.default_rng(TIMING_SEED)
     r0 = residuals(base, v, part, scales)
     out = np.zeros((n, n))
+    lo, hi = part.bounds[:, 0], part.bounds[:, 1]
+    # writes whose windows overlap (a stall: each may have waited behind the one before) are one burst, late together
+    burst = np.r_[0, np.cumsum(part.t_cmd[1:] + lo[1:] > np.maximum.accumulate(part.t_cmd + hi)[:-1])]
     for _ in range(TIMING_DRAWS):
-        lo, hi = part.bounds[:, 0], part.bounds[:, 1]
-        dr = residuals(base, v, part.shifted(lo + rng.uniform(0.0, 1.0, len(lo)) * (hi - lo)), scales) - r0
+        u = rng.uniform(0.0, 1.0, int(burst[-1]) + 1)[burst]
+        dr = residuals(base, v, part.shifted(lo + u * (hi - lo)), scales) - r0
         shift = bread @ (jac.T @ dr)
         out += np.outer(shift, shift)
     return out / TIMING_DRAWS
