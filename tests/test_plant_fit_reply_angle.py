@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hal.virtual.plant import load_plant_params
-from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment, _encoder_source
+from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment, _summary_field
 from host_tools.calibration.fit_model import base_values, simulate
 
 
@@ -68,13 +68,14 @@ def test_the_command_delay_moves_the_simulated_response():
     assert np.max(np.abs(current_early - current_late)[mask]) > 0.1
 
 
-def test_the_encoder_source_comes_from_the_run_summary(tmp_path):
-    assert _encoder_source(tmp_path) == ""  # no summary: the virtual bench's encoder
-    (tmp_path / "summary.json").write_text(json.dumps({"encoder_source": "motor"}))
-    assert _encoder_source(tmp_path) == "motor"
+def test_the_encoder_source_and_mode_come_from_the_run_summary(tmp_path):
+    assert _summary_field(tmp_path, "encoder_source") == ""  # no summary: the virtual bench's encoder
+    (tmp_path / "summary.json").write_text(json.dumps({"encoder_source": "motor", "mode": "serial"}))
+    assert _summary_field(tmp_path, "encoder_source") == "motor"
+    assert _summary_field(tmp_path, "mode") == "serial"
     (tmp_path / "summary.json").write_text("[1, 2")
     with pytest.raises(ValueError, match="summary.json"):
-        _encoder_source(tmp_path)
+        _summary_field(tmp_path, "mode")
 
 
 def test_the_command_delay_is_bounded_below_the_reply_round_trip():
@@ -218,3 +219,59 @@ def test_a_reply_that_waited_behind_the_one_before_dates_nothing():
     own = 9e-3 - 10.0 * 23 / 921600 - LINK_READ_LATENCY_S - (5e-3 + COMMAND_DELAY_S + frame)
     assert own > behind + 1e-4  # had its own late reply dated it, the test would fail
     assert late[5] == pytest.approx(behind, abs=1e-9)
+
+
+def test_the_record_bounds_each_writes_arrival():
+    """A reply read by the next job bounds its write's arrival to that job less the reply's wire time; the writes
+    keep their order, so a write is bounded by the next one's bound too; a dated write may have come as early as
+    its job allows (the dating is an inference, not a bound)."""
+    from host_tools.calibration.fit_data import _late_commands, arrival_bounds
+
+    w = _late_wire({5: 8e-3})
+    late = _late_commands(w)
+    b = arrival_bounds(w, late)
+    reply = 10.0 * 23 / 921600
+    on_time = 1e-3 - reply - COMMAND_DELAY_S  # read by the next job: 0.6 ms
+    assert b[0].tolist() == [0.0, pytest.approx(on_time, abs=1e-12)]
+    # request 5's reply was read at 8 ms, request 6's at 7 ms: write 5 came no later than write 6's bound
+    assert late[5] > 0 and b[5, 0] == -late[5]
+    assert b[5, 1] == pytest.approx(7e-3 - reply - (5e-3 + COMMAND_DELAY_S + late[5]), abs=1e-12)
+    assert np.all(b[:, 0] <= 0.0) and np.all(b[:, 1] >= 0.0)
+
+
+def test_a_shifted_experiment_moves_each_write_and_its_request_in_order():
+    t = np.arange(5) * 1e-3
+    zeros = np.zeros(5)
+    exp = Experiment(t, zeros, t, zeros, zeros, zeros, "hand-built", zeros, t + 2e-4, np.arange(5) - 1,
+                     req_cmd=np.arange(5))
+    moved = exp.shifted(np.array([0.0, 3e-4, 2.5e-3, 0.0, 1e-4]))
+    assert moved.t_cmd.tolist() == pytest.approx([0.0, 1.3e-3, 4.5e-3, 4.5e-3, 4.5e-3])  # not before the one before
+    assert moved.t_req.tolist() == pytest.approx([2e-4, 1.5e-3, 4.7e-3, 4.7e-3, 4.7e-3])
+    assert exp.shifted(np.zeros(5)).t_cmd.tolist() == t.tolist()
+
+
+def _timing_term(bounds: np.ndarray | None) -> float:
+    """The current lag's variance from `plant_fit._timing` on the hand-built experiment with these arrival bounds."""
+    from dataclasses import replace
+
+    from host_tools.calibration.fit_model import SIGMA, residuals
+    from host_tools.calibration.plant_fit import _secant_jacobian, _timing
+
+    base = load_plant_params()
+    v = base_values(base)
+    exp = replace(_experiment(False), bounds=bounds, req_cmd=np.arange(500))
+    names = ("current_time_constant_s",)
+    step = np.array([0.02 * v[names[0]]])
+    jac, _ = _secant_jacobian(lambda x: residuals(base, {**v, names[0]: float(x[0])}, exp, SIGMA),
+                              np.array([v[names[0]]]), step, np.array([1.0]))
+    return float(_timing(base, v, exp, SIGMA, names, jac, np.linalg.pinv(jac.T @ jac))[0, 0])
+
+
+def test_the_timing_term_is_zero_when_the_timing_is_exact_and_grows_with_the_window():
+    """The virtual bench (no bounds) and a zero window add nothing; through a pty the record leaves ~0.6 ms."""
+    assert _timing_term(None) == 0.0
+    assert _timing_term(np.zeros((500, 2))) == 0.0
+    narrow = _timing_term(np.column_stack([np.zeros(500), np.full(500, 1e-4)]))
+    wide = _timing_term(np.column_stack([np.zeros(500), np.full(500, 6e-4)]))
+    assert 0.0 < narrow < wide
+    assert _timing_term(np.column_stack([np.zeros(500), np.full(500, 6e-4)])) == wide  # its draws are seeded

@@ -112,6 +112,17 @@ def test_the_emulators_timing_can_replace_the_fits(serial_fit):
     assert float(np.mean(true.req_of == exp.req_of)) >= 0.99
 
 
+def test_the_intervals_carry_the_writes_unknown_arrival(serial_fit):
+    """Through a pty the record bounds each write's arrival to a window (about 0.6 ms: `fit_data.arrival_bounds`):
+    its part of each interval (`plant_fit._timing`) is in fit.json, within the interval; the virtual bench has none
+    (tests/test_plant_fit_reply_angle.py)."""
+    # the median write's window: 0.60 ms on ten recordings, 1.6 ms on the one whose link stalled most
+    assert 0.3 < serial_fit["arrival_window_ms"] < 5.0, serial_fit["arrival_window_ms"]
+    for name, p in serial_fit["params"].items():
+        assert 0.0 <= p["ci95_timing"] <= p["ci95_half_width"] + 1e-12, (name, p)
+    assert serial_fit["params"]["current_time_constant_s"]["ci95_timing"] > 0.0
+
+
 def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
     p = serial_fit["params"]
     for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):
@@ -119,10 +130,11 @@ def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
         assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
 
 
-@pytest.mark.xfail(reason="every one within its interval in 2 of 9 serial recordings (load 1.2-3.8, each fitted as "
-                          "pafp fit does): 52 of 63 parameter-runs were; the current lag (+2.6 to +6.8 %: late writes "
-                          "the record cannot see) in none of six, inertia outside in 3 (1.0-5.1 "
-                          "half-widths), static friction and damping in 1 each (docs/calibration.md)")
+@pytest.mark.xfail(reason="every one within its interval in 8 of 11 serial recordings with the timing term (3 of 11 "
+                          "without it; load 2.6-4.7, each fitted as pafp fit does): 73 of 77 parameter-runs were; "
+                          "Coulomb outside in 2 (1.05, 1.17 half-widths), damping and inertia in 1 each (1.39, 1.26): "
+                          "the fit's response to the link's per-frame delays is not linear there "
+                          "(docs/calibration.md, Late writes)")
 def test_serial_identified_parameters_within_their_intervals(serial_fit):
     """The done-when's coverage: every identified plant parameter within its 95 % interval of the truth."""
     p = serial_fit["params"]

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +43,11 @@ class Experiment:
     # per sample: the request whose reply's position the encoder angle is (None: the same as req_of). The encoder
     # task opens each period, before the motor task reads that period's reply: its angle is one reply older
     angle_req_of: np.ndarray | None = None
+    # per command: (earliest, latest) its write may have reached the motor, relative to its dated arrival, as far as
+    # the record bounds it (s, `arrival_bounds`; None: the timing is exact, the virtual bench); per request: its
+    # write's command
+    bounds: np.ndarray | None = None
+    req_cmd: np.ndarray | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
         """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
@@ -55,15 +60,29 @@ class Experiment:
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
                           self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[keep])
+                          None if self.angle_req_of is None else self.angle_req_of[keep], self.bounds, self.req_cmd)
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
         k = (self.t >= t0) & (self.t < t1)
         c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
+        # the commands kept are a run of them: a request's command index moves by the first one's (-1: not kept)
+        first = int(np.argmax(c)) if c.any() else 0
+        req_cmd = None if self.req_cmd is None else np.where(
+            (self.req_cmd >= first) & (self.req_cmd < first + int(c.sum())), self.req_cmd - first, -1)
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
                           self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[k])
+                          None if self.angle_req_of is None else self.angle_req_of[k],
+                          None if self.bounds is None else self.bounds[c], req_cmd)
+
+    def shifted(self, delay: np.ndarray) -> Experiment:
+        """The same experiment with each write (a command and the request that follows it) reaching the motor
+        delay[c] (s, per command) later; the link keeps the order of the writes."""
+        t_cmd = np.maximum.accumulate(self.t_cmd + delay)
+        t_req = self.t_req
+        if self.req_cmd is not None:
+            t_req = np.maximum.accumulate(self.t_req + np.where(self.req_cmd >= 0, delay[self.req_cmd], 0.0))
+        return replace(self, t_cmd=t_cmd, t_req=t_req)
 
 
 def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -248,6 +267,38 @@ def _late_commands(w: _Wire) -> np.ndarray:
     return late
 
 
+def arrival_bounds(w: _Wire, late: np.ndarray) -> np.ndarray:
+    """Per command: (earliest, latest) its write may have reached the motor, as far as the record tells, relative to
+    its dated arrival (COMMAND_DELAY_S plus `late` after its job) (s; shape (n, 2), earliest <= 0 <= latest).
+
+    Earliest: COMMAND_DELAY_S after its job (its frame's wire time), `late` earlier than the dating: that a late
+    reply dates a write is an inference on the link's read latency (`_late_commands`), and after a stall of the
+    far end it dated some writes 1 to 3 ms too late (docs/calibration.md, "Late writes"); not a bound.
+
+    Its request follows it in the same write and the motor answers the request as it arrives, so the reply's last
+    byte ended no later than the start of the job that read it: the write arrived no later than that less the
+    reply's wire time. The link keeps the order of the writes, so a write arrived no later than the next one's
+    bound either. A write with no bound (its reply never read, the last ones) takes the median slack. Through a pty
+    the record leaves most writes a slack of about 0.6 ms (a reply read by the next 1 ms job) of which the
+    emulator's capture shows most used by 0.1 ms, a few by 0.8-1 ms (docs/calibration.md, "Late writes").
+    """
+    n = len(w.t_cmd)
+    upper = np.full(n, math.inf)
+    if n == 0 or len(w.req_cmd) != len(w.t_req) or len(w.reply_bytes) != len(w.t_reply):
+        return np.zeros((n, 2))
+    answers = _reply_answers(w.t_reply, w.t_req_job)
+    for i, q in enumerate(answers):
+        if q < 0:
+            continue
+        c = int(w.req_cmd[q])
+        upper[c] = min(upper[c], float(w.t_reply[i]) - 10.0 * float(w.reply_bytes[i]) / w.baud)
+    upper = np.minimum.accumulate(upper[::-1])[::-1]  # no later than the next write's bound
+    slack = upper - (w.t_cmd + COMMAND_DELAY_S + late)
+    known = np.isfinite(slack)
+    fill = float(np.median(slack[known])) if known.any() else 0.0
+    return np.column_stack([-late, np.clip(np.where(known, slack, fill), 0.0, None)])
+
+
 def load_experiment(run_dir: Path) -> Experiment:
     """The commands (record.bin) and the measurements (telemetry.csv) of a run, over its RUN span.
 
@@ -287,13 +338,19 @@ def load_experiment(run_dir: Path) -> Experiment:
     if len(a) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
                          "(at least 100; run `pafp run --experiment sysid`)")
-    from_reply = _encoder_source(run_dir) == "motor"
+    from_reply = _summary_field(run_dir, "encoder_source") == "motor"
     # a write that reached the motor late (`_late_commands`): its command and its request both later
     late = _late_commands(w)
-    t_req = w.t_req + late[w.req_cmd] if len(w.req_cmd) == len(w.t_req) else w.t_req
+    paired = len(w.req_cmd) == len(w.t_req)
+    t_req = w.t_req + late[w.req_cmd] if paired else w.t_req
+    # through serial mode the record bounds each write's arrival only to a window (`arrival_bounds`); the virtual
+    # bench's ports deliver at the modelled wire time, exactly the fit's
+    serial = _summary_field(run_dir, "mode") == "serial"
     return Experiment(t_cmd + late, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
                       encoder_velocity(a[:, 0], a[:, 1]), t_req, _reply_requests(a[:, 0], w), from_reply,
-                      _angle_requests(a[:, 0], w) if from_reply else None)
+                      _angle_requests(a[:, 0], w) if from_reply else None,
+                      arrival_bounds(w, late) if serial and paired else None,
+                      np.array(w.req_cmd, dtype=int) if serial and paired else None)
 
 
 SWING_DEG = 4.0  # a start further than this from where the foot comes to rest is a swing-up (the foot hung on a stop)
@@ -320,15 +377,16 @@ def _swing_up(t: np.ndarray, angle: np.ndarray) -> int:
     return 0
 
 
-def _encoder_source(run_dir: Path) -> str:
-    """Where a serial run's encoder angle came from (summary.json's ``encoder_source``; "" for the virtual bench,
-    whose encoder reads the plant at the job's time). ValueError (one line) for a damaged summary."""
+def _summary_field(run_dir: Path, key: str) -> str:
+    """A run summary's field as text ("" without a summary or the field): ``encoder_source`` (where a serial run's
+    encoder angle came from; "" for the virtual bench, whose encoder reads the plant at the job's time), ``mode``
+    ("serial" or "virtual"). ValueError (one line) for a damaged summary."""
     import json
 
     summary = run_dir / "summary.json"
     if not summary.is_file():
         return ""
     try:
-        return str(json.loads(summary.read_text(encoding="utf-8")).get("encoder_source", ""))
+        return str(json.loads(summary.read_text(encoding="utf-8")).get(key, ""))
     except (ValueError, AttributeError):
         raise ValueError(f"{summary}: not a run summary (not a JSON object)") from None

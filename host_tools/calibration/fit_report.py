@@ -73,7 +73,9 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
 
     params = {n: {"value": num(r.values[n]), "ci95_half_width": num(r.ci95[n]),
                   # the part of ci95_half_width that is the base's rotor side (Kt/J_m) taken as uncertain
-                  "ci95_rotor_side": num(r.rotor_ci95.get(n, 0.0)), "start": num(r.start[n]),
+                  "ci95_rotor_side": num(r.rotor_ci95.get(n, 0.0)),
+                  # the part that is the writes' arrival the record leaves unknown (serial mode; 0 when exact)
+                  "ci95_timing": num(r.timing_ci95.get(n, 0.0)), "start": num(r.start[n]),
                   "collinearity": num(r.collinearity[n]), "identifiable": r.identifiable[n],
                   "unit": PARAMS[n].unit, "meaning": PARAMS[n].meaning, "bounds": [PARAMS[n].lo, PARAMS[n].hi]}
               for n in r.names}
@@ -93,6 +95,8 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
             "current_samples_without_simulation": dict(r.unheard),
             # the base's rotor side (Kt/J_m) is taken as uncertain by this relative spread (`rotor_side_sd`)
             "rotor_side_sd": num(r.rotor_sd),
+            # the median window the record leaves a write's arrival (ms; 0: the timing is exact, the virtual bench)
+            "arrival_window_ms": num(r.arrival_window_ms),
             **(extra or {})}
 
 
@@ -158,19 +162,23 @@ _g = figure
 def _markdown(s: dict) -> str:
     lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
              f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
-             "| parameter | value | 95 % ± | of which rotor side | collinearity | verdict |",
-             "|---|---|---|---|---|---|"]
+             "| parameter | value | 95 % ± | of which rotor side | of which timing | collinearity | verdict |",
+             "|---|---|---|---|---|---|---|"]
     for n, p in s["params"].items():
         verdict = "identified" if p["identifiable"] else "**not identifiable** (base value kept)"
         lines.append(f"| {n} ({p['unit']}) | {_g(p['value'], '.6g')} | {_g(p['ci95_half_width'], '.3g')} | "
-                     f"{_g(p['ci95_rotor_side'], '.2g')} | "
+                     f"{_g(p['ci95_rotor_side'], '.2g')} | {_g(p['ci95_timing'], '.2g')} | "
                      f"{_g(p['collinearity'], '.2f')} | {verdict} |")
     for n, p in s["fixed"].items():
-        lines.append(f"| {n} | fixed | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
+        lines.append(f"| {n} | fixed | | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
     lines += ["", "95 % ± is each parameter's interval on its own. It includes the base profile's rotor side: the "
               "rotor's Kt/J_m, which alone carries it across the backlash at each reversal, is taken from the base "
               f"with a relative spread of {_g(s['rotor_side_sd'], '.3f')} (the tolerance table's Kt and rotor inertia) "
-              "and the shift that spread would cause is added to the covariance; its part is in its own column."]
+              "and the shift that spread would cause is added to the covariance; its part is in its own column. "
+              + ("The timing's column: the record bounds each write's arrival at the motor only to a window (median "
+                 f"{_g(s['arrival_window_ms'], '.3f')} ms); the shift of the fit over writes drawn within it is "
+                 "added likewise." if s["arrival_window_ms"] else
+                 "The timing's column is 0: the virtual bench's writes arrive when the fit takes them to.")]
     lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():

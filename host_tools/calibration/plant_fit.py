@@ -5,7 +5,8 @@ The data are `fit_data`'s (commands, replies, encoder, IMU, current; never the e
 residuals within bounds (`PARAMS`): a first solution without the backlash and the current lag, the backlash's
 profile, each signal weighed by its own residual RMS, then all of them together (`fit_plant`; docs/calibration.md
 says why in this order). The Jacobian at the solution gives 95 % intervals (with the base's rotor side, which the
-fit takes as given, carried into them: `_rotor_side`) and the identifiability verdict: a parameter whose column is
+fit takes as given, and through serial mode the writes' arrival the record leaves unknown, carried into them:
+`_rotor_side`, `_timing`) and the identifiability verdict: a parameter whose column is
 (nearly) a combination of the others' (variance inflation, from the normalised Jacobian's conditioning) is reported
 "not identifiable", not given a confident number.
 """
@@ -58,6 +59,10 @@ class FitResult:
     # the part of each 95 % half-width that is the base profile's rotor side (Kt/J_m) taken as uncertain
     rotor_ci95: dict[str, float] = field(default_factory=dict)
     rotor_sd: float = 0.0  # the rotor side's relative spread carried into the intervals (`rotor_side_sd`)
+    # the part of each 95 % half-width that is the writes' arrival the record leaves unknown (`_timing`): 0 when the
+    # timing is exact (the virtual bench)
+    timing_ci95: dict[str, float] = field(default_factory=dict)
+    arrival_window_ms: float = 0.0  # the median window the record leaves a write's arrival (`fit_data.arrival_bounds`)
 
 
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
@@ -175,6 +180,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     v = values(names, res.x)
     rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, names, jac, bread)
     cov = cov + rotor_sd ** 2 * np.outer(rotor_shift, rotor_shift)
+    timing = _timing(base, v, fit_part, scales, names, jac, bread)
+    cov = cov + timing
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
     ident = {}
@@ -201,16 +208,18 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     ci95 = {nm: float(ci[k]) for k, nm in enumerate(names)}
     collinearity = {nm: float(coll[k]) for k, nm in enumerate(names)}
     rotor_ci95 = {nm: 1.96 * rotor_sd * abs(float(rotor_shift[k])) for k, nm in enumerate(names)}
+    timing_ci95 = {nm: 1.96 * math.sqrt(max(float(timing[k, k]), 0.0)) for k, nm in enumerate(names)}
     if profile is not None:  # its interval from the profile (a secant over its switching steps is no curvature),
-        # with the rotor side's part added in quadrature (when the backlash is in the Jacobian)
+        # with the rotor side's and the timing's parts added in quadrature (when the backlash is in the Jacobian)
         rb = rotor_ci95.get("backlash_deg", 0.0)
-        ci95["backlash_deg"] = math.hypot(profile[1], rb)
+        ci95["backlash_deg"] = math.sqrt(profile[1] ** 2 + rb ** 2 + timing_ci95.get("backlash_deg", 0.0) ** 2)
         ident["backlash_deg"] = profile[2] and ci95["backlash_deg"] <= _ABS_CI["backlash_deg"]
         collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
     start = {**start, "backlash_deg": base_values(base)["backlash_deg"]}  # what the fit started from
     return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, int(res.nfev),
                      float(res.cost), time.perf_counter() - wall0, (t0, t1), str(res.message),
-                     fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_sd)
+                     fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_sd, timing_ci95,
+                     0.0 if exp.bounds is None else 1e3 * float(np.median(exp.bounds[:, 1] - exp.bounds[:, 0])))
 
 
 def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
@@ -232,6 +241,39 @@ def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales
     col = (residuals(base, {**v, "rotor_accel_scale": 1.0 + sd}, part, scales)
            - residuals(base, {**v, "rotor_accel_scale": 1.0 - sd}, part, scales)) / (2.0 * sd)
     return sd, bread @ (jac.T @ col)
+
+
+TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
+TIMING_SEED = 21  # their seed: the same recording gives the same intervals
+
+
+def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+            names: tuple[str, ...], jac: np.ndarray, bread: np.ndarray) -> np.ndarray:
+    """The covariance the writes' unknown arrival adds to the fitted parameters (zeros when the timing is exact).
+
+    Through serial mode the record dates each write (a command and the request after it) at COMMAND_DELAY_S after
+    its job, later when a late reply shows it (`fit_data._late_commands`), and bounds it only to a window
+    (`fit_data.arrival_bounds`: about 0.6 ms through a pty) within which the link's per-frame delay is unknown.
+    Each draw puts every write at an independent uniform point of its window (the least the record says); the
+    least-squares solution would move by -(J'J)^-1 J' dr, dr the residuals' change; the mean of that shift's
+    outer product over the draws (its mean, a delay common to all writes, included: the record cannot exclude it)
+    is added to the covariance, as the rotor side's consider term is.
+    """
+    n = len(names)
+    if part.bounds is None or not np.any(part.bounds[:, 1] > part.bounds[:, 0]):
+        return np.zeros((n, n))
+    rng = np.random.default_rng(TIMING_SEED)
+    r0 = residuals(base, v, part, scales)
+    out = np.zeros((n, n))
+    lo, hi = part.bounds[:, 0], part.bounds[:, 1]
+    # writes whose windows overlap (a stall: each may have waited behind the one before) are one burst, late together
+    burst = np.r_[0, np.cumsum(part.t_cmd[1:] + lo[1:] > np.maximum.accumulate(part.t_cmd + hi)[:-1])]
+    for _ in range(TIMING_DRAWS):
+        u = rng.uniform(0.0, 1.0, int(burst[-1]) + 1)[burst]
+        dr = residuals(base, v, part.shifted(lo + u * (hi - lo)), scales) - r0
+        shift = bread @ (jac.T @ dr)
+        out += np.outer(shift, shift)
+    return out / TIMING_DRAWS
 
 
 SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the solver and the intervals use
