@@ -275,3 +275,42 @@ def test_the_timing_term_is_zero_when_the_timing_is_exact_and_grows_with_the_win
     wide = _timing_term(np.column_stack([np.zeros(500), np.full(500, 6e-4)]))
     assert 0.0 < narrow < wide
     assert _timing_term(np.column_stack([np.zeros(500), np.full(500, 6e-4)])) == wide  # its draws are seeded
+
+
+def test_a_stalls_windows_are_left_out_of_both_parts():
+    """A simulation window whose writes' arrival windows are over STALL_BOUND_S wide on average is a stall's: out of
+    the fitting and the held-out parts alike; a window with one wide write among narrow ones, and the virtual bench
+    (no bounds), keep every sample."""
+    from dataclasses import replace
+
+    from host_tools.calibration.fit_data import STALL_BOUND_S
+
+    exp = _experiment(False)  # two windows of WINDOW_S (0.25 s) at 1 kHz
+    assert not exp.stalled().any()  # exact timing
+    width = np.full(500, 6e-4)
+    width[300:] = 2.5 * STALL_BOUND_S  # the second window: every write's arrival unknown by 2.5 ms
+    width[100] = 20 * STALL_BOUND_S  # one long write in the first: its mean stays under the bound
+    stalled = replace(exp, bounds=np.column_stack([np.zeros(500), width])).stalled()
+    assert WINDOW_S == 0.25
+    assert not stalled[:250].any() and stalled[250:].all()
+    fit, held = replace(exp, bounds=np.column_stack([np.zeros(500), width])).interleave(2, window_s=0.125, drop=stalled)
+    assert len(fit.t) == 125 and len(held.t) == 125  # the first window's halves; the second's are in neither
+    assert fit.t.max() < 0.125 and 0.125 <= held.t.min() and held.t.max() < 0.25
+    fit_all, held_all = exp.interleave(2, window_s=0.125)
+    assert len(fit_all.t) == len(held_all.t) == 250
+
+
+def test_a_run_stalled_throughout_is_refused_before_the_fit():
+    """Every window a stall's: one line naming the run and the bound, before any simulation."""
+    from dataclasses import replace
+
+    from host_tools.calibration.fit_data import STALL_BOUND_S
+    from host_tools.calibration.plant_fit import fit_plant
+
+    t = np.arange(4000) * 1e-3
+    zeros = np.zeros_like(t)
+    exp = Experiment(t, zeros, t, zeros, zeros, zeros, "hand-built", zeros, t, np.arange(4000) - 1,
+                     bounds=np.column_stack([zeros, np.full(4000, 2 * STALL_BOUND_S)]), req_cmd=np.arange(4000))
+    with pytest.raises(ValueError, match=r"hand-built: the link stalled .* 4000 of 4000 samples .* 1\.5 ms"):
+        fit_plant(load_plant_params(), exp)
+    assert not replace(exp, bounds=np.column_stack([zeros, np.full(4000, 0.9 * STALL_BOUND_S)])).stalled().any()

@@ -123,6 +123,18 @@ def test_the_intervals_carry_the_writes_unknown_arrival(serial_fit):
     assert serial_fit["params"]["current_time_constant_s"]["ci95_timing"] > 0.0
 
 
+def test_a_stalls_windows_are_counted_out_of_the_fit(serial_fit):
+    """The windows whose writes' arrivals the record leaves unknown by more than STALL_BOUND_S on average are left
+    out of both parts (`Experiment.stalled`): fit.json counts them and says the bound, as fit.md does."""
+    from host_tools.calibration.fit_data import STALL_BOUND_S, load_experiment
+
+    assert serial_fit["stall_bound_ms"] == pytest.approx(1e3 * STALL_BOUND_S)
+    left_out = serial_fit["stalled_samples_left_out"]
+    assert sum(left_out.values()) == int(load_experiment(serial_fit["run"]).stalled().sum()), left_out
+    md = (serial_fit["run"].parent / "fit" / "fit.md").read_text()
+    assert f"{left_out['fit']} (fit), {left_out['held_out']} (held out)" in md and "windows of a stall" in md
+
+
 def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
     p = serial_fit["params"]
     for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):

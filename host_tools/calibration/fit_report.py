@@ -97,6 +97,9 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
             "rotor_side_sd": num(r.rotor_sd),
             # the median window the record leaves a write's arrival (ms; 0: the timing is exact, the virtual bench)
             "arrival_window_ms": num(r.arrival_window_ms),
+            # used samples in windows of a stall (their writes' arrival windows over stall_bound_ms on average):
+            # out of the fit and of the fit percentages (serial mode; 0 when the timing is exact)
+            "stalled_samples_left_out": dict(r.stalled), "stall_bound_ms": num(r.stall_bound_ms),
             **(extra or {})}
 
 
@@ -189,6 +192,11 @@ def _markdown(s: dict) -> str:
               f"{_g(ns['imu_deg'], '.3g')} deg. Samples whose current has no simulated counterpart, left out of "
               f"the current: {unheard.get('fit', 0)} (fit), "
               f"{unheard.get('held_out', 0)} (held out)."]
+    if s.get("stall_bound_ms"):
+        stalled = s["stalled_samples_left_out"]
+        lines += ["", "Samples in windows of a stall (their writes' arrivals at the motor unknown by more than "
+                  f"{_g(s['stall_bound_ms'], 'g')} ms on average), left out of the fit and of the fit percentages: "
+                  f"{stalled.get('fit', 0)} (fit), {stalled.get('held_out', 0)} (held out)."]
     lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals), "
               "`correlations.png`. The fitted profile is `plant_fitted.toml`: `pafp run --plant` takes it."]
     return "\n".join(lines) + "\n"

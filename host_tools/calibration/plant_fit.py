@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hal.virtual.plant import PlantParams
-from host_tools.calibration.fit_data import Experiment
+from host_tools.calibration.fit_data import STALL_BOUND_S, Experiment
 from host_tools.calibration.fit_model import (
     DEFAULT_FIT,
     PARAMS,
@@ -63,6 +63,9 @@ class FitResult:
     # timing is exact (the virtual bench)
     timing_ci95: dict[str, float] = field(default_factory=dict)
     arrival_window_ms: float = 0.0  # the median window the record leaves a write's arrival (`fit_data.arrival_bounds`)
+    # segment -> samples left out as a stall's (`Experiment.stalled`), and the bound that says so (ms; 0: none)
+    stalled: dict[str, int] = field(default_factory=dict)
+    stall_bound_ms: float = 0.0
 
 
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
@@ -99,7 +102,18 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         raise ValueError(f"--params: {unknown[0]!r} is not a fit parameter: one of {', '.join(PARAMS)}")
     wall0 = time.perf_counter()
     t0, t1 = float(exp.t[0]), float(exp.t[-1])
-    fit_part, held = exp.interleave(HELD_OUT_EVERY)
+    # the windows of a stall (`Experiment.stalled`) are left out of both parts, counted as the samples without a
+    # simulated current are
+    stalled = exp.stalled()
+    fit_part, held = exp.interleave(HELD_OUT_EVERY, drop=stalled)
+    all_fit, _ = exp.interleave(HELD_OUT_EVERY)
+    left_out = {"fit": len(all_fit.t) - len(fit_part.t), "held_out": int(np.count_nonzero(stalled)) - (
+        len(all_fit.t) - len(fit_part.t))}
+    if stalled.any() and (len(fit_part.t) < 100 or len(held.t) < 25):
+        raise ValueError(f"{exp.source}: the link stalled through too much of the run to fit: "
+                         f"{int(np.count_nonzero(stalled))} of {len(exp.t)} samples are in windows whose writes' "
+                         f"arrivals are unknown by more than {1e3 * STALL_BOUND_S:g} ms on average "
+                         "(docs/calibration.md, Stalled stretches)")
     start = base_values(base)
     # the encoder's zero is where the foot was at power-up: set at its zero mark by eye, within a degree or so
     # (the offset starts at 0), unless the IMU's absolute pitch over the first 0.2 s says it was further off than
@@ -219,7 +233,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, int(res.nfev),
                      float(res.cost), time.perf_counter() - wall0, (t0, t1), str(res.message),
                      fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_sd, timing_ci95,
-                     0.0 if exp.bounds is None else 1e3 * float(np.median(exp.bounds[:, 1] - exp.bounds[:, 0])))
+                     0.0 if exp.bounds is None else 1e3 * float(np.median(exp.bounds[:, 1] - exp.bounds[:, 0])),
+                     left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S)
 
 
 def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
