@@ -300,6 +300,25 @@ def test_a_stalls_windows_are_left_out_of_both_parts():
     assert len(fit_all.t) == len(held_all.t) == 250
 
 
+def test_a_late_write_is_dated_within_its_window():
+    """Request 5's reply read two jobs late dates its write late (`_late_commands`); the record's latest arrival for
+    it is write 6's bound (its reply read on time): `date_within` puts it at the middle of its window when that is
+    sooner than the late reply's dating, keeps the writes in order, and gives the bounds about the new dating;
+    writes not dated late stay at COMMAND_DELAY_S."""
+    from host_tools.calibration.fit_data import _late_commands, arrival_bounds, date_within
+
+    w = _late_wire({5: 8e-3})
+    late = _late_commands(w)
+    latest = late + arrival_bounds(w, late)[:, 1]
+    dated, b = date_within(w, late)
+    assert late[5] > 0.5 * latest[5] > 0.0  # the test can fail: the window's middle is sooner
+    assert dated[5] == pytest.approx(0.5 * latest[5], abs=1e-12)
+    assert np.all(dated <= late + 1e-15) and np.all(np.diff(w.t_cmd + dated) > 0.0)
+    assert np.allclose(b[:, 0], -dated) and np.allclose(dated + b[:, 1], latest)
+    assert np.all(dated[late == 0.0] == 0.0) and np.all(b[:, 1] >= 0.0)
+    assert np.all(date_within(_late_wire({}), np.zeros(20))[0] == 0.0)
+
+
 def test_a_run_stalled_throughout_is_refused_before_the_fit():
     """Every window a stall's: one line naming the run and the bound, before any simulation."""
     from dataclasses import replace
