@@ -1,11 +1,10 @@
 """`pafp fit`'s data: what a bench measured in a run directory, never the emulator's truth.
 
 From record.bin's motor port: the current commands the firmware sent (each at its job's time, later when a late
-reply shows its write arrived late: `_late_commands`), the feedback requests that followed them and the jobs whose
-reads brought a reply; from telemetry.csv, over the span the
-supervisor was in RUN (from the foot's first rest when it swung up from a stop: `_swing_up`): the encoder angle,
-the IMU pitch and the motor's measured current (`load_experiment`).
-"""
+reply shows its write arrived late: `_late_commands`, `date_within`), the feedback requests that followed them and
+the jobs whose reads brought a reply; from telemetry.csv, over the span the supervisor was in RUN (from the foot's
+first rest when it swung up from a stop: `_swing_up`): the encoder angle, the IMU pitch and the motor's measured
+current (`load_experiment`)."""
 
 from __future__ import annotations
 
