@@ -106,9 +106,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     # simulated current are
     stalled = exp.stalled()
     fit_part, held = exp.interleave(HELD_OUT_EVERY, drop=stalled)
-    all_fit, _ = exp.interleave(HELD_OUT_EVERY)
-    left_out = {"fit": len(all_fit.t) - len(fit_part.t), "held_out": int(np.count_nonzero(stalled)) - (
-        len(all_fit.t) - len(fit_part.t))}
+    all_fit, all_held = exp.interleave(HELD_OUT_EVERY)
+    left_out = {"fit": len(all_fit.t) - len(fit_part.t), "held_out": len(all_held.t) - len(held.t)}
     if stalled.any() and (len(fit_part.t) < 100 or len(held.t) < 25):
         raise ValueError(f"{exp.source}: the link stalled through too much of the run to fit: "
                          f"{int(np.count_nonzero(stalled))} of {len(exp.t)} samples are in windows whose writes' "
