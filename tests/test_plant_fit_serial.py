@@ -142,11 +142,11 @@ def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
         assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
 
 
-@pytest.mark.xfail(reason="every one within its interval in 13 of 15 serial recordings (load 2.6-4.7, each fitted "
+@pytest.mark.xfail(reason="every one within its interval in 14 of 17 serial recordings (load 1.4-4.7, each fitted "
                           "as pafp fit does, a stall's windows left out and late writes dated within their windows): "
-                          "101 of 103 parameter-runs were; static friction (1.05 half-widths) and current lag (1.13) "
-                          "outside once each; on the most stalled one damping and Coulomb not identifiable "
-                          "(docs/calibration.md, Stalled stretches)")
+                          "113 of 117 parameter-runs were; static friction outside twice (1.05, 1.12 half-widths), "
+                          "current lag (1.13) and inertia (1.03) once; on the most stalled one damping and Coulomb not "
+                          "identifiable (docs/calibration.md, Stalled stretches)")
 def test_serial_identified_parameters_within_their_intervals(serial_fit):
     """The done-when's coverage: every identified plant parameter within its 95 % interval of the truth."""
     p = serial_fit["params"]
