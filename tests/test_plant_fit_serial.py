@@ -11,8 +11,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from host_tools.calibration.fit_data import load_experiment
 from host_tools.cli import main
 from tests.test_serial_run import SETTLE_S, STALL_FAULTS, _stop, _summary
 
@@ -23,6 +25,10 @@ SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 # a host stall of 100 ms also fires the host watchdog (WATCHDOG: once in seven attempts here, at 0.04 s, load 3.3)
 RETRIED = (*STALL_FAULTS, "WATCHDOG")
+# a recording whose record shows the link stalled through more than this share of the samples (`Experiment.stalled`:
+# left out of the fit) is run again, as one with a latched fault is: on one stalled through 72 % of it the held-out
+# angle came to 69 % (docs/calibration.md, "Stalled stretches")
+STALLED_AT_MOST = 0.2
 
 
 def _emulator(*options: str) -> tuple[subprocess.Popen, str, str]:
@@ -56,6 +62,10 @@ def serial_fit(tmp_path_factory):
         s = _summary(out)
         if s["faults"] and s["faults"][0] in RETRIED:
             stalls.append(f"{s['faults'][0]} ({s['fault']['detail']})")
+            continue
+        stalled = float(np.mean(load_experiment(out).stalled())) if code == 0 else 0.0
+        if stalled > STALLED_AT_MOST:  # a stall without a latched fault: what is left is too little to hold to
+            stalls.append(f"{100 * stalled:.0f} % of the samples in a stall's windows")
             continue
         break
     else:  # every run latched a fault a host stall explains: the fit is untested here, and said so
