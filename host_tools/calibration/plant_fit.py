@@ -238,7 +238,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
     if rotor is not None:  # the wider of the Jacobian's interval and its scan's; the scan's must close
         ci95["rotor_accel_scale"] = max(ci95["rotor_accel_scale"], rotor.half)
-        ident["rotor_accel_scale"] = ident["rotor_accel_scale"] and rotor.closed
+        ident["rotor_accel_scale"] = bool(ident["rotor_accel_scale"] and rotor.closed)
     elif fit_ras:  # not identifiable without a backlash to cross
         ci95["rotor_accel_scale"], ident["rotor_accel_scale"] = math.inf, False
         collinearity["rotor_accel_scale"] = math.nan
@@ -355,13 +355,14 @@ def _rotor_scan(base: PlantParams, v: dict[str, float], part: Experiment, scales
     grid = np.unique(np.clip(best * (1.0 + ROTOR_FINE_REL * np.linspace(-1.0, 1.0, ROTOR_FINE)), lo, hi))
     costs = _costs(base, v, part, scales, "rotor_accel_scale", grid)
     half, closed = _interval(grid, costs, _threshold(residuals(base, v, part, scales), n + 1))
-    return _RotorScan(float(grid[int(np.argmin(costs))]), half, closed and grid[0] > lo)
+    return _RotorScan(float(grid[int(np.argmin(costs))]), half, bool(closed and grid[0] > lo))
 
 
 VALLEY_U_REL, VALLEY_U_STEPS = 0.03, 9  # the scan across the valley at each point along it: +-3 % of u, 9 points
 VALLEY_SLOPE = 0.3  # d ln u / d ln backlash along the valley's floor (seen 0.26-0.3: the output's own motion slows
 # the crossing by a part that does not scale with the rotor's Kt/J_m)
 VALLEY_REACH_DEG, VALLEY_TOL_DEG = 0.5, 0.01
+VALLEY_GRID = 11  # points of the coarse grid along the valley
 VALLEY_ROUNDS = 3  # rounds of the search along the valley and the least squares of the others  # the search along the valley: this far either side, to this resolution
 
 
@@ -391,6 +392,10 @@ def _valley_search(base: PlantParams, v: dict[str, float], part: Experiment, sca
         return floor[b][0]
 
     lo, hi = max(VALLEY_TOL_DEG, b0 - reach), min(PARAMS["backlash_deg"].hi, b0 + reach)
+    # the floor has steps of its own: a coarse grid first, then the golden section about its best
+    grid = np.linspace(lo, hi, VALLEY_GRID)
+    k = int(np.argmin([valley(float(b)) for b in grid]))
+    lo, hi = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, len(grid) - 1)])
     g = (math.sqrt(5.0) - 1.0) / 2.0
     x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
     while hi - lo > VALLEY_TOL_DEG:
