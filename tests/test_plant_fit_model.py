@@ -1,6 +1,5 @@
 """pafp fit's measurement models and weights on hand-built experiments: the IMU's 100 Hz frames, the samples whose
-current has no simulated counterpart, the motor's reply position through the backlash, and the noise scales the
-signals are weighed by."""
+current has no simulated counterpart, and the noise scales the three signals are weighed by."""
 
 from __future__ import annotations
 
@@ -58,7 +57,7 @@ def test_samples_without_a_simulated_current_are_left_out_of_the_current_errors(
     req_of[200:260] = 10_000  # a request the simulation never reaches: no simulated current
     exp = _experiment(req_of=req_of)
     r = residuals(base, v, exp)
-    current = np.split(r, len(SIGMA))[1]
+    current = np.split(r, 3)[1]
     _, c, _, mask = simulate(base, v, exp, free_v0=True)
     unheard = mask.copy()
     unheard[:200] = unheard[260:] = False
@@ -77,14 +76,11 @@ def test_noise_scales_are_each_signals_residual_rms():
     rng = np.random.default_rng(3)
     n = 4000
     angle, current, imu = 0.5 * rng.standard_normal(n), 2.0 * rng.standard_normal(n), rng.standard_normal(n)
-    motor = 3.0 * rng.standard_normal(n)
     current[:1000] = 0.0  # left out (samples without a simulated current): not counted
-    motor[2000:] = 0.0  # likewise samples without a reply position
-    s = noise_scales(np.concatenate([angle, current, imu, motor]), SIGMA)
+    s = noise_scales(np.concatenate([angle, current, imu]), SIGMA)
     assert math.isclose(s["angle"] / SIGMA["angle"], 0.5, rel_tol=0.05)
     assert math.isclose(s["current"] / SIGMA["current"], 2.0, rel_tol=0.05)
     assert math.isclose(s["imu"] / SIGMA["imu"], 1.0, rel_tol=0.05)
-    assert math.isclose(s["motor"] / SIGMA["motor"], 3.0, rel_tol=0.05)
 
 
 def test_rotor_side_spread_is_the_tolerances_rms_about_the_base(tmp_path):
@@ -123,26 +119,3 @@ def test_the_rotor_side_acts_only_through_the_backlash_crossing():
         b = residuals(base, {**w, "rotor_accel_scale": 1.1}, exp)
         assert bool(np.max(np.abs(a - b)) > 1e-3) is moves, backlash
 
-
-
-def test_the_reply_position_channel_sees_the_backlash():
-    """The motor's reply position (pid_pos, the rotor over the gearbox ratio) is a fourth residual channel: zero
-    without reply positions; on positions made by the model itself, zero at their backlash and not at another;
-    windows that start just after a reversal of the command (the rotor perhaps still crossing) are left out."""
-    import dataclasses
-
-    base = load_plant_params()
-    v = {**base_values(base), "backlash_deg": 1.0}
-    exp = _experiment()
-    r = residuals(base, v, exp)
-    assert len(r) % len(SIGMA) == 0 and not np.any(np.split(r, len(SIGMA))[-1])  # no positions: nothing
-    made = np.full(len(exp.t), np.nan)
-    simulate(base, v, dataclasses.replace(exp, position=np.zeros(len(exp.t))), free_v0=False, motor_out=made)
-    assert np.isnan(made[:50]).all()  # the first window starts at the square wave's first reversal: left out
-    assert np.isfinite(made).sum() > 200  # two of the four windows
-    measured = dataclasses.replace(exp, position=made)
-    same = np.split(residuals(base, v, measured), len(SIGMA))[-1]
-    other = np.split(residuals(base, {**v, "backlash_deg": 0.5}, measured), len(SIGMA))[-1]
-    assert np.max(np.abs(same)) < 1e-9
-    # half a degree less backlash: the reply's level on either side moves by a quarter degree (of pid_pos)
-    assert np.max(np.abs(other)) * SIGMA["motor"] > math.radians(0.2)

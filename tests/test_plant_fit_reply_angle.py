@@ -28,7 +28,8 @@ def _experiment(from_reply: bool, shift_s: float = 0.0, angle_back: int = 0) -> 
 
 def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
     base = load_plant_params()
-    v = base_values(base)
+    # without backlash the reply's position (the rotor's, over the whole ratio) is the output's angle
+    v = {**base_values(base), "backlash_deg": 0.0}
     reply, _, _, mask = simulate(base, v, _experiment(True), free_v0=False)
     # each sample carries the reply to the request that reached the motor one period before it: the reply's angle is
     # the plant's then, and a window starts there (its start angle is a reply's too). The same plant read directly
@@ -45,7 +46,7 @@ def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
 def test_the_encoder_angle_can_be_an_older_reply_than_the_current():
     """Serial mode: the encoder task opens the period and reads the reply the motor task read a period before."""
     base = load_plant_params()
-    v = base_values(base)
+    v = {**base_values(base), "backlash_deg": 0.0}  # the reply's position is then the output's angle
     older, current_older, _, mask = simulate(base, v, _experiment(True, angle_back=1), free_v0=False)
     earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=2e-3), free_v0=False)
     same, current_same, _, _ = simulate(base, v, _experiment(True), free_v0=False)
@@ -218,3 +219,16 @@ def test_a_reply_that_waited_behind_the_one_before_dates_nothing():
     own = 9e-3 - 10.0 * 23 / 921600 - LINK_READ_LATENCY_S - (5e-3 + COMMAND_DELAY_S + frame)
     assert own > behind + 1e-4  # had its own late reply dated it, the test would fail
     assert late[5] == pytest.approx(behind, abs=1e-9)
+
+
+def test_a_reply_angle_carries_the_rotors_place_in_the_backlash():
+    """The motor's encoder is on the rotor (docs/plant.md): with a backlash the reply's position, over the whole
+    ratio, is the output's angle plus half the gap (through the belt) on the side the last command pushed."""
+    base = load_plant_params()
+    v = {**base_values(base), "backlash_deg": 1.0}
+    reply, _, _, mask = simulate(base, v, _experiment(True), free_v0=False)
+    earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=1e-3), free_v0=False)
+    used = np.flatnonzero(mask & (np.arange(len(mask)) > WINDOW_S / 1e-3))
+    gap = np.degrees(reply[used] - earlier[used]) * base.belt_ratio  # at the gearbox's output
+    assert np.max(np.abs(gap)) == pytest.approx(0.5, abs=1e-6)  # half the 1 deg gap when in contact
+    assert np.min(gap) < -0.49 and np.max(gap) > 0.49  # on both sides as the command reverses

@@ -43,10 +43,6 @@ class Experiment:
     # per sample: the request whose reply's position the encoder angle is (None: the same as req_of). The encoder
     # task opens each period, before the motor task reads that period's reply: its angle is one reply older
     angle_req_of: np.ndarray | None = None
-    # per sample: the position (pid_pos, rad: the gearbox's output angle, rotor / gearbox ratio, before the belt) the
-    # last reply the firmware read carries, which req_of answers; NaN where none (no reply yet, or one without it).
-    # The motor's encoder is on the rotor: through the backlash it moves at each reversal while the output does not
-    position: np.ndarray | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S) -> tuple[Experiment, Experiment]:
         """(the fitting part, the held-out part): every `every`-th stretch of window_s is held out.
@@ -59,8 +55,7 @@ class Experiment:
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
                           self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[keep],
-                          None if self.position is None else self.position[keep])
+                          None if self.angle_req_of is None else self.angle_req_of[keep])
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
@@ -68,8 +63,7 @@ class Experiment:
         c = (self.t_cmd >= t0 - 0.01) & (self.t_cmd < t1)
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
                           self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[k],
-                          None if self.position is None else self.position[k])
+                          None if self.angle_req_of is None else self.angle_req_of[k])
 
 
 def encoder_velocity(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -99,7 +93,6 @@ class _Wire:
     reply_bytes: np.ndarray = field(default_factory=lambda: np.zeros(0))  # per reply read: its frame's length
     req_cmd: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # per request: its write's command
     baud: float = 921600.0  # the motor link's
-    reply_pos: np.ndarray = field(default_factory=lambda: np.zeros(0))  # per reply read: its pid_pos (rad; NaN: none)
 
 
 def _wire(record: Path) -> _Wire:
@@ -117,8 +110,7 @@ def _wire(record: Path) -> _Wire:
     f_cpu = int(reader.header["f_cpu_hz"])
     baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
     to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
-    times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes, req_cmd, reply_pos = (
-        [] for _ in range(10))
+    times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes, req_cmd = ([] for _ in range(9))
     write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
     tasks = list(reader.header.get("tasks", ()))
     encoder_task = tasks.index("encoder") if "encoder" in tasks else -1
@@ -126,7 +118,7 @@ def _wire(record: Path) -> _Wire:
 
     def wire() -> _Wire:
         return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes)),
-                     np.array(req_cmd, dtype=int), baud, np.array(reply_pos, dtype=float))
+                     np.array(req_cmd, dtype=int), baud)
 
     for s in reader.sections():
         t = s.start / f_cpu
@@ -139,8 +131,6 @@ def _wire(record: Path) -> _Wire:
                 if isinstance(m, (Values, ValuesSelective)):
                     t_reply.append(t)
                     reply_bytes.append(len(m.encode()))
-                    pos = m.pid_pos_rad if isinstance(m, Values) else m.values.get("pid_pos_rad", math.nan)
-                    reply_pos.append(float(pos))
         for accepted, data in s.outputs.get(write_key, ()):
             sent = data[:accepted]
             for msg in to_motor.feed(sent):
@@ -161,15 +151,6 @@ def _reply_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
     """Per sample: the request the current it carries answers (-1: none). A sample shows the last reply the
     firmware read at or before it; which request that reply answers: `_reply_answers`."""
     return _answered(np.searchsorted(w.t_reply, t, side="right") - 1, w)
-
-
-def _reply_positions(t: np.ndarray, w: _Wire) -> np.ndarray:
-    """Per sample: the position (pid_pos, rad) of the last reply the firmware read at or before it (the reply whose
-    current the sample carries: `_reply_requests`); NaN before the first reply or for a reply without one."""
-    if len(w.reply_pos) != len(w.t_reply) or len(w.t_reply) == 0:
-        return np.full(len(t), math.nan)
-    i = np.searchsorted(w.t_reply, t, side="right") - 1
-    return np.where(i >= 0, w.reply_pos[np.maximum(i, 0)], math.nan)
 
 
 def _angle_requests(t: np.ndarray, w: _Wire) -> np.ndarray:
@@ -312,7 +293,7 @@ def load_experiment(run_dir: Path) -> Experiment:
     t_req = w.t_req + late[w.req_cmd] if len(w.req_cmd) == len(w.t_req) else w.t_req
     return Experiment(t_cmd + late, i_cmd, a[:, 0], a[:, 1], a[:, 2], a[:, 3], str(run_dir),
                       encoder_velocity(a[:, 0], a[:, 1]), t_req, _reply_requests(a[:, 0], w), from_reply,
-                      _angle_requests(a[:, 0], w) if from_reply else None, _reply_positions(a[:, 0], w))
+                      _angle_requests(a[:, 0], w) if from_reply else None)
 
 
 SWING_DEG = 4.0  # a start further than this from where the foot comes to rest is a swing-up (the foot hung on a stop)

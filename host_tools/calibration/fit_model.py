@@ -28,8 +28,7 @@ SKIP_S = 0.01  # residuals skip the first samples of a window (the current state
 # below this the encoder cannot tell motion from rest over the velocity's span (0.09 deg counts, ~30 ms): a window
 # starts at rest, so a foot held by static friction starts stuck, not sliding on a velocity made of count noise
 REST_RAD_S = 0.03
-# residual scales (rad, A, rad, rad): the encoder angle, the reply's current, the IMU pitch, the reply's position
-SIGMA = {"angle": math.radians(0.1), "current": 0.1, "imu": math.radians(0.3), "motor": math.radians(0.05)}
+SIGMA = {"angle": math.radians(0.1), "current": 0.1, "imu": math.radians(0.3)}  # residual scales (rad, A, rad)
 
 
 @dataclass(frozen=True)
@@ -68,8 +67,8 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
 # residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope; it is profiled over a grid
 # (`_backlash_profile`, docs/calibration.md)
 DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
-               "gravity_moment_nm", "backlash_deg", "rotor_accel_scale", "current_time_constant_s", "imu_lag_s",
-               "imu_bias_deg", "encoder_offset_deg")
+               "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
+               "encoder_offset_deg")
 
 
 def base_values(p: PlantParams) -> dict[str, float]:
@@ -126,7 +125,7 @@ FREE_IMU_OFFSET = True  # each window's IMU offset is projected out (the bias dr
 
 
 def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: float = WINDOW_S,
-             free_v0: bool = FREE_V0, heard_out: np.ndarray | None = None, motor_out: np.ndarray | None = None
+             free_v0: bool = FREE_V0, heard_out: np.ndarray | None = None
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(angle as the encoder reads it, current as the firmware last heard it, IMU pitch, used-sample mask)
     simulated at exp.t, each window of window_s from the measured state.
@@ -141,12 +140,6 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     the first-order lag towards the command from the plant's current at each event (a command or a request
     reaching the motor): while the rotor crosses the backlash the plant's current falls towards 0
     (hal/virtual/plant/model.py, Plant._cross_gap) and each event restarts the integral from it.
-
-    `motor_out` (an array of len(exp.t), when given) gets the position (pid_pos, rad) of the reply each sample
-    carries: the rotor's angle over the gearbox ratio when its request reached the motor, i.e. the output through
-    the belt plus the rotor's place in the backlash (NaN where there is none, as for the current). The motor's
-    zero is its own and each window starts from the encoder's angle, so each window's offset is projected out
-    (as the IMU's): what is left is the motion, and at each reversal the backlash crossed.
     """
     params = plant_with(base, v)
     offset = math.radians(v["encoder_offset_deg"])
@@ -165,9 +158,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     n_cmd, n_req = len(t_cmd), len(t_req)
     tau = params.current_time_constant_s
     peak = params.peak_current_a
-    ratio, gear = params.total_ratio, params.gearbox_ratio
-    pos = exp.position if motor_out is not None else None
-    t_pos = np.zeros(n) if pos is not None else None  # per sample: when its reply's request reached the motor
+    ratio = params.total_ratio
     k = 0
     while k < n:
         t0 = t_first = float(exp.t[k])
@@ -183,10 +174,6 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
-        crossing = False
-        if pos is not None:  # a reversal of the command just before the start: the rotor may still be crossing
-            recent = np.sign(i_cmd[int(np.searchsorted(t_cmd, t0 - delay - CROSSING_S)):max(c, 0) + 1])
-            crossing = c < 0 or not len(recent) or recent[-1] == 0.0 or float(np.ptp(recent)) > 0.0
         target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
         c += 1
         r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
@@ -225,15 +212,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             # through serial mode the encoder angle is a reply's position (one reply older than the current's),
             # taken when its request reached the motor; on the virtual bench the encoder reads the plant at the
             # sample's time
-            if exp.angle_from_reply:  # the reply's position: the rotor's over the whole ratio (backlash and all)
-                rotor = positions.get(int(angle_of[j]))
-                angle[j] = (th if rotor is None else rotor / ratio) - offset
-            else:
-                angle[j] = th - offset
-            if pos is not None:
-                rotor = positions.get(q)
-                motor_out[j] = math.nan if rotor is None or math.isnan(pos[j]) else rotor / gear
-                t_pos[j] = float(t_req[q]) if q >= 0 else tj
+            # (the reply's position is the rotor's, the motor's encoder being on it: over the whole ratio it is the
+            # output plus the rotor's place in the backlash, docs/plant.md)
+            rotor = positions.get(int(angle_of[j])) if exp.angle_from_reply else None
+            angle[j] = (th if rotor is None else rotor / ratio) - offset
             heard = means.get(q)
             # None: its request reached the motor before this window, or has not yet in the simulation
             current[j] = exp.current[j] if heard is None else heard
@@ -244,14 +226,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             imu[j] = filt + bias
             if tj - t_first < SKIP_S:
                 mask[j] = False
-        if pos is not None:
-            known = mask[k:end] & ~np.isnan(motor_out[k:end])
-            if crossing:  # the rotor may be in the gap at the start, where the plant puts it in contact: not used
-                motor_out[k:end] = math.nan
-                known[:] = False
-        if pos is not None and known.any():
-            _project_start_on_motor(exp, k, end, t0, angle, imu, motor_out, t_pos, known, params, free_v0 and moving)
-        elif free_v0 and moving:
+        if free_v0 and moving:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
         imu[k:end] = imu[k:end][_frame_sources(exp, k, end)]
         if FREE_IMU_OFFSET:
@@ -260,35 +235,6 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                 imu[k:end] += float(np.mean((exp.imu[k:end] - imu[k:end])[used]))
         k = end
     return angle, current, imu, mask
-
-
-# the longest crossing of the backlash a window may start in: sqrt(2 gap J_m / (Kt i)) for the hand-made plant's 1.5 deg
-# (9 deg at the rotor) is 14 ms at 0.5 A, 31 ms at 0.1 A
-CROSSING_S = 0.03
-
-
-def _project_start_on_motor(exp: Experiment, k: int, end: int, t0: float, angle: np.ndarray, imu: np.ndarray,
-                            motor: np.ndarray, t_pos: np.ndarray, known: np.ndarray, params: PlantParams,
-                            moving: bool) -> None:
-    """Correct window [k, end)'s simulation for its start (in place), from the motor's reply position.
-
-    The reply's position follows the output through the belt with no counts to speak of (1e-6 deg in pid_pos,
-    against the ankle encoder's 0.09 deg), so it gives the window's start far better than the encoder: its offset
-    (the motor's own zero, and the encoder counts the start angle was taken from) and, in a moving window, the
-    initial velocity's error dv (as `_project_initial_velocity`, least squares on both). The encoder angle and the
-    IMU get the same velocity correction; the offset is the motor's alone (the encoder's is a fit parameter)."""
-    tm = params.output_inertia_kg_m2 / max(params.foot_damping_nm_s_per_rad, 1e-9)
-    err = (exp.position[k:end] - motor[k:end])[known]
-    if moving:
-        sens_pos = params.belt_ratio * tm * -np.expm1(-(t_pos[k:end] - t0) / tm)
-        a = np.column_stack([np.ones(int(known.sum())), sens_pos[known]])
-        (offset, dv), *_ = np.linalg.lstsq(a, err, rcond=None)
-        sens = tm * -np.expm1(-(exp.t[k:end] - t0) / tm)
-        angle[k:end] += dv * sens
-        imu[k:end] += dv * sens
-        motor[k:end] += offset + dv * sens_pos
-    else:
-        motor[k:end] += float(np.mean(err))
 
 
 def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angle: np.ndarray, imu: np.ndarray,
@@ -356,20 +302,15 @@ def ids_start(ids: np.ndarray) -> np.ndarray:
 
 def residuals(base: PlantParams, v: dict[str, float], exp: Experiment,
               scales: dict[str, float] | None = None) -> np.ndarray:
-    """The scaled simulation errors: encoder angle, measured current, IMU pitch and the motor's reply position, on
-    the used samples, each divided by its scale (`SIGMA` unless given: `noise_scales`)."""
+    """The scaled simulation errors: encoder angle, measured current and IMU pitch, on the used samples, each
+    divided by its scale (`SIGMA` unless given: `noise_scales`)."""
     s = SIGMA if scales is None else scales
-    n = len(exp.t)
-    heard = np.zeros(n, dtype=bool)
-    motor = np.full(n, math.nan)
-    angle, current, imu, mask = simulate(base, v, exp, heard_out=heard,
-                                         motor_out=motor if exp.position is not None else None)
-    # a sample without a simulated current (it carries the measured one) has no current error: 0, not counted;
-    # likewise a sample without a reply position, measured or simulated
+    heard = np.zeros(len(exp.t), dtype=bool)
+    angle, current, imu, mask = simulate(base, v, exp, heard_out=heard)
+    # a sample without a simulated current (it carries the measured one) has no current error: 0, not counted
     current_error = np.where(heard, current - exp.current, 0.0)
-    motor_error = np.zeros(n) if exp.position is None else np.nan_to_num(motor - exp.position, nan=0.0)
     return np.concatenate([(angle - exp.angle)[mask] / s["angle"], current_error[mask] / s["current"],
-                           (imu - exp.imu)[mask] / s["imu"], motor_error[mask] / s["motor"]])
+                           (imu - exp.imu)[mask] / s["imu"]])
 
 
 def fit_percentages(base: PlantParams, v: dict[str, float], exp: Experiment) -> tuple[dict[str, float], int]:
@@ -385,9 +326,9 @@ def fit_percentages(base: PlantParams, v: dict[str, float], exp: Experiment) -> 
 
 def noise_scales(r: np.ndarray, scales: dict[str, float]) -> dict[str, float]:
     """Each signal's residual RMS (rad, A, rad) from residuals `r` scaled by `scales`: the noise scales that weigh
-    the signals by their own size (the maximum-likelihood weights for independent Gaussian errors)."""
+    the three signals by their own size (the maximum-likelihood weights for independent Gaussian errors)."""
     out = {}
-    for name, part in zip(SIGMA, np.split(r, len(SIGMA)), strict=True):
+    for name, part in zip(SIGMA, np.split(r, 3), strict=True):
         part = part[part != 0.0]  # a current error left out (`residuals`) is exactly 0
         out[name] = scales[name] * max(float(np.sqrt(np.mean(part ** 2))) if len(part) else 1.0, 1e-3)
     return out

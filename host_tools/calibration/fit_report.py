@@ -88,9 +88,7 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
             # the residual scales the signals were weighed by (each one's RMS at the first solution)
             "noise_scales": {"angle_deg": num(math.degrees(r.noise_scales.get("angle", math.nan))),
                              "current_a": num(r.noise_scales.get("current", math.nan)),
-                             "imu_deg": num(math.degrees(r.noise_scales.get("imu", math.nan))),
-                             # the motor's reply position (pid_pos, at the gearbox's output, before the belt)
-                             "motor_position_deg": num(math.degrees(r.noise_scales.get("motor", math.nan)))},
+                             "imu_deg": num(math.degrees(r.noise_scales.get("imu", math.nan)))},
             # used samples whose reply answers a request with no simulated counterpart: out of the current's errors
             "current_samples_without_simulation": dict(r.unheard),
             # the base's rotor side (Kt/J_m) is taken as uncertain by this relative spread (`rotor_side_sd`)
@@ -169,15 +167,10 @@ def _markdown(s: dict) -> str:
                      f"{_g(p['collinearity'], '.2f')} | {verdict} |")
     for n, p in s["fixed"].items():
         lines.append(f"| {n} | fixed | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
-    if s["rotor_side_sd"]:
-        lines += ["", "95 % ± is each parameter's interval on its own. It includes the base profile's rotor side: the "
-                  "rotor's Kt/J_m, which alone carries it across the backlash at each reversal, is taken from the base "
-                  f"with a relative spread of {_g(s['rotor_side_sd'], '.3f')} (the tolerance table's Kt and rotor "
-                  "inertia) and the shift that spread would cause is added to the covariance; its part is in its own "
-                  "column."]
-    else:
-        lines += ["", "95 % ± is each parameter's interval on its own. The rotor's Kt/J_m (`rotor_accel_scale`) is "
-                  "fitted, or there is no backlash to cross: no part of the intervals is the base's rotor side."]
+    lines += ["", "95 % ± is each parameter's interval on its own. It includes the base profile's rotor side: the "
+              "rotor's Kt/J_m, which alone carries it across the backlash at each reversal, is taken from the base "
+              f"with a relative spread of {_g(s['rotor_side_sd'], '.3f')} (the tolerance table's Kt and rotor inertia) "
+              "and the shift that spread would cause is added to the covariance; its part is in its own column."]
     lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():
@@ -185,8 +178,7 @@ def _markdown(s: dict) -> str:
     ns, unheard = s["noise_scales"], s["current_samples_without_simulation"]
     lines += ["", "Residuals weighed by each signal's own RMS at the first solution: angle "
               f"{_g(ns['angle_deg'], '.3g')} deg, current {_g(ns['current_a'], '.3g')} A, IMU "
-              f"{_g(ns['imu_deg'], '.3g')} deg, motor position (at the gearbox's output) "
-              f"{_g(ns.get('motor_position_deg', math.nan), '.3g')} deg. Samples whose current has no simulated counterpart, left out of "
+              f"{_g(ns['imu_deg'], '.3g')} deg. Samples whose current has no simulated counterpart, left out of "
               f"the current: {unheard.get('fit', 0)} (fit), "
               f"{unheard.get('held_out', 0)} (held out)."]
     lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals), "

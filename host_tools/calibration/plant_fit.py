@@ -105,14 +105,12 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     start["encoder_offset_deg"] = zero
     all_names = tuple(names)
     scan = "backlash_deg" in names  # profiled first, then in the least squares (`_backlash_profile`)
-    fit_ras = "rotor_accel_scale" in names  # scanned, not in the least squares (`_rotor_scan`)
-    # the first solution leaves out the backlash, the rotor's Kt/J_m and the driver's current lag: all shape the
-    # current at each reversal, so with the backlash at a start far from the bench's the lag runs off to make up for
-    # it (seen: 0.28 ms for 1.14 ms with a backlash of 0.55 deg for none) and the second fit starts from there
-    held_back = ("backlash_deg", "current_time_constant_s", "rotor_accel_scale")
-    first_names = tuple(n for n in names if n not in held_back)
+    # the first solution leaves out the backlash and the driver's current lag: both shape the current at each
+    # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:
+    # 0.28 ms for 1.14 ms with a backlash of 0.55 deg for none) and the second fit starts from there
+    first_names = tuple(n for n in names if n not in ("backlash_deg", "current_time_constant_s"))
     if not first_names:  # only the lag (and the backlash) asked for: the lag alone first
-        first_names = tuple(n for n in names if n not in ("backlash_deg", "rotor_accel_scale"))
+        first_names = tuple(n for n in names if n != "backlash_deg")
     scales = dict(SIGMA)
     last: list[tuple[tuple[str, ...], np.ndarray, np.ndarray]] = []
 
@@ -146,47 +144,20 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     if scan:  # over the whole grid, the others at their fit (from a start far off, the grid misleads: not before)
         profile = _backlash_profile(base, values(names, res.x), fit_part, scales, len(names))
         start = {**start, "backlash_deg": profile[0]}
-    # the signals weighed by their own residual size at this first solution (the maximum-likelihood weights),
+    # the three signals weighed by their own residual size at this first solution (the maximum-likelihood weights),
     # then everything fitted again from it, the backlash with the others: it and the driver's current lag trade
     # off against each other (both shape the current at each reversal), so neither is right fitted alone
     scales = noise_scales(residuals(base, values(names, res.x), fit_part, scales), scales)
     first = values(first_names, res.x)
     # none at all is a model of its own: any gap, however small, frees the rotor until the next command (a period's
     # dead time at each reversal), so a profile at 0 keeps it there (the solver's interior start would be 5e-9 deg)
-    names = tuple(n for n in all_names if n != "rotor_accel_scale" and (n != "backlash_deg"
-                                                                        or start["backlash_deg"] > 0.0))
-    res, steps, hi = solve(names, np.array([first.get(n, start[n]) for n in names]))
-    rotor: _RotorScan | None = None
-    if fit_ras and values(names, res.x)["backlash_deg"] > 0.0:
-        # the rotor's Kt/J_m by a scan (`_rotor_scan`), the others at their solution; the signals weighed again
-        # there (the motor's position, far finer than the encoder, is its own size only once the crossings are
-        # right), the others fitted again at it, and a fine scan about it
-        rotor = _rotor_scan(base, values(names, res.x), fit_part, scales, len(names), True)
-        for k in range(VALLEY_ROUNDS):
-            # from a backlash too large the scan finds the valley there: the search along it (`_valley_search`),
-            # then the others fitted again there, with the signals weighed at it; until the search stays put
-            was = values(names, res.x)["backlash_deg"], rotor.value
-            backlash, ras = _valley_search(base, {**values(names, res.x), "rotor_accel_scale": rotor.value},
-                                           fit_part, scales, VALLEY_REACH_DEG if k == 0 else VALLEY_REACH_DEG / 5)
-            if k and abs(backlash - was[0]) <= VALLEY_TOL_DEG and abs(ras / was[1] - 1.0) <= ROTOR_FINE_REL / 6:
-                break
-            start = {**start, "rotor_accel_scale": ras}
-            x0 = np.array([backlash if n == "backlash_deg" else x for n, x in zip(names, res.x, strict=True)])
-            scales = noise_scales(residuals(base, values(names, x0), fit_part, scales), scales)
-            last.clear()  # the cached residuals were at the Kt/J_m and the scales before
-            res, steps, hi = solve(names, x0)
-            rotor = _rotor_scan(base, values(names, res.x), fit_part, scales, len(names), False)
-            start = {**start, "rotor_accel_scale": rotor.value}
-            last.clear()
+    names = tuple(n for n in all_names if n != "backlash_deg" or start["backlash_deg"] > 0.0)
+    res, steps, hi = solve(names, np.array([first[n] for n in names]))
     if profile is not None:  # the interval from the profile on a finer grid about the fit, the others at theirs
         profile = _backlash_profile(base, values(names, res.x), fit_part, scales, len(names),
                                     around=values(names, res.x)["backlash_deg"])
-    x = np.asarray(res.x)
-    if rotor is not None:  # its column in the Jacobian too (a secant over many crossings' steps, as the backlash's),
-        # so that its interval and the others' allow for their correlations; its own is the wider of that and the scan's
-        names, x = names + ("rotor_accel_scale",), np.append(x, rotor.value)
-        steps, hi = np.append(steps, SECANT_STEP), np.append(hi, PARAMS["rotor_accel_scale"].hi)
-    jac, r = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), x, steps, hi)
+    jac, r = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), np.asarray(res.x),
+                              steps, hi)
     m, n = jac.shape
     s2 = float(np.dot(r, r)) / max(1, m - n)
     rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
@@ -194,15 +165,15 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     bread = np.linalg.pinv(jac.T @ jac)
     # cluster-robust ("sandwich") covariance with each simulation window as a cluster: the errors within a
     # window are one trajectory's, correlated, whatever their shape; the larger of the two is reported
-    clusters = np.tile(window_ids(fit_part), len(SIGMA))
+    clusters = np.tile(window_ids(fit_part), 3)
     scores = jac * r[:, None]
     meat = np.zeros((n, n))
     for c in np.unique(clusters):
         g = scores[clusters == c].sum(axis=0)
         meat += np.outer(g, g)
     cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
-    v = values(names, x)
-    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, all_names, jac, bread)
+    v = values(names, res.x)
+    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, names, jac, bread)
     cov = cov + rotor_sd ** 2 * np.outer(rotor_shift, rotor_shift)
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
@@ -236,12 +207,6 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         ci95["backlash_deg"] = math.hypot(profile[1], rb)
         ident["backlash_deg"] = profile[2] and ci95["backlash_deg"] <= _ABS_CI["backlash_deg"]
         collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
-    if rotor is not None:  # the wider of the Jacobian's interval and its scan's; the scan's must close
-        ci95["rotor_accel_scale"] = max(ci95["rotor_accel_scale"], rotor.half)
-        ident["rotor_accel_scale"] = bool(ident["rotor_accel_scale"] and rotor.closed)
-    elif fit_ras:  # not identifiable without a backlash to cross
-        ci95["rotor_accel_scale"], ident["rotor_accel_scale"] = math.inf, False
-        collinearity["rotor_accel_scale"] = math.nan
     start = {**start, "backlash_deg": base_values(base)["backlash_deg"]}  # what the fit started from
     return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, int(res.nfev),
                      float(res.cost), time.perf_counter() - wall0, (t0, t1), str(res.message),
@@ -260,10 +225,10 @@ def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales
     rotor side biases get the intervals it allows. No term when it is fitted, or with no backlash (no crossing).
     """
     if "rotor_accel_scale" in names or v["backlash_deg"] <= 0.0:
-        return 0.0, np.zeros(jac.shape[1])
+        return 0.0, np.zeros(len(names))
     sd = rotor_side_sd(base)
     if sd <= 0.0:
-        return 0.0, np.zeros(jac.shape[1])
+        return 0.0, np.zeros(len(names))
     col = (residuals(base, {**v, "rotor_accel_scale": 1.0 + sd}, part, scales)
            - residuals(base, {**v, "rotor_accel_scale": 1.0 - sd}, part, scales)) / (2.0 * sd)
     return sd, bread @ (jac.T @ col)
@@ -294,121 +259,6 @@ def _secant_jacobian(fun, x: np.ndarray, steps: np.ndarray, hi: np.ndarray) -> t
     return np.column_stack(cols), r0
 
 
-@dataclass
-class _RotorScan:
-    """The rotor's Kt/J_m from `_rotor_scan`: its value, 95 % half-width, and whether that interval closed."""
-
-    value: float
-    half: float
-    closed: bool
-
-
-def _threshold(r: np.ndarray, n: int) -> float:
-    """The cost rise that bounds a 95 % profile interval: chi-square(1)'s 95 % quantile / 2 in units of the residual
-    variance, inflated for the residuals' lag-1 correlation (as the Jacobian's intervals)."""
-    m = len(r)
-    s2 = float(np.dot(r, r)) / max(1, m - n)
-    rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
-    return 0.5 * 3.841 * s2 * (1.0 + rho) / (1.0 - rho)
-
-
-def _interval(grid: np.ndarray, costs: np.ndarray, threshold: float, best: float | None = None
-              ) -> tuple[float, bool]:
-    """(95 % half-width about `best` (default: the grid point of least cost), whether it closed inside the grid, or
-    at a grid starting at 0): the interval reaches the first grid points where the cost rises past the threshold."""
-    k = int(np.argmin(costs))
-    x = float(grid[k]) if best is None else best
-    inside = costs - costs[k] <= threshold
-    lo_i, hi_i = k, k
-    while lo_i > 0 and inside[lo_i - 1]:
-        lo_i -= 1
-    while hi_i < len(grid) - 1 and inside[hi_i + 1]:
-        hi_i += 1
-    closed = (lo_i > 0 or grid[0] == 0.0) and hi_i < len(grid) - 1
-    return max(x - float(grid[max(lo_i - 1, 0)]), float(grid[min(hi_i + 1, len(grid) - 1)]) - x), closed
-
-
-def _costs(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float], name: str,
-           grid: np.ndarray) -> np.ndarray:
-    """The cost (half the sum of squared residuals) with parameter `name` at each grid value, the others at `v`."""
-    return np.array([0.5 * float(np.sum(residuals(base, {**v, name: float(x)}, part, scales) ** 2)) for x in grid])
-
-
-ROTOR_COARSE = 41  # points of the coarse scan over the bounds (geometric: about 1.5 % apart)
-ROTOR_FINE_REL, ROTOR_FINE = 0.03, 13  # the fine scan: +-3 % about the best, 0.5 % apart
-
-
-def _rotor_scan(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float], n: int,
-                coarse: bool) -> _RotorScan:
-    """The rotor's Kt/J_m (`rotor_accel_scale`) from scans of the cost, the other parameters held at `v`.
-
-    It alone carries the rotor across the backlash (in about sqrt(2 gap / (Kt/J_m i))), and the crossings end on
-    whole command periods: the cost is a narrow valley in it (about 2 % wide) with steps, where the least squares'
-    Jacobian sees slopes that are not there. The motor's reply position shows each crossing. So a scan over its
-    bounds (`coarse`), then a fine one about the best; the interval is where the fine scan's cost stays within the
-    95 % threshold (`_threshold`), closed when it ends inside the scan."""
-    lo, hi = PARAMS["rotor_accel_scale"].lo, PARAMS["rotor_accel_scale"].hi
-    best = v["rotor_accel_scale"]
-    if coarse:
-        grid = np.geomspace(lo, hi, ROTOR_COARSE)
-        best = float(grid[int(np.argmin(_costs(base, v, part, scales, "rotor_accel_scale", grid)))])
-    grid = np.unique(np.clip(best * (1.0 + ROTOR_FINE_REL * np.linspace(-1.0, 1.0, ROTOR_FINE)), lo, hi))
-    costs = _costs(base, v, part, scales, "rotor_accel_scale", grid)
-    half, closed = _interval(grid, costs, _threshold(residuals(base, v, part, scales), n + 1))
-    return _RotorScan(float(grid[int(np.argmin(costs))]), half, bool(closed and grid[0] > lo))
-
-
-VALLEY_U_REL, VALLEY_U_STEPS = 0.03, 9  # the scan across the valley at each point along it: +-3 % of u, 9 points
-VALLEY_SLOPE = 0.3  # d ln u / d ln backlash along the valley's floor (seen 0.26-0.3: the output's own motion slows
-# the crossing by a part that does not scale with the rotor's Kt/J_m)
-VALLEY_REACH_DEG, VALLEY_TOL_DEG = 0.5, 0.01
-VALLEY_GRID = 11  # points of the coarse grid along the valley
-VALLEY_ROUNDS = 3  # rounds of the search along the valley and the least squares of the others  # the search along the valley: this far either side, to this resolution
-
-
-def _valley_search(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-                   reach: float = VALLEY_REACH_DEG) -> tuple[float, float]:
-    """(backlash, rotor_accel_scale) at the least cost along the valley they make together, the others at `v`.
-
-    The rotor crosses the gap in about sqrt(2 gap / (Kt/J_m i)): the two trade off along u = backlash /
-    rotor_accel_scale, a valley about 2 % wide in u with steps across it, which neither the least squares nor a
-    scan of one of them at a time follows (from a backlash too large, Kt/J_m's scan finds the valley there and
-    the least squares of the backlash stays). Along the valley the cost is smooth: the motor's reply position shows
-    the gap's level on either side. So a golden-section search of the backlash along it, each point the least
-    cost over a short scan of u about where the valley is expected (through `v`'s point, VALLEY_SLOPE), within
-    `reach` (deg) of `v`'s backlash."""
-    b0 = v["backlash_deg"]
-    u0 = b0 / v["rotor_accel_scale"]
-    lo_r, hi_r = PARAMS["rotor_accel_scale"].lo, PARAMS["rotor_accel_scale"].hi
-    floor: dict[float, tuple[float, float]] = {}  # backlash -> (least cost across the valley, its u)
-
-    def valley(b: float) -> float:
-        if b not in floor:
-            u = u0 * (b / b0) ** VALLEY_SLOPE
-            us = np.unique(np.clip(u * (1.0 + VALLEY_U_REL * np.linspace(-1.0, 1.0, VALLEY_U_STEPS)), b / hi_r,
-                                   b / lo_r))
-            costs = _costs(base, {**v, "backlash_deg": b}, part, scales, "rotor_accel_scale", b / us)
-            floor[b] = (float(costs.min()), float(us[int(np.argmin(costs))]))
-        return floor[b][0]
-
-    lo, hi = max(VALLEY_TOL_DEG, b0 - reach), min(PARAMS["backlash_deg"].hi, b0 + reach)
-    # the floor has steps of its own: a coarse grid first, then the golden section about its best
-    grid = np.linspace(lo, hi, VALLEY_GRID)
-    k = int(np.argmin([valley(float(b)) for b in grid]))
-    lo, hi = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, len(grid) - 1)])
-    g = (math.sqrt(5.0) - 1.0) / 2.0
-    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-    while hi - lo > VALLEY_TOL_DEG:
-        if valley(x1) <= valley(x2):
-            hi, x2 = x2, x1
-            x1 = hi - g * (hi - lo)
-        else:
-            lo, x1 = x1, x2
-            x2 = lo + g * (hi - lo)
-    b = min(floor, key=lambda x: floor[x][0])
-    return b, b / floor[b][1]
-
-
 BACKLASH_GRID_DEG = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0)
 
 
@@ -419,18 +269,34 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
 
     Backlash acts through a dead time at each reversal: the simulation error moves in steps as it grows, which
     a finite-difference Jacobian sees as zero or as a spurious slope; a scan over the whole range does not.
-    The interval is where the cost stays within the 95 % threshold (`_threshold`); identified when that interval
-    closes inside the grid and is no wider than `_ABS_CI`.
+    The interval is where the cost stays within the 95 % quantile of chi-square(1) / 2, in units of the
+    residual variance inflated for the residuals' lag-1 correlation (as the Jacobian's intervals); identified
+    when that interval closes inside the grid and is no wider than `_ABS_CI`.
     """
     grid = np.array(BACKLASH_GRID_DEG if around is None else
                     sorted(set(np.clip(around + np.linspace(-0.5, 0.5, 11), 0.0, PARAMS["backlash_deg"].hi))))
-    cost = _costs(base, v, part, scales, "backlash_deg", grid)
+    cost = np.array([0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": float(b)}, part, scales) ** 2))
+                     for b in grid])
     k = int(np.argmin(cost))
+    r = residuals(base, v, part, scales)
+    m = len(r)
+    s2 = float(np.dot(r, r)) / max(1, m - n)
+    rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
+    threshold = 0.5 * 3.841 * s2 * (1.0 + rho) / (1.0 - rho)
     best = float(grid[k])
     if 0 < k < len(grid) - 1:  # the parabola through the best and its neighbours
         x, y = grid[k - 1:k + 2], cost[k - 1:k + 2]
         a = np.polyfit(x, y, 2)
         if a[0] > 0:
             best = float(np.clip(-a[1] / (2 * a[0]), x[0], x[2]))
-    half, closed = _interval(grid, cost, _threshold(residuals(base, v, part, scales), n), best)
+    inside = cost - cost[k] <= threshold
+    lo_i, hi_i = k, k
+    while lo_i > 0 and inside[lo_i - 1]:
+        lo_i -= 1
+    while hi_i < len(grid) - 1 and inside[hi_i + 1]:
+        hi_i += 1
+    closed = (lo_i > 0 or grid[0] == 0.0) and hi_i < len(grid) - 1
+    lower = float(grid[lo_i - 1]) if lo_i > 0 else float(grid[0])  # the interval reaches the first point outside it
+    upper = float(grid[hi_i + 1]) if hi_i < len(grid) - 1 else float(grid[-1])
+    half = max(best - lower, upper - best)
     return best, half, bool(closed and half <= _ABS_CI["backlash_deg"])
