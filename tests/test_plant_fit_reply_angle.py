@@ -220,15 +220,3 @@ def test_a_reply_that_waited_behind_the_one_before_dates_nothing():
     assert own > behind + 1e-4  # had its own late reply dated it, the test would fail
     assert late[5] == pytest.approx(behind, abs=1e-9)
 
-
-def test_a_reply_angle_carries_the_rotors_place_in_the_backlash():
-    """The motor's encoder is on the rotor (docs/plant.md): with a backlash the reply's position, over the whole
-    ratio, is the output's angle plus half the gap (through the belt) on the side the last command pushed."""
-    base = load_plant_params()
-    v = {**base_values(base), "backlash_deg": 1.0}
-    reply, _, _, mask = simulate(base, v, _experiment(True), free_v0=False)
-    earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=1e-3), free_v0=False)
-    used = np.flatnonzero(mask & (np.arange(len(mask)) > WINDOW_S / 1e-3))
-    gap = np.degrees(reply[used] - earlier[used]) * base.belt_ratio  # at the gearbox's output
-    assert np.max(np.abs(gap)) == pytest.approx(0.5, abs=1e-6)  # half the 1 deg gap when in contact
-    assert np.min(gap) < -0.49 and np.max(gap) > 0.49  # on both sides as the command reverses

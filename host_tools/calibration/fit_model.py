@@ -165,13 +165,17 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
         if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
             t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
-        start_angle = min(hi, max(lo, exp.angle[k] + offset))
+        start = exp.angle[k] + offset
+        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
+        if exp.angle_from_reply and c >= 0:  # a reply's angle has the rotor's place in the backlash in it: the
+            # output is half the gap (through the belt) behind it on the side the command acting pushes
+            start -= 0.5 * backlash / params.belt_ratio * float(np.sign(i_cmd[c]))
+        start_angle = min(hi, max(lo, start))
         v0 = float(vel[k])
         moving = abs(v0) >= REST_RAD_S
         i0 = float(exp.current[k])
         plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v0 if moving else 0.0,
                       start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
-        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
         target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
