@@ -8,42 +8,18 @@ figures are in docs/calibration.md, from the command it names)."""
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import pytest
 
-from hal.virtual.plant import load_plant_params
+from host_tools.calibration.plant_truth import truth_of
 from host_tools.cli import main
-from host_tools.runner import RunConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
 SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
          'prbs_s = 2.0\n')
 QUIET = ["--quiet", "--no-plot", "--no-trace"]
-
-
-def truth_of(plant: list[str]) -> dict[str, float]:
-    """The bench's true values of the fit parameters (emulation only: the test's yardstick, never the fit's input).
-
-    The torques (inertia, damping, friction, gravity) are in the base profile's torque per ampere, as the fit
-    reports them: the current is the bench's only torque measure, so the fit sees each torque over the true
-    torque per ampere times the base's (docs/calibration.md: the torque constant's scale is not identifiable).
-    Seed 7 draws a torque per ampere 0.11 % above the base's (Kt, gearbox and belt efficiencies): within the
-    gravity moment's interval of about 0.07 % that is what tells the two apart.
-    """
-    cfg = RunConfig(plant_file=Path(plant[1]) if plant[0] == "--plant" else None,
-                    plant_seed=int(plant[1]) if plant[0] == "--plant-seed" else None)
-    options, _ = cfg.bench_setup()
-    p = options["plant_params"]
-    k = load_plant_params().output_torque_per_amp_nm / p.output_torque_per_amp_nm
-    return {"output_inertia_kg_m2": k * p.output_inertia_kg_m2,
-            "foot_damping_nm_s_per_rad": k * p.foot_damping_nm_s_per_rad,
-            "coulomb_friction_nm": k * p.coulomb_friction_nm, "static_friction_nm": k * p.static_friction_nm,
-            "gravity_moment_nm": k * p.gravity_moment_nm, "current_time_constant_s": p.current_time_constant_s,
-            "backlash_deg": math.degrees(options["backlash_rad"]),
-            "encoder_offset_deg": math.degrees(options["initial_angle_rad"])}
 
 
 @pytest.fixture(scope="module", params=[["--plant-seed", "7"], ["--plant", str(HANDMADE)]], ids=["seed7", "handmade"])

@@ -28,7 +28,8 @@ def _experiment(from_reply: bool, shift_s: float = 0.0, angle_back: int = 0) -> 
 
 def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
     base = load_plant_params()
-    v = base_values(base)
+    # without backlash the reply's position (the rotor's, over the whole ratio) is the output's angle
+    v = {**base_values(base), "backlash_deg": 0.0}
     reply, _, _, mask = simulate(base, v, _experiment(True), free_v0=False)
     # each sample carries the reply to the request that reached the motor one period before it: the reply's angle is
     # the plant's then, and a window starts there (its start angle is a reply's too). The same plant read directly
@@ -45,7 +46,7 @@ def test_a_reply_angle_is_the_plant_angle_when_its_request_arrived():
 def test_the_encoder_angle_can_be_an_older_reply_than_the_current():
     """Serial mode: the encoder task opens the period and reads the reply the motor task read a period before."""
     base = load_plant_params()
-    v = base_values(base)
+    v = {**base_values(base), "backlash_deg": 0.0}  # the reply's position is then the output's angle
     older, current_older, _, mask = simulate(base, v, _experiment(True, angle_back=1), free_v0=False)
     earlier, _, _, _ = simulate(base, v, _experiment(False, shift_s=2e-3), free_v0=False)
     same, current_same, _, _ = simulate(base, v, _experiment(True), free_v0=False)

@@ -158,26 +158,31 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     n_cmd, n_req = len(t_cmd), len(t_req)
     tau = params.current_time_constant_s
     peak = params.peak_current_a
+    ratio = params.total_ratio
     k = 0
     while k < n:
         t0 = t_first = float(exp.t[k])
         end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
         if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
             t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
-        start_angle = min(hi, max(lo, exp.angle[k] + offset))
+        start = exp.angle[k] + offset
+        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
+        if exp.angle_from_reply and c >= 0:  # a reply's angle has the rotor's place in the backlash in it: the
+            # output is half the gap (through the belt) behind it on the side the command acting pushes
+            start -= 0.5 * backlash / params.belt_ratio * float(np.sign(i_cmd[c]))
+        start_angle = min(hi, max(lo, start))
         v0 = float(vel[k])
         moving = abs(v0) >= REST_RAD_S
         i0 = float(exp.current[k])
         plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v0 if moving else 0.0,
                       start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
-        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
         target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
         c += 1
         r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
         means: dict[int, float] = {}  # request index -> the mean its reply carries
-        positions: dict[int, float] = {}  # request index -> the output angle its reply carries
+        positions: dict[int, float] = {}  # request index -> the rotor angle its reply carries
         r_prev = r - 1
         t_mark = float(t_req[r_prev]) if r_prev >= 0 else t0  # the driver's averages reset here
         acc = i0 * (t0 - t_mark)  # before t0 the current is taken as the measured one
@@ -199,7 +204,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                     i_last, t_last = plant.current_q_a(te), te
                 if tr <= ta:
                     means[r] = acc / (te - t_mark) if te > t_mark else i_last
-                    positions[r] = plant.output_angle_rad(te)
+                    positions[r] = plant.motor_angle_rad(te)
                     acc, t_mark = 0.0, te
                     r += 1
                 else:
@@ -211,7 +216,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             # through serial mode the encoder angle is a reply's position (one reply older than the current's),
             # taken when its request reached the motor; on the virtual bench the encoder reads the plant at the
             # sample's time
-            angle[j] = (positions.get(int(angle_of[j]), th) if exp.angle_from_reply else th) - offset
+            # (the reply's position is the rotor's, the motor's encoder being on it: over the whole ratio it is the
+            # output plus the rotor's place in the backlash, docs/plant.md)
+            rotor = positions.get(int(angle_of[j])) if exp.angle_from_reply else None
+            angle[j] = (th if rotor is None else rotor / ratio) - offset
             heard = means.get(q)
             # None: its request reached the motor before this window, or has not yet in the simulation
             current[j] = exp.current[j] if heard is None else heard

@@ -285,6 +285,23 @@ class Plant:
             self._gap_a = self._kt_over_jm * cmd - self._ratio * alpha
             self._command_a = 0.0
 
+    def _gap_motion(self, t_s: float) -> tuple[float, float]:
+        """(angle [rad], speed [rad/s]) of the rotor in the gap at t_s, relative to N x the output's.
+
+        In contact it rests at +-half the gap; while free it moves as `_cross_gap` integrates it (the relative
+        acceleration held since the last command), stopped at either end (the next command finds it there)."""
+        if not self._gap_free:
+            return self._gap_phi, 0.0
+        dt = t_s - self._gap_t
+        a = self._gap_a
+        phi = self._gap_phi + (self._gap_w + 0.5 * a * dt) * dt
+        half = self._gap_half
+        if phi >= half:
+            return half, 0.0
+        if phi <= -half:
+            return -half, 0.0
+        return phi, self._gap_w + a * dt
+
     # ---------------------------------------------------------------- queries
     def advance_to(self, t_s: float) -> None:
         """Commit whole steps up to the last grid point <= t_s (the state at t_s itself is not committed)."""
@@ -299,9 +316,11 @@ class Plant:
         a = accel(self._c, th, w, i, ext, s)
         n = self._ratio
         lo, hi = p.stop_min_rad, p.stop_max_rad
+        phi, dw = self._gap_motion(t_s)
         return PlantState(
             t_s=t_s, output_angle_rad=th, output_velocity_rad_s=w, output_accel_rad_s2=a,
-            motor_angle_rad=n * th + self.motor_angle_offset_rad, motor_velocity_rad_s=n * w, current_q_a=i,
+            motor_angle_rad=n * th + self.motor_angle_offset_rad + phi, motor_velocity_rad_s=n * w + dw,
+            current_q_a=i,
             current_command_a=self._command_a, motor_torque_nm=p.kt_nm_per_a * i,
             output_torque_nm=p.output_torque_per_amp_nm * i, external_torque_nm=ext,
             energy_j=self._energy(th, w), powered=self._powered, stuck=s == 0 and a == 0.0,
@@ -321,18 +340,24 @@ class Plant:
         return accel(self._c, th, w, i, self._ext_value(t_s), s)
 
     def motor_angle_rad(self, t_s: float) -> float:
-        """Rotor mechanical angle at t_s: N * ankle angle + offset [rad]."""
-        return self._ratio * self._state_tuple(t_s)[0] + self.motor_angle_offset_rad
+        """Rotor mechanical angle at t_s: N * ankle angle + offset + the rotor's place in the backlash [rad]."""
+        th = self._state_tuple(t_s)[0]
+        return self._ratio * th + self.motor_angle_offset_rad + self._gap_motion(t_s)[0]
 
     def motor_velocity_rad_s(self, t_s: float) -> float:
-        """Rotor mechanical speed at t_s [rad/s]."""
-        return self._ratio * self._state_tuple(t_s)[1]
+        """Rotor mechanical speed at t_s: N * ankle speed + the rotor's speed through the backlash [rad/s]."""
+        w = self._state_tuple(t_s)[1]
+        return self._ratio * w + self._gap_motion(t_s)[1]
 
     def motor_sample(self, t_s: float) -> tuple[float, float, float]:
-        """(q current [A], rotor speed [rad/s], rotor angle [rad]) at t_s from one state evaluation."""
+        """(q current [A], rotor speed [rad/s], rotor angle [rad]) at t_s from one state evaluation.
+
+        The rotor's own encoder sits before the gearbox: its angle moves through the backlash at each reversal
+        while the output does not (`_gap_motion`)."""
         th, w, i, _ = self._state_tuple(t_s)
         n = self._ratio
-        return i, n * w, n * th + self.motor_angle_offset_rad
+        phi, dw = self._gap_motion(t_s)
+        return i, n * w + dw, n * th + self.motor_angle_offset_rad + phi
 
     def current_q_a(self, t_s: float) -> float:
         """q-axis current at t_s [A]."""
