@@ -20,7 +20,7 @@ from host_tools.calibration.fit_model import PARAMS, fit_percentages, plant_with
 from host_tools.calibration.plant_fit import FitResult
 from host_tools.outdir import write_atomic
 
-__all__ = ["figure", "fit_json", "validate", "write_fit_outputs"]
+__all__ = ["figure", "fit_json", "validate", "verdict", "write_fit_outputs"]
 
 # fit parameter -> the profile keys it sets
 _KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per_rad": ("foot_damping_nm_s_per_rad",),
@@ -162,16 +162,23 @@ def figure(value: float | None, spec: str) -> str:
 _g = figure
 
 
+def verdict(p: dict) -> str:
+    """A fitted parameter's verdict (fit.json's entry): identified, or not, with the start value the outputs keep
+    (the value the solver ended at is shown beside it but is not one to use)."""
+    if p["identifiable"]:
+        return "identified"
+    return f"NOT IDENTIFIABLE: kept at its start, {_g(p['start'], '.6g')}; the value shown is not to be used"
+
+
 def _markdown(s: dict) -> str:
     lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
              f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
              "| parameter | value | 95 % ± | of which rotor side | of which timing | collinearity | verdict |",
              "|---|---|---|---|---|---|---|"]
     for n, p in s["params"].items():
-        verdict = "identified" if p["identifiable"] else "**not identifiable** (base value kept)"
         lines.append(f"| {n} ({p['unit']}) | {_g(p['value'], '.6g')} | {_g(p['ci95_half_width'], '.3g')} | "
                      f"{_g(p['ci95_rotor_side'], '.2g')} | {_g(p['ci95_timing'], '.2g')} | "
-                     f"{_g(p['collinearity'], '.2f')} | {verdict} |")
+                     f"{_g(p['collinearity'], '.2f')} | {verdict(p)} |")
     for n, p in s["fixed"].items():
         lines.append(f"| {n} | fixed | | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
     lines += ["", "95 % ± is each parameter's interval on its own. It includes the base profile's rotor side: the "

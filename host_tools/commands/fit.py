@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.calibration.fit_data import load_experiment
     from host_tools.calibration.fit_model import DEFAULT_FIT, PARAMS, load_base
     from host_tools.calibration.fit_report import figure as _g
-    from host_tools.calibration.fit_report import validate, write_fit_outputs
+    from host_tools.calibration.fit_report import validate, verdict, write_fit_outputs
     from host_tools.calibration.plant_fit import fit_plant
     from host_tools.command_errors import input_error, output_error
     from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     for n, p in s["params"].items():
         print(f"  {n:<28}{_g(p['value'], '.5g'):>12}{_g(p['ci95_half_width'], '.3g'):>12}"
               f"{_g(p['ci95_rotor_side'], '.2g'):>12}{_g(p['ci95_timing'], '.2g'):>10}  "
-              f"{'identified' if p['identifiable'] else 'NOT IDENTIFIABLE (base value kept)'}")
+              f"{verdict(p)}")
     for n in s["fixed"]:
         print(f"  {n:<28}{'fixed':>12}{'':>34}  NOT IDENTIFIABLE (fixed: see fit.md)")
     for seg, d in s["fit_percent"].items():
