@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -152,3 +153,45 @@ def test_fit_reports_the_rotor_sides_part_of_the_intervals(experiment):
     assert s["params"]["backlash_deg"]["ci95_rotor_side"] > 0
     assert s["params"]["current_time_constant_s"]["ci95_rotor_side"] > 0
     assert "of which rotor side" in (out / "fit.md").read_text()
+
+
+def _toy_chord(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -10.0, hi: float = 10.0):
+    from host_tools.calibration.plant_fit import _Chord
+
+    names = tuple(f"p{k}" for k in range(len(x)))
+    chord = _Chord(names, jac, np.linalg.inv(jac.T @ jac), r0, np.full(len(x), 1e-6),
+                   np.full(len(x), lo), np.full(len(x), hi))
+    return chord, {n: float(a) for n, a in zip(names, x, strict=True)}
+
+
+def test_chord_shift_is_the_linear_shift_on_a_linear_problem():
+    """Residuals linear in the parameters: the chord's first step is zero, the shift is -(J'J)^-1 J' dr."""
+    from host_tools.calibration.plant_fit import _chord_shift
+
+    rng = np.random.default_rng(3)
+    a, y, d = rng.normal(size=(40, 3)), rng.normal(size=40), rng.normal(size=40)
+    x = np.linalg.lstsq(a, y, rcond=None)[0]
+    chord, v = _toy_chord(a, a @ x - y, x)
+    shift, steps = _chord_shift(chord, v, lambda w: a @ np.array([w["p0"], w["p1"], w["p2"]]) - y - d)
+    linear = np.linalg.lstsq(a, d, rcond=None)[0]  # the perturbed problem's solution moves by exactly this
+    assert np.allclose(shift, linear, rtol=1e-9, atol=1e-12)
+    assert steps == 1  # one step, of size 0, then it stops
+
+
+def test_chord_shift_follows_a_nonlinear_residual():
+    """r = exp(x) - c, solved at c = 1 (x = 0, J = 1); c = 1.3 moves the solution to ln 1.3: the linear shift
+    says 0.3, the chord steps come within a few thousandths; the bounds hold the iterate."""
+    from host_tools.calibration.plant_fit import _chord_shift
+
+    chord, v = _toy_chord(np.ones((1, 1)), np.zeros(1), np.zeros(1))
+
+    def fun(w):
+        return np.array([math.exp(w["p0"]) - 1.3])
+
+    linear, _ = _chord_shift(chord, v, fun, max_steps=0)
+    assert linear[0] == pytest.approx(0.3)
+    shift, steps = _chord_shift(chord, v, fun)
+    assert steps == 3
+    assert abs(shift[0] - math.log(1.3)) < 0.003 < abs(linear[0] - math.log(1.3)) / 10
+    bounded, _ = _chord_shift(_toy_chord(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
+    assert bounded[0] == pytest.approx(0.2)

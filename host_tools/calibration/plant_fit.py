@@ -191,9 +191,13 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         meat += np.outer(g, g)
     cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
     v = values(names, res.x)
-    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, names, jac, bread)
-    cov = cov + rotor_sd ** 2 * np.outer(rotor_shift, rotor_shift)
-    timing = _timing(base, v, fit_part, scales, names, jac, bread)
+    # the consider terms' chord iterations (`_chord_shift`) stop on a step small against the data's own interval
+    chord = _Chord(names, jac, bread, r, 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None)),
+                   np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names]),
+                   np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names]))
+    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, chord)
+    cov = cov + np.outer(rotor_shift, rotor_shift)
+    timing = _timing(base, v, fit_part, scales, chord)
     cov = cov + timing
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
@@ -220,7 +224,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         pct[label], unheard[label] = fit_percentages(base, v, part)
     ci95 = {nm: float(ci[k]) for k, nm in enumerate(names)}
     collinearity = {nm: float(coll[k]) for k, nm in enumerate(names)}
-    rotor_ci95 = {nm: 1.96 * rotor_sd * abs(float(rotor_shift[k])) for k, nm in enumerate(names)}
+    rotor_ci95 = {nm: 1.96 * abs(float(rotor_shift[k])) for k, nm in enumerate(names)}
     timing_ci95 = {nm: 1.96 * math.sqrt(max(float(timing[k, k]), 0.0)) for k, nm in enumerate(names)}
     if profile is not None:  # its interval from the profile (a secant over its switching steps is no curvature),
         # with the rotor side's and the timing's parts added in quadrature (when the backlash is in the Jacobian)
@@ -236,56 +240,111 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
                      left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S)
 
 
+CHORD_STEPS = 3  # at most this many chord steps per consider shift (`_chord_shift`), one simulation each
+CHORD_TOL = 0.1  # stop when no parameter's step exceeds this fraction of its 95 % half-width from the data alone
+
+
+@dataclass
+class _Chord:
+    """What the consider terms' chord iterations reuse from the solution: its parameters, their secant Jacobian,
+    (J'J)^-1, the residuals there, the data's 95 % half-widths (the stopping scale) and the bounds."""
+
+    names: tuple[str, ...]
+    jac: np.ndarray
+    bread: np.ndarray
+    r0: np.ndarray
+    half: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def _chord_shift(chord: _Chord, v: dict[str, float], fun, max_steps: int = CHORD_STEPS) -> tuple[np.ndarray, int]:
+    """(the shift of the least-squares solution when the residuals become `fun`'s, chord steps taken).
+
+    `fun(values)` gives the residuals of the perturbed problem (a moved base, drawn timings) at the parameter
+    values it is handed. The linear shift is -(J'J)^-1 J' (r_p(x) - r(x)); a chord (simplified Newton) iteration
+    reuses the solution's Jacobian, one simulation a step, s <- s - (J'J)^-1 J' (r_p(x + s) - r(x)): its fixed point
+    is where the perturbed residuals' projection on J is the solution's own (0 at an interior minimum), so it is the
+    linear shift when the residuals are linear in the parameters, and follows them where they are not. The
+    iterate is kept within the bounds; it stops when no step exceeds CHORD_TOL of the data's half-width, after
+    `max_steps` (0: the linear shift), or when a step grows against the one before it (the chord does not
+    contract there: the last iterate before it is kept).
+    """
+    x = np.array([v[n] for n in chord.names])
+    half = np.where(chord.half > 0, chord.half, 1.0)
+    g0 = chord.jac.T @ chord.r0
+
+    def at(shift: np.ndarray) -> np.ndarray:
+        return fun({**v, **{n: float(a) for n, a in zip(chord.names, x + shift, strict=True)}})
+
+    shift = np.clip(x - chord.bread @ (chord.jac.T @ at(np.zeros(len(x))) - g0), chord.lo, chord.hi) - x
+    size = math.inf
+    steps = 0
+    for _ in range(max_steps):
+        step = np.clip(x + shift - chord.bread @ (chord.jac.T @ at(shift) - g0), chord.lo, chord.hi) - x - shift
+        new = float(np.max(np.abs(step) / half))
+        if new > size:
+            break
+        shift, size, steps = shift + step, new, steps + 1
+        if new <= CHORD_TOL:
+            break
+    return shift, steps
+
+
 def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-                names: tuple[str, ...], jac: np.ndarray, bread: np.ndarray) -> tuple[float, np.ndarray]:
-    """(the rotor side's relative spread, the fitted parameters' shift per unit of it): a "consider" parameter.
+                chord: _Chord) -> tuple[float, np.ndarray]:
+    """(the rotor side's relative spread, the fitted parameters' shift for one spread of it): a "consider" term.
 
     The rotor's acceleration per ampere (Kt / J_m) alone carries it across the backlash at each reversal; the fit
     takes it from the base profile (fitting it too trades off against the backlash: docs/calibration.md, Limits).
-    A bench whose Kt/J_m differs from the base's by a fraction e moves the least-squares solution by about
-    -e (J'J)^-1 J' c, c the residuals' derivative by it (a central secant over the spread: the crossings end on
-    whole periods); with e of spread `rotor_side_sd` that adds sd^2 s s' to the covariance, so the parameters the
-    rotor side biases get the intervals it allows. No term when it is fitted, or with no backlash (no crossing).
+    A bench whose Kt/J_m differs from the base's by one spread `rotor_side_sd` either way moves the least-squares
+    solution; each way's shift is `_chord_shift`'s (from the linear shift, chord steps on the moved base), and
+    each parameter takes the larger of the two (its sign with it): the crossings end on whole periods, so the
+    response is lopsided, and the sign of the base's error is what the record cannot tell. Its outer product is
+    added to the covariance, so the parameters the rotor side biases get the intervals it allows. No term when
+    it is fitted, or with no backlash (no crossing).
     """
-    if "rotor_accel_scale" in names or v["backlash_deg"] <= 0.0:
-        return 0.0, np.zeros(len(names))
+    n = len(chord.names)
+    if "rotor_accel_scale" in chord.names or v["backlash_deg"] <= 0.0:
+        return 0.0, np.zeros(n)
     sd = rotor_side_sd(base)
     if sd <= 0.0:
-        return 0.0, np.zeros(len(names))
-    col = (residuals(base, {**v, "rotor_accel_scale": 1.0 + sd}, part, scales)
-           - residuals(base, {**v, "rotor_accel_scale": 1.0 - sd}, part, scales)) / (2.0 * sd)
-    return sd, bread @ (jac.T @ col)
+        return 0.0, np.zeros(n)
+    ways = [_chord_shift(chord, v, lambda w, e=e: residuals(base, {**w, "rotor_accel_scale": 1.0 + e}, part,
+                                                            scales))[0] for e in (sd, -sd)]
+    return sd, np.where(np.abs(ways[0]) >= np.abs(ways[1]), ways[0], ways[1])
 
 
 TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
 TIMING_SEED = 21  # their seed: the same recording gives the same intervals
+TIMING_CHORD_STEPS = 0  # the timing draws' shifts stay linear (docs/calibration.md, The timing term: not measured)
 
 
 def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-            names: tuple[str, ...], jac: np.ndarray, bread: np.ndarray) -> np.ndarray:
+            chord: _Chord) -> np.ndarray:
     """The covariance the writes' unknown arrival adds to the fitted parameters (zeros when the timing is exact).
 
     Through serial mode the record dates each write (a command and the request after it) at COMMAND_DELAY_S after
     its job, later when a late reply shows it (`fit_data._late_commands`), and bounds it only to a window
     (`fit_data.arrival_bounds`: about 0.6 ms through a pty) within which the link's per-frame delay is unknown.
     Each draw puts every write at an independent uniform point of its window (the least the record says); the
-    least-squares solution would move by -(J'J)^-1 J' dr, dr the residuals' change; the mean of that shift's
-    outer product over the draws (its mean, a delay common to all writes, included: the record cannot exclude it)
-    is added to the covariance, as the rotor side's consider term is.
+    least-squares solution's shift on it is `_chord_shift`'s with TIMING_CHORD_STEPS (0: the linear shift
+    -(J'J)^-1 J' dr);
+    the mean of that shift's outer product over the draws (its mean, a delay common to all writes, included: the
+    record cannot exclude it) is added to the covariance, as the rotor side's consider term is.
     """
-    n = len(names)
+    n = len(chord.names)
     if part.bounds is None or not np.any(part.bounds[:, 1] > part.bounds[:, 0]):
         return np.zeros((n, n))
     rng = np.random.default_rng(TIMING_SEED)
-    r0 = residuals(base, v, part, scales)
     out = np.zeros((n, n))
     lo, hi = part.bounds[:, 0], part.bounds[:, 1]
     # writes whose windows overlap (a stall: each may have waited behind the one before) are one burst, late together
     burst = np.r_[0, np.cumsum(part.t_cmd[1:] + lo[1:] > np.maximum.accumulate(part.t_cmd + hi)[:-1])]
     for _ in range(TIMING_DRAWS):
         u = rng.uniform(0.0, 1.0, int(burst[-1]) + 1)[burst]
-        dr = residuals(base, v, part.shifted(lo + u * (hi - lo)), scales) - r0
-        shift = bread @ (jac.T @ dr)
+        drawn = part.shifted(lo + u * (hi - lo))
+        shift, _ = _chord_shift(chord, v, lambda w, d=drawn: residuals(base, w, d, scales), TIMING_CHORD_STEPS)
         out += np.outer(shift, shift)
     return out / TIMING_DRAWS
 
