@@ -135,10 +135,14 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     def values(names: tuple[str, ...], x: np.ndarray) -> dict[str, float]:
         return {**start, **{n: float(v) for n, v in zip(names, x, strict=True)}}
 
+    def bounds(names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) bounds of `names` (the encoder offset's about its start)."""
+        return tuple(np.array([getattr(PARAMS[n], side) + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
+                     for side in ("lo", "hi"))  # type: ignore[return-value]
+
     def solve(names: tuple[str, ...], x0: np.ndarray | None = None) -> tuple[object, np.ndarray, np.ndarray]:
         """least_squares over `names` from x0 (default: their start values): (result, steps, upper bounds)."""
-        lo = np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
-        hi = np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names])
+        lo, hi = bounds(names)
         if x0 is None:
             x0 = np.clip(np.array([start[n] for n in names]), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
         scale = np.maximum(np.abs(x0), 0.05 * (hi - lo))
@@ -192,9 +196,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
     v = values(names, res.x)
     # the consider terms' chord iterations (`_chord_shift`) stop on a step small against the data's own interval
-    chord = _Chord(names, jac, bread, r, 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None)),
-                   np.array([PARAMS[n].lo + (zero if n == "encoder_offset_deg" else 0.0) for n in names]),
-                   np.array([PARAMS[n].hi + (zero if n == "encoder_offset_deg" else 0.0) for n in names]))
+    chord = _Chord(names, jac, bread, r, 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None)), *bounds(names))
     rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, chord)
     cov = cov + np.outer(rotor_shift, rotor_shift)
     timing = _timing(base, v, fit_part, scales, chord)
