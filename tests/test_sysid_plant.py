@@ -39,7 +39,7 @@ def test_sysid_is_a_shipped_controller_within_its_limits():
     assert isinstance(c, SysidExperiment)
     assert 20.0 < c.duration_s < 40.0
     names = [n for n, _ in c.bounds]
-    assert names == ["hold", "sweep", "sweep2", "chirp", "prbs", "hold_end"]
+    assert names == ["hold", "sweep", "chirp", "prbs", "hold_end"]
     obs = Observation()
     seen_current, targets = [], []
     for k in range(int(c.duration_s * 1000)):
@@ -68,27 +68,10 @@ def test_sysid_parameters_are_checked():
         build_controller("sysid", cfg, {"sweep_deg": 30.0, "margin_deg": 10.0})
 
 
-def test_second_sweep_pass_runs_the_same_triangle_at_its_own_speed():
-    cfg = load_firmware_config()
-    one = build_controller("sysid", cfg, {"sweep_deg": 10.0, "sweep_deg_s": 10.0, "sweep2_deg_s": 0.0})
-    two = build_controller("sysid", cfg, {"sweep_deg": 10.0, "sweep_deg_s": 10.0, "sweep2_deg_s": 5.0})
-    assert one.duration_s == pytest.approx(two.duration_s - 8.0)  # 4 x 10 deg at 5 deg/s
-    ends = dict(two.bounds)
-    start = ends["sweep"]
-    assert ends["sweep2"] - start == pytest.approx(8.0)
-    path = [math.degrees(two.target_and_excitation(start + k * 0.01)[0]) - 2.0 for k in range(800)]
-    assert max(path) == pytest.approx(10.0, abs=0.06) and min(path) == pytest.approx(-10.0, abs=0.06)
-    assert path[200] == pytest.approx(10.0, abs=0.06)  # the top after 2 s: half the first pass's speed
-    assert all(two.target_and_excitation(start + k * 0.01)[1] == 0.0 for k in range(800))  # no excitation on it
-    assert dict(one.bounds)["sweep2"] == dict(one.bounds)["sweep"]  # 0: no second pass
-    with pytest.raises(ValueError, match="sweep2_deg_s = 0.2 out of range"):
-        build_controller("sysid", cfg, {"sweep2_deg_s": 0.2})
-
-
 def test_same_seed_same_prbs():
     cfg = load_firmware_config()
     a, b, c = (build_controller("sysid", cfg, {"seed": s}) for s in (1, 1, 2))
-    t0 = dict(a.bounds)["chirp"] + 0.001  # inside the PRBS
+    t0 = a.bounds[2][1] + 0.001  # inside the PRBS
     seq = [[x.target_and_excitation(t0 + k * 0.03)[1] for k in range(50)] for x in (a, b, c)]
     assert seq[0] == seq[1] != seq[2]
     assert set(seq[0]) == {1.0, -1.0}

@@ -9,15 +9,12 @@ AK60-6 bench; docs/calibration.md gives the reasoning):
    current needed is the gravity moment (its cos shape over the angle) plus Coulomb friction (its sign
    flips with the direction: the difference of the two passes); the reversals at the ends excite the
    static friction and the gearbox's backlash;
-3. the same triangle again at ``sweep2_deg_s`` (0: none): at another speed the friction's part that grows with
-   the speed (damping) and the part that does not (Coulomb) separate by the speed, not only by the shape of
-   the reversals, where the gearbox's backlash and the rotor's side act too;
-4. a logarithmic chirp in current, ``chirp_a`` amplitude from ``chirp_f0_hz`` to ``chirp_f1_hz`` over
+3. a logarithmic chirp in current, ``chirp_a`` amplitude from ``chirp_f0_hz`` to ``chirp_f1_hz`` over
    ``chirp_s``, added to the position hold: its low frequencies see the stiffness of the hold, the high
    ones the inertia; the phase between current command and measured current is the driver's lag;
-5. a PRBS in current, ``prbs_a`` with a bit every ``prbs_bit_s`` (seeded by ``seed``): broadband, for
+4. a PRBS in current, ``prbs_a`` with a bit every ``prbs_bit_s`` (seeded by ``seed``): broadband, for
    the damping and a second look at inertia and friction;
-6. ``hold_s`` again (the IMU's bias drift over the experiment).
+5. ``hold_s`` again (the IMU's bias drift over the experiment).
 
 A PD position hold (``kp_a_per_rad``, ``kd_a_s_per_rad``) carries the foot's weight under every segment;
 the angle stays within ``margin_deg`` of the firmware's safety limits (a guard adds a restoring current
@@ -35,12 +32,12 @@ from firmware.config import FirmwareConfig
 __all__ = ["DEFAULTS", "SysidExperiment", "sysid_from_config"]
 
 DEFAULTS: dict[str, float] = {
-    "hold_s": 2.0, "sweep_deg": 18.0, "sweep_deg_s": 9.0, "sweep2_deg_s": 0.0, "chirp_a": 1.2, "chirp_f0_hz": 0.3, "chirp_f1_hz": 12.0,
+    "hold_s": 2.0, "sweep_deg": 18.0, "sweep_deg_s": 9.0, "chirp_a": 1.2, "chirp_f0_hz": 0.3, "chirp_f1_hz": 12.0,
     "chirp_s": 10.0, "prbs_a": 1.0, "prbs_bit_s": 0.03, "prbs_s": 4.0, "kp_a_per_rad": 25.0,
     "kd_a_s_per_rad": 0.6, "margin_deg": 5.0, "current_fraction": 0.6, "centre_deg": 2.0, "seed": 0,
 }
 _RANGES: dict[str, tuple[float, float]] = {
-    "hold_s": (0.2, 60.0), "sweep_deg": (1.0, 40.0), "sweep_deg_s": (0.5, 60.0), "sweep2_deg_s": (0.0, 60.0), "chirp_a": (0.0, 10.0),
+    "hold_s": (0.2, 60.0), "sweep_deg": (1.0, 40.0), "sweep_deg_s": (0.5, 60.0), "chirp_a": (0.0, 10.0),
     "chirp_f0_hz": (0.05, 50.0), "chirp_f1_hz": (0.1, 100.0), "chirp_s": (0.0, 120.0), "prbs_a": (0.0, 10.0),
     "prbs_bit_s": (0.002, 1.0), "prbs_s": (0.0, 120.0), "kp_a_per_rad": (0.0, 500.0), "kd_a_s_per_rad": (0.0, 20.0),
     "margin_deg": (0.0, 30.0), "current_fraction": (0.05, 1.0), "centre_deg": (-30.0, 30.0), "seed": (0, 2**32 - 1),
@@ -76,19 +73,14 @@ class SysidExperiment:
             raise ValueError(f"controller sysid: centre_deg ± sweep_deg = {p['centre_deg']} ± {p['sweep_deg']} leaves "
                              f"the range of motion less the margin [{math.degrees(self.lo):.1f}, "
                              f"{math.degrees(self.hi):.1f}] deg")
-        if 0.0 < p["sweep2_deg_s"] < _RANGES["sweep_deg_s"][0]:
-            raise ValueError(f"controller sysid: sweep2_deg_s = {p['sweep2_deg_s']} out of range: 0 (no second pass) "
-                             f"or [{_RANGES['sweep_deg_s'][0]}, {_RANGES['sweep2_deg_s'][1]}]")
         self.sweep = sweep
         self.limit = p["current_fraction"] * current_limit_a
         rate = math.radians(p["sweep_deg_s"])
         self.sweep_s = 4.0 * sweep / rate
         self.rate = rate
-        self.rate2 = math.radians(p["sweep2_deg_s"])
-        self.sweep2_s = 4.0 * sweep / self.rate2 if self.rate2 > 0.0 else 0.0
         self.bounds = []  # segment end times, relative to the start
         t = 0.0
-        for name, length in (("hold", p["hold_s"]), ("sweep", self.sweep_s), ("sweep2", self.sweep2_s), ("chirp", p["chirp_s"]),
+        for name, length in (("hold", p["hold_s"]), ("sweep", self.sweep_s), ("chirp", p["chirp_s"]),
                              ("prbs", p["prbs_s"]), ("hold_end", p["hold_s"])):
             t += length
             self.bounds.append((name, t))
@@ -126,8 +118,8 @@ class SysidExperiment:
         """The position held (rad) and the current added on top (A) at t seconds from the start."""
         p = self.p
         i, name, u = self.segment(t)
-        if name in ("sweep", "sweep2"):  # centre -> +sweep -> -sweep -> centre, at the segment's constant rate
-            d = (self.rate if name == "sweep" else self.rate2) * u
+        if name == "sweep":  # centre -> +sweep -> -sweep -> centre, at the constant rate
+            d = self.rate * u
             s = self.sweep
             off = d if d < s else 2 * s - d if d < 3 * s else d - 4 * s
             return self.centre + off, 0.0
