@@ -17,10 +17,10 @@ import numpy as np
 from hal.virtual.plant import PlantParams
 from host_tools.calibration.fit_data import Experiment
 from host_tools.calibration.fit_model import PARAMS, fit_percentages, plant_with, simulate
-from host_tools.calibration.plant_fit import FitResult
+from host_tools.calibration.plant_fit import HELD_OUT_EVERY, FitResult
 from host_tools.outdir import write_atomic
 
-__all__ = ["figure", "fit_json", "validate", "verdict", "write_fit_outputs"]
+__all__ = ["figure", "fit_figure", "fit_json", "validate", "verdict", "write_fit_outputs"]
 
 # fit parameter -> the profile keys it sets
 _KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per_rad": ("foot_damping_nm_s_per_rad",),
@@ -66,11 +66,14 @@ def profile_text(base_text: str, base: PlantParams, r: FitResult, run_dir: str) 
         "\n".join(extra) + "\n" + text
 
 
+def _num(x: float) -> float | None:
+    """A figure for JSON: rounded, a non-finite one as null."""
+    return round(x, 9) if math.isfinite(x) else None
+
+
 def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
     """Every figure of the fit, JSON-ready (non-finite numbers as null)."""
-    def num(x: float) -> float | None:
-        return round(x, 9) if math.isfinite(x) else None
-
+    num = _num
     params = {n: {"value": num(r.values[n]), "ci95_half_width": num(r.ci95[n]),
                   # the part of ci95_half_width that is the base's rotor side (Kt/J_m) taken as uncertain
                   "ci95_rotor_side": num(r.rotor_ci95.get(n, 0.0)),
@@ -103,20 +106,39 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
             **(extra or {})}
 
 
-def validate(base: PlantParams, r: FitResult, other: Experiment) -> dict[str, float]:
-    """Fit percentages of the fitted plant on another recording (windowed simulation, as the fit)."""
-    return fit_percentages(base, used_values(r), other)[0]
+def validate(base: PlantParams, r: FitResult, other: Experiment) -> dict:
+    """The fitted plant on another recording, fit.json's ``validation``: its fit percentages (windowed simulation,
+    as the fit), with that recording's stall windows (`Experiment.stalled`) left out and counted as the fit leaves
+    out and counts its own; its percentages are null when nothing else is left."""
+    stalled = other.stalled()
+    _, used = other.interleave(1, drop=stalled)  # every stretch is the "held-out" one: all but the stall's windows
+    pct, unheard = (fit_percentages(base, used_values(r), used) if len(used.t) else
+                    ({"angle": math.nan, "current": math.nan, "imu": math.nan}, 0))
+    return {"run": other.source, "fit_percent": {k: _num(v) for k, v in pct.items()}, "samples": len(used.t),
+            "stalled_samples_left_out": int(np.count_nonzero(stalled)), "current_samples_without_simulation": unheard}
 
 
-def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
+def _spans(t: np.ndarray) -> list[tuple[float, float]]:
+    """(first, last) time of each run of samples `t` whose steps stay under twice the median step."""
+    if len(t) == 0:
+        return []
+    cut = np.flatnonzero(np.diff(t) > 2.0 * float(np.median(np.diff(t)))) if len(t) > 1 else np.zeros(0, int)
+    return [(float(t[a]), float(t[b])) for a, b in zip(np.r_[0, cut + 1], np.r_[cut, len(t) - 1], strict=True)]
+
+
+def fit_figure(base: PlantParams, r: FitResult, exp: Experiment):
+    """fit.png's figure: measured and simulated on the fitting and the held-out stretches and their residuals, as
+    the fit used them: a stall's windows (`Experiment.stalled`) are left out of both and shaded, labelled."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fit_part, held = exp.interleave(4)
+    stalled = exp.stalled()
+    parts = exp.interleave(HELD_OUT_EVERY, drop=stalled)  # what the fit used
+    stalls = exp.interleave(HELD_OUT_EVERY, drop=~stalled)  # what it left out, by the same stretches
     fig, axes = plt.subplots(3, 2, figsize=(13, 9), sharex="col")
-    for col, (label, part) in enumerate((("fitting", fit_part), ("held out", held))):
+    for col, (label, part, stall) in enumerate(zip(("fitting", "held out"), parts, stalls, strict=True)):
         a, c, _, mask = simulate(base, r.values, part)
         t = part.t
         ax = axes[0, col]
@@ -124,18 +146,27 @@ def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
         ax.plot(t[mask], np.degrees(a[mask]), ".", ms=1, label="simulated")
         ax.set_ylabel("angle (deg)")
         ax.set_title(f"{label}: angle fit {r.fit_pct['fit' if col == 0 else 'held_out']['angle']:.1f} %")
-        ax.legend(markerscale=8, fontsize=8)
         ax = axes[1, col]
         ax.plot(t, part.current, ".", ms=1, label="motor reply (measured)")
         ax.plot(t[mask], c[mask], ".", ms=1, label="simulated")
         ax.set_ylabel("current (A)")
-        ax.legend(markerscale=8, fontsize=8)
         ax = axes[2, col]
         ax.plot(t[mask], np.degrees(part.angle - a)[mask], ".", ms=1, label="angle residual (deg)")
         ax.plot(t[mask], (part.current - c)[mask], ".", ms=1, label="current residual (A)")
         ax.set_xlabel("time (s)")
-        ax.legend(markerscale=8, fontsize=8)
+        for ax in axes[:, col]:
+            for k, (t0, t1) in enumerate(_spans(stall.t)):
+                ax.axvspan(t0, t1, color="0.85", zorder=0,
+                           label=f"stall: left out ({len(stall.t)} samples)" if k == 0 else None)
+            ax.legend(markerscale=8, fontsize=8)
     fig.tight_layout()
+    return fig
+
+
+def _plots(out: Path, base: PlantParams, r: FitResult, exp: Experiment) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = fit_figure(base, r, exp)
     tmp = out / ".fit.tmp.png"
     fig.savefig(tmp, dpi=90)
     plt.close(fig)
@@ -204,7 +235,15 @@ def _markdown(s: dict) -> str:
         lines += ["", "Samples in windows of a stall (their writes' arrivals at the motor unknown by more than "
                   f"{_g(s['stall_bound_ms'], 'g')} ms on average), left out of the fit and of the fit percentages: "
                   f"{stalled.get('fit', 0)} (fit), {stalled.get('held_out', 0)} (held out)."]
-    lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals), "
+    if "validation" in s:
+        v = s["validation"]
+        pct = v["fit_percent"]
+        lines += ["", f"On another recording, `{v['run']}` ({v['samples']} samples used): fit percentage angle "
+                  f"{_g(pct['angle'], '.1f')}, current {_g(pct['current'], '.1f')}, IMU {_g(pct['imu'], '.1f')}; "
+                  f"left out as the fit's own: {v['stalled_samples_left_out']} samples in windows of a stall, "
+                  f"{v['current_samples_without_simulation']} currents without a simulated counterpart."]
+    lines += ["", "Plots: `fit.png` (measured and simulated, fitting and held-out stretches, residuals; a stall's "
+              "windows shaded, left out), "
               "`correlations.png`. The fitted profile is `plant_fitted.toml`: `pafp run --plant` takes it."]
     return "\n".join(lines) + "\n"
 

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
           f"parameters -> {run_dir.out}", flush=True)
     try:
         r = fit_plant(base, exp, names)
-        extra = {"validation": {"run": str(args.validate), "fit_percent": validate(base, r, other)}} if other else {}
+        extra = {"validation": validate(base, r, other)} if other is not None else {}
         s = write_fit_outputs(run_dir.path, base, base_text, r, exp, extra, plot=not args.no_plot)
         run_dir.publish()
     except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
