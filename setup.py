@@ -44,6 +44,7 @@ COMPILED = [
     "hal/virtual/can.py",
     "hal/virtual/timer.py",
     "hal/virtual/plant/integrator.py",
+    "hal/virtual/plant/gap.py",
     "hal/virtual/plant/model.py",
     "hal/virtual/devices/world.py",
     "hal/virtual/devices/ak60.py",

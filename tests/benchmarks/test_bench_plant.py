@@ -22,6 +22,20 @@ def one_second_with_commands(query: bool) -> float:
     return plant.output_angle_rad(1.0)
 
 
+def one_second_through_the_backlash() -> float:
+    """1 s of simulated time, spring bench, the packaged backlash, a current command every 1 ms reversing at 5 Hz
+    (9 reversals: the gap is crossed at each, and more often as the foot rests on its stop), an angle read and a
+    motor sample (current, rotor speed and angle) every 1 ms."""
+    plant = Plant(PARAMS, spring_bench(0.68), initial_angle_rad=0.0, backlash_rad=math.radians(PARAMS.backlash_deg))
+    for k in range(1000):
+        t = k * 1e-3 + UART_LATENCY_S
+        plant.set_current_command(2.0 * math.sin(2 * math.pi * 5.0 * t), t)
+        plant.output_angle_rad(t + 0.0002)
+        plant.motor_sample(t + 0.0004)
+    assert plant.gap_crossings >= 9
+    return plant.output_angle_rad(1.0)
+
+
 def one_second_free() -> float:
     """1 s of simulated time without inputs (pure integration)."""
     plant = Plant(PARAMS, spring_bench(0.68), initial_angle_rad=0.3)
@@ -36,6 +50,11 @@ def test_bench_plant_1s_commands_every_1ms(benchmark: Any) -> None:
 
 def test_bench_plant_1s_commands_and_reads_every_1ms(benchmark: Any) -> None:
     angle = benchmark.pedantic(one_second_with_commands, args=(True,), rounds=9, iterations=1)
+    assert PARAMS.stop_min_rad - 0.05 < angle < PARAMS.stop_max_rad + 0.05
+
+
+def test_bench_plant_1s_backlash_commands_and_motor_reads_every_1ms(benchmark: Any) -> None:
+    angle = benchmark.pedantic(one_second_through_the_backlash, rounds=9, iterations=1)
     assert PARAMS.stop_min_rad - 0.05 < angle < PARAMS.stop_max_rad + 0.05
 
 

@@ -11,6 +11,7 @@ from typing import Final
 from mypy_extensions import mypyc_attr
 
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, check_load, suspended
+from hal.virtual.plant.gap import Gap
 from hal.virtual.plant.integrator import (
     Coefficients,
     Drive,
@@ -124,18 +125,10 @@ class Plant:
             tau += p.phase_inductance_h / p.phase_resistance_ohm
         self.step_s = step_s
         self.motor_angle_offset_rad = motor_angle_offset_rad
-        # backlash: half the free play at the rotor; the rotor's angle in it relative to N x the output
-        # angle, its relative velocity, the time and drive of the last update (see _cross_gap)
-        self._gap_half = 0.5 * backlash_rad * p.gearbox_ratio
-        self._kt_over_jm = p.kt_nm_per_a / p.rotor_inertia_kg_m2
-        self._gap_phi = 0.0
-        self._gap_w = 0.0
-        self._gap_t = start_time_s
-        self._gap_a = 0.0  # relative acceleration while free over the last interval
-        self._gap_free = False
-        self._contact = 0  # +1/-1: the side of the gap the teeth rest on; 0: free or not yet known
-        self.gap_crossings = 0
         self._ratio = p.total_ratio  # read per query: kept here, not looked up on the interpreted params
+        # backlash: half the free play at the rotor, and the rotor's place and motion in it (see _cross_gap)
+        self._gap = Gap(0.5 * backlash_rad * p.gearbox_ratio, start_time_s,
+                        p.kt_nm_per_a / p.rotor_inertia_kg_m2, self._ratio)
         self._peak_a = p.peak_current_a
         fx = self.fixture
         load_lever = p.load_lever_m
@@ -189,7 +182,7 @@ class Plant:
         if not self._powered:
             logger.debug("current command %.3f A at %.6f s ignored: driver unpowered", current_a, t_s)
             self._command_a = 0.0
-        if self._gap_half > 0.0:
+        if self._gap.half > 0.0:
             self._cross_gap(t_s)
         self._drive = self._make_drive()
 
@@ -250,57 +243,21 @@ class Plant:
     def _cross_gap(self, t_s: float) -> None:
         """Backlash: while the rotor is inside the gearbox's free play, no torque reaches the output.
 
-        The rotor angle in the gap, relative to N x the output angle, moves with the relative acceleration
-        Kt i_cmd / J_m - N alpha_out (both held from the last command: commands come every control period),
-        and stops at either end (contact; the impact's momentum is not passed on). The teeth stay engaged
-        while the command pushes towards the side in contact; a command of the other sign frees the rotor,
-        and its torque reaches the output only once the rotor has crossed. Called after the plant is
-        committed to t_s; sets the command the output sees (0 while free).
+        The rotor's place and motion in the gap are `Gap`'s (hal/virtual/plant/gap.py); a command of the other
+        sign than the side in contact frees the rotor, and its torque reaches the output only once the rotor has
+        crossed. Called after the plant is committed to t_s; sets the command the output sees (0 while free).
         """
         cmd = self._command_a
-        side = (cmd > 0.0) - (cmd < 0.0)
-        half = self._gap_half
-        if self._gap_free:  # move the rotor through the gap over the interval since the last command
-            dt = t_s - self._gap_t
-            a = self._gap_a
-            phi = self._gap_phi + self._gap_w * dt + 0.5 * a * dt * dt
-            w = self._gap_w + a * dt
-            if phi >= half or phi <= -half:
-                self._contact = 1 if phi > 0.0 else -1
-                phi = half * self._contact
-                w = 0.0
-                self._gap_free = False
-            self._gap_phi, self._gap_w = phi, w
-        elif self._contact == 0 and side != 0:  # the first command: the teeth rest on its side
-            self._contact = side
-            self._gap_phi = half * side
-        if not self._gap_free and side != 0 and side != self._contact and self._contact != 0:
-            self._gap_free = True  # a reversal: the rotor leaves contact
-            self._contact = 0
-            self.gap_crossings += 1
-        self._gap_t = t_s
-        if self._gap_free:
+        gap = self._gap
+        if gap.command(t_s, (cmd > 0.0) - (cmd < 0.0)):
             th, w_out, i, s = self._x
-            alpha = accel(self._c, th, w_out, i, self._ext_value(t_s), s)
-            self._gap_a = self._kt_over_jm * cmd - self._ratio * alpha
+            gap.free_under(cmd, accel(self._c, th, w_out, i, self._ext_value(t_s), s))
             self._command_a = 0.0
 
-    def _gap_motion(self, t_s: float) -> tuple[float, float]:
-        """(angle [rad], speed [rad/s]) of the rotor in the gap at t_s, relative to N x the output's.
-
-        In contact it rests at +-half the gap; while free it moves as `_cross_gap` integrates it (the relative
-        acceleration held since the last command), stopped at either end (the next command finds it there)."""
-        if not self._gap_free:
-            return self._gap_phi, 0.0
-        dt = t_s - self._gap_t
-        a = self._gap_a
-        phi = self._gap_phi + (self._gap_w + 0.5 * a * dt) * dt
-        half = self._gap_half
-        if phi >= half:
-            return half, 0.0
-        if phi <= -half:
-            return -half, 0.0
-        return phi, self._gap_w + a * dt
+    @property
+    def gap_crossings(self) -> int:
+        """Reversals whose command freed the rotor in the backlash."""
+        return self._gap.crossings
 
     # ---------------------------------------------------------------- queries
     def advance_to(self, t_s: float) -> None:
@@ -316,7 +273,7 @@ class Plant:
         a = accel(self._c, th, w, i, ext, s)
         n = self._ratio
         lo, hi = p.stop_min_rad, p.stop_max_rad
-        phi, dw = self._gap_motion(t_s)
+        phi, dw = self._gap.motion(t_s)
         return PlantState(
             t_s=t_s, output_angle_rad=th, output_velocity_rad_s=w, output_accel_rad_s2=a,
             motor_angle_rad=n * th + self.motor_angle_offset_rad + phi, motor_velocity_rad_s=n * w + dw,
@@ -342,21 +299,21 @@ class Plant:
     def motor_angle_rad(self, t_s: float) -> float:
         """Rotor mechanical angle at t_s: N * ankle angle + offset + the rotor's place in the backlash [rad]."""
         th = self._state_tuple(t_s)[0]
-        return self._ratio * th + self.motor_angle_offset_rad + self._gap_motion(t_s)[0]
+        return self._ratio * th + self.motor_angle_offset_rad + self._gap.motion(t_s)[0]
 
     def motor_velocity_rad_s(self, t_s: float) -> float:
         """Rotor mechanical speed at t_s: N * ankle speed + the rotor's speed through the backlash [rad/s]."""
         w = self._state_tuple(t_s)[1]
-        return self._ratio * w + self._gap_motion(t_s)[1]
+        return self._ratio * w + self._gap.motion(t_s)[1]
 
     def motor_sample(self, t_s: float) -> tuple[float, float, float]:
         """(q current [A], rotor speed [rad/s], rotor angle [rad]) at t_s from one state evaluation.
 
         The rotor's own encoder sits before the gearbox: its angle moves through the backlash at each reversal
-        while the output does not (`_gap_motion`)."""
+        while the output does not (`Gap.motion`)."""
         th, w, i, _ = self._state_tuple(t_s)
         n = self._ratio
-        phi, dw = self._gap_motion(t_s)
+        phi, dw = self._gap.motion(t_s)
         return i, n * w + dw, n * th + self.motor_angle_offset_rad + phi
 
     def current_q_a(self, t_s: float) -> float:
