@@ -102,17 +102,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         raise ValueError(f"--params: {unknown[0]!r} is not a fit parameter: one of {', '.join(PARAMS)}")
     wall0 = time.perf_counter()
     t0, t1 = float(exp.t[0]), float(exp.t[-1])
-    # the windows of a stall (`Experiment.stalled`) are left out of both parts, counted as the samples without a
-    # simulated current are
-    stalled = exp.stalled()
-    fit_part, held = exp.interleave(HELD_OUT_EVERY, drop=stalled)
-    all_fit, all_held = exp.interleave(HELD_OUT_EVERY)
-    left_out = {"fit": len(all_fit.t) - len(fit_part.t), "held_out": len(all_held.t) - len(held.t)}
-    if stalled.any() and (len(fit_part.t) < 100 or len(held.t) < 25):
-        raise ValueError(f"{exp.source}: the link stalled through too much of the run to fit: "
-                         f"{int(np.count_nonzero(stalled))} of {len(exp.t)} samples are in windows whose writes' "
-                         f"arrivals are unknown by more than {1e3 * STALL_BOUND_S:g} ms on average "
-                         "(docs/calibration.md, Stalled stretches)")
+    fit_part, held, left_out = fit_parts(exp)
     start = base_values(base)
     # the encoder's zero is where the foot was at power-up: set at its zero mark by eye, within a degree or so
     # (the offset starts at 0), unless the IMU's absolute pitch over the first 0.2 s says it was further off than
@@ -417,3 +407,20 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
     upper = float(grid[hi_i + 1]) if hi_i < len(grid) - 1 else float(grid[-1])
     half = max(best - lower, upper - best)
     return best, half, bool(closed and half <= _ABS_CI["backlash_deg"])
+
+
+def fit_parts(exp: Experiment) -> tuple[Experiment, Experiment, dict[str, int]]:
+    """(the fitting part, the held-out part, the samples left out of each as a stall's) of a recording; a ValueError
+    naming the recording when a stall leaves too little of it to fit (`pafp fit` checks it before the fit)."""
+    # the windows of a stall (`Experiment.stalled`) are left out of both parts, counted as the samples without a
+    # simulated current are
+    stalled = exp.stalled()
+    fit_part, held = exp.interleave(HELD_OUT_EVERY, drop=stalled)
+    all_fit, all_held = exp.interleave(HELD_OUT_EVERY)
+    left_out = {"fit": len(all_fit.t) - len(fit_part.t), "held_out": len(all_held.t) - len(held.t)}
+    if stalled.any() and (len(fit_part.t) < 100 or len(held.t) < 25):
+        raise ValueError(f"{exp.source}: the link stalled through too much of the run to fit: "
+                         f"{int(np.count_nonzero(stalled))} of {len(exp.t)} samples are in windows whose writes' "
+                         f"arrivals are unknown by more than {1e3 * STALL_BOUND_S:g} ms on average "
+                         "(docs/calibration.md, Stalled stretches)")
+    return fit_part, held, left_out

@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.calibration.fit_model import DEFAULT_FIT, PARAMS, load_base
     from host_tools.calibration.fit_report import figure as _g
     from host_tools.calibration.fit_report import validate, verdict, write_fit_outputs
-    from host_tools.calibration.plant_fit import fit_plant
+    from host_tools.calibration.plant_fit import fit_parts, fit_plant
     from host_tools.command_errors import input_error, output_error
     from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir
     from profiles import profile_path
@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
         base = load_base(args.base)
         base_text = (args.base or profile_path("plant_ak60_6.toml")).read_text(encoding="utf-8")
         exp = load_experiment(args.run_dir)
+        fit_parts(exp)  # a recording a stall spoiled throughout: refused before the fit
         other = load_experiment(args.validate) if args.validate is not None else None
         run_dir = RunDir(args.out or args.run_dir / "fit")
     except (OSError, ValueError) as e:  # a file that cannot be read, a bad value (OutDirError, RecordError too)
