@@ -8,6 +8,7 @@ relay behind the same stable path (a symlink, as udev's /dev/serial/by-id names 
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -84,6 +85,24 @@ def _telemetry(out: Path, s: dict) -> list:
     assert dec.stats.crc_errors == dec.stats.dropped_bytes == dec.stats.lost_records == 0
     assert len((out / "telemetry.csv").read_text().splitlines()) == len(records) + 1
     return records
+
+
+def _false_imu_frame(records: list, trip_s: float) -> bool:
+    """Whether the IMU pitch the supervisor tripped on is a one-frame spike: a value more than the disagreement
+    limit (6 deg) from both the frame before and the frame after it, which agree with each other within it. At the
+    foot's fastest (about 400 deg/s, 4 deg per 10 ms frame) a real pitch cannot leave and come back so, a frame that
+    passed the checksum by chance can (seen: 7.46 deg, 316.74 deg, 8.12 deg)."""
+    limit = math.radians(6.0)
+    pitches = [r.imu_pitch_rad for r in records if r.time_cycles / F_CPU_HZ <= trip_s + 0.05]
+    frames = [p for k, p in enumerate(pitches) if k == 0 or p != pitches[k - 1]]  # one value per IMU frame
+    after = [r.imu_pitch_rad for r in records if r.time_cycles / F_CPU_HZ <= trip_s + 0.002]
+    if len(frames) < 3 or not after:
+        return False
+    k = max(i for i, p in enumerate(frames) if p == after[-1])  # the frame the trip saw
+    if not 0 < k < len(frames) - 1:
+        return False
+    before, spike, nxt = frames[k - 1], frames[k], frames[k + 1]
+    return abs(spike - before) > limit and abs(spike - nxt) > limit and abs(nxt - before) <= limit
 
 
 def _unplugged_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -189,10 +208,13 @@ def test_garbage_drops_and_late_replies_are_counted_and_survived(tmp_path: Path)
     assert wm["crc_errors"] + wm["bad_end_bytes"] > 0, wm
     assert wi["junk_bytes"] >= relay_i["garbage_bytes"], (wi, relay_i)
     assert wi["frames"] > 200  # the IMU stream went on
-    _telemetry(tmp_path, s)
+    records = _telemetry(tmp_path, s)
     # ... and survived: no fault latched, still tracking, unless an age went over its limit (a stall of this
-    # shared host, or a false header holding replies back: docs/serial_mode.md); then the age is on record
-    assert_faults_justified(s)
+    # shared host, or a false header holding replies back: docs/serial_mode.md); then the age is on record;
+    # or a garbage-damaged IMU frame passed RVC's 8-bit checksum (1 in 256 damaged frames) and the supervisor
+    # caught its false pitch: a one-frame spike in the IMU's pitch at the trip
+    if s["faults"] != ["SENSOR_DISAGREEMENT"] or not _false_imu_frame(records, s["fault"]["at_s"]):
+        assert_faults_justified(s)
     assert code == (1 if s["faults"] else 0)
     if not s["faults"]:
         assert s["supervisor_state"] == "RUN"

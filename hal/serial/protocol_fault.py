@@ -7,10 +7,15 @@ reads from it, on a real bench as on the virtual one: the same injector classes 
     fault://PORT?fault=NAME&(at=SECONDS|phase=P)[&duration=SECONDS][&PARAM=VALUE...][&allow_dangerous=1]
 
 PORT is a device path or a pyserial URL without a query of its own (``/dev/ttyUSB0``, ``/dev/pts/7``,
-``socket://host:port``); ``at`` counts from the moment the port opens; ``phase`` (0 <= P < 1) is a gait
-phase instead: the fault starts the first time the firmware's gait clock reaches it, which serial mode
-tells the port through :meth:`Serial.follow_gait` (until then, and without it, the fault never acts);
-``duration`` defaults to the rest of the run.
+``socket://host:port``); ``at`` counts on the firmware's clock, from its start, which serial mode tells the port
+through :meth:`Serial.follow_clock` (before the firmware starts -- the ports' start-up checks -- the fault does
+not act); a port no firmware follows counts from the moment it opens. Counting from the open would let a slow
+start-up (a host stall between the open and the firmware's first period) move the window into the firmware's
+start-up, where a silent motor is rightly no fault yet (zero current, ``startup_grace_s``), so a fault meant
+for a running foot would act where it tests nothing. ``phase`` (0 <= P < 1) is a gait phase instead: the
+fault starts the first time the firmware's gait clock reaches it, which serial mode tells the port through
+:meth:`Serial.follow_gait` (until then, and without it, the fault never acts); ``duration`` defaults to the
+rest of the run. The record's times (when the fault first and last acted) are on the same clock.
 A fault marked dangerous (it feeds the controller a plausible but false angle, so the foot is driven
 by it: ``imu_frozen``, ``imu_bias_step``) is refused unless ``allow_dangerous=1`` is given: docs/hardware.md,
 "Faults on a real bench". Faults that act elsewhere than on a wire (encoder, CPU, supply, plant, controller)
@@ -106,7 +111,19 @@ class Serial(SerialBase):
         self._t0 = 0.0
         self._reported = False
         self._gait: tuple[Callable[[], float | None], float] | None = None
+        self._clock: Callable[[], float | None] | None = None
         super().__init__(*args, **kwargs)
+
+    def follow_clock(self, now_s: Callable[[], float | None]) -> None:
+        """Count the fault's window on the firmware's clock: now_s() is the firmware's time in seconds since its
+        start, None before it started (then the fault does not act). Without it, time counts from the open."""
+        self._clock = now_s
+
+    def now_s(self) -> float | None:
+        """The fault's time now: the firmware's clock when followed (None before its start), else since the open."""
+        if self._clock is not None:
+            return self._clock()
+        return time.monotonic() - self._t0
 
     def follow_gait(self, gait_time_s: Callable[[], float | None], stride_s: float) -> None:
         """Place a ``phase=P`` onset on the firmware's gait clock: gait_time_s() is the time since the gait
@@ -124,8 +141,8 @@ class Serial(SerialBase):
         while target < gait_t:
             target += stride
         self.fault.move_onset(now_s + target - gait_t)
-        log.warning("fault://: %s placed at gait phase %g: %.4f s after open", self.fault.NAME, self.fault.phase,
-                    self.fault.onset_s)
+        log.warning("fault://: %s placed at gait phase %g: at %.4f s (%s)", self.fault.NAME, self.fault.phase,
+                    self.fault.onset_s, self._time_base())
 
     def open(self) -> None:
         """Open the wrapped port with this port's settings and arm the fault from now."""
@@ -143,9 +160,13 @@ class Serial(SerialBase):
             self.inner.close()
             self.inner = None
             rec = self.fault.record
-            log.warning("fault://: %s: fired %d times, first at %s s after open (%s)", self.fault.describe(),
-                        rec.count, None if rec.first_s is None else round(rec.first_s, 4), rec.what or "nothing")
+            log.warning("fault://: %s: fired %d times, first at %s s (%s; %s)", self.fault.describe(), rec.count,
+                        None if rec.first_s is None else round(rec.first_s, 4), self._time_base(),
+                        rec.what or "nothing")
         self.is_open = False
+
+    def _time_base(self) -> str:
+        return "after open" if self._clock is None else "on the firmware's clock"
 
     def _reconfigure_port(self, force_update: bool = False) -> None:
         if self.inner is not None:
@@ -164,13 +185,16 @@ class Serial(SerialBase):
     def read(self, size: int = 1) -> bytes:
         """Read from the wrapped port; the fault acts on what came."""
         data = bytes(self._open_inner().read(size))
-        now_s = time.monotonic() - self._t0
+        now_s = self.now_s()
+        if now_s is None:  # the firmware it follows has not started: its start-up checks read the port as it is
+            return data
         if self.fault.phase is not None:
             self._place_onset(now_s)
         out = self.fault.filter(data, now_s)
         if out != data and not self._reported:
             self._reported = True
-            log.warning("fault://: %s acts from %.4f s after open", self.fault.NAME, self.fault.record.first_s)
+            log.warning("fault://: %s acts from %.4f s (%s)", self.fault.NAME, self.fault.record.first_s,
+                        self._time_base())
         return out
 
     def write(self, data: bytes) -> int | None:

@@ -54,8 +54,8 @@ from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
 from rtos.scheduler import SchedulerNow
 
-__all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "SerialRunConfig", "SerialRunResult",
-           "StartupError", "run_serial"]
+__all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "FirmwareClock", "SerialRunConfig",
+           "SerialRunResult", "StartupError", "run_serial"]
 
 log = logging.getLogger(__name__)
 
@@ -410,7 +410,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     now.bind(sched)
-    _follow_gait(ports, fw, lambda: sched.now / f_cpu, fw_cfg.stride_s)
+    fw_clock = FirmwareClock(lambda: sched.now, f_cpu)
+    _follow_firmware(ports, fw, fw_clock, fw_cfg.stride_s)
     fw.kernel_health = kernel_health(sched, fw)
     if recording is not None:
         fw.kernel_health = recording.health(fw.kernel_health)
@@ -429,6 +430,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
         wall0_ns = time.perf_counter_ns()
         try:
             if signals.name is None:  # a signal during the start-up: straight to the stop path
+                fw_clock.started = True
                 sched.run_until(int(cfg.duration_s * f_cpu), progress=progress)
         except BaseException as exc:  # a task raised (SystemExit too): the firmware's bug, reported after the stop path
             if isinstance(exc, KeyboardInterrupt) and (signals.name is not None or not signals.installed):
@@ -483,16 +485,40 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                            record_error=record_error)
 
 
-def _follow_gait(ports: _Ports, fw: Firmware, now_s: Callable[[], float], stride_s: float) -> None:
-    """Tell every ``fault://`` port (hal/serial/protocol_fault.py) the firmware's gait clock, so a fault given as
-    a gait phase starts at that phase (a host instrument: the firmware does not know the port is wrapped)."""
+class FirmwareClock:
+    """The firmware's time in seconds for host instruments (``fault://`` ports): None until its scheduler runs.
+
+    During a job it is the job's start, the very time the firmware stamps what it reads with.
+
+    >>> clock = FirmwareClock(lambda: 84_000_000, 168_000_000); clock() is None
+    True
+    >>> clock.started = True; clock()
+    0.5
+    """
+
+    def __init__(self, now_cycles: Callable[[], int], f_cpu_hz: int) -> None:
+        """Not started: None until ``started`` is set (right before the scheduler runs)."""
+        self.now_cycles = now_cycles
+        self.f_cpu_hz = f_cpu_hz
+        self.started = False
+
+    def __call__(self) -> float | None:
+        """Seconds since the firmware's start, or None before it."""
+        return self.now_cycles() / self.f_cpu_hz if self.started else None
+
+
+def _follow_firmware(ports: _Ports, fw: Firmware, now_s: FirmwareClock, stride_s: float) -> None:
+    """Tell every ``fault://`` port (hal/serial/protocol_fault.py) the firmware's clock, so ``at=S`` counts from the
+    firmware's start however long the start-up took, and its gait clock, so a fault given as a gait phase starts at
+    that phase (a host instrument: the firmware does not know the port is wrapped)."""
     def gait_time_s() -> float | None:
-        start = fw.gait_start_s
-        return None if start is None else now_s() - start
+        start, t = fw.gait_start_s, now_s()
+        return None if start is None or t is None else t - start
 
     for uart in (ports.untapped_motor or ports.motor, ports.imu, ports.ground):
         while uart is not None and not hasattr(uart, "serial"):  # a capture's tap or the recorder's wrapper
             uart = getattr(uart, "inner", None)
-        follow = getattr(getattr(uart, "serial", None), "follow_gait", None)
-        if follow is not None:
-            follow(gait_time_s, stride_s)
+        port = getattr(uart, "serial", None)
+        if hasattr(port, "follow_clock") and hasattr(port, "follow_gait"):
+            port.follow_clock(now_s)  # type: ignore[union-attr]
+            port.follow_gait(gait_time_s, stride_s)  # type: ignore[union-attr]
