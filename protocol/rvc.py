@@ -5,6 +5,10 @@ index (uint8), yaw/pitch/roll (int16 little-endian, 0.01 degree), x/y/z accelera
 milli-g), motion intent (byte 15), motion request (byte 16), reserved (byte 17, sent as 0) and a
 checksum = sum of bytes 2..17 mod 256. 115200 baud 8N1, 100 Hz, output only.
 
+A frame whose checksum holds but whose angles are outside the sensor's ranges (yaw and roll +-180 deg, pitch
++-90 deg: datasheet §1.3.5.2) is damaged data that matched the 8-bit checksum by chance (about 1 in 256 damaged
+frames): the decoder counts it in ``range_errors`` and slides on, as it does past a checksum error.
+
 SI -> wire truncates toward zero (like a C cast), after snapping a scaled value within 1e-6 LSB of an
 integer to that integer: float round-off of a decoded value must not push it one LSB down, so every
 decoded frame re-encodes to the same bytes (tests check all 65536 int16 values).
@@ -29,6 +33,8 @@ CENTIDEG_TO_RAD: Final[float] = math.pi / 18000.0  # one LSB of yaw/pitch/roll (
 BANNER_START: Final[int] = 0x25  # '%': every boot banner line of the BNO08x starts with it (datasheet §5.1)
 MAX_BANNER_LINE: Final[int] = 128  # longest banner line accepted before the '%' is treated as junk
 
+YAW_ROLL_MAX_CDEG: Final[int] = 18000  # the sensor's yaw and roll range, +-180 deg (datasheet §1.3.5.2)
+PITCH_MAX_CDEG: Final[int] = 9000  # its pitch range, +-90 deg
 _INT16_MIN: Final = -32768
 _INT16_MAX: Final = 32767
 _SNAP_LSB: Final = 1e-6  # a scaled value this close to an integer is that integer (float round-off, not data)
@@ -98,6 +104,12 @@ def _raw_at(buf: bytes | bytearray, start: int) -> RvcRaw:
     """Wire-unit values of the frame at buf[start:], its length, header and checksum already verified."""
     # the namedtuple's own __new__ is interpreted Python; tuple.__new__ builds the same tuple directly
     return _new_tuple(RvcRaw, _BODY.unpack_from(buf, start + 2)[:9])  # without the reserved byte
+
+
+def _in_range(raw: RvcRaw) -> bool:
+    """Whether a frame's angles are within the sensor's ranges (yaw and roll +-180 deg, pitch +-90 deg)."""
+    return (-YAW_ROLL_MAX_CDEG <= raw.yaw_cdeg <= YAW_ROLL_MAX_CDEG and -PITCH_MAX_CDEG <= raw.pitch_cdeg
+            <= PITCH_MAX_CDEG and -YAW_ROLL_MAX_CDEG <= raw.roll_cdeg <= YAW_ROLL_MAX_CDEG)
 
 
 def _to_lsb(name: str, value_si: float, lsb_si: float, unit: str) -> int:
@@ -199,6 +211,7 @@ class RvcStats:
     bytes_in: int = 0
     dropped_bytes: int = 0
     checksum_errors: int = 0
+    range_errors: int = 0  # checksum right, angles outside the sensor's ranges: damage the checksum missed
     banner_bytes: int = 0
     lost_frames: int = 0
 
@@ -228,10 +241,14 @@ class RvcDecoder:
                         break  # maybe the start of a frame: wait for the rest
                 elif buf[i + 1] == 0xAA:
                     if rvc_checksum(buf[i + 2 : i + 18]) == buf[i + 18]:
-                        frames.append(self._accept(_raw_at(buf, i)))  # header and checksum just checked
-                        i += RVC_FRAME_LEN
-                        continue
-                    self.stats.checksum_errors += 1
+                        raw = _raw_at(buf, i)  # header and checksum just checked
+                        if _in_range(raw):
+                            frames.append(self._accept(raw))
+                            i += RVC_FRAME_LEN
+                            continue
+                        self.stats.range_errors += 1
+                    else:
+                        self.stats.checksum_errors += 1
                 self._drop(1)  # slide the window by one byte: 0xAA may also be a data byte
                 i += 1
             elif byte == BANNER_START or (self._after_banner and byte in _LINE_END):

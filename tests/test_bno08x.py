@@ -201,3 +201,14 @@ def test_output_only_and_config_checks() -> None:
     with pytest.raises(ValueError, match=r"rate_hz = True is outside"):  # a bool is no rate, compiled or not
         Bno08xConfig(rate_hz=True)  # type: ignore[arg-type]
     assert isinstance(RvcFrame.from_bytes(rig.read_until(0.06)[-19:]), RvcFrame)
+
+
+def test_yaw_and_roll_at_half_a_turn_stay_within_the_sensors_range() -> None:
+    """Mounted at yaw and roll 180 deg, the noise crosses +-180: the sensor reports them wrapped (+-180 deg,
+    datasheet §1.3.5.2), and the firmware's decoder, which skips frames outside those ranges, keeps every frame."""
+    rig = Rig(config=Bno08xConfig(yaw_rad=math.pi, roll_rad=-math.pi), seed=3)
+    decoder = RvcDecoder()
+    frames = decoder.feed(rig.read_until(1.002))
+    assert len(frames) == 100 and decoder.stats.range_errors == 0
+    yaws = [f.yaw_rad for f in frames]
+    assert min(yaws) < -3.0 and max(yaws) > 3.0  # both sides of the wrap: the test can fail

@@ -44,7 +44,8 @@ def _errors(r: SerialRunResult) -> dict:
                   "missing_replies": fw.motor.stats.missing_replies, "stale_replies": fw.motor.stats.stale_replies,
                   "uart": asdict(fw.motor.uart.errors) if hasattr(fw.motor, "uart") and not fw.motor.link_lost
                   else None},
-        "imu": {"frames": fw.imu.frames, "checksum_errors": i.checksum_errors, "junk_bytes": i.dropped_bytes,
+        "imu": {"frames": fw.imu.frames, "checksum_errors": i.checksum_errors,
+                "out_of_range_frames": i.range_errors, "junk_bytes": i.dropped_bytes,
                 "lost_frames": i.lost_frames},
     }
 

@@ -36,6 +36,7 @@ __all__ = ["BANNER_LINES", "Bno08x", "Bno08xConfig"]
 
 STANDARD_GRAVITY: Final = 9.80665
 _FULL_SCALE_MPS2: Final = 8 * STANDARD_GRAVITY  # BNO08x accelerometer range +-8 g
+_TURN: Final = 2.0 * math.pi  # one turn: yaw and roll wrap into +-pi
 
 
 class Bno08x(EventDevice):
@@ -159,11 +160,11 @@ class Bno08x(EventDevice):
         ax = _clip(fx * c + fz * s + bx + gauss(0.0, sa))
         ay = _clip(by + gauss(0.0, sa))
         az = _clip(-fx * s + fz * c + bz + gauss(0.0, sa))
-        yaw = cfg.yaw_rad + gauss(0.0, sp)
+        yaw = math.remainder(cfg.yaw_rad + gauss(0.0, sp), _TURN)  # the sensor reports yaw and roll in +-180 deg
         if self._drift_sigma > 0.0:
             self.pitch_drift_rad = self.pitch_drift_rad * self._drift_a + self._drift_b * gauss(0.0, 1.0)
         pitch = self.lagged_pitch_rad + self.pitch_bias_rad + self.pitch_drift_rad + gauss(0.0, sp)
-        roll = cfg.roll_rad + gauss(0.0, sp)
+        roll = math.remainder(cfg.roll_rad + gauss(0.0, sp), _TURN)
         frame = RvcFrame(self.index, yaw, pitch, roll, ax, ay, az).encode()
         self.index = (self.index + 1) & 0xFF
         if any(a <= t < b for a, b in self._silences):
