@@ -233,7 +233,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             t_prev, u_prev = tj, th
             imu[j] = filt + bias
             mask[j] = tj - t_first >= SKIP_S
-        if free_v0 and v_start != 0.0:
+        if free_v0 and abs(v_start) >= REST_RAD_S:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params, lag)
 
     heard = np.zeros(n, dtype=bool) if heard_out is None else heard_out
@@ -244,7 +244,21 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
             t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
         v0 = float(vel[k])
-        run_window(k, end, t0, v0 if abs(v0) >= REST_RAD_S else _slow_start(exp, k, v0))
+        if abs(v0) >= REST_RAD_S:
+            run_window(k, end, t0, v0)
+        else:
+            v_start = _slow_start(exp, k, v0)
+            if free_v0 and v_start != 0.0:  # sliding: its start velocity's error projected out along the
+                # simulation's own response to it (a foot that sticks soon after its start responds little; the free
+                # motion's analytic response gave a hold-only recording's inertia a confident wrong number)
+                w = slice(k, end)
+                run_window(k, end, t0, v_start + math.copysign(SLOW_STEP_RAD_S, v_start))
+                moved_angle, moved_imu = angle[w].copy(), imu[w].copy()
+                run_window(k, end, t0, v_start)
+                _project_along(exp, k, end, angle, imu, mask, (moved_angle - angle[w]) / SLOW_STEP_RAD_S,
+                               (moved_imu - imu[w]) / SLOW_STEP_RAD_S)
+            else:
+                run_window(k, end, t0, v_start)
         frames = _frame_times(exp, k, end)
         imu[k:end] = np.interp(frames, exp.t[k:end], imu[k:end])
         if FREE_IMU_OFFSET:
@@ -253,6 +267,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     return angle, current, imu, mask
 
 
+SLOW_STEP_RAD_S = 0.03  # a slow start's response to its velocity: the window simulated this much faster
 SLIDE_LOOK_S = 0.03  # a start below REST_RAD_S slides the way the encoder moves within this, if it does
 SLIDE_CREEP_RAD_S = 1e-3  # the sliding start's speed when the encoder's velocity is the other way or none
 
@@ -302,6 +317,19 @@ def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angl
     lag = max(1e-6, lag_s)
     lagged = tm * (1.0 - tm / (tm - lag) * np.exp(-t / tm)) if abs(tm - lag) > 1e-9 * tm else sens
     imu[k:end] += dv * lagged
+
+
+def _project_along(exp: Experiment, k: int, end: int, angle: np.ndarray, imu: np.ndarray, mask: np.ndarray,
+                   sens: np.ndarray, sens_imu: np.ndarray) -> None:
+    """Correct window [k, end)'s simulation (in place) by the start-velocity error dv that best explains its encoder
+    residual, given the angle's and the IMU's responses per unit of start velocity."""
+    used = mask[k:end]
+    ss = float(np.dot(sens[used], sens[used]))
+    if ss <= 0.0:
+        return
+    dv = -float(np.dot((angle[k:end] - exp.angle[k:end])[used], sens[used])) / ss
+    angle[k:end] += dv * sens
+    imu[k:end] += dv * sens_imu
 
 
 def _project_imu_start(exp: Experiment, k: int, end: int, imu: np.ndarray, mask: np.ndarray,
