@@ -158,3 +158,22 @@ def test_a_windows_imu_offset_and_lag_transient_leave_no_imu_error():
     other = first + 0.004 * np.exp(-(frames - exp.t[0]) / (4 * lag))
     _, _, third, mask = simulate(base, v, replace(exp, imu=other), window_s=1.0, free_v0=False)
     assert np.max(np.abs((third - other)[mask])) > 1e-4
+
+
+def test_the_backlash_valley_is_found_from_its_wall(monkeypatch):
+    """The backlash's cost valley is a few hundredths of a degree wide, in steps: from a value on its wall (as the
+    least squares' 0.1 deg secant leaves it) the coarse-to-fine search ends at its floor."""
+    import host_tools.calibration.plant_fit as pf
+
+    floor = 0.437
+
+    def stepped(base, v, part, scales):  # the cost moves in 0.005 deg steps, doubling 0.03 deg from the floor
+        b = 0.005 * round(v["backlash_deg"] / 0.005)
+        return np.array([1.0 + ((b - floor) / 0.03) ** 2, 1.0])
+
+    monkeypatch.setattr(pf, "residuals", stepped)
+    base = load_plant_params()
+    for wall in (0.55, 0.33, 0.45):
+        best = pf._backlash_valley(base, {**base_values(base), "backlash_deg": wall}, None, SIGMA)
+        assert abs(best - floor) <= 0.006, (wall, best)
+    assert pf._backlash_valley(base, {**base_values(base), "backlash_deg": 0.9}, None, SIGMA) > 0.5  # a local search
