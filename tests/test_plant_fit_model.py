@@ -4,6 +4,7 @@ current has no simulated counterpart, and the noise scales the three signals are
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -119,3 +120,60 @@ def test_the_rotor_side_acts_only_through_the_backlash_crossing():
         b = residuals(base, {**w, "rotor_accel_scale": 1.1}, exp)
         assert bool(np.max(np.abs(a - b)) > 1e-3) is moves, backlash
 
+
+
+def test_a_window_at_rest_starts_sliding_only_where_its_encoder_moves():
+    """Below REST_RAD_S the encoder cannot tell rest from the turn of a slide: a window starts sliding the way the
+    encoder moves within SLIDE_LOOK_S (at its velocity when that has the same sign, else barely), stuck otherwise."""
+    from host_tools.calibration.fit_model import SLIDE_CREEP_RAD_S, SLIDE_LOOK_S, _slow_start
+
+    exp = _experiment()
+    t = exp.t
+    down = np.where(t < 0.006, 0.0, -math.radians(0.09) * np.floor((t - 0.006) / 0.004 + 1))
+    late = np.where(t < SLIDE_LOOK_S + 0.01, 0.0, math.radians(0.09))
+    at = {"down": replace(exp, angle=down), "late": replace(exp, angle=late)}
+    assert _slow_start(at["down"], 0, 0.0) == -SLIDE_CREEP_RAD_S
+    assert _slow_start(at["down"], 0, 0.01) == -SLIDE_CREEP_RAD_S  # the velocity the other way: barely
+    assert _slow_start(at["down"], 0, -0.02) == -0.02
+    assert _slow_start(at["late"], 0, 0.0) == 0.0  # no motion within the look: stuck
+    assert _slow_start(exp, 0, 0.02) == 0.0
+
+
+def test_a_windows_imu_offset_and_lag_transient_leave_no_imu_error():
+    """The IMU's offset and its lag's start state are each window's own: a recorded pitch that differs from the
+    simulated one by a constant and a term decaying as e^(-t/lag) from the window's start has no IMU error."""
+    from host_tools.calibration.fit_model import IMU_FRAME_AGE_S
+
+    base = load_plant_params()
+    lag = 0.0195
+    v = {**base_values(base), "imu_lag_s": lag}
+    exp = _experiment(imu=np.arange(500) * 1e-6)  # a frame at every sample
+    _, _, first, mask = simulate(base, v, exp, window_s=1.0, free_v0=False)
+    frames = np.maximum(exp.t - IMU_FRAME_AGE_S, exp.t[0])
+    shifted = first + 0.01 + 0.004 * np.exp(-(frames - exp.t[0]) / lag)
+    assert np.all(np.diff(shifted[2:]) != 0.0)  # still a frame at every sample (the first three's time is the start)
+    _, _, again, mask = simulate(base, v, replace(exp, imu=shifted), window_s=1.0, free_v0=False)
+    assert np.max(np.abs((again - shifted)[mask])) < 1e-9
+    # a transient of another time constant is not taken out
+    other = first + 0.004 * np.exp(-(frames - exp.t[0]) / (4 * lag))
+    _, _, third, mask = simulate(base, v, replace(exp, imu=other), window_s=1.0, free_v0=False)
+    assert np.max(np.abs((third - other)[mask])) > 1e-4
+
+
+def test_the_backlash_valley_is_found_from_its_wall(monkeypatch):
+    """The backlash's cost valley is a few hundredths of a degree wide, in steps: from a value on its wall (as the
+    least squares' 0.1 deg secant leaves it) the coarse-to-fine search ends at its floor."""
+    import host_tools.calibration.plant_fit as pf
+
+    floor = 0.437
+
+    def stepped(base, v, part, scales):  # the cost moves in 0.005 deg steps, doubling 0.03 deg from the floor
+        b = 0.005 * round(v["backlash_deg"] / 0.005)
+        return np.array([1.0 + ((b - floor) / 0.03) ** 2, 1.0])
+
+    monkeypatch.setattr(pf, "residuals", stepped)
+    base = load_plant_params()
+    for wall in (0.55, 0.33, 0.45):
+        best = pf._backlash_valley(base, {**base_values(base), "backlash_deg": wall}, None, SIGMA)
+        assert abs(best - floor) <= 0.006, (wall, best)
+    assert pf._backlash_valley(base, {**base_values(base), "backlash_deg": 0.9}, None, SIGMA) > 0.5  # a local search

@@ -5,7 +5,10 @@ driven by the recorded commands. Its simulation error is taken over windows of `
 starts from the measured angle and velocity (the suspended foot under gravity is not self-regulating, so
 one 30 s open-loop simulation drifts with any error in the gravity moment; windows keep the error about
 the dynamics), and the residuals are the encoder angle, the measured current and the IMU pitch (through
-a first-order lag and a bias), each divided by its noise scale (`residuals`).
+a first-order lag and a bias), each divided by its noise scale (`residuals`). What a window does not know of its
+start is a nuisance, taken from its own data: the initial velocity (`_project_initial_velocity`), whether a foot
+the encoder shows at rest is stuck or at the turn of a slide (`_slow_start`), the IMU's offset and its lag's start
+state (`_project_imu_start`).
 """
 
 from __future__ import annotations
@@ -121,7 +124,9 @@ def rotor_side_sd(base: PlantParams, path: Path | None = None) -> float:
 
 
 FREE_V0 = True  # each moving window's initial velocity is projected out (`_project_initial_velocity`)
-FREE_IMU_OFFSET = True  # each window's IMU offset is projected out (the bias drifts over the experiment)
+# each window's IMU offset (its bias drifts over the experiment) and the transient of its lag's unknown start state
+# are projected out (`_project_imu_start`)
+FREE_IMU_OFFSET = True
 
 
 def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: float = WINDOW_S,
@@ -159,22 +164,18 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     tau = params.current_time_constant_s
     peak = params.peak_current_a
     ratio = params.total_ratio
-    k = 0
-    while k < n:
-        t0 = t_first = float(exp.t[k])
-        end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
-        if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
-            t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
+
+    def run_window(k: int, end: int, t0: float, v_start: float) -> None:
+        """Simulate window [k, end) from the measured angle at t0, at v_start (0: stuck), into the arrays."""
+        t_first = float(exp.t[k])
         start = exp.angle[k] + offset
         c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
         if exp.angle_from_reply and c >= 0:  # a reply's angle has the rotor's place in the backlash in it: the
             # output is half the gap (through the belt) behind it on the side the command acting pushes
             start -= 0.5 * backlash / params.belt_ratio * float(np.sign(i_cmd[c]))
         start_angle = min(hi, max(lo, start))
-        v0 = float(vel[k])
-        moving = abs(v0) >= REST_RAD_S
         i0 = float(exp.current[k])
-        plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v0 if moving else 0.0,
+        plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v_start,
                       start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
         if c >= 0:
             plant.set_current_command(float(i_cmd[c]), t0)
@@ -187,9 +188,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         t_mark = float(t_req[r_prev]) if r_prev >= 0 else t0  # the driver's averages reset here
         acc = i0 * (t0 - t_mark)  # before t0 the current is taken as the measured one
         t_last, i_last = t0, i0
-        # the IMU's lag state: following the start's motion (its offset at the start is the window's own, below)
-        filt = start_angle - lag * (v0 if moving else 0.0)
-        t_prev = t0
+        # the IMU's lag state: following the start's motion (its offset and its transient are the window's own:
+        # projected out below)
+        filt = start_angle - lag * v_start
+        t_prev, u_prev = t0, start_angle
         for j in range(k, end):
             tj = float(exp.t[j])
             while True:  # the events up to tj, in time order: commands arriving, requests arriving
@@ -220,29 +222,76 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             # output plus the rotor's place in the backlash, docs/plant.md)
             rotor = positions.get(int(angle_of[j])) if exp.angle_from_reply else None
             angle[j] = (th if rotor is None else rotor / ratio) - offset
-            heard = means.get(q)
+            got = means.get(q)
             # None: its request reached the motor before this window, or has not yet in the simulation
-            current[j] = exp.current[j] if heard is None else heard
-            if heard_out is not None:
-                heard_out[j] = heard is not None
-            filt += (th - filt) * (1.0 - math.exp(-(tj - t_prev) / lag))
-            t_prev = tj
+            current[j] = exp.current[j] if got is None else got
+            heard[j] = got is not None
+            if tj > t_prev:  # the lag integrated exactly for an input linear between samples (as the sensor's model)
+                h = tj - t_prev
+                slope = (th - u_prev) / h
+                filt = th - slope * lag + (filt - u_prev + slope * lag) * math.exp(-h / lag)
+            t_prev, u_prev = tj, th
             imu[j] = filt + bias
-            if tj - t_first < SKIP_S:
-                mask[j] = False
-        if free_v0 and moving:
-            _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params)
-        imu[k:end] = imu[k:end][_frame_sources(exp, k, end)]
+            mask[j] = tj - t_first >= SKIP_S
+        if free_v0 and abs(v_start) >= REST_RAD_S:
+            _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params, lag)
+
+    heard = np.zeros(n, dtype=bool) if heard_out is None else heard_out
+    k = 0
+    while k < n:
+        t0 = float(exp.t[k])
+        end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
+        if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
+            t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
+        v0 = float(vel[k])
+        if abs(v0) >= REST_RAD_S:
+            run_window(k, end, t0, v0)
+        else:
+            v_start = _slow_start(exp, k, v0)
+            if free_v0 and v_start != 0.0:  # sliding: its start velocity's error projected out along the
+                # simulation's own response to it (a foot that sticks soon after its start responds little; the free
+                # motion's analytic response gave a hold-only recording's inertia a confident wrong number)
+                w = slice(k, end)
+                run_window(k, end, t0, v_start + math.copysign(SLOW_STEP_RAD_S, v_start))
+                moved_angle, moved_imu = angle[w].copy(), imu[w].copy()
+                run_window(k, end, t0, v_start)
+                _project_along(exp, k, end, angle, imu, mask, (moved_angle - angle[w]) / SLOW_STEP_RAD_S,
+                               (moved_imu - imu[w]) / SLOW_STEP_RAD_S)
+            else:
+                run_window(k, end, t0, v_start)
+        frames = _frame_times(exp, k, end)
+        imu[k:end] = np.interp(frames, exp.t[k:end], imu[k:end])
         if FREE_IMU_OFFSET:
-            used = mask[k:end]
-            if used.any():  # the IMU's bias drifts (Gauss-Markov, tau ~10 s): each window's own offset
-                imu[k:end] += float(np.mean((exp.imu[k:end] - imu[k:end])[used]))
+            _project_imu_start(exp, k, end, imu, mask, np.exp(-(frames - t0) / lag))
         k = end
     return angle, current, imu, mask
 
 
+SLOW_STEP_RAD_S = 0.03  # a slow start's response to its velocity: the window simulated this much faster
+SLIDE_LOOK_S = 0.03  # a start below REST_RAD_S slides the way the encoder moves within this, if it does
+SLIDE_CREEP_RAD_S = 1e-3  # the sliding start's speed when the encoder's velocity is the other way or none
+
+
+def _slow_start(exp: Experiment, k: int, v0: float) -> float:
+    """The start velocity (rad/s; 0: stuck) of a window whose encoder velocity v0 is below REST_RAD_S.
+
+    The encoder cannot tell a foot that rests from one at the turn of a slow slide. When it moves within
+    SLIDE_LOOK_S the window starts sliding that way (at v0 when v0 has that sign, else barely: a foot that is in
+    fact held by static friction then sticks within a fraction of a millisecond, its start as a stuck one);
+    otherwise it starts stuck. Started stuck, a foot that was sliding at the turn (a reversal in the PRBS) stays
+    held until the torque passes the static friction, many times the Coulomb friction: one such window had 16
+    times the encoder error of the others and carried a third of the encoder's cost (docs/calibration.md).
+    The choice is the data's alone, so it does not switch with the parameters (no step in the Jacobian)."""
+    look = exp.angle[k:int(np.searchsorted(exp.t, exp.t[k] + SLIDE_LOOK_S, side="right"))] - exp.angle[k]
+    moved = np.flatnonzero(look)
+    if not len(moved):
+        return 0.0
+    way = math.copysign(1.0, float(look[moved[0]]))
+    return v0 if v0 * way > 0.0 else way * SLIDE_CREEP_RAD_S
+
+
 def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angle: np.ndarray, imu: np.ndarray,
-                              mask: np.ndarray, params: PlantParams) -> None:
+                              mask: np.ndarray, params: PlantParams, lag_s: float = 0.0) -> None:
     """Correct window [k, end)'s simulation for the least-squares initial velocity (in place).
 
     The window starts at the encoder's velocity estimate, which a smoothing derivative attenuates at the
@@ -252,7 +301,7 @@ def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angl
     initial velocity is instead a nuisance parameter, eliminated by variable projection: a velocity error dv
     moves the angle by dv * tm * (1 - exp(-t / tm)) (tm = J / b, the free motion's decay), the projection takes
     the dv that best explains the window's encoder residual, as MATLAB's ``compare`` estimates initial
-    conditions. The IMU, which sees the same angle through a lag of a few tens of ms, gets the same shift.
+    conditions. The IMU, which sees the same angle through a lag of a few tens of ms, gets the shift lagged.
     """
     tm = params.output_inertia_kg_m2 / max(params.foot_damping_nm_s_per_rad, 1e-9)
     t = exp.t[k:end] - t0
@@ -263,7 +312,44 @@ def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angl
         return
     dv = -float(np.dot((angle[k:end] - exp.angle[k:end])[used], sens[used])) / ss
     angle[k:end] += dv * sens
-    imu[k:end] += dv * sens
+    # the IMU sees the shift through its lag: L[tm (1 - e^(-t/tm))] = tm (1 - tm/(tm - lag) e^(-t/tm)) plus a multiple
+    # of e^(-t/lag), which `_project_imu_start` takes out with the lag's start state
+    lag = max(1e-6, lag_s)
+    lagged = tm * (1.0 - tm / (tm - lag) * np.exp(-t / tm)) if abs(tm - lag) > 1e-9 * tm else sens
+    imu[k:end] += dv * lagged
+
+
+def _project_along(exp: Experiment, k: int, end: int, angle: np.ndarray, imu: np.ndarray, mask: np.ndarray,
+                   sens: np.ndarray, sens_imu: np.ndarray) -> None:
+    """Correct window [k, end)'s simulation (in place) by the start-velocity error dv that best explains its encoder
+    residual, given the angle's and the IMU's responses per unit of start velocity."""
+    used = mask[k:end]
+    ss = float(np.dot(sens[used], sens[used]))
+    if ss <= 0.0:
+        return
+    dv = -float(np.dot((angle[k:end] - exp.angle[k:end])[used], sens[used])) / ss
+    angle[k:end] += dv * sens
+    imu[k:end] += dv * sens_imu
+
+
+def _project_imu_start(exp: Experiment, k: int, end: int, imu: np.ndarray, mask: np.ndarray,
+                       decay: np.ndarray) -> None:
+    """Add to window [k, end)'s simulated IMU pitch (in place) the offset and the lag's start transient (`decay`:
+    e^(-t/lag) at each sample's frame) that best explain the recorded pitch on the used samples.
+
+    The IMU's bias drifts (Gauss-Markov, tau ~10 s): each window has its own offset. Its lag's state at the window's
+    start is the pitch's whole past, which the window's start (an angle and a velocity) does not give: taken as the
+    start's ramp, its error decays as e^(-t/lag) over the first tens of ms (SKIP_S keeps 10) and, weighed as data,
+    pulled the mechanical parameters (on the ideal bench, `--ideal all`, `--plant-seed 7`'s default experiment: the
+    Coulomb friction +5.4 %, 1.6 half-widths off, with it; docs/calibration.md)."""
+    used = mask[k:end]
+    if np.count_nonzero(used) < 3:
+        if used.any():
+            imu[k:end] += float(np.mean((exp.imu[k:end] - imu[k:end])[used]))
+        return
+    basis = np.column_stack([np.ones(end - k), decay])
+    coef = np.linalg.lstsq(basis[used], (exp.imu[k:end] - imu[k:end])[used], rcond=None)[0]
+    imu[k:end] += basis @ coef
 
 
 # a telemetry sample's IMU pitch is the last UART-RVC frame the firmware read: the lagged pitch when the frame left
@@ -272,18 +358,18 @@ def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angl
 IMU_FRAME_AGE_S = 2.7e-3
 
 
-def _frame_sources(exp: Experiment, k: int, end: int) -> np.ndarray:
-    """Per sample of window [k, end): the window sample whose lagged pitch its IMU frame carries (its frame's
-    first sample, IMU_FRAME_AGE_S earlier; a frame is where the recorded pitch changes, as the firmware read it).
+def _frame_times(exp: Experiment, k: int, end: int) -> np.ndarray:
+    """Per sample of window [k, end): when the IMU frame it carries left the sensor (its frame's first sample less
+    IMU_FRAME_AGE_S; a frame is where the recorded pitch changes, as the firmware read it; not before the window).
 
-    Modelled as a continuous lag sampled at each sample, the pitch's 10 ms steps were a mismatch of their own
-    (with the IMU's noise and drift off, its fit percentage 98 % for 99 % with the frames)."""
+    The simulated pitch is interpolated there, the lag integrated exactly for an input linear between samples as
+    the sensor's model does (hal/virtual/devices/bno08x.py): taken at the sample at or after that time and lagged as
+    a step at each sample, it led the sensor by about a millisecond, which the IMU lag made up for."""
     t = exp.t[k:end]
     y = exp.imu[k:end]
     new = np.r_[True, y[1:] != y[:-1]]
     first = np.maximum.accumulate(np.where(new, np.arange(len(t)), 0))
-    src = np.searchsorted(t, t[first] - IMU_FRAME_AGE_S, side="left")
-    return np.minimum(src, first)
+    return np.maximum(t[first] - IMU_FRAME_AGE_S, t[0])
 
 
 def window_ids(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
