@@ -11,9 +11,10 @@ from hal.virtual.plant import load_plant_params
 __all__ = ["truth_of"]
 
 
-def truth_of(plant: list[str]) -> dict[str, float]:
+def truth_of(plant: list[str], seed: int = 0) -> dict[str, float]:
     """The bench's true values of the fit parameters for `pafp run`'s plant options (["--plant", FILE] or
-    ["--plant-seed", N]).
+    ["--plant-seed", N]) and its `--seed` (the noise seed: it draws the foot's angle at power-up, the encoder's
+    offset).
 
     The torques (inertia, damping, friction, gravity) are in the base profile's torque per ampere, as the fit
     reports them: the current is the bench's only torque measure, so the fit sees each torque over the true
@@ -24,7 +25,7 @@ def truth_of(plant: list[str]) -> dict[str, float]:
     """
     from host_tools.runner import RunConfig
 
-    cfg = RunConfig(plant_file=Path(plant[1]) if plant[0] == "--plant" else None,
+    cfg = RunConfig(seed=seed, plant_file=Path(plant[1]) if plant[0] == "--plant" else None,
                     plant_seed=int(plant[1]) if plant[0] == "--plant-seed" else None)
     options, _ = cfg.bench_setup()
     p = options["plant_params"]
