@@ -306,17 +306,11 @@ def _project_initial_velocity(exp: Experiment, k: int, end: int, t0: float, angl
     tm = params.output_inertia_kg_m2 / max(params.foot_damping_nm_s_per_rad, 1e-9)
     t = exp.t[k:end] - t0
     sens = tm * -np.expm1(-t / tm)
-    used = mask[k:end]
-    ss = float(np.dot(sens[used], sens[used]))
-    if ss <= 0.0:
-        return
-    dv = -float(np.dot((angle[k:end] - exp.angle[k:end])[used], sens[used])) / ss
-    angle[k:end] += dv * sens
     # the IMU sees the shift through its lag: L[tm (1 - e^(-t/tm))] = tm (1 - tm/(tm - lag) e^(-t/tm)) plus a multiple
     # of e^(-t/lag), which `_project_imu_start` takes out with the lag's start state
     lag = max(1e-6, lag_s)
     lagged = tm * (1.0 - tm / (tm - lag) * np.exp(-t / tm)) if abs(tm - lag) > 1e-9 * tm else sens
-    imu[k:end] += dv * lagged
+    _project_along(exp, k, end, angle, imu, mask, sens, lagged)
 
 
 def _project_along(exp: Experiment, k: int, end: int, angle: np.ndarray, imu: np.ndarray, mask: np.ndarray,
