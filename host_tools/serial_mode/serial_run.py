@@ -42,6 +42,7 @@ from hal.virtual.null import NullDigitalIn, NullDigitalOut, NullUart
 from hal.virtual.timer import VirtualEncoderTimer
 from host_tools.recording import RunRecording
 from host_tools.runner import PROBE_HZ, WATCHDOG_TIMEOUT_S, Probe, board_profile, kernel_health, reference_record
+from host_tools.serial_mode.fault_clock import FirmwareClock, follow_firmware
 from host_tools.serial_mode.host_watchdog import HostWatchdog, WatchdogRecord, arm_watchdog
 from host_tools.serial_mode.jitter import TaskTimings, instrument
 from host_tools.serial_mode.link_watch import LinkEvent, LinkWatch
@@ -54,7 +55,7 @@ from host_tools.wire_capture import WireCapture
 from rtos import Scheduler, Task, Trace, WallClock, Watchdog
 from rtos.scheduler import SchedulerNow
 
-__all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "FirmwareClock", "SerialRunConfig",
+__all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "SerialRunConfig",
            "SerialRunResult", "StartupError", "run_serial"]
 
 log = logging.getLogger(__name__)
@@ -411,7 +412,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                       seed=cfg.seed)
     now.bind(sched)
     fw_clock = FirmwareClock(lambda: sched.now, f_cpu)
-    _follow_firmware(ports, fw, fw_clock, fw_cfg.stride_s)
+    follow_firmware((ports.untapped_motor or ports.motor, ports.imu, ports.ground), fw, fw_clock, fw_cfg.stride_s)
     fw.kernel_health = kernel_health(sched, fw)
     if recording is not None:
         fw.kernel_health = recording.health(fw.kernel_health)
@@ -483,42 +484,3 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                            started_unix, "plant" if plant is not None else "fused estimate", stop, warnings,
                            section.granted, link.event, watch, capture.inner_error, seen, time_in_run_s=time_in_run,
                            record_error=record_error)
-
-
-class FirmwareClock:
-    """The firmware's time in seconds for host instruments (``fault://`` ports): None until its scheduler runs.
-
-    During a job it is the job's start, the very time the firmware stamps what it reads with.
-
-    >>> clock = FirmwareClock(lambda: 84_000_000, 168_000_000); clock() is None
-    True
-    >>> clock.started = True; clock()
-    0.5
-    """
-
-    def __init__(self, now_cycles: Callable[[], int], f_cpu_hz: int) -> None:
-        """Not started: None until ``started`` is set (right before the scheduler runs)."""
-        self.now_cycles = now_cycles
-        self.f_cpu_hz = f_cpu_hz
-        self.started = False
-
-    def __call__(self) -> float | None:
-        """Seconds since the firmware's start, or None before it."""
-        return self.now_cycles() / self.f_cpu_hz if self.started else None
-
-
-def _follow_firmware(ports: _Ports, fw: Firmware, now_s: FirmwareClock, stride_s: float) -> None:
-    """Tell every ``fault://`` port (hal/serial/protocol_fault.py) the firmware's clock, so ``at=S`` counts from the
-    firmware's start however long the start-up took, and its gait clock, so a fault given as a gait phase starts at
-    that phase (a host instrument: the firmware does not know the port is wrapped)."""
-    def gait_time_s() -> float | None:
-        start, t = fw.gait_start_s, now_s()
-        return None if start is None or t is None else t - start
-
-    for uart in (ports.untapped_motor or ports.motor, ports.imu, ports.ground):
-        while uart is not None and not hasattr(uart, "serial"):  # a capture's tap or the recorder's wrapper
-            uart = getattr(uart, "inner", None)
-        port = getattr(uart, "serial", None)
-        if hasattr(port, "follow_clock") and hasattr(port, "follow_gait"):
-            port.follow_clock(now_s)  # type: ignore[union-attr]
-            port.follow_gait(gait_time_s, stride_s)  # type: ignore[union-attr]
