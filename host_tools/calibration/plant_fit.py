@@ -393,6 +393,12 @@ VALLEY_STEPS_DEG = (0.04, 0.01)  # `_backlash_valley`'s grids: +-VALLEY_POINTS s
 VALLEY_POINTS = 4
 
 
+def _backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+                   backlash_deg: float) -> float:
+    """The least-squares cost with the backlash at `backlash_deg` and the other parameters held at v."""
+    return 0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": backlash_deg}, part, scales) ** 2))
+
+
 def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float]) -> float:
     """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid).
 
@@ -402,7 +408,7 @@ def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, s
     (BACKLASH_STEP_DEG) cannot follow it and stops on the valley's wall, where the current lag and the Coulomb
     friction make up for the crossings it times wrong (docs/calibration.md)."""
     def cost(b: float) -> float:
-        return 0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": b}, part, scales) ** 2))
+        return _backlash_cost(base, v, part, scales, b)
 
     best = float(v["backlash_deg"])
     costs = {best: cost(best)}
@@ -432,8 +438,7 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
     """
     grid = np.array(BACKLASH_GRID_DEG if around is None else
                     sorted(set(np.clip(around + np.linspace(-0.5, 0.5, 11), 0.0, PARAMS["backlash_deg"].hi))))
-    cost = np.array([0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": float(b)}, part, scales) ** 2))
-                     for b in grid])
+    cost = np.array([_backlash_cost(base, v, part, scales, float(b)) for b in grid])
     k = int(np.argmin(cost))
     r = residuals(base, v, part, scales)
     m = len(r)
