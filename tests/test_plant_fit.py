@@ -155,43 +155,81 @@ def test_fit_reports_the_rotor_sides_part_of_the_intervals(experiment):
     assert "of which rotor side" in (out / "fit.md").read_text()
 
 
-def _toy_chord(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -10.0, hi: float = 10.0):
-    from host_tools.calibration.plant_fit import _Chord
+def _toy_solution(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -10.0, hi: float = 10.0,
+                  names: tuple[str, ...] | None = None):
+    from host_tools.calibration.plant_fit import _Solution
 
-    names = tuple(f"p{k}" for k in range(len(x)))
-    chord = _Chord(names, jac, np.linalg.inv(jac.T @ jac), r0, np.full(len(x), 1e-6),
-                   np.full(len(x), lo), np.full(len(x), hi))
-    return chord, {n: float(a) for n, a in zip(names, x, strict=True)}
+    names = names or tuple(f"p{k}" for k in range(len(x)))
+    sol = _Solution(names, jac, np.linalg.inv(jac.T @ jac), r0, np.full(len(x), lo), np.full(len(x), hi))
+    return sol, {n: float(a) for n, a in zip(names, x, strict=True)}
 
 
-def test_chord_shift_is_the_linear_shift_on_a_linear_problem():
-    """Residuals linear in the parameters: the chord's first step is zero, the shift is -(J'J)^-1 J' dr."""
-    from host_tools.calibration.plant_fit import _chord_shift
+def test_moved_solution_is_the_linear_shift_on_a_linear_problem():
+    """Residuals linear in the parameters: the moved solution is the linear shift -(J'J)^-1 J' dr."""
+    from host_tools.calibration.plant_fit import _linear_shift, _moved_solution
 
     rng = np.random.default_rng(3)
     a, y, d = rng.normal(size=(40, 3)), rng.normal(size=40), rng.normal(size=40)
     x = np.linalg.lstsq(a, y, rcond=None)[0]
-    chord, v = _toy_chord(a, a @ x - y, x)
-    shift, steps = _chord_shift(chord, v, lambda w: a @ np.array([w["p0"], w["p1"], w["p2"]]) - y - d)
-    linear = np.linalg.lstsq(a, d, rcond=None)[0]  # the perturbed problem's solution moves by exactly this
-    assert np.allclose(shift, linear, rtol=1e-9, atol=1e-12)
-    assert steps == 1  # one step, of size 0, then it stops
+    sol, v = _toy_solution(a, a @ x - y, x)
+
+    def fun(w):
+        return a @ np.array([w["p0"], w["p1"], w["p2"]]) - y - d
+
+    exact = np.linalg.lstsq(a, d, rcond=None)[0]  # the perturbed problem's solution moves by exactly this
+    assert np.allclose(_linear_shift(sol, v, fun), exact, rtol=1e-9, atol=1e-12)
+    assert np.allclose(_moved_solution(sol, v, fun), exact, rtol=1e-3, atol=1e-6)
 
 
-def test_chord_shift_follows_a_nonlinear_residual():
+def test_moved_solution_follows_a_nonlinear_residual_within_the_bounds():
     """r = exp(x) - c, solved at c = 1 (x = 0, J = 1); c = 1.3 moves the solution to ln 1.3: the linear shift
-    says 0.3, the chord steps come within a few thousandths; the bounds hold the iterate."""
-    from host_tools.calibration.plant_fit import _chord_shift
+    says 0.3, the moved solution comes within a thousandth; the bounds hold it."""
+    from host_tools.calibration.plant_fit import _linear_shift, _moved_solution
 
-    chord, v = _toy_chord(np.ones((1, 1)), np.zeros(1), np.zeros(1))
+    sol, v = _toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1))
 
     def fun(w):
         return np.array([math.exp(w["p0"]) - 1.3])
 
-    linear, _ = _chord_shift(chord, v, fun, max_steps=0)
-    assert linear[0] == pytest.approx(0.3)
-    shift, steps = _chord_shift(chord, v, fun)
-    assert steps == 3
-    assert abs(shift[0] - math.log(1.3)) < 0.003 < abs(linear[0] - math.log(1.3)) / 10
-    bounded, _ = _chord_shift(_toy_chord(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
+    assert _linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
+    assert abs(_moved_solution(sol, v, fun)[0] - math.log(1.3)) < 1e-3
+    bounded = _moved_solution(_toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
     assert bounded[0] == pytest.approx(0.2)
+
+
+def test_moved_solution_never_climbs_where_the_solutions_jacobian_misleads():
+    """The solution's Jacobian says the residual falls as x grows (J = -1); the moved problem's residual x + 0.3
+    rises: a Newton step on that Jacobian (the linear shift, +0.3) quadruples the cost; the moved solution keeps
+    only steps that lower it, so it does not move up."""
+    from host_tools.calibration.plant_fit import _linear_shift, _moved_solution
+
+    sol, v = _toy_solution(-np.ones((1, 1)), np.zeros(1), np.zeros(1))
+
+    def fun(w):
+        return np.array([w["p0"] + 0.3])
+
+    assert _linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
+    shift = _moved_solution(sol, v, fun)
+    assert float(fun({"p0": shift[0]})[0]) ** 2 <= 0.3 ** 2
+
+
+def test_moved_solution_takes_the_backlash_from_its_valley_and_fits_the_others_again():
+    """The backlash is not stepped on its (step-made) secant column: its value is the valley's, found with the
+    others at their first pass, and the others are fitted again with it (here: p0 follows the backlash)."""
+    from host_tools.calibration.plant_fit import _moved_solution
+
+    names = ("p0", "backlash_deg")
+    sol, v = _toy_solution(np.array([[1.0, 0.0], [0.0, 1.0]]), np.zeros(2), np.array([0.0, 1.0]), names=names)
+    seen = []
+
+    def fun(w):
+        return np.array([w["p0"] - 0.5 * w["backlash_deg"], 0.0])
+
+    def valley(w):
+        seen.append(dict(w))
+        return 1.4
+
+    shift = _moved_solution(sol, v, fun, valley)
+    assert seen and seen[0]["p0"] == pytest.approx(0.5, abs=1e-3)  # the first pass, at the solution's backlash
+    assert shift[1] == pytest.approx(0.4)
+    assert shift[0] == pytest.approx(0.7, abs=1e-3)  # fitted again with the valley's backlash

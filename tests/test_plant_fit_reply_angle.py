@@ -256,7 +256,7 @@ def _timing_term(bounds: np.ndarray | None) -> float:
     from dataclasses import replace
 
     from host_tools.calibration.fit_model import SIGMA, residuals
-    from host_tools.calibration.plant_fit import _Chord, _secant_jacobian, _timing
+    from host_tools.calibration.plant_fit import _secant_jacobian, _Solution, _timing
 
     base = load_plant_params()
     v = base_values(base)
@@ -265,8 +265,8 @@ def _timing_term(bounds: np.ndarray | None) -> float:
     step = np.array([0.02 * v[names[0]]])
     jac, r0 = _secant_jacobian(lambda x: residuals(base, {**v, names[0]: float(x[0])}, exp, SIGMA),
                                np.array([v[names[0]]]), step, np.array([1.0]))
-    chord = _Chord(names, jac, np.linalg.pinv(jac.T @ jac), r0, np.ones(1), np.zeros(1), np.ones(1))
-    return float(_timing(base, v, exp, SIGMA, chord)[0, 0])
+    sol = _Solution(names, jac, np.linalg.pinv(jac.T @ jac), r0, np.zeros(1), np.ones(1))
+    return float(_timing(base, v, exp, SIGMA, sol)[0, 0])
 
 
 def test_the_timing_term_is_zero_when_the_timing_is_exact_and_grows_with_the_window():

@@ -202,11 +202,10 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         meat += np.outer(g, g)
     cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
     v = values(names, x_fit)
-    # the consider terms' chord iterations (`_chord_shift`) stop on a step small against the data's own interval
-    chord = _Chord(names, jac, bread, r, 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None)), *bounds(names))
-    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, chord)
+    sol = _Solution(names, jac, bread, r, *bounds(names))
+    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, sol)
     cov = cov + np.outer(rotor_shift, rotor_shift)
-    timing = _timing(base, v, fit_part, scales, chord)
+    timing = _timing(base, v, fit_part, scales, sol)
     cov = cov + timing
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
@@ -249,100 +248,109 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
                      left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S)
 
 
-CHORD_STEPS = 3  # at most this many chord steps per consider shift (`_chord_shift`), one simulation each
-CHORD_TOL = 0.1  # stop when no parameter's step exceeds this fraction of its 95 % half-width from the data alone
+MOVED_NFEV = 10  # at most this many simulations per trust-region pass of `_moved_solution` (two passes a way)
+MOVED_TOL = 1e-4  # their cost and step tolerance (the solution's own is SOLVER_TOL: these are one spread's shift)
 
 
 @dataclass
-class _Chord:
-    """What the consider terms' chord iterations reuse from the solution: its parameters, their secant Jacobian,
-    (J'J)^-1, the residuals there, the data's 95 % half-widths (the stopping scale) and the bounds."""
+class _Solution:
+    """What the consider terms reuse from the least-squares solution: its parameters, their secant Jacobian,
+    (J'J)^-1, the residuals there and the bounds."""
 
     names: tuple[str, ...]
     jac: np.ndarray
     bread: np.ndarray
     r0: np.ndarray
-    half: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
 
 
-def _chord_shift(chord: _Chord, v: dict[str, float], fun, max_steps: int = CHORD_STEPS) -> tuple[np.ndarray, int]:
-    """(the shift of the least-squares solution when the residuals become `fun`'s, chord steps taken).
+def _linear_shift(sol: _Solution, v: dict[str, float], fun) -> np.ndarray:
+    """The linear shift -(J'J)^-1 J' (r_p(x) - r(x)) of the least-squares solution when the residuals become
+    `fun`'s (`fun(values)`: the perturbed problem's residuals at those parameter values), kept within the bounds."""
+    x = np.array([v[n] for n in sol.names])
+    dr = fun(v) - sol.r0
+    return np.clip(x - sol.bread @ (sol.jac.T @ dr), sol.lo, sol.hi) - x
 
-    `fun(values)` gives the residuals of the perturbed problem (a moved base, drawn timings) at the parameter
-    values it is handed. The linear shift is -(J'J)^-1 J' (r_p(x) - r(x)); a chord (simplified Newton) iteration
-    reuses the solution's Jacobian, one simulation a step, s <- s - (J'J)^-1 J' (r_p(x + s) - r(x)): its fixed point
-    is where the perturbed residuals' projection on J is the solution's own (0 at an interior minimum), so it is the
-    linear shift when the residuals are linear in the parameters, and follows them where they are not. The
-    iterate is kept within the bounds; it stops when no step exceeds CHORD_TOL of the data's half-width, after
-    `max_steps` (0: the linear shift), or when a step grows against the one before it (the chord does not
-    contract there: the last iterate before it is kept).
+
+def _moved_solution(sol: _Solution, v: dict[str, float], fun, valley=None) -> np.ndarray:
+    """The shift of the least-squares solution when the residuals become `fun`'s, found by few simulations.
+
+    A trust-region least squares (scipy's "trf", within the bounds, at most MOVED_NFEV simulations) over the
+    solution's parameters but the backlash, on the solution's own secant Jacobian (not recomputed: a simulation a
+    step), from the solution; then the backlash's valley on its grid (`valley(values)`: the backlash of least cost
+    with the others at those values) and the same least squares again from there. On residuals linear in the
+    parameters it is the linear shift; where they are not, each accepted step lowers the perturbed problem's cost,
+    so the shift never ends where the solution's own Jacobian alone would have stopped it (docs/calibration.md, The
+    base's rotor side in the intervals). The backlash's column is made of steps (each reversal's crossing ends on
+    a whole period): the valley's grid follows it, a secant step cannot.
     """
-    x = np.array([v[n] for n in chord.names])
-    half = np.where(chord.half > 0, chord.half, 1.0)
-    g0 = chord.jac.T @ chord.r0
+    from scipy.optimize import least_squares
 
-    def at(shift: np.ndarray) -> np.ndarray:
-        return fun({**v, **{n: float(a) for n, a in zip(chord.names, x + shift, strict=True)}})
+    free = [k for k, n in enumerate(sol.names) if n != "backlash_deg"]
+    names = tuple(sol.names[k] for k in free)
+    jac, lo, hi = sol.jac[:, free], sol.lo[free], sol.hi[free]
+    w = dict(v)
 
-    shift = np.clip(x - chord.bread @ (chord.jac.T @ at(np.zeros(len(x))) - g0), chord.lo, chord.hi) - x
-    size = math.inf
-    steps = 0
-    for _ in range(max_steps):
-        step = np.clip(x + shift - chord.bread @ (chord.jac.T @ at(shift) - g0), chord.lo, chord.hi) - x - shift
-        new = float(np.max(np.abs(step) / half))
-        if new > size:
-            break
-        shift, size, steps = shift + step, new, steps + 1
-        if new <= CHORD_TOL:
-            break
-    return shift, steps
+    def solve(w: dict[str, float]) -> dict[str, float]:
+        x0 = np.clip(np.array([w[n] for n in names]), lo, hi)
+        res = least_squares(lambda x: fun({**w, **{n: float(a) for n, a in zip(names, x, strict=True)}}), x0,
+                            jac=lambda x: jac, bounds=(lo, hi), x_scale=np.maximum(np.abs(x0), 0.05 * (hi - lo)),
+                            max_nfev=MOVED_NFEV, method="trf", ftol=MOVED_TOL, xtol=MOVED_TOL)
+        return {**w, **{n: float(a) for n, a in zip(names, res.x, strict=True)}}
+
+    if names:
+        w = solve(w)
+    if valley is not None and "backlash_deg" in sol.names:
+        w["backlash_deg"] = valley(w)
+        if names:
+            w = solve(w)
+    return np.array([w[n] - v[n] for n in sol.names])
 
 
 def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-                chord: _Chord) -> tuple[float, np.ndarray]:
+                sol: _Solution) -> tuple[float, np.ndarray]:
     """(the rotor side's relative spread, the fitted parameters' shift for one spread of it): a "consider" term.
 
     The rotor's acceleration per ampere (Kt / J_m) alone carries it across the backlash at each reversal; the fit
     takes it from the base profile (fitting it too trades off against the backlash: docs/calibration.md, Limits).
     A bench whose Kt/J_m differs from the base's by one spread `rotor_side_sd` either way moves the least-squares
-    solution; each way's shift is `_chord_shift`'s (from the linear shift, chord steps on the moved base), and
-    each parameter takes the larger of the two (its sign with it): the crossings end on whole periods, so the
-    response is lopsided, and the sign of the base's error is what the record cannot tell. Its outer product is
-    added to the covariance, so the parameters the rotor side biases get the intervals it allows. No term when
-    it is fitted, or with no backlash (no crossing).
+    solution; each way's shift is `_moved_solution`'s, and each parameter takes the larger of the two (its sign
+    with it): the crossings end on whole periods, so the response is lopsided, and the sign of the base's error
+    is what the record cannot tell. Its outer product is added to the covariance, so the parameters the rotor side
+    biases get the intervals it allows. No term when it is fitted, or with no backlash (no crossing).
     """
-    n = len(chord.names)
-    if "rotor_accel_scale" in chord.names or v["backlash_deg"] <= 0.0:
+    n = len(sol.names)
+    if "rotor_accel_scale" in sol.names or v["backlash_deg"] <= 0.0:
         return 0.0, np.zeros(n)
     sd = rotor_side_sd(base)
     if sd <= 0.0:
         return 0.0, np.zeros(n)
-    ways = [_chord_shift(chord, v, lambda w, e=e: residuals(base, {**w, "rotor_accel_scale": 1.0 + e}, part,
-                                                            scales))[0] for e in (sd, -sd)]
+    ways = []
+    for e in (sd, -sd):
+        moved = {"rotor_accel_scale": 1.0 + e}
+        ways.append(_moved_solution(sol, v, lambda w, m=moved: residuals(base, {**w, **m}, part, scales),
+                                    lambda w, m=moved: _backlash_valley(base, {**w, **m}, part, scales)))
     return sd, np.where(np.abs(ways[0]) >= np.abs(ways[1]), ways[0], ways[1])
 
 
 TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
 TIMING_SEED = 21  # their seed: the same recording gives the same intervals
-TIMING_CHORD_STEPS = 0  # the timing draws' shifts stay linear (docs/calibration.md, The timing term: not measured)
 
 
 def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-            chord: _Chord) -> np.ndarray:
+            sol: _Solution) -> np.ndarray:
     """The covariance the writes' unknown arrival adds to the fitted parameters (zeros when the timing is exact).
 
     Through serial mode the record dates each write (a command and the request after it) at COMMAND_DELAY_S after
     its job, later when a late reply shows it (`fit_data._late_commands`), and bounds it only to a window
     (`fit_data.arrival_bounds`: about 0.6 ms through a pty) within which the link's per-frame delay is unknown.
     Each draw puts every write at an independent uniform point of its window (the least the record says); the
-    least-squares solution's shift on it is `_chord_shift`'s with TIMING_CHORD_STEPS (0: the linear shift
-    -(J'J)^-1 J' dr);
-    the mean of that shift's outer product over the draws (its mean, a delay common to all writes, included: the
-    record cannot exclude it) is added to the covariance, as the rotor side's consider term is.
+    least-squares solution's shift on it is the linear one (`_linear_shift`); the mean of that shift's outer product
+    over the draws (its mean, a delay common to all writes, included: the record cannot exclude it) is added to the
+    covariance, as the rotor side's consider term is.
     """
-    n = len(chord.names)
+    n = len(sol.names)
     if part.bounds is None or not np.any(part.bounds[:, 1] > part.bounds[:, 0]):
         return np.zeros((n, n))
     rng = np.random.default_rng(TIMING_SEED)
@@ -353,7 +361,7 @@ def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: di
     for _ in range(TIMING_DRAWS):
         u = rng.uniform(0.0, 1.0, int(burst[-1]) + 1)[burst]
         drawn = part.shifted(lo + u * (hi - lo))
-        shift, _ = _chord_shift(chord, v, lambda w, d=drawn: residuals(base, w, d, scales), TIMING_CHORD_STEPS)
+        shift = _linear_shift(sol, v, lambda w, d=drawn: residuals(base, w, d, scales))
         out += np.outer(shift, shift)
     return out / TIMING_DRAWS
 
