@@ -140,9 +140,10 @@ def test_the_lag_and_the_backlash_alone_are_fitted(experiment, tmp_path):
 
 
 def test_fit_reports_the_rotor_sides_part_of_the_intervals(experiment):
-    """fit.json: each parameter's 95 % half-width includes the base's rotor side (Kt/J_m, spread from the tolerance
-    table), its part reported beside it; the rotor side shapes the current at each reversal, so it widens the
-    backlash's interval and the current lag's."""
+    """fit.json: the rotor side (Kt/J_m) is fitted by its profile and reported with its interval, within its bounds;
+    each other parameter's 95 % half-width includes its part (their shift across the rotor side's interval),
+    reported beside it; the rotor side shapes the current at each reversal, so it widens the backlash's interval
+    and the current lag's. The tolerance table's spread (its prior) is reported too."""
     from host_tools.calibration.fit_model import rotor_side_sd
 
     _, _, out, _ = experiment
@@ -153,6 +154,8 @@ def test_fit_reports_the_rotor_sides_part_of_the_intervals(experiment):
     assert s["params"]["backlash_deg"]["ci95_rotor_side"] > 0
     assert s["params"]["current_time_constant_s"]["ci95_rotor_side"] > 0
     assert "of which rotor side" in (out / "fit.md").read_text()
+    rotor = s["params"]["rotor_accel_scale"]
+    assert 0.7 <= rotor["value"] <= 1.3 and rotor["ci95_half_width"] == rotor["ci95_rotor_side"] > 0, rotor
 
 
 def _toy_solution(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -10.0, hi: float = 10.0,
@@ -165,7 +168,7 @@ def _toy_solution(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -1
 
 
 def test_moved_solution_is_the_linear_shift_on_a_linear_problem():
-    """Residuals linear in the parameters: the moved solution is the linear shift -(J'J)^-1 J' dr."""
+    """Residuals linear in the parameters: the moved solution is the linear shift -(J'J)^-1 J' dr away."""
     from host_tools.calibration.plant_fit import _linear_shift, _moved_solution
 
     rng = np.random.default_rng(3)
@@ -178,7 +181,9 @@ def test_moved_solution_is_the_linear_shift_on_a_linear_problem():
 
     exact = np.linalg.lstsq(a, d, rcond=None)[0]  # the perturbed problem's solution moves by exactly this
     assert np.allclose(_linear_shift(sol, v, fun), exact, rtol=1e-9, atol=1e-12)
-    assert np.allclose(_moved_solution(sol, v, fun), exact, rtol=1e-3, atol=1e-6)
+    moved, r = _moved_solution(sol, v, fun)
+    assert np.allclose([moved[n] - v[n] for n in sol.names], exact, rtol=1e-3, atol=1e-6)
+    assert np.array_equal(r, fun(moved))  # the residuals there, as the profile takes its cost from them
 
 
 def test_moved_solution_follows_a_nonlinear_residual_within_the_bounds():
@@ -192,9 +197,9 @@ def test_moved_solution_follows_a_nonlinear_residual_within_the_bounds():
         return np.array([math.exp(w["p0"]) - 1.3])
 
     assert _linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
-    assert abs(_moved_solution(sol, v, fun)[0] - math.log(1.3)) < 1e-3
-    bounded = _moved_solution(_toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
-    assert bounded[0] == pytest.approx(0.2)
+    assert abs(_moved_solution(sol, v, fun)[0]["p0"] - math.log(1.3)) < 1e-3
+    bounded, _ = _moved_solution(_toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
+    assert bounded["p0"] == pytest.approx(0.2)
 
 
 def test_moved_solution_never_climbs_where_the_solutions_jacobian_misleads():
@@ -209,8 +214,49 @@ def test_moved_solution_never_climbs_where_the_solutions_jacobian_misleads():
         return np.array([w["p0"] + 0.3])
 
     assert _linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
-    shift = _moved_solution(sol, v, fun)
-    assert float(fun({"p0": shift[0]})[0]) ** 2 <= 0.3 ** 2
+    moved, _ = _moved_solution(sol, v, fun)
+    assert float(fun(moved)[0]) ** 2 <= 0.3 ** 2
+
+
+def _toy_rotor(monkeypatch, true_scale: float, gain: float, noise: float = 0.1, spread: float = 0.074):
+    """`_rotor_profile` on a toy: 200 residuals that grow with the rotor's scale off `true_scale` (by `gain`), and
+    one parameter p0 whose best value moves with the scale (p0 = 2 (scale - 1)); noise from a fixed seed."""
+    import host_tools.calibration.plant_fit as pf
+
+    rng = np.random.default_rng(5)
+    e, x = rng.normal(size=200) * noise, rng.normal(size=200)
+    e, x = e - e.mean(), x - x.mean()  # so that p0 = 0 is the least-squares solution at the base's scale
+
+    def residuals(base, w, part, scales):
+        scale = w.get("rotor_accel_scale", 1.0)
+        return (w["p0"] - 2.0 * (scale - 1.0)) * np.ones(200) + gain * (scale - true_scale) * x + e
+
+    monkeypatch.setattr(pf, "residuals", residuals)
+    monkeypatch.setattr(pf, "rotor_side_sd", lambda base: spread)
+    v = {"p0": 0.0, "backlash_deg": 1.0, "rotor_accel_scale": 1.0}
+    r0 = residuals(None, v, None, None)
+    sol = pf._Solution(("p0",), np.ones((200, 1)), np.array([[1 / 200]]), r0, np.array([-5.0]), np.array([5.0]))
+    return pf._rotor_profile(None, v, None, None, sol)
+
+
+def test_rotor_profile_walks_to_the_rotor_side_and_moves_the_others_with_it(monkeypatch):
+    """Kt/J_m 12 % under the base's: the profile walks down to it, the vertex lands on it, the interval closes
+    around it, and p0 is moved to where the toy puts it there (and shifts with the interval's ends)."""
+    r = _toy_rotor(monkeypatch, 0.88, 40.0)
+    assert abs(r.best - 0.88) < 0.01
+    assert r.best - r.half <= 0.88 <= r.best + r.half and r.half <= 0.1
+    assert r.identified
+    assert r.values["p0"] == pytest.approx(2.0 * (r.best - 1.0), abs=2e-3)
+    assert abs(r.shift95[0]) == pytest.approx(2.0 * r.half, rel=0.05)
+
+
+def test_rotor_profile_keeps_the_base_when_the_record_cannot_tell(monkeypatch):
+    """No information on the rotor side (the cost does not change along the profile: p0 makes up for it): the
+    tolerance table's spread, the prior, keeps it at the base's, its interval the prior's, and not identified."""
+    r = _toy_rotor(monkeypatch, 0.88, 0.0)
+    assert r.best == pytest.approx(1.0, abs=1e-6)
+    assert r.half >= 1.96 * 0.074
+    assert not r.identified
 
 
 def test_moved_solution_takes_the_backlash_from_its_valley_and_fits_the_others_again():
@@ -229,7 +275,7 @@ def test_moved_solution_takes_the_backlash_from_its_valley_and_fits_the_others_a
         seen.append(dict(w))
         return 1.4
 
-    shift = _moved_solution(sol, v, fun, valley)
+    moved, _ = _moved_solution(sol, v, fun, valley)
     assert seen and seen[0]["p0"] == pytest.approx(0.5, abs=1e-3)  # the first pass, at the solution's backlash
-    assert shift[1] == pytest.approx(0.4)
-    assert shift[0] == pytest.approx(0.7, abs=1e-3)  # fitted again with the valley's backlash
+    assert moved["backlash_deg"] == pytest.approx(1.4)
+    assert moved["p0"] == pytest.approx(0.7, abs=1e-3)  # fitted again with the valley's backlash

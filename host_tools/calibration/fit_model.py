@@ -54,8 +54,9 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("backlash_deg", "deg", 0.0, 5.0, "gearbox free play at the actuator output"),
     FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
     # the rotor's acceleration per ampere (Kt / J_m): it alone carries the rotor across the backlash at each
-    # reversal (the output's torque per ampere and inertia are fitted); not fitted by default: it trades off
-    # against the backlash, so its uncertainty is carried into the intervals instead (`rotor_side_sd`)
+    # reversal (the output's torque per ampere and inertia are fitted); it makes a narrow valley with the backlash
+    # that least squares cannot follow, so it is fitted by its profile (`plant_fit._rotor_profile`), never in the
+    # least squares
     FitParam("rotor_accel_scale", "", 0.7, 1.3, "the rotor's Kt/J_m relative to the base profile's"),
     FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
     # at most 0.8 ms: the record shows the firmware reading most replies one 1 ms period after their request, so the
@@ -66,12 +67,12 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("imu_bias_deg", "deg", -6.0, 6.0, "IMU pitch bias"),
     FitParam("encoder_offset_deg", "deg", -4.0, 4.0, "true angle minus the encoder's at power-up"),
 )}
-# backlash is not in the least squares: its effect (a dead time at each reversal of the command) moves the
+# backlash is not in the first least squares: its effect (a dead time at each reversal of the command) moves the
 # residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope; it is profiled over a grid
 # (`_backlash_profile`, docs/calibration.md)
 DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
                "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
-               "encoder_offset_deg")
+               "encoder_offset_deg", "rotor_accel_scale")
 
 
 def base_values(p: PlantParams) -> dict[str, float]:

@@ -118,6 +118,11 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     zero = zero if abs(zero) > PARAMS["encoder_offset_deg"].hi else 0.0
     start["encoder_offset_deg"] = zero
     all_names = tuple(names)
+    # the rotor's Kt/J_m is fitted by its profile after the least squares (`_rotor_profile`), never in them
+    names = ls_names = tuple(n for n in names if n != "rotor_accel_scale")
+    if not names:
+        raise ValueError("--params: rotor_accel_scale is fitted by its profile, along which the others move: "
+                         "name at least one other parameter")
     scan = "backlash_deg" in names  # profiled first, then in the least squares (`_backlash_profile`)
     # the first solution leaves out the backlash and the driver's current lag: both shape the current at each
     # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:
@@ -169,7 +174,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     first = values(first_names, res.x)
     # none at all is a model of its own: any gap, however small, frees the rotor until the next command (a period's
     # dead time at each reversal), so a profile at 0 keeps it there (the solver's interior start would be 5e-9 deg)
-    names = tuple(n for n in all_names if n != "backlash_deg" or start["backlash_deg"] > 0.0)
+    names = tuple(n for n in ls_names if n != "backlash_deg" or start["backlash_deg"] > 0.0)
     res, steps, hi = solve(names, np.array([first[n] for n in names]))
     x_fit, nfev, cost, message = np.asarray(res.x, dtype=float), int(res.nfev), float(res.cost), str(res.message)
     if "backlash_deg" in names:  # the backlash's valley, found on a fine grid, then the others fitted again in it
@@ -182,28 +187,27 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
             refit = values(rest, again.x)
             x_fit = np.array([refit[n] for n in names])
             nfev, cost, message = nfev + int(again.nfev), float(again.cost), str(again.message)
+    rotor = None
+    if "rotor_accel_scale" in all_names and values(names, x_fit)["backlash_deg"] > 0.0 and rotor_side_sd(base) > 0:
+        # the rotor's Kt/J_m from its own profile, the others moved with it (with no backlash nothing crosses it)
+        jac1, r1 = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), x_fit, steps, hi)
+        rotor = _rotor_profile(base, values(names, x_fit), fit_part, scales,
+                               _Solution(names, jac1, np.linalg.pinv(jac1.T @ jac1), r1, *bounds(names)))
+        start = {**start, "rotor_accel_scale": rotor.best}
+        x_fit = np.array([rotor.values[n] for n in names])
     if profile is not None:  # the interval from the profile on a finer grid about the fit, the others at theirs
         profile = _backlash_profile(base, values(names, x_fit), fit_part, scales, len(names),
                                     around=values(names, x_fit)["backlash_deg"])
     jac, r = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), x_fit,
                               steps, hi)
-    m, n = jac.shape
-    s2 = float(np.dot(r, r)) / max(1, m - n)
-    rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
-    inflation = (1.0 + rho) / (1.0 - rho)  # AR(1) residuals: m samples carry m (1 - rho) / (1 + rho) of information
+    n, cost = jac.shape[1], 0.5 * float(np.dot(r, r))
     bread = np.linalg.pinv(jac.T @ jac)
-    # cluster-robust ("sandwich") covariance with each simulation window as a cluster: the errors within a
-    # window are one trajectory's, correlated, whatever their shape; the larger of the two is reported
     clusters = np.tile(window_ids(fit_part), 3)
-    scores = jac * r[:, None]
-    meat = np.zeros((n, n))
-    for c in np.unique(clusters):
-        g = scores[clusters == c].sum(axis=0)
-        meat += np.outer(g, g)
-    cov = np.maximum(inflation * s2 * bread, bread @ meat @ bread)
+    cov = _covariance(jac, r, clusters)
     v = values(names, x_fit)
     sol = _Solution(names, jac, bread, r, *bounds(names))
-    rotor_sd, rotor_shift = _rotor_side(base, v, fit_part, scales, sol)
+    # the rotor side's interval carried into the others' as a consider term: their shift at its interval's ends
+    rotor_shift = np.zeros(n) if rotor is None else rotor.shift95 / 1.96
     cov = cov + np.outer(rotor_shift, rotor_shift)
     timing = _timing(base, v, fit_part, scales, sol)
     cov = cov + timing
@@ -240,15 +244,23 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         ci95["backlash_deg"] = math.sqrt(profile[1] ** 2 + rb ** 2 + timing_ci95.get("backlash_deg", 0.0) ** 2)
         ident["backlash_deg"] = profile[2] and ci95["backlash_deg"] <= _ABS_CI["backlash_deg"]
         collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
-    start = {**start, "backlash_deg": base_values(base)["backlash_deg"]}  # what the fit started from
+    if "rotor_accel_scale" in all_names:  # its value and interval are its profile's (none: the base's, its spread)
+        v["rotor_accel_scale"] = 1.0 if rotor is None else rotor.best
+        ci95["rotor_accel_scale"] = rotor_ci95["rotor_accel_scale"] = \
+            1.96 * rotor_side_sd(base) if rotor is None else rotor.half
+        timing_ci95["rotor_accel_scale"] = 0.0
+        collinearity["rotor_accel_scale"] = math.nan
+        ident["rotor_accel_scale"] = rotor is not None and rotor.identified
+    # what the fit started from
+    start = {**start, **{n: base_values(base)[n] for n in ("backlash_deg", "rotor_accel_scale")}}
     return FitResult(all_names, v, start, ci95, collinearity, ident, corr, pct, nfev,
                      cost, time.perf_counter() - wall0, (t0, t1), message,
-                     fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_sd, timing_ci95,
+                     fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_side_sd(base), timing_ci95,
                      0.0 if exp.bounds is None else 1e3 * float(np.median(exp.bounds[:, 1] - exp.bounds[:, 0])),
                      left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S)
 
 
-MOVED_NFEV = 10  # at most this many simulations per trust-region pass of `_moved_solution` (two passes a way)
+MOVED_NFEV = 10  # at most this many simulations per trust-region pass of `_moved_solution` (two passes a point)
 MOVED_TOL = 1e-4  # their cost and step tolerance (the solution's own is SOLVER_TOL: these are one spread's shift)
 
 
@@ -273,65 +285,167 @@ def _linear_shift(sol: _Solution, v: dict[str, float], fun) -> np.ndarray:
     return np.clip(x - sol.bread @ (sol.jac.T @ dr), sol.lo, sol.hi) - x
 
 
-def _moved_solution(sol: _Solution, v: dict[str, float], fun, valley=None) -> np.ndarray:
-    """The shift of the least-squares solution when the residuals become `fun`'s, found by few simulations.
+def _moved_solution(sol: _Solution, start: dict[str, float], fun, valley=None) -> tuple[dict[str, float], np.ndarray]:
+    """(the least-squares solution when the residuals become `fun`'s, found by few simulations; its residuals).
 
     A trust-region least squares (scipy's "trf", within the bounds, at most MOVED_NFEV simulations) over the
     solution's parameters but the backlash, on the solution's own secant Jacobian (not recomputed: a simulation a
-    step), from the solution; then the backlash's valley on its grid (`valley(values)`: the backlash of least cost
-    with the others at those values) and the same least squares again from there. On residuals linear in the
-    parameters it is the linear shift; where they are not, each accepted step lowers the perturbed problem's cost,
-    so the shift never ends where the solution's own Jacobian alone would have stopped it (docs/calibration.md, The
-    base's rotor side in the intervals). The backlash's column is made of steps (each reversal's crossing ends on
-    a whole period): the valley's grid follows it, a secant step cannot.
+    step), from `start`; then the backlash's valley on its grid (`valley(values)`: the backlash of least cost with
+    the others at those values) and the same least squares again from there. On residuals linear in the parameters
+    it is the least-squares solution; where they are not, each accepted step lowers the moved problem's cost, so it
+    never ends where a Newton step on the solution's Jacobian alone would have taken it uphill. The backlash's
+    column is made of steps (each reversal's crossing ends on a whole period): the valley's grid follows it, a
+    secant step cannot.
     """
     from scipy.optimize import least_squares
 
     free = [k for k, n in enumerate(sol.names) if n != "backlash_deg"]
     names = tuple(sol.names[k] for k in free)
     jac, lo, hi = sol.jac[:, free], sol.lo[free], sol.hi[free]
-    w = dict(v)
 
-    def solve(w: dict[str, float]) -> dict[str, float]:
+    def solve(w: dict[str, float]) -> tuple[dict[str, float], np.ndarray]:
         x0 = np.clip(np.array([w[n] for n in names]), lo, hi)
         res = least_squares(lambda x: fun({**w, **{n: float(a) for n, a in zip(names, x, strict=True)}}), x0,
                             jac=lambda x: jac, bounds=(lo, hi), x_scale=np.maximum(np.abs(x0), 0.05 * (hi - lo)),
                             max_nfev=MOVED_NFEV, method="trf", ftol=MOVED_TOL, xtol=MOVED_TOL)
-        return {**w, **{n: float(a) for n, a in zip(names, res.x, strict=True)}}
+        return {**w, **{n: float(a) for n, a in zip(names, res.x, strict=True)}}, np.asarray(res.fun)
 
+    w, r = dict(start), None
     if names:
-        w = solve(w)
+        w, r = solve(w)
     if valley is not None and "backlash_deg" in sol.names:
         w["backlash_deg"] = valley(w)
-        if names:
-            w = solve(w)
-    return np.array([w[n] - v[n] for n in sol.names])
+        w, r = solve(w) if names else (w, None)
+    return w, (fun(w) if r is None else r)
 
 
-def _rotor_side(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-                sol: _Solution) -> tuple[float, np.ndarray]:
-    """(the rotor side's relative spread, the fitted parameters' shift for one spread of it): a "consider" term.
+ROTOR_STEP = 0.05  # the rotor side's profile grid and its secant step in the Jacobian (relative Kt/J_m)
+ROTOR_POINTS = 9  # at most this many profile points (the base's, 1.0, included)
+# the backlash's valley at each profile point, from its neighbour's (it moves a few hundredths of a degree a step)
+ROTOR_VALLEY = ((0.03, 2), (0.01, 2))
 
-    The rotor's acceleration per ampere (Kt / J_m) alone carries it across the backlash at each reversal; the fit
-    takes it from the base profile (fitting it too trades off against the backlash: docs/calibration.md, Limits).
-    A bench whose Kt/J_m differs from the base's by one spread `rotor_side_sd` either way moves the least-squares
-    solution; each way's shift is `_moved_solution`'s, and each parameter takes the larger of the two (its sign
-    with it): the crossings end on whole periods, so the response is lopsided, and the sign of the base's error
-    is what the record cannot tell. Its outer product is added to the covariance, so the parameters the rotor side
-    biases get the intervals it allows. No term when it is fitted, or with no backlash (no crossing).
+
+def _covariance(jac: np.ndarray, r: np.ndarray, clusters: np.ndarray) -> np.ndarray:
+    """The parameters' covariance from the secant Jacobian and the residuals: the larger (element by element) of
+    the AR(1)-inflated least-squares one (`_cost_unit`) and the cluster-robust ("sandwich") one with each
+    simulation window as a cluster (the errors within a window are one trajectory's, correlated, whatever their
+    shape)."""
+    n = jac.shape[1]
+    bread = np.linalg.pinv(jac.T @ jac)
+    scores = jac * r[:, None]
+    meat = np.zeros((n, n))
+    for c in np.unique(clusters):
+        g = scores[clusters == c].sum(axis=0)
+        meat += np.outer(g, g)
+    return np.maximum(_cost_unit(r, n) * bread, bread @ meat @ bread)
+
+
+def _cost_unit(r: np.ndarray, n: int) -> float:
+    """One unit of chi-square in the least-squares cost (0.5 sum r^2) at residuals r with n parameters: the residual
+    variance, inflated for the residuals' lag-1 correlation (m samples of AR(1) residuals carry m (1 - rho) /
+    (1 + rho) of information), as the Jacobian's intervals are."""
+    m = len(r)
+    s2 = float(np.dot(r, r)) / max(1, m - n)
+    rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
+    return s2 * (1.0 + rho) / (1.0 - rho)
+
+
+def _parabola(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """(vertex, curvature a of y = a (x - vertex)^2 + c) of the parabola through three points; a <= 0: not convex
+    (the vertex is then the best of the three)."""
+    a, b, _ = np.polyfit(x, y, 2)
+    if a <= 0:
+        return float(x[int(np.argmin(y))]), float(a)
+    return float(np.clip(-b / (2 * a), x[0], x[2])), float(a)
+
+
+@dataclass
+class _RotorProfile:
+    """`_rotor_profile`'s result: the rotor's Kt/J_m relative to the base's, its 95 % half-width, whether it is
+    identified, the other parameters' values there, and their shift at the interval's farther-moving end (one
+    vector over the solution's names)."""
+
+    best: float
+    half: float
+    identified: bool
+    values: dict[str, float]
+    shift95: np.ndarray
+
+
+def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+                   sol: _Solution) -> _RotorProfile:
+    """The rotor's acceleration per ampere (Kt / J_m, relative to the base's) from the cost's profile over it.
+
+    The rotor alone carries itself across the backlash at each reversal, so Kt/J_m shapes the current there, and
+    the least squares cannot follow it: with the backlash it makes a narrow valley whose floor moves in steps (each
+    crossing ends on a whole command period; docs/calibration.md, The rotor side). A profile can: at each point of a
+    grid (ROTOR_STEP) the other parameters are the solution moved to that Kt/J_m (`_moved_solution`: the
+    backlash's valley searched, the others by a trust region on the solution's Jacobian). The tolerance table's
+    spread (`rotor_side_sd`) is a prior: its penalty, in units of the cost's chi-square (`_cost_unit`), is added,
+    so a record that cannot tell the rotor side keeps about the base's. The grid walks downhill from the base's and
+    on until a point on each side is outside the interval (where the cost rises by the 95 % quantile of
+    chi-square(1) / 2), at most ROTOR_POINTS points. The best is the vertex of the parabola through the best point
+    and its neighbours; the interval reaches the first point outside it on each side (as the backlash's profile's),
+    and is identified when it closes inside the grid narrower than the prior's own (1.96 spreads). The others are
+    moved to the best, and their shift to the interval's ends (the larger of the two, its sign with it) is what
+    `fit_plant` carries into their intervals.
     """
-    n = len(sol.names)
-    if "rotor_accel_scale" in sol.names or v["backlash_deg"] <= 0.0:
-        return 0.0, np.zeros(n)
     sd = rotor_side_sd(base)
-    if sd <= 0.0:
-        return 0.0, np.zeros(n)
-    ways = []
-    for e in (sd, -sd):
-        moved = {"rotor_accel_scale": 1.0 + e}
-        ways.append(_moved_solution(sol, v, lambda w, m=moved: residuals(base, {**w, **m}, part, scales),
-                                    lambda w, m=moved: _backlash_valley(base, {**w, **m}, part, scales)))
-    return sd, np.where(np.abs(ways[0]) >= np.abs(ways[1]), ways[0], ways[1])
+
+    points = {0: (sol.r0, dict(v))}  # grid index -> (residuals, moved values)
+
+    def add(k: int) -> bool:
+        scale = 1.0 + k * ROTOR_STEP
+        if k in points or not PARAMS["rotor_accel_scale"].lo <= scale <= PARAMS["rotor_accel_scale"].hi \
+                or len(points) >= ROTOR_POINTS:
+            return False
+        moved = {"rotor_accel_scale": scale}
+        w, r = _moved_solution(sol, points[k + 1 if k < 0 else k - 1][1],  # from its neighbour towards the base
+                               lambda w: residuals(base, {**w, **moved}, part, scales),
+                               lambda w: _backlash_valley(base, {**w, **moved}, part, scales, ROTOR_VALLEY))
+        points[k] = (r, w)
+        return True
+
+    unit = _cost_unit(sol.r0, len(sol.names))
+
+    def penalised(k: int) -> float:
+        return 0.5 * float(np.dot(points[k][0], points[k][0])) + 0.5 * unit * (k * ROTOR_STEP / sd) ** 2
+
+    def within(k: int) -> bool:
+        return penalised(k) - min(penalised(j) for j in points) <= 0.5 * 3.841 * unit
+
+    add(-1)
+    add(1)
+    # on outwards while an end of the grid is within the interval: first in the units of the base's residuals, then
+    # of the best point's (the base's carry the misfit of a rotor side that is off)
+    for _ in range(2):
+        while True:
+            ks = sorted(points)
+            if not ((within(ks[0]) and add(ks[0] - 1)) or (within(ks[-1]) and add(ks[-1] + 1))):
+                break
+        unit = _cost_unit(points[min(points, key=penalised)][0], len(sol.names))
+    best = min(points, key=penalised)
+    offset = best * ROTOR_STEP
+    there = points[best][1]
+    if best - 1 in points and best + 1 in points:  # the vertex of the parabola through the best and its neighbours,
+        # the others there along the same parabolas through their moved values
+        three = [(best + d) * ROTOR_STEP for d in (-1, 0, 1)]
+        a, b, _ = np.polyfit(three, [penalised(best + d) for d in (-1, 0, 1)], 2)
+        if a > 0:
+            offset = float(np.clip(-b / (2 * a), three[0], three[2]))
+            there = {n: float(np.polyval(np.polyfit(three, [points[best + d][1][n] for d in (-1, 0, 1)], 2), offset))
+                     for n in there}
+    lo_k, hi_k = best, best
+    while lo_k - 1 in points and within(lo_k - 1):
+        lo_k -= 1
+    while hi_k + 1 in points and within(hi_k + 1):
+        hi_k += 1
+    closed = lo_k - 1 in points and hi_k + 1 in points
+    lower, upper = (lo_k - 1 if lo_k - 1 in points else lo_k), (hi_k + 1 if hi_k + 1 in points else hi_k)
+    half = max(offset - lower * ROTOR_STEP, upper * ROTOR_STEP - offset)
+    ends = [np.array([points[k][1][n] - there[n] for n in sol.names]) for k in (upper, lower)]
+    shift95 = np.where(np.abs(ends[0]) >= np.abs(ends[1]), ends[0], ends[1])
+    return _RotorProfile(1.0 + offset, half, bool(closed and half < 1.96 * sd), there, shift95)
 
 
 TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
@@ -397,8 +511,7 @@ def _secant_jacobian(fun, x: np.ndarray, steps: np.ndarray, hi: np.ndarray) -> t
     return np.column_stack(cols), r0
 
 
-VALLEY_STEPS_DEG = (0.04, 0.01)  # `_backlash_valley`'s grids: +-VALLEY_POINTS steps of each about the best so far
-VALLEY_POINTS = 4
+VALLEY_GRIDS = ((0.04, 4), (0.01, 4))  # `_backlash_valley`'s grids: (step in deg, steps either side of the best)
 
 
 def _backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
@@ -407,7 +520,8 @@ def _backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, sca
     return 0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": backlash_deg}, part, scales) ** 2))
 
 
-def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float]) -> float:
+def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+                     grids: tuple[tuple[float, int], ...] = VALLEY_GRIDS) -> float:
     """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid).
 
     The backlash's valley is narrow: each reversal's crossing ends on a whole command period, and the measured
@@ -420,9 +534,9 @@ def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, s
 
     best = float(v["backlash_deg"])
     costs = {best: cost(best)}
-    for step in VALLEY_STEPS_DEG:
+    for step, points in grids:
         centre = best
-        for k in range(-VALLEY_POINTS, VALLEY_POINTS + 1):
+        for k in range(-points, points + 1):
             b = round(centre + k * step, 6)
             if 0.0 < b <= PARAMS["backlash_deg"].hi and b not in costs:
                 costs[b] = cost(b)
@@ -448,11 +562,7 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
                     sorted(set(np.clip(around + np.linspace(-0.5, 0.5, 11), 0.0, PARAMS["backlash_deg"].hi))))
     cost = np.array([_backlash_cost(base, v, part, scales, float(b)) for b in grid])
     k = int(np.argmin(cost))
-    r = residuals(base, v, part, scales)
-    m = len(r)
-    s2 = float(np.dot(r, r)) / max(1, m - n)
-    rho = float(np.clip(np.dot(r[1:], r[:-1]) / max(float(np.dot(r, r)), 1e-300), 0.0, 0.999))
-    threshold = 0.5 * 3.841 * s2 * (1.0 + rho) / (1.0 - rho)
+    threshold = 0.5 * 3.841 * _cost_unit(residuals(base, v, part, scales), n)
     best = float(grid[k])
     if 0 < k < len(grid) - 1:  # the parabola through the best and its neighbours
         x, y = grid[k - 1:k + 2], cost[k - 1:k + 2]
