@@ -102,9 +102,10 @@ def test_fit_writes_its_backlash_verdict_into_the_key(tmp_path):
     assert re.search(r"^backlash_deg = 0\.55  # fitted from runs/x: backlash_deg not identifiable \(kept\)", text, re.M)
 
 
-def test_backlash_alone_is_refused(tmp_path, capsys):
+@pytest.mark.parametrize("params", ["backlash_deg", "rotor_accel_scale", "backlash_deg,rotor_accel_scale"])
+def test_the_profiled_ones_alone_are_refused(tmp_path, capsys, params):
     from host_tools.cli import main
 
-    assert main(["fit", str(tmp_path), "--params", "backlash_deg"]) == 2
+    assert main(["fit", str(tmp_path), "--params", params]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "backlash_deg is profiled with other parameters" in err[0]
+    assert len(err) == 1 and "are profiled with other parameters fitted" in err[0]

@@ -75,7 +75,7 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
     """Every figure of the fit, JSON-ready (non-finite numbers as null)."""
     num = _num
     params = {n: {"value": num(r.values[n]), "ci95_half_width": num(r.ci95[n]),
-                  # the part of ci95_half_width that is the base's rotor side (Kt/J_m) taken as uncertain
+                  # the part of ci95_half_width that is the rotor side's (Kt/J_m) interval
                   "ci95_rotor_side": num(r.rotor_ci95.get(n, 0.0)),
                   # the part that is the writes' arrival the record leaves unknown (serial mode; 0 when exact)
                   "ci95_timing": num(r.timing_ci95.get(n, 0.0)), "start": num(r.start[n]),
@@ -96,7 +96,7 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
                              "imu_deg": num(math.degrees(r.noise_scales.get("imu", math.nan)))},
             # used samples whose reply answers a request with no simulated counterpart: out of the current's errors
             "current_samples_without_simulation": dict(r.unheard),
-            # the base's rotor side (Kt/J_m) is taken as uncertain by this relative spread (`rotor_side_sd`)
+            # the tolerance table's relative spread of the rotor side (Kt/J_m): its profile's prior (`rotor_side_sd`)
             "rotor_side_sd": num(r.rotor_sd),
             # the median window the record leaves a write's arrival (ms; 0: the timing is exact, the virtual bench)
             "arrival_window_ms": num(r.arrival_window_ms),
@@ -212,10 +212,11 @@ def _markdown(s: dict) -> str:
                      f"{_g(p['collinearity'], '.2f')} | {verdict(p)} |")
     for n, p in s["fixed"].items():
         lines.append(f"| {n} | fixed | | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
-    lines += ["", "95 % ± is each parameter's interval on its own. It includes the base profile's rotor side: the "
-              "rotor's Kt/J_m, which alone carries it across the backlash at each reversal, is taken from the base "
-              f"with a relative spread of {_g(s['rotor_side_sd'], '.3f')} (the tolerance table's Kt and rotor inertia) "
-              "and the shift that spread would cause is added to the covariance; its part is in its own column. "
+    lines += ["", "95 % ± is each parameter's interval on its own. It includes the rotor side's: the rotor's Kt/J_m "
+              "(`rotor_accel_scale`), which alone carries it across the backlash at each reversal, is fitted by its "
+              "profile (the tolerance table's relative spread of Kt and rotor inertia, "
+              f"{_g(s['rotor_side_sd'], '.3f')}, as its prior), and the others' shift across its interval is added "
+              "to their covariance; that part is in its own column. "
               + ("The timing's column: the record bounds each write's arrival at the motor only to a window (median "
                  f"{_g(s['arrival_window_ms'], '.3f')} ms); the shift of the fit over writes drawn within it is "
                  "added likewise." if s["arrival_window_ms"] else

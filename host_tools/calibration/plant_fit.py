@@ -4,9 +4,10 @@ The data are `fit_data`'s (commands, replies, encoder, IMU, current; never the e
 `fit_model`'s windowed simulation of the bench's own plant. `scipy.optimize.least_squares` minimises its
 residuals within bounds (`PARAMS`): a first solution without the backlash and the current lag, the backlash's
 profile, each signal weighed by its own residual RMS, then all of them together (`fit_plant`; docs/calibration.md
-says why in this order). The Jacobian at the solution gives 95 % intervals (with the base's rotor side, which the
-fit takes as given, and through serial mode the writes' arrival the record leaves unknown, carried into them:
-`_rotor_side`, `_timing`) and the identifiability verdict: a parameter whose column is
+says why in this order), and the rotor's Kt/J_m by its profile along the others' solution (`_rotor_profile`). The
+Jacobian at the solution gives 95 % intervals (with the rotor side's interval, and through serial mode the writes'
+arrival the record leaves unknown, carried into them: `_rotor_profile`, `_timing`) and the identifiability verdict:
+a parameter whose column is
 (nearly) a combination of the others' (variance inflation, from the normalised Jacobian's conditioning) is reported
 "not identifiable", not given a confident number.
 """
@@ -56,9 +57,9 @@ class FitResult:
     jac_names: tuple[str, ...] = ()  # the parameters of the Jacobian (and `correlations`), in its order
     noise_scales: dict[str, float] = field(default_factory=dict)  # signal -> the residual scale it was weighed by
     unheard: dict[str, int] = field(default_factory=dict)  # segment -> used samples without a simulated current
-    # the part of each 95 % half-width that is the base profile's rotor side (Kt/J_m) taken as uncertain
+    # the part of each 95 % half-width that is the rotor side's (Kt/J_m) interval (`_rotor_profile`)
     rotor_ci95: dict[str, float] = field(default_factory=dict)
-    rotor_sd: float = 0.0  # the rotor side's relative spread carried into the intervals (`rotor_side_sd`)
+    rotor_sd: float = 0.0  # the tolerance table's relative spread of Kt/J_m, the profile's prior (`rotor_side_sd`)
     # the part of each 95 % half-width that is the writes' arrival the record leaves unknown (`_timing`): 0 when the
     # timing is exact (the virtual bench)
     timing_ci95: dict[str, float] = field(default_factory=dict)
@@ -120,9 +121,9 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     all_names = tuple(names)
     # the rotor's Kt/J_m is fitted by its profile after the least squares (`_rotor_profile`), never in them
     names = ls_names = tuple(n for n in names if n != "rotor_accel_scale")
-    if not names:
-        raise ValueError("--params: rotor_accel_scale is fitted by its profile, along which the others move: "
-                         "name at least one other parameter")
+    if not set(names) - {"backlash_deg"}:
+        raise ValueError("--params: backlash_deg and rotor_accel_scale are profiled with other parameters fitted: "
+                         "name at least one more")
     scan = "backlash_deg" in names  # profiled first, then in the least squares (`_backlash_profile`)
     # the first solution leaves out the backlash and the driver's current lag: both shape the current at each
     # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:

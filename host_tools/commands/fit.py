@@ -45,9 +45,9 @@ def run(args: argparse.Namespace) -> int:
         if unknown or not names:
             raise ValueError(f"--params {args.params!r}: {unknown[0] if unknown else 'empty'} is not a fit "
                              f"parameter: choose from {', '.join(PARAMS)}")
-        if set(names) == {"backlash_deg"}:
-            raise ValueError(f"--params {args.params!r}: backlash_deg is profiled with other parameters fitted: "
-                             "name at least one more")
+        if not set(names) - {"backlash_deg", "rotor_accel_scale"}:
+            raise ValueError(f"--params {args.params!r}: backlash_deg and rotor_accel_scale are profiled with other "
+                             "parameters fitted: name at least one more")
         base = load_base(args.base)
         base_text = (args.base or profile_path("plant_ak60_6.toml")).read_text(encoding="utf-8")
         exp = load_experiment(args.run_dir)
