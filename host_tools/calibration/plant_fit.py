@@ -322,8 +322,6 @@ def _moved_solution(sol: _Solution, start: dict[str, float], fun, valley=None) -
 
 ROTOR_STEP = 0.05  # the rotor side's profile grid and its secant step in the Jacobian (relative Kt/J_m)
 ROTOR_POINTS = 9  # at most this many profile points (the base's, 1.0, included)
-# the backlash's valley at each profile point, from its neighbour's (it moves a few hundredths of a degree a step)
-ROTOR_VALLEY = ((0.03, 2), (0.01, 2))
 
 
 def _covariance(jac: np.ndarray, r: np.ndarray, clusters: np.ndarray) -> np.ndarray:
@@ -401,9 +399,8 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
                 or len(points) >= ROTOR_POINTS:
             return False
         moved = {"rotor_accel_scale": scale}
-        w, r = _moved_solution(sol, points[k + 1 if k < 0 else k - 1][1],  # from its neighbour towards the base
-                               lambda w: residuals(base, {**w, **moved}, part, scales),
-                               lambda w: _backlash_valley(base, {**w, **moved}, part, scales, ROTOR_VALLEY))
+        w, r = _moved_solution(sol, v, lambda w: residuals(base, {**w, **moved}, part, scales),
+                               lambda w: _backlash_valley(base, {**w, **moved}, part, scales))
         points[k] = (r, w)
         return True
 
@@ -426,27 +423,37 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
                 break
         unit = _cost_unit(points[min(points, key=penalised)][0], len(sol.names))
     best = min(points, key=penalised)
+    level = penalised(best) + 0.5 * 3.841 * unit
     offset = best * ROTOR_STEP
-    there = points[best][1]
-    if best - 1 in points and best + 1 in points:  # the vertex of the parabola through the best and its neighbours,
-        # the others there along the same parabolas through their moved values
+    if best - 1 in points and best + 1 in points:  # the vertex of the parabola through the best and its neighbours
         three = [(best + d) * ROTOR_STEP for d in (-1, 0, 1)]
         a, b, _ = np.polyfit(three, [penalised(best + d) for d in (-1, 0, 1)], 2)
         if a > 0:
             offset = float(np.clip(-b / (2 * a), three[0], three[2]))
-            there = {n: float(np.polyval(np.polyfit(three, [points[best + d][1][n] for d in (-1, 0, 1)], 2), offset))
-                     for n in there}
-    lo_k, hi_k = best, best
-    while lo_k - 1 in points and within(lo_k - 1):
-        lo_k -= 1
-    while hi_k + 1 in points and within(hi_k + 1):
-        hi_k += 1
-    closed = lo_k - 1 in points and hi_k + 1 in points
-    lower, upper = (lo_k - 1 if lo_k - 1 in points else lo_k), (hi_k + 1 if hi_k + 1 in points else hi_k)
-    half = max(offset - lower * ROTOR_STEP, upper * ROTOR_STEP - offset)
-    ends = [np.array([points[k][1][n] - there[n] for n in sol.names]) for k in (upper, lower)]
+    ks = sorted(points)
+    grid = np.array([k * ROTOR_STEP for k in ks])
+    along = np.array([[points[k][1][n] for n in sol.names] for k in ks])
+
+    def at(x: float) -> dict[str, float]:  # the others along the grid's moved solutions, linearly between points
+        return {**v, **{n: float(np.interp(x, grid, along[:, j])) for j, n in enumerate(sol.names)}}
+
+    def end(step: int) -> tuple[float, bool]:  # where the cost crosses the interval's level, linearly between points
+        k = best
+        while k + step in points and within(k + step):
+            k += step
+        if k + step not in points:
+            return k * ROTOR_STEP, False
+        y0, y1 = penalised(k), penalised(k + step)
+        return (k + step * (level - y0) / (y1 - y0)) * ROTOR_STEP, True
+
+    (lower, closed_lo), (upper, closed_hi) = end(-1), end(1)
+    # the profile is sampled every ROTOR_STEP: a best between samples is known to about half a step either way
+    lower, upper = min(lower, offset - ROTOR_STEP / 2), max(upper, offset + ROTOR_STEP / 2)
+    half = max(offset - lower, upper - offset)
+    there = at(offset)
+    ends = [np.array([at(x)[n] - there[n] for n in sol.names]) for x in (upper, lower)]
     shift95 = np.where(np.abs(ends[0]) >= np.abs(ends[1]), ends[0], ends[1])
-    return _RotorProfile(1.0 + offset, half, bool(closed and half < 1.96 * sd), there, shift95)
+    return _RotorProfile(1.0 + offset, half, bool(closed_lo and closed_hi and half < 1.96 * sd), there, shift95)
 
 
 TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
