@@ -378,16 +378,17 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
     The rotor alone carries itself across the backlash at each reversal, so Kt/J_m shapes the current there, and
     the least squares cannot follow it: with the backlash it makes a narrow valley whose floor moves in steps (each
     crossing ends on a whole command period; docs/calibration.md, The rotor side). A profile can: at each point of a
-    grid (ROTOR_STEP) the other parameters are the solution moved to that Kt/J_m (`_moved_solution`: the
-    backlash's valley searched, the others by a trust region on the solution's Jacobian). The tolerance table's
-    spread (`rotor_side_sd`) is a prior: its penalty, in units of the cost's chi-square (`_cost_unit`), is added,
-    so a record that cannot tell the rotor side keeps about the base's. The grid walks downhill from the base's and
-    on until a point on each side is outside the interval (where the cost rises by the 95 % quantile of
-    chi-square(1) / 2), at most ROTOR_POINTS points. The best is the vertex of the parabola through the best point
-    and its neighbours; the interval reaches the first point outside it on each side (as the backlash's profile's),
-    and is identified when it closes inside the grid narrower than the prior's own (1.96 spreads). The others are
-    moved to the best, and their shift to the interval's ends (the larger of the two, its sign with it) is what
-    `fit_plant` carries into their intervals.
+    grid (ROTOR_STEP) the other parameters are the solution moved to that Kt/J_m (`_moved_solution` from the
+    base's solution: the backlash's valley searched, the others by a trust region on the solution's Jacobian). The
+    tolerance table's spread (`rotor_side_sd`) is a prior: its penalty, in units of the cost's chi-square
+    (`_cost_unit`), is added, so a record that cannot tell the rotor side keeps about the base's. The grid walks
+    from the base's on outwards while an end of it is within the interval (where the penalised cost is within the
+    95 % quantile of chi-square(1) / 2 of its least), at most ROTOR_POINTS points. The best is the vertex of the
+    parabola through the best point and its neighbours; the others there, and at the interval's ends, lie linearly
+    between the grid's moved solutions. The interval's ends are where the cost crosses its level, linearly between
+    points, and at least half a grid step from the best (the profile is sampled no finer). It is identified when
+    the cost without the prior closes such an interval inside the grid. The others' shift to the interval's ends
+    (the larger of the two, its sign with it) is what `fit_plant` carries into their intervals.
     """
     sd = rotor_side_sd(base)
 
@@ -423,7 +424,6 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
                 break
         unit = _cost_unit(points[min(points, key=penalised)][0], len(sol.names))
     best = min(points, key=penalised)
-    level = penalised(best) + 0.5 * 3.841 * unit
     offset = best * ROTOR_STEP
     if best - 1 in points and best + 1 in points:  # the vertex of the parabola through the best and its neighbours
         three = [(best + d) * ROTOR_STEP for d in (-1, 0, 1)]
@@ -437,23 +437,31 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
     def at(x: float) -> dict[str, float]:  # the others along the grid's moved solutions, linearly between points
         return {**v, **{n: float(np.interp(x, grid, along[:, j])) for j, n in enumerate(sol.names)}}
 
-    def end(step: int) -> tuple[float, bool]:  # where the cost crosses the interval's level, linearly between points
-        k = best
-        while k + step in points and within(k + step):
+    def data(k: int) -> float:
+        return 0.5 * float(np.dot(points[k][0], points[k][0]))
+
+    def end(step: int, cost=penalised) -> tuple[float, bool]:
+        """Where `cost` crosses its interval's level on that side, linearly between points; False: not in the grid."""
+        low = min(points, key=cost)
+        level = cost(low) + 0.5 * 3.841 * unit
+        k = low
+        while k + step in points and cost(k + step) <= level:
             k += step
         if k + step not in points:
             return k * ROTOR_STEP, False
-        y0, y1 = penalised(k), penalised(k + step)
+        y0, y1 = cost(k), cost(k + step)
         return (k + step * (level - y0) / (y1 - y0)) * ROTOR_STEP, True
 
-    (lower, closed_lo), (upper, closed_hi) = end(-1), end(1)
+    (lower, _), (upper, _) = end(-1), end(1)
     # the profile is sampled every ROTOR_STEP: a best between samples is known to about half a step either way
     lower, upper = min(lower, offset - ROTOR_STEP / 2), max(upper, offset + ROTOR_STEP / 2)
     half = max(offset - lower, upper - offset)
     there = at(offset)
     ends = [np.array([at(x)[n] - there[n] for n in sol.names]) for x in (upper, lower)]
     shift95 = np.where(np.abs(ends[0]) >= np.abs(ends[1]), ends[0], ends[1])
-    return _RotorProfile(1.0 + offset, half, bool(closed_lo and closed_hi and half < 1.96 * sd), there, shift95)
+    # identified when the data alone (the cost without the prior) close an interval inside the walked grid
+    identified = end(-1, data)[1] and end(1, data)[1]
+    return _RotorProfile(1.0 + offset, half, bool(identified), there, shift95)
 
 
 TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
