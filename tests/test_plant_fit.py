@@ -158,6 +158,18 @@ def test_fit_reports_the_rotor_sides_part_of_the_intervals(experiment):
     assert 0.7 <= rotor["value"] <= 1.3 and rotor["ci95_half_width"] == rotor["ci95_rotor_side"] > 0, rotor
 
 
+def test_fit_reports_the_stuck_starts_part_of_the_intervals(experiment):
+    """fit.json: the encoder's count at the windows that start stuck widens the intervals, the static friction's
+    (the breakaways are in those windows) most of all; its part is reported beside each, and in fit.md."""
+    _, _, out, _ = experiment
+    s = json.loads((out / "fit.json").read_text())
+    for n, p in s["params"].items():
+        assert 0.0 <= p["ci95_stuck_starts"] <= p["ci95_half_width"] + 1e-12, n
+    static = s["params"]["static_friction_nm"]
+    assert static["ci95_stuck_starts"] > 0.3 * static["ci95_half_width"], static
+    assert "of which stuck starts" in (out / "fit.md").read_text()
+
+
 def _toy_solution(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -10.0, hi: float = 10.0,
                   names: tuple[str, ...] | None = None):
     from host_tools.calibration.plant_fit import _Solution

@@ -139,6 +139,35 @@ def test_a_window_at_rest_starts_sliding_only_where_its_encoder_moves():
     assert _slow_start(exp, 0, 0.02) == 0.0
 
 
+def test_stuck_starts_and_the_encoders_count():
+    """The windows that start stuck are those whose encoder is at rest and does not move within SLIDE_LOOK_S (not
+    those that move, nor a fast one); the readings' resolution is their smallest step; a start shift moves that
+    window's simulated start by exactly that much, and nothing else."""
+    from host_tools.calibration.fit_model import base_values, encoder_step, simulate, stuck_starts, windows
+
+    exp = _experiment()
+    q = 2 * math.pi / 4000
+    starts = [k for k, _ in windows(exp)]
+    assert encoder_step(exp) == 0.0
+    assert list(stuck_starts(exp)) == starts  # never moves, never fast: every window starts stuck
+    # the foot moves one count in the first window's first 10 ms, and three counts later
+    angle = np.where(exp.t < 0.005, 0.0, q) + np.where(exp.t < 0.3, 0.0, 3 * q)
+    moving = replace(exp, angle=angle, vel=np.where(exp.t < 0.01, 0.5, 0.0))
+    assert encoder_step(moving) == pytest.approx(q, rel=1e-12)
+    assert 0 not in stuck_starts(moving) and set(stuck_starts(moving)) == set(starts) - {0}
+    base = load_plant_params()
+    v = base_values(base)
+    k = int(stuck_starts(moving)[0])
+    shift = np.zeros(len(exp.t))
+    shift[k] = q / 3
+    a0 = simulate(base, v, moving)[0]
+    a1 = simulate(base, v, replace(moving, start_shift=shift))[0]
+    end = dict(windows(moving))[k]
+    assert a1[k] - a0[k] == pytest.approx(q / 3, abs=1e-12)
+    assert not np.allclose(a1[k:end], a0[k:end])
+    assert np.array_equal(np.delete(a1, np.arange(k, end)), np.delete(a0, np.arange(k, end)))
+
+
 def test_a_windows_imu_offset_and_lag_transient_leave_no_imu_error():
     """The IMU's offset and its lag's start state are each window's own: a recorded pitch that differs from the
     simulated one by a constant and a term decaying as e^(-t/lag) from the window's start has no IMU error."""

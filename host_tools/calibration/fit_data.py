@@ -53,6 +53,9 @@ class Experiment:
     # write's command
     bounds: np.ndarray | None = None
     req_cmd: np.ndarray | None = None
+    # per sample: how far above its encoder reading a simulation window starting there starts (rad; None: 0). The
+    # reading places the foot only to its count: `plant_fit._stuck_starts` draws it within the count
+    start_shift: np.ndarray | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S,
                    drop: np.ndarray | None = None) -> tuple[Experiment, Experiment]:
@@ -83,7 +86,8 @@ class Experiment:
     def _select(self, keep: np.ndarray) -> Experiment:
         return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
                           self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[keep], self.bounds, self.req_cmd)
+                          None if self.angle_req_of is None else self.angle_req_of[keep], self.bounds, self.req_cmd,
+                          None if self.start_shift is None else self.start_shift[keep])
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
@@ -96,7 +100,8 @@ class Experiment:
         return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
                           self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply,
                           None if self.angle_req_of is None else self.angle_req_of[k],
-                          None if self.bounds is None else self.bounds[c], req_cmd)
+                          None if self.bounds is None else self.bounds[c], req_cmd,
+                          None if self.start_shift is None else self.start_shift[k])
 
     def shifted(self, delay: np.ndarray) -> Experiment:
         """The same experiment with each write (a command and the request that follows it) reaching the motor

@@ -22,8 +22,9 @@ import numpy as np
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
 from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment
 
-__all__ = ["DEFAULT_FIT", "IMU_FRAME_AGE_S", "PARAMS", "SIGMA", "FitParam", "base_values", "fit_percentage",
-           "fit_percentages", "noise_scales", "plant_with", "residuals", "rotor_side_sd", "simulate"]
+__all__ = ["DEFAULT_FIT", "IMU_FRAME_AGE_S", "PARAMS", "SIGMA", "FitParam", "base_values", "encoder_step",
+           "fit_percentage", "fit_percentages", "noise_scales", "plant_with", "residuals", "rotor_side_sd", "simulate",
+           "stuck_starts", "windows"]
 
 BACKLASH_DEG = 0.55  # the maker's (bench_imperfections.toml [gearbox_backlash]) for a base without the key
 
@@ -169,7 +170,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     def run_window(k: int, end: int, t0: float, v_start: float) -> None:
         """Simulate window [k, end) from the measured angle at t0, at v_start (0: stuck), into the arrays."""
         t_first = float(exp.t[k])
-        start = exp.angle[k] + offset
+        start = exp.angle[k] + offset + (0.0 if exp.start_shift is None else float(exp.start_shift[k]))
         c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
         if exp.angle_from_reply and c >= 0:  # a reply's angle has the rotor's place in the backlash in it: the
             # output is half the gap (through the belt) behind it on the side the command acting pushes
@@ -238,10 +239,8 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params, lag)
 
     heard = np.zeros(n, dtype=bool) if heard_out is None else heard_out
-    k = 0
-    while k < n:
+    for k, end in windows(exp, window_s):
         t0 = float(exp.t[k])
-        end = max(int(np.searchsorted(exp.t, t0 + window_s)), k + 1)
         if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
             t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
         v0 = float(vel[k])
@@ -264,8 +263,32 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         imu[k:end] = np.interp(frames, exp.t[k:end], imu[k:end])
         if FREE_IMU_OFFSET:
             _project_imu_start(exp, k, end, imu, mask, np.exp(-(frames - t0) / lag))
-        k = end
     return angle, current, imu, mask
+
+
+def windows(exp: Experiment, window_s: float = WINDOW_S) -> list[tuple[int, int]]:
+    """The simulation windows: (first sample, end) of each, window_s from its first sample's time."""
+    out, k = [], 0
+    while k < len(exp.t):
+        end = max(int(np.searchsorted(exp.t, exp.t[k] + window_s)), k + 1)
+        out.append((k, end))
+        k = end
+    return out
+
+
+def stuck_starts(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
+    """The first samples of the windows that start stuck (the encoder at rest and not moving within SLIDE_LOOK_S:
+    `_slow_start`)."""
+    return np.array([k for k, _ in windows(exp, window_s)
+                     if abs(float(exp.vel[k])) < REST_RAD_S and _slow_start(exp, k, float(exp.vel[k])) == 0.0],
+                    dtype=int)
+
+
+def encoder_step(exp: Experiment) -> float:
+    """The encoder readings' resolution (rad): their smallest step (0 when they never move)."""
+    steps = np.abs(np.diff(exp.angle))
+    steps = steps[steps > 1e-12]
+    return float(steps.min()) if len(steps) else 0.0
 
 
 SLOW_STEP_RAD_S = 0.03  # a slow start's response to its velocity: the window simulated this much faster
@@ -370,11 +393,8 @@ def _frame_times(exp: Experiment, k: int, end: int) -> np.ndarray:
 def window_ids(exp: Experiment, window_s: float = WINDOW_S) -> np.ndarray:
     """The simulation window of each used sample (as `simulate` cuts them), in the order `residuals` lists them."""
     ids = np.zeros(len(exp.t), dtype=int)
-    k, w = 0, 0
-    while k < len(exp.t):
-        end = max(int(np.searchsorted(exp.t, exp.t[k] + window_s)), k + 1)
+    for w, (k, end) in enumerate(windows(exp, window_s)):
         ids[k:end] = w
-        k, w = end, w + 1
     mask = exp.t - exp.t[ids_start(ids)] >= SKIP_S
     return ids[mask]
 

@@ -78,7 +78,9 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
                   # the part of ci95_half_width that is the rotor side's (Kt/J_m) interval
                   "ci95_rotor_side": num(r.rotor_ci95.get(n, 0.0)),
                   # the part that is the writes' arrival the record leaves unknown (serial mode; 0 when exact)
-                  "ci95_timing": num(r.timing_ci95.get(n, 0.0)), "start": num(r.start[n]),
+                  "ci95_timing": num(r.timing_ci95.get(n, 0.0)),
+                  # the part that is the encoder's count at the windows that start stuck (where the foot sits in it)
+                  "ci95_stuck_starts": num(r.stuck_ci95.get(n, 0.0)), "start": num(r.start[n]),
                   "collinearity": num(r.collinearity[n]), "identifiable": r.identifiable[n],
                   "unit": PARAMS[n].unit, "meaning": PARAMS[n].meaning, "bounds": [PARAMS[n].lo, PARAMS[n].hi]}
               for n in r.names}
@@ -204,14 +206,15 @@ def verdict(p: dict) -> str:
 def _markdown(s: dict) -> str:
     lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
              f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
-             "| parameter | value | 95 % ± | of which rotor side | of which timing | collinearity | verdict |",
-             "|---|---|---|---|---|---|---|"]
+             "| parameter | value | 95 % ± | of which rotor side | of which timing | of which stuck starts | "
+             "collinearity | verdict |", "|---|---|---|---|---|---|---|---|"]
     for n, p in s["params"].items():
         lines.append(f"| {n} ({p['unit']}) | {_g(p['value'], '.6g')} | {_g(p['ci95_half_width'], '.3g')} | "
                      f"{_g(p['ci95_rotor_side'], '.2g')} | {_g(p['ci95_timing'], '.2g')} | "
+                     f"{_g(p['ci95_stuck_starts'], '.2g')} | "
                      f"{_g(p['collinearity'], '.2f')} | {verdict(p)} |")
     for n, p in s["fixed"].items():
-        lines.append(f"| {n} | fixed | | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
+        lines.append(f"| {n} | fixed | | | | | {p['collinearity_if_fitted']} | **not identifiable**: {p['why']} |")
     lines += ["", "95 % ± is each parameter's interval on its own. It includes the rotor side's: the rotor's Kt/J_m "
               "(`rotor_accel_scale`), which alone carries it across the backlash at each reversal, is fitted by its "
               "profile (the tolerance table's relative spread of Kt and rotor inertia, "
@@ -220,7 +223,9 @@ def _markdown(s: dict) -> str:
               + ("The timing's column: the record bounds each write's arrival at the motor only to a window (median "
                  f"{_g(s['arrival_window_ms'], '.3f')} ms); the shift of the fit over writes drawn within it is "
                  "added likewise." if s["arrival_window_ms"] else
-                 "The timing's column is 0: the virtual bench's writes arrive when the fit takes them to.")]
+                 "The timing's column is 0: the virtual bench's writes arrive when the fit takes them to.")
+              + " The stuck starts' column: a window that starts stuck starts at its encoder reading, which places "
+              "the foot only to its count; the shift of the fit over starts drawn within the count is added likewise."]
     lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():

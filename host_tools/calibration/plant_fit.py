@@ -15,7 +15,7 @@ a parameter whose column is
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -26,10 +26,12 @@ from host_tools.calibration.fit_model import (
     PARAMS,
     SIGMA,
     base_values,
+    encoder_step,
     fit_percentages,
     noise_scales,
     residuals,
     rotor_side_sd,
+    stuck_starts,
     window_ids,
 )
 
@@ -67,6 +69,8 @@ class FitResult:
     # segment -> samples left out as a stall's (`Experiment.stalled`), and the bound that says so (ms; 0: none)
     stalled: dict[str, int] = field(default_factory=dict)
     stall_bound_ms: float = 0.0
+    # the part of each 95 % half-width that is the encoder's count at the windows that start stuck (`_stuck_starts`)
+    stuck_ci95: dict[str, float] = field(default_factory=dict)
 
 
 # the solver stops when the cost (in units of the noise scales: 0.5 per sample's unit error) changes by less than this
@@ -211,7 +215,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     rotor_shift = np.zeros(n) if rotor is None else rotor.shift95 / 1.96
     cov = cov + np.outer(rotor_shift, rotor_shift)
     timing = _timing(base, v, fit_part, scales, sol)
-    cov = cov + timing
+    stuck = _stuck_starts(base, v, fit_part, scales, sol)
+    cov = cov + timing + stuck
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
     ident = {}
@@ -239,17 +244,19 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     collinearity = {nm: float(coll[k]) for k, nm in enumerate(names)}
     rotor_ci95 = {nm: 1.96 * abs(float(rotor_shift[k])) for k, nm in enumerate(names)}
     timing_ci95 = {nm: 1.96 * math.sqrt(max(float(timing[k, k]), 0.0)) for k, nm in enumerate(names)}
+    stuck_ci95 = {nm: 1.96 * math.sqrt(max(float(stuck[k, k]), 0.0)) for k, nm in enumerate(names)}
     if profile is not None:  # its interval from the profile (a secant over its switching steps is no curvature),
-        # with the rotor side's and the timing's parts added in quadrature (when the backlash is in the Jacobian)
+        # with the rotor side's, the timing's and the stuck starts' parts in quadrature (when it is in the Jacobian)
         rb = rotor_ci95.get("backlash_deg", 0.0)
-        ci95["backlash_deg"] = math.sqrt(profile[1] ** 2 + rb ** 2 + timing_ci95.get("backlash_deg", 0.0) ** 2)
+        ci95["backlash_deg"] = math.sqrt(profile[1] ** 2 + rb ** 2 + timing_ci95.get("backlash_deg", 0.0) ** 2
+                                         + stuck_ci95.get("backlash_deg", 0.0) ** 2)
         ident["backlash_deg"] = profile[2] and ci95["backlash_deg"] <= _ABS_CI["backlash_deg"]
         collinearity.setdefault("backlash_deg", math.nan)  # not in the Jacobian when fixed at 0
     if "rotor_accel_scale" in all_names:  # its value and interval are its profile's (none: the base's, its spread)
         v["rotor_accel_scale"] = 1.0 if rotor is None else rotor.best
         ci95["rotor_accel_scale"] = rotor_ci95["rotor_accel_scale"] = \
             1.96 * rotor_side_sd(base) if rotor is None else rotor.half
-        timing_ci95["rotor_accel_scale"] = 0.0
+        timing_ci95["rotor_accel_scale"] = stuck_ci95["rotor_accel_scale"] = 0.0
         collinearity["rotor_accel_scale"] = math.nan
         ident["rotor_accel_scale"] = rotor is not None and rotor.identified
     # what the fit started from
@@ -258,7 +265,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
                      cost, time.perf_counter() - wall0, (t0, t1), message,
                      fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_side_sd(base), timing_ci95,
                      0.0 if exp.bounds is None else 1e3 * float(np.median(exp.bounds[:, 1] - exp.bounds[:, 0])),
-                     left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S)
+                     left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S, stuck_ci95)
 
 
 MOVED_NFEV = 10  # at most this many simulations per trust-region pass of `_moved_solution` (two passes a point)
@@ -464,8 +471,20 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
     return _RotorProfile(1.0 + offset, half, bool(identified), there, shift95)
 
 
-TIMING_DRAWS = 16  # draws of the writes' arrivals (`_timing`): the half-widths' part to about 18 % (sqrt(1/2K))
-TIMING_SEED = 21  # their seed: the same recording gives the same intervals
+DRAWS = 16  # draws of each drawn consider term (`_drawn`): its half-widths' part to about 18 % (sqrt(1/2K))
+TIMING_SEED = 21  # the seeds of the draws: the same recording gives the same intervals
+STUCK_SEED = 22
+
+
+def _drawn(sol: _Solution, v: dict[str, float], draws) -> np.ndarray:
+    """The covariance a consider term adds: the mean outer product of the least-squares solution's linear shift
+    (`_linear_shift`) over `draws`, residual functions each of one draw of what the record leaves unknown (the
+    draws' mean included: the record cannot exclude it)."""
+    out = np.zeros((len(sol.names), len(sol.names)))
+    for fun in draws:
+        shift = _linear_shift(sol, v, fun)
+        out += np.outer(shift, shift)
+    return out / DRAWS
 
 
 def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
@@ -475,25 +494,39 @@ def _timing(base: PlantParams, v: dict[str, float], part: Experiment, scales: di
     Through serial mode the record dates each write (a command and the request after it) at COMMAND_DELAY_S after
     its job, later when a late reply shows it (`fit_data._late_commands`), and bounds it only to a window
     (`fit_data.arrival_bounds`: about 0.6 ms through a pty) within which the link's per-frame delay is unknown.
-    Each draw puts every write at an independent uniform point of its window (the least the record says); the
-    least-squares solution's shift on it is the linear one (`_linear_shift`); the mean of that shift's outer product
-    over the draws (its mean, a delay common to all writes, included: the record cannot exclude it) is added to the
-    covariance, as the rotor side's consider term is.
+    Each of DRAWS draws puts every write at an independent uniform point of its window (the least the record says):
+    `_drawn`.
     """
-    n = len(sol.names)
     if part.bounds is None or not np.any(part.bounds[:, 1] > part.bounds[:, 0]):
-        return np.zeros((n, n))
+        return np.zeros((len(sol.names), len(sol.names)))
     rng = np.random.default_rng(TIMING_SEED)
-    out = np.zeros((n, n))
     lo, hi = part.bounds[:, 0], part.bounds[:, 1]
     # writes whose windows overlap (a stall: each may have waited behind the one before) are one burst, late together
     burst = np.r_[0, np.cumsum(part.t_cmd[1:] + lo[1:] > np.maximum.accumulate(part.t_cmd + hi)[:-1])]
-    for _ in range(TIMING_DRAWS):
-        u = rng.uniform(0.0, 1.0, int(burst[-1]) + 1)[burst]
-        drawn = part.shifted(lo + u * (hi - lo))
-        shift = _linear_shift(sol, v, lambda w, d=drawn: residuals(base, w, d, scales))
-        out += np.outer(shift, shift)
-    return out / TIMING_DRAWS
+    drawn = [part.shifted(lo + rng.uniform(0.0, 1.0, int(burst[-1]) + 1)[burst] * (hi - lo)) for _ in range(DRAWS)]
+    return _drawn(sol, v, (lambda w, d=d: residuals(base, w, d, scales) for d in drawn))
+
+
+def _stuck_starts(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+                  sol: _Solution) -> np.ndarray:
+    """The covariance the encoder's count at the windows that start stuck adds to the fitted parameters.
+
+    A window that starts stuck (`fit_model.stuck_starts`) starts at its encoder reading, which places the foot only
+    to its count (`fit_model.encoder_step`: 0.09 deg for 4000 counts a turn); where in it the foot sits moves the
+    angle after the breakaway and, through gravity, the breakaway itself, by up to a count, and the record does not
+    say where (docs/calibration.md, The encoder's count at a stuck start). Each of DRAWS draws starts every such
+    window at an independent uniform point within a count about its reading: `_drawn`. Zeros with no such window.
+    """
+    ks, q = stuck_starts(part), encoder_step(part)
+    if not len(ks) or q <= 0.0:
+        return np.zeros((len(sol.names), len(sol.names)))
+    rng = np.random.default_rng(STUCK_SEED)
+    drawn = []
+    for _ in range(DRAWS):
+        shift = np.zeros(len(part.t))
+        shift[ks] = rng.uniform(-q / 2, q / 2, len(ks))
+        drawn.append(replace(part, start_shift=shift))
+    return _drawn(sol, v, (lambda w, d=d: residuals(base, w, d, scales) for d in drawn))
 
 
 SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the solver and the intervals use

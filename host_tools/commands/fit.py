@@ -72,13 +72,14 @@ def run(args: argparse.Namespace) -> int:
         run_dir.discard()
         raise
     print(f"  {r.nfev} simulations in {r.wall_s:.1f} s ({r.message})")
-    print(f"  {'parameter':<28}{'value':>12}{'95 % ±':>12}{'rotor side':>12}{'timing':>10}  verdict")
+    print(f"  {'parameter':<28}{'value':>12}{'95 % ±':>12}{'rotor side':>12}{'timing':>10}{'stuck':>10}  verdict")
     for n, p in s["params"].items():
         print(f"  {n:<28}{_g(p['value'], '.5g'):>12}{_g(p['ci95_half_width'], '.3g'):>12}"
-              f"{_g(p['ci95_rotor_side'], '.2g'):>12}{_g(p['ci95_timing'], '.2g'):>10}  "
+              f"{_g(p['ci95_rotor_side'], '.2g'):>12}{_g(p['ci95_timing'], '.2g'):>10}"
+              f"{_g(p['ci95_stuck_starts'], '.2g'):>10}  "
               f"{verdict(p)}")
     for n in s["fixed"]:
-        print(f"  {n:<28}{'fixed':>12}{'':>34}  NOT IDENTIFIABLE (fixed: see fit.md)")
+        print(f"  {n:<28}{'fixed':>12}{'':>44}  NOT IDENTIFIABLE (fixed: see fit.md)")
     for seg, d in s["fit_percent"].items():
         print(f"  fit % on the {seg.replace('_', '-')} part: angle {_g(d['angle'], '.1f')}, current "
               f"{_g(d['current'], '.1f')}, IMU {_g(d['imu'], '.1f')}")
