@@ -42,9 +42,9 @@ def _errors_in_half_widths(s: dict, truth: dict[str, float]) -> dict[str, float]
 
 
 def test_identified_parameters_are_within_their_intervals(fitted):
-    """Each identified parameter within its own 95 % interval, on both plants (seed 7's static friction since the
-    intervals carry the base's rotor side: docs/calibration.md, Limits, with the intervals' coverage over six
-    plants, which is below 95 %)."""
+    """Each identified parameter within its own 95 % interval, on both plants, the rotor side's Kt/J_m among them
+    (seed 7's static friction since the intervals carry the stuck starts' encoder count: docs/calibration.md,
+    Limits, with the intervals' coverage over six plants)."""
     s, truth = fitted
     errors = _errors_in_half_widths(s, truth)
     assert len(errors) >= 5

@@ -269,7 +269,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
 
 
 MOVED_NFEV = 10  # at most this many simulations per trust-region pass of `_moved_solution` (two passes a point)
-MOVED_TOL = 1e-4  # their cost and step tolerance (the solution's own is SOLVER_TOL: these are one spread's shift)
+MOVED_TOL = 1e-4  # their cost and step tolerance (the solution's own is SOLVER_TOL: these are a profile point's)
 
 
 @dataclass
@@ -327,7 +327,7 @@ def _moved_solution(sol: _Solution, start: dict[str, float], fun, valley=None) -
     return w, (fun(w) if r is None else r)
 
 
-ROTOR_STEP = 0.05  # the rotor side's profile grid and its secant step in the Jacobian (relative Kt/J_m)
+ROTOR_STEP = 0.05  # the rotor side's profile grid (relative Kt/J_m)
 ROTOR_POINTS = 9  # at most this many profile points (the base's, 1.0, included)
 
 
@@ -356,13 +356,11 @@ def _cost_unit(r: np.ndarray, n: int) -> float:
     return s2 * (1.0 + rho) / (1.0 - rho)
 
 
-def _parabola(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """(vertex, curvature a of y = a (x - vertex)^2 + c) of the parabola through three points; a <= 0: not convex
-    (the vertex is then the best of the three)."""
+def _parabola(x: np.ndarray, y: np.ndarray) -> float:
+    """The vertex of the parabola through three points (x ascending), within them; the middle one's x when it is
+    not convex."""
     a, b, _ = np.polyfit(x, y, 2)
-    if a <= 0:
-        return float(x[int(np.argmin(y))]), float(a)
-    return float(np.clip(-b / (2 * a), x[0], x[2])), float(a)
+    return float(np.clip(-b / (2 * a), x[0], x[2])) if a > 0 else float(x[1])
 
 
 @dataclass
@@ -432,11 +430,9 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
         unit = _cost_unit(points[min(points, key=penalised)][0], len(sol.names))
     best = min(points, key=penalised)
     offset = best * ROTOR_STEP
-    if best - 1 in points and best + 1 in points:  # the vertex of the parabola through the best and its neighbours
-        three = [(best + d) * ROTOR_STEP for d in (-1, 0, 1)]
-        a, b, _ = np.polyfit(three, [penalised(best + d) for d in (-1, 0, 1)], 2)
-        if a > 0:
-            offset = float(np.clip(-b / (2 * a), three[0], three[2]))
+    if best - 1 in points and best + 1 in points:
+        offset = _parabola(np.array([(best + d) * ROTOR_STEP for d in (-1, 0, 1)]),
+                           np.array([penalised(best + d) for d in (-1, 0, 1)]))
     ks = sorted(points)
     grid = np.array([k * ROTOR_STEP for k in ks])
     along = np.array([[points[k][1][n] for n in sol.names] for k in ks])
@@ -614,10 +610,7 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
     threshold = 0.5 * 3.841 * _cost_unit(residuals(base, v, part, scales), n)
     best = float(grid[k])
     if 0 < k < len(grid) - 1:  # the parabola through the best and its neighbours
-        x, y = grid[k - 1:k + 2], cost[k - 1:k + 2]
-        a = np.polyfit(x, y, 2)
-        if a[0] > 0:
-            best = float(np.clip(-a[1] / (2 * a[0]), x[0], x[2]))
+        best = _parabola(grid[k - 1:k + 2], cost[k - 1:k + 2])
     inside = cost - cost[k] <= threshold
     lo_i, hi_i = k, k
     while lo_i > 0 and inside[lo_i - 1]:
