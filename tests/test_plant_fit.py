@@ -314,3 +314,20 @@ def test_the_reply_current_is_the_middle_of_its_truncated_reading(experiment):
     assert abs(float(np.mean(signed))) < 0.0015, float(np.mean(signed))  # as read: +0.0040 A
     readings = np.array([-1.23, -0.01, 0.0, 0.01, 2.5])
     assert np.allclose(reading_mean(readings), [-1.235, -0.015, 0.0, 0.015, 2.505])
+
+
+def test_a_column_made_of_a_switching_step_is_not_a_slope():
+    """A secant column whose step crosses a switching (a jump of 50 in one residual) is found by the step the other
+    way, and only that one: a smooth column passes (docs/calibration.md, "A verdict the secant can fool")."""
+    from host_tools.calibration.plant_fit import _secant_jacobian, _switching_columns
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return np.array([x[0], 2.0 * x[0] + 0.1 * x[1], 0.01 * x[1] + (50.0 if x[1] > 1.001 else 0.0)])
+
+    x, steps, lo, hi = np.array([1.0, 1.0]), np.array([0.02, 0.02]), np.zeros(2), np.full(2, 10.0)
+    jac, r0 = _secant_jacobian(fun, x, steps, hi)
+    assert _switching_columns(fun, x, steps, lo, hi, jac, r0, [0, 1]) == [1]
+    # the same step at a point away from the switching is a slope
+    x2 = np.array([1.0, 2.0])
+    jac2, r2 = _secant_jacobian(fun, x2, steps, hi)
+    assert _switching_columns(fun, x2, steps, lo, hi, jac2, r2, [0, 1]) == []
