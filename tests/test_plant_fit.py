@@ -291,3 +291,43 @@ def test_moved_solution_takes_the_backlash_from_its_valley_and_fits_the_others_a
     assert seen and seen[0]["p0"] == pytest.approx(0.5, abs=1e-3)  # the first pass, at the solution's backlash
     assert moved["backlash_deg"] == pytest.approx(1.4)
     assert moved["p0"] == pytest.approx(0.7, abs=1e-3)  # fitted again with the valley's backlash
+
+
+def test_the_reply_current_is_the_middle_of_its_truncated_reading(experiment):
+    """VESC truncates the current it reports toward zero to 0.01 A (PROTOCOLS.md A.3): taken as read, the fit's data
+    is 0.005 A smaller in magnitude than the driver's mean, which took the default experiment's damping and current
+    lag out of their intervals. At the true plant (emulation only) the measured current the fit reads has no signed
+    bias left against the simulated one; the readings are moved half a step away from zero, 0 stays 0."""
+    from host_tools.calibration.fit_data import load_experiment, reading_mean
+    from host_tools.calibration.fit_model import base_values, simulate
+    from host_tools.calibration.plant_truth import truth_of
+
+    d, run, _, _ = experiment
+    base = load_plant_params()
+    v = {**base_values(base), **truth_of(["--plant", str(d / "plant.toml")], 0), "imu_lag_s": 0.0195}
+    exp = load_experiment(run)
+    heard = np.zeros(len(exp.t), dtype=bool)
+    _, current, _, mask = simulate(base, v, exp, heard_out=heard)
+    used = mask & heard & (np.abs(exp.current) > 0.05)
+    assert used.sum() > 1000
+    signed = (current - exp.current)[used] * np.sign(exp.current[used])
+    assert abs(float(np.mean(signed))) < 0.0015, float(np.mean(signed))  # as read: +0.0040 A
+    readings = np.array([-1.23, -0.01, 0.0, 0.01, 2.5])
+    assert np.allclose(reading_mean(readings), [-1.235, -0.015, 0.0, 0.015, 2.505])
+
+
+def test_a_column_made_of_a_switching_step_is_not_a_slope():
+    """A secant column whose step crosses a switching (a jump of 50 in one residual) is found by the step the other
+    way, and only that one: a smooth column passes (docs/calibration.md, "A verdict the secant can fool")."""
+    from host_tools.calibration.plant_fit import _secant_jacobian, _switching_columns
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return np.array([x[0], 2.0 * x[0] + 0.1 * x[1], 0.01 * x[1] + (50.0 if x[1] > 1.001 else 0.0)])
+
+    x, steps, lo, hi = np.array([1.0, 1.0]), np.array([0.02, 0.02]), np.zeros(2), np.full(2, 10.0)
+    jac, r0 = _secant_jacobian(fun, x, steps, hi)
+    assert _switching_columns(fun, x, steps, lo, hi, jac, r0, [0, 1]) == [1]
+    # the same step at a point away from the switching is a slope
+    x2 = np.array([1.0, 2.0])
+    jac2, r2 = _secant_jacobian(fun, x2, steps, hi)
+    assert _switching_columns(fun, x2, steps, lo, hi, jac2, r2, [0, 1]) == []
