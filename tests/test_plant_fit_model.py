@@ -192,7 +192,7 @@ def test_a_windows_imu_offset_and_lag_transient_leave_no_imu_error():
 def test_the_backlash_valley_is_found_from_its_wall(monkeypatch):
     """The backlash's cost valley is a few hundredths of a degree wide, in steps: from a value on its wall (as the
     least squares' 0.1 deg secant leaves it) the coarse-to-fine search ends at its floor."""
-    import host_tools.calibration.plant_fit as pf
+    import host_tools.calibration.fit_profiles as pf
 
     floor = 0.437
 

@@ -252,11 +252,12 @@ def test_a_shifted_experiment_moves_each_write_and_its_request_in_order():
 
 
 def _timing_term(bounds: np.ndarray | None) -> float:
-    """The current lag's variance from `plant_fit._timing` on the hand-built experiment with these arrival bounds."""
+    """The current lag's variance from `fit_consider._timing` on the hand-built experiment with these arrival bounds."""
     from dataclasses import replace
 
+    from host_tools.calibration.fit_consider import _Solution, _timing
     from host_tools.calibration.fit_model import SIGMA, residuals
-    from host_tools.calibration.plant_fit import _secant_jacobian, _Solution, _timing
+    from host_tools.calibration.plant_fit import _secant_jacobian
 
     base = load_plant_params()
     v = base_values(base)

@@ -56,7 +56,7 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
     # the rotor's acceleration per ampere (Kt / J_m): it alone carries the rotor across the backlash at each
     # reversal (the output's torque per ampere and inertia are fitted); it makes a narrow valley with the backlash
-    # that least squares cannot follow, so it is fitted by its profile (`plant_fit._rotor_profile`), never in the
+    # that least squares cannot follow, so it is fitted by its profile (`fit_profiles._rotor_profile`), never in the
     # least squares
     FitParam("rotor_accel_scale", "", 0.7, 1.3, "the rotor's Kt/J_m relative to the base profile's"),
     FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
