@@ -206,3 +206,28 @@ def test_the_backlash_valley_is_found_from_its_wall(monkeypatch):
         best = pf._backlash_valley(base, {**base_values(base), "backlash_deg": wall}, None, SIGMA)
         assert abs(best - floor) <= 0.006, (wall, best)
     assert pf._backlash_valley(base, {**base_values(base), "backlash_deg": 0.9}, None, SIGMA) > 0.5  # a local search
+
+
+def test_a_sliding_starts_velocity_is_projected_along_the_simulations_own_response():
+    """A window that starts sliding (below REST_RAD_S, the encoder moving its way) has its start velocity's error
+    projected out along the simulation's response to it: the difference of two plain runs, at its start velocity and
+    SLOW_STEP_RAD_S faster. The faster run is not itself projected (its start is above REST_RAD_S, where a moving
+    window's analytic projection applies): projected, it would carry most of the response away."""
+    from host_tools.calibration.fit_model import REST_RAD_S, SLOW_STEP_RAD_S, _slow_start
+
+    exp = _experiment()
+    t = exp.t
+    down = np.where(t < 0.006, 0.0, -math.radians(0.09) * np.floor((t - 0.006) / 0.004 + 1))
+    v0 = -0.02
+    sliding = replace(exp, angle=down, vel=np.full(len(t), v0))
+    assert _slow_start(sliding, 0, v0) == v0 and abs(v0 - SLOW_STEP_RAD_S) >= REST_RAD_S
+    base = load_plant_params()
+    v = base_values(base)
+    plain, _, _, mask = simulate(base, v, sliding, window_s=1.0, free_v0=False)
+    faster, _, _, _ = simulate(base, v, replace(sliding, vel=np.full(len(t), v0 - SLOW_STEP_RAD_S)), window_s=1.0,
+                               free_v0=False)
+    sens = (faster - plain) / SLOW_STEP_RAD_S
+    dv = float(np.dot((down - plain)[mask], sens[mask]) / np.dot(sens[mask], sens[mask]))
+    projected, _, _, _ = simulate(base, v, sliding, window_s=1.0)
+    assert np.abs(sens).max() > 1e-3  # the response is there to project along
+    np.testing.assert_allclose(projected, plain + dv * sens, rtol=0, atol=1e-12)

@@ -167,8 +167,9 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     peak = params.peak_current_a
     ratio = params.total_ratio
 
-    def run_window(k: int, end: int, t0: float, v_start: float) -> None:
-        """Simulate window [k, end) from the measured angle at t0, at v_start (0: stuck), into the arrays."""
+    def run_window(k: int, end: int, t0: float, v_start: float, project: bool = False) -> None:
+        """Simulate window [k, end) from the measured angle at t0, at v_start (0: stuck), into the arrays; with
+        `project`, its start velocity's error projected out along the free motion's analytic response."""
         t_first = float(exp.t[k])
         start = exp.angle[k] + offset + (0.0 if exp.start_shift is None else float(exp.start_shift[k]))
         c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
@@ -235,7 +236,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             t_prev, u_prev = tj, th
             imu[j] = filt + bias
             mask[j] = tj - t_first >= SKIP_S
-        if free_v0 and abs(v_start) >= REST_RAD_S:
+        if project:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params, lag)
 
     heard = np.zeros(n, dtype=bool) if heard_out is None else heard_out
@@ -245,12 +246,13 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
         v0 = float(vel[k])
         if abs(v0) >= REST_RAD_S:
-            run_window(k, end, t0, v0)
+            run_window(k, end, t0, v0, project=free_v0)
         else:
             v_start = _slow_start(exp, k, v0)
             if free_v0 and v_start != 0.0:  # sliding: its start velocity's error projected out along the
                 # simulation's own response to it (a foot that sticks soon after its start responds little; the free
-                # motion's analytic response gave a hold-only recording's inertia a confident wrong number)
+                # motion's analytic response gave a hold-only recording's inertia a confident wrong number); the
+                # moved run is the simulation's alone (projected itself, it would take most of the response out)
                 w = slice(k, end)
                 run_window(k, end, t0, v_start + math.copysign(SLOW_STEP_RAD_S, v_start))
                 moved_angle, moved_imu = angle[w].copy(), imu[w].copy()
