@@ -227,7 +227,32 @@ def test_a_sliding_starts_velocity_is_projected_along_the_simulations_own_respon
     faster, _, _, _ = simulate(base, v, replace(sliding, vel=np.full(len(t), v0 - SLOW_STEP_RAD_S)), window_s=1.0,
                                free_v0=False)
     sens = (faster - plain) / SLOW_STEP_RAD_S
-    dv = float(np.dot((down - plain)[mask], sens[mask]) / np.dot(sens[mask], sens[mask]))
+    basis = np.column_stack([sens, np.ones(len(t))])  # with the angle's level within its count (`_project_along`)
+    coef = np.linalg.lstsq(basis[mask], (down - plain)[mask], rcond=None)[0]
     projected, _, _, _ = simulate(base, v, sliding, window_s=1.0)
     assert np.abs(sens).max() > 1e-3  # the response is there to project along
-    np.testing.assert_allclose(projected, plain + dv * sens, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(projected, plain + basis @ coef, rtol=0, atol=1e-12)
+
+
+def test_a_moving_windows_level_within_its_count_is_projected_out():
+    """A moving window starts at its reading, known to its count: the encoder's readings after its start moved by a
+    fraction of a count leave the window's angle residual as it was (the level is projected out with the start
+    velocity), and a window that starts stuck keeps its reading as its start (its count is a consider term)."""
+    from host_tools.calibration.fit_model import windows
+
+    exp = _experiment()
+    q = 2 * math.pi / 4000
+    moving = replace(exp, vel=np.full(len(exp.t), 0.5), angle=0.5 * exp.t)
+    base = load_plant_params()
+    v = base_values(base)
+    k, end = windows(moving, 0.25)[0]
+    lifted = moving.angle.copy()
+    lifted[k + 1:end] += q / 3  # the start's reading stays
+    before, _, _, mask = simulate(base, v, moving, window_s=0.25)
+    after, _, _, _ = simulate(base, v, replace(moving, angle=lifted), window_s=0.25)
+    w = slice(k, end)
+    np.testing.assert_allclose((after - lifted)[w][mask[w]], (before - moving.angle)[w][mask[w]], rtol=0, atol=1e-12)
+    stuck = replace(exp, angle=np.where(np.arange(len(exp.t)) > 0, q / 3, 0.0))
+    held, _, _, held_mask = simulate(base, v, exp, window_s=0.25)
+    lifted_stuck, _, _, _ = simulate(base, v, stuck, window_s=0.25)
+    assert not np.allclose((lifted_stuck - stuck.angle)[w][held_mask[w]], (held - exp.angle)[w][held_mask[w]])
