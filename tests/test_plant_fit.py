@@ -98,13 +98,7 @@ def test_fit_percentage_is_matlab_compare():
 
 
 def test_too_little_excitation_is_not_identifiable(tmp_path):
-    """Holds only (no sweep to speak of, no chirp, no PRBS): the dynamics are not given a confident wrong number.
-
-    The damping is not identifiable. The inertia shows where the foot slides off a hold under gravity: projected along
-    the simulation's own response to its start velocity, those windows give it within its interval (on the noise seeds
-    0-3: 0.18, 0.90, 0.57 half-widths, two of them identified at 7-9 %; docs/calibration.md), where a projection
-    along a response that had itself been projected left it 24-38 % high and the damping 3-5 times the truth, 1.6-2.3
-    half-widths off (each "not identifiable" by its verdict only)."""
+    """Holds only (no sweep to speak of, no chirp, no PRBS): the dynamics are not given a confident number."""
     (tmp_path / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + (
         '\n[controller]\nname = "sysid"\nhold_s = 1.5\nsweep_deg = 1.0\nsweep_deg_s = 60.0\nchirp_s = 0.0\n'
         'prbs_s = 0.0\n'))
@@ -113,15 +107,14 @@ def test_too_little_excitation_is_not_identifiable(tmp_path):
                  "--no-trace", "--out", str(run)]) == 0
     assert main(["fit", str(run), "--no-plot"]) == 0
     p = json.loads((run / "fit" / "fit.json").read_text())["params"]
-    assert not p["foot_damping_nm_s_per_rad"]["identifiable"], p["foot_damping_nm_s_per_rad"]
-    inertia, true_inertia = p["output_inertia_kg_m2"], load_plant_params().output_inertia_kg_m2
-    assert not inertia["identifiable"] or abs(inertia["value"] - true_inertia) <= inertia["ci95_half_width"], inertia
+    for name in ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad"):
+        assert not p[name]["identifiable"], (name, p[name])
     # the driver's lag shows in the current's response to the hold's own commands: not a number, or a right one
     lag = p["current_time_constant_s"]
     true_lag = load_plant_params().current_time_constant_s
     assert not lag["identifiable"] or abs(lag["value"] - true_lag) <= lag["ci95_half_width"], lag
     text = (run / "fit" / "plant_fitted.toml").read_text()
-    assert "foot_damping_nm_s_per_rad not identifiable (kept)" in text
+    assert "output_inertia_kg_m2 not identifiable (kept)" in text
     assert main(["fit", str(run), "--no-plot"]) == 0  # a second fit replaces the first one's directory
 
 
