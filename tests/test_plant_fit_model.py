@@ -238,7 +238,7 @@ def test_a_moving_windows_level_within_its_count_is_projected_out():
     """A moving window starts at its reading, known to its count: the encoder's readings after its start moved by a
     fraction of a count leave the window's angle residual as it was (the level is projected out with the start
     velocity), and a window that starts stuck keeps its reading as its start (its count is a consider term)."""
-    from host_tools.calibration.fit_model import windows
+    from host_tools.calibration.fit_model import SLIDE_LOOK_S, stuck_starts, windows
 
     exp = _experiment()
     q = 2 * math.pi / 4000
@@ -252,7 +252,10 @@ def test_a_moving_windows_level_within_its_count_is_projected_out():
     after, _, _, _ = simulate(base, v, replace(moving, angle=lifted), window_s=0.25)
     w = slice(k, end)
     np.testing.assert_allclose((after - lifted)[w][mask[w]], (before - moving.angle)[w][mask[w]], rtol=0, atol=1e-12)
-    stuck = replace(exp, angle=np.where(np.arange(len(exp.t)) > 0, q / 3, 0.0))
+    # a stuck start (the encoder still within SLIDE_LOOK_S): the same lift moves its residual by as much
+    stuck = replace(exp, angle=np.where((exp.t > SLIDE_LOOK_S + 0.01) & (exp.t < 0.25), q / 3, 0.0))
+    assert 0 in stuck_starts(stuck, 0.25)
     held, _, _, held_mask = simulate(base, v, exp, window_s=0.25)
     lifted_stuck, _, _, _ = simulate(base, v, stuck, window_s=0.25)
-    assert not np.allclose((lifted_stuck - stuck.angle)[w][held_mask[w]], (held - exp.angle)[w][held_mask[w]])
+    moved = ((lifted_stuck - stuck.angle) - (held - exp.angle))[w][held_mask[w]]
+    assert np.allclose(moved[stuck.t[w][held_mask[w]] > SLIDE_LOOK_S + 0.01], -q / 3, atol=1e-9)
