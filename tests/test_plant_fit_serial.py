@@ -152,6 +152,19 @@ def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
         assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
 
 
+SERIAL_TRUTH = {**TRUTH, "static_friction_nm": 0.933333, "backlash_deg": 1.5, "current_time_constant_s": 0.00114}
+
+
+def test_serial_identified_parameters_within_two_half_widths(serial_fit):
+    """A bound no calibrated interval misses by chance (a normal error beyond twice its 95 % half-width: 1 in 10^4 a
+    parameter), kept strict beside the all-inside check: every identified plant parameter within two half-widths of
+    the truth (at most 1.21 on six serial recordings with this fit, 1.41 with the one before: docs/calibration.md)."""
+    p = serial_fit["params"]
+    for name, value in SERIAL_TRUTH.items():
+        assert p[name]["identifiable"], name
+        assert abs(p[name]["value"] - value) <= 2.0 * p[name]["ci95_half_width"], (name, p[name], value)
+
+
 @pytest.mark.xfail(reason="every one within its interval in 5 of 6 serial recordings (load 0.8-1.4, none stalled, each "
                           "fitted as pafp fit does): 47 of 48 parameter-runs were, a static friction outside at 1.21 "
                           "half-widths; eight parameters each inside a 95 % interval are all inside together on "
@@ -159,8 +172,7 @@ def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
 def test_serial_identified_parameters_within_their_intervals(serial_fit):
     """The done-when's coverage: every identified plant parameter within its 95 % interval of the truth."""
     p = serial_fit["params"]
-    truth = {**TRUTH, "static_friction_nm": 0.933333, "backlash_deg": 1.5, "current_time_constant_s": 0.00114}
-    for name, value in truth.items():
+    for name, value in SERIAL_TRUTH.items():
         assert p[name]["identifiable"], name
         assert abs(p[name]["value"] - value) <= p[name]["ci95_half_width"], (name, p[name], value)
 
