@@ -85,10 +85,13 @@ class Experiment:
         return wide[k]
 
     def _select(self, keep: np.ndarray) -> Experiment:
-        return Experiment(self.t_cmd, self.i_cmd, self.t[keep], self.angle[keep], self.imu[keep], self.current[keep],
-                          self.source, self.vel[keep], self.t_req, self.req_of[keep], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[keep], self.bounds, self.req_cmd,
-                          None if self.start_shift is None else self.start_shift[keep])
+        """The samples `keep` marks (every per-sample field), the commands and requests all kept."""
+        def rows(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[keep]
+
+        return replace(self, t=self.t[keep], angle=self.angle[keep], imu=self.imu[keep], current=self.current[keep],
+                       vel=self.vel[keep], req_of=self.req_of[keep], angle_req_of=rows(self.angle_req_of),
+                       start_shift=rows(self.start_shift))
 
     def span(self, t0: float, t1: float) -> Experiment:
         """The part between t0 and t1 (s)."""
@@ -98,11 +101,8 @@ class Experiment:
         first = int(np.argmax(c)) if c.any() else 0
         req_cmd = None if self.req_cmd is None else np.where(
             (self.req_cmd >= first) & (self.req_cmd < first + int(c.sum())), self.req_cmd - first, -1)
-        return Experiment(self.t_cmd[c], self.i_cmd[c], self.t[k], self.angle[k], self.imu[k], self.current[k],
-                          self.source, self.vel[k], self.t_req, self.req_of[k], self.angle_from_reply,
-                          None if self.angle_req_of is None else self.angle_req_of[k],
-                          None if self.bounds is None else self.bounds[c], req_cmd,
-                          None if self.start_shift is None else self.start_shift[k])
+        return replace(self._select(k), t_cmd=self.t_cmd[c], i_cmd=self.i_cmd[c],
+                       bounds=None if self.bounds is None else self.bounds[c], req_cmd=req_cmd)
 
     def shifted(self, delay: np.ndarray) -> Experiment:
         """The same experiment with each write (a command and the request that follows it) reaching the motor

@@ -41,7 +41,7 @@ from host_tools.calibration.fit_profiles import (
     _rotor_profile,
 )
 
-__all__ = ["COLLINEARITY_LIMIT", "FitResult", "fit_plant"]
+__all__ = ["COLLINEARITY_LIMIT", "FitResult", "check_params", "fit_plant"]
 
 
 @dataclass
@@ -107,6 +107,19 @@ def _collinearity(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return d, corr
 
 
+def check_params(names: tuple[str, ...], given: str = "") -> None:
+    """ValueError (one line, naming `given`: the option's text) unless `names` are fit parameters that the least
+    squares can fit: at least one besides the profiled backlash and rotor side."""
+    where = f"--params {given!r}" if given else "--params"
+    unknown = [n for n in names if n not in PARAMS]
+    if unknown or not names:
+        raise ValueError(f"{where}: {unknown[0] if unknown else 'empty'} is not a fit parameter: choose from "
+                         f"{', '.join(PARAMS)}")
+    if not set(names) - {"backlash_deg", "rotor_accel_scale"}:
+        raise ValueError(f"{where}: backlash_deg and rotor_accel_scale are profiled with other parameters fitted: "
+                         "name at least one more")
+
+
 def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAULT_FIT,
               held_out: float = 0.2, max_nfev: int = 60) -> FitResult:
     """Least squares on the windowed simulation error over the first (1 - held_out) of the experiment."""
@@ -114,9 +127,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
 
     from scipy.optimize import least_squares
 
-    unknown = [n for n in names if n not in PARAMS]
-    if unknown:
-        raise ValueError(f"--params: {unknown[0]!r} is not a fit parameter: one of {', '.join(PARAMS)}")
+    check_params(names)
     wall0 = time.perf_counter()
     t0, t1 = float(exp.t[0]), float(exp.t[-1])
     fit_part, held, left_out = fit_parts(exp)
@@ -131,9 +142,6 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     all_names = tuple(names)
     # the rotor's Kt/J_m is fitted by its profile after the least squares (`_rotor_profile`), never in them
     names = ls_names = tuple(n for n in names if n != "rotor_accel_scale")
-    if not set(names) - {"backlash_deg"}:
-        raise ValueError("--params: backlash_deg and rotor_accel_scale are profiled with other parameters fitted: "
-                         "name at least one more")
     scan = "backlash_deg" in names  # profiled first, then in the least squares (`_backlash_profile`)
     # the first solution leaves out the backlash and the driver's current lag: both shape the current at each
     # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:

@@ -31,23 +31,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Check the inputs, fit, write the outputs, print the table."""
     from host_tools.calibration.fit_data import load_experiment
-    from host_tools.calibration.fit_model import DEFAULT_FIT, PARAMS, load_base
+    from host_tools.calibration.fit_model import DEFAULT_FIT, load_base
     from host_tools.calibration.fit_report import figure as _g
     from host_tools.calibration.fit_report import validate, verdict, write_fit_outputs
-    from host_tools.calibration.plant_fit import fit_parts, fit_plant
+    from host_tools.calibration.plant_fit import check_params, fit_parts, fit_plant
     from host_tools.command_errors import input_error, output_error
     from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir
     from profiles import profile_path
 
     try:
         names = DEFAULT_FIT if args.params is None else tuple(n.strip() for n in args.params.split(",") if n.strip())
-        unknown = [n for n in names if n not in PARAMS]
-        if unknown or not names:
-            raise ValueError(f"--params {args.params!r}: {unknown[0] if unknown else 'empty'} is not a fit "
-                             f"parameter: choose from {', '.join(PARAMS)}")
-        if not set(names) - {"backlash_deg", "rotor_accel_scale"}:
-            raise ValueError(f"--params {args.params!r}: backlash_deg and rotor_accel_scale are profiled with other "
-                             "parameters fitted: name at least one more")
+        check_params(names, args.params or "")
         base = load_base(args.base)
         base_text = (args.base or profile_path("plant_ak60_6.toml")).read_text(encoding="utf-8")
         exp = load_experiment(args.run_dir)
