@@ -172,16 +172,16 @@ def test_fit_reports_the_stuck_starts_part_of_the_intervals(experiment):
 
 def _toy_solution(jac: np.ndarray, r0: np.ndarray, x: np.ndarray, lo: float = -10.0, hi: float = 10.0,
                   names: tuple[str, ...] | None = None):
-    from host_tools.calibration.fit_consider import _Solution
+    from host_tools.calibration.fit_consider import Solution
 
     names = names or tuple(f"p{k}" for k in range(len(x)))
-    sol = _Solution(names, jac, np.linalg.inv(jac.T @ jac), r0, np.full(len(x), lo), np.full(len(x), hi))
+    sol = Solution(names, jac, np.linalg.inv(jac.T @ jac), r0, np.full(len(x), lo), np.full(len(x), hi))
     return sol, {n: float(a) for n, a in zip(names, x, strict=True)}
 
 
 def test_moved_solution_is_the_linear_shift_on_a_linear_problem():
     """Residuals linear in the parameters: the moved solution is the linear shift -(J'J)^-1 J' dr away."""
-    from host_tools.calibration.fit_consider import _linear_shift, _moved_solution
+    from host_tools.calibration.fit_consider import linear_shift, moved_solution
 
     rng = np.random.default_rng(3)
     a, y, d = rng.normal(size=(40, 3)), rng.normal(size=40), rng.normal(size=40)
@@ -192,8 +192,8 @@ def test_moved_solution_is_the_linear_shift_on_a_linear_problem():
         return a @ np.array([w["p0"], w["p1"], w["p2"]]) - y - d
 
     exact = np.linalg.lstsq(a, d, rcond=None)[0]  # the perturbed problem's solution moves by exactly this
-    assert np.allclose(_linear_shift(sol, v, fun), exact, rtol=1e-9, atol=1e-12)
-    moved, r = _moved_solution(sol, v, fun)
+    assert np.allclose(linear_shift(sol, v, fun), exact, rtol=1e-9, atol=1e-12)
+    moved, r = moved_solution(sol, v, fun)
     assert np.allclose([moved[n] - v[n] for n in sol.names], exact, rtol=1e-3, atol=1e-6)
     assert np.array_equal(r, fun(moved))  # the residuals there, as the profile takes its cost from them
 
@@ -201,16 +201,16 @@ def test_moved_solution_is_the_linear_shift_on_a_linear_problem():
 def test_moved_solution_follows_a_nonlinear_residual_within_the_bounds():
     """r = exp(x) - c, solved at c = 1 (x = 0, J = 1); c = 1.3 moves the solution to ln 1.3: the linear shift
     says 0.3, the moved solution comes within a thousandth; the bounds hold it."""
-    from host_tools.calibration.fit_consider import _linear_shift, _moved_solution
+    from host_tools.calibration.fit_consider import linear_shift, moved_solution
 
     sol, v = _toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1))
 
     def fun(w):
         return np.array([math.exp(w["p0"]) - 1.3])
 
-    assert _linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
-    assert abs(_moved_solution(sol, v, fun)[0]["p0"] - math.log(1.3)) < 1e-3
-    bounded, _ = _moved_solution(_toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
+    assert linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
+    assert abs(moved_solution(sol, v, fun)[0]["p0"] - math.log(1.3)) < 1e-3
+    bounded, _ = moved_solution(_toy_solution(np.ones((1, 1)), np.zeros(1), np.zeros(1), hi=0.2)[0], v, fun)
     assert bounded["p0"] == pytest.approx(0.2)
 
 
@@ -218,23 +218,23 @@ def test_moved_solution_never_climbs_where_the_solutions_jacobian_misleads():
     """The solution's Jacobian says the residual falls as x grows (J = -1); the moved problem's residual x + 0.3
     rises: a Newton step on that Jacobian (the linear shift, +0.3) quadruples the cost; the moved solution keeps
     only steps that lower it, so it does not move up."""
-    from host_tools.calibration.fit_consider import _linear_shift, _moved_solution
+    from host_tools.calibration.fit_consider import linear_shift, moved_solution
 
     sol, v = _toy_solution(-np.ones((1, 1)), np.zeros(1), np.zeros(1))
 
     def fun(w):
         return np.array([w["p0"] + 0.3])
 
-    assert _linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
-    moved, _ = _moved_solution(sol, v, fun)
+    assert linear_shift(sol, v, fun)[0] == pytest.approx(0.3)
+    moved, _ = moved_solution(sol, v, fun)
     assert float(fun(moved)[0]) ** 2 <= 0.3 ** 2
 
 
 def _toy_rotor(monkeypatch, true_scale: float, gain: float, noise: float = 0.1, spread: float = 0.074):
-    """`_rotor_profile` on a toy: 200 residuals that grow with the rotor's scale off `true_scale` (by `gain`), and
+    """`rotor_profile` on a toy: 200 residuals that grow with the rotor's scale off `true_scale` (by `gain`), and
     one parameter p0 whose best value moves with the scale (p0 = 2 (scale - 1)); noise from a fixed seed."""
     import host_tools.calibration.fit_profiles as pf
-    from host_tools.calibration.fit_consider import _Solution
+    from host_tools.calibration.fit_consider import Solution
 
     rng = np.random.default_rng(5)
     e, x = rng.normal(size=200) * noise, rng.normal(size=200)
@@ -248,8 +248,8 @@ def _toy_rotor(monkeypatch, true_scale: float, gain: float, noise: float = 0.1, 
     monkeypatch.setattr(pf, "rotor_side_sd", lambda base: spread)
     v = {"p0": 0.0, "backlash_deg": 1.0, "rotor_accel_scale": 1.0}
     r0 = residuals(None, v, None, None)
-    sol = _Solution(("p0",), np.ones((200, 1)), np.array([[1 / 200]]), r0, np.array([-5.0]), np.array([5.0]))
-    return pf._rotor_profile(None, v, None, None, sol)
+    sol = Solution(("p0",), np.ones((200, 1)), np.array([[1 / 200]]), r0, np.array([-5.0]), np.array([5.0]))
+    return pf.rotor_profile(None, v, None, None, sol)
 
 
 def test_rotor_profile_walks_to_the_rotor_side_and_moves_the_others_with_it(monkeypatch):
@@ -275,7 +275,7 @@ def test_rotor_profile_keeps_the_base_when_the_record_cannot_tell(monkeypatch):
 def test_moved_solution_takes_the_backlash_from_its_valley_and_fits_the_others_again():
     """The backlash is not stepped on its (step-made) secant column: its value is the valley's, found with the
     others at their first pass, and the others are fitted again with it (here: p0 follows the backlash)."""
-    from host_tools.calibration.fit_consider import _moved_solution
+    from host_tools.calibration.fit_consider import moved_solution
 
     names = ("p0", "backlash_deg")
     sol, v = _toy_solution(np.array([[1.0, 0.0], [0.0, 1.0]]), np.zeros(2), np.array([0.0, 1.0]), names=names)
@@ -288,7 +288,7 @@ def test_moved_solution_takes_the_backlash_from_its_valley_and_fits_the_others_a
         seen.append(dict(w))
         return 1.4
 
-    moved, _ = _moved_solution(sol, v, fun, valley)
+    moved, _ = moved_solution(sol, v, fun, valley)
     assert seen and seen[0]["p0"] == pytest.approx(0.5, abs=1e-3)  # the first pass, at the solution's backlash
     assert moved["backlash_deg"] == pytest.approx(1.4)
     assert moved["p0"] == pytest.approx(0.7, abs=1e-3)  # fitted again with the valley's backlash

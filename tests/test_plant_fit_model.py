@@ -203,9 +203,9 @@ def test_the_backlash_valley_is_found_from_its_wall(monkeypatch):
     monkeypatch.setattr(pf, "residuals", stepped)
     base = load_plant_params()
     for wall in (0.55, 0.33, 0.45):
-        best = pf._backlash_valley(base, {**base_values(base), "backlash_deg": wall}, None, SIGMA)
+        best = pf.backlash_valley(base, {**base_values(base), "backlash_deg": wall}, None, SIGMA)
         assert abs(best - floor) <= 0.006, (wall, best)
-    assert pf._backlash_valley(base, {**base_values(base), "backlash_deg": 0.9}, None, SIGMA) > 0.5  # a local search
+    assert pf.backlash_valley(base, {**base_values(base), "backlash_deg": 0.9}, None, SIGMA) > 0.5  # a local search
 
 
 def test_a_sliding_starts_velocity_is_projected_along_the_simulations_own_response():

@@ -252,10 +252,11 @@ def test_a_shifted_experiment_moves_each_write_and_its_request_in_order():
 
 
 def _timing_term(bounds: np.ndarray | None) -> float:
-    """The current lag's variance from `fit_consider._timing` on the hand-built experiment with these arrival bounds."""
+    """The current lag's variance from `fit_consider.timing_term` on the hand-built experiment with these arrival
+    bounds."""
     from dataclasses import replace
 
-    from host_tools.calibration.fit_consider import _Solution, _timing
+    from host_tools.calibration.fit_consider import Solution, timing_term
     from host_tools.calibration.fit_model import SIGMA, residuals
     from host_tools.calibration.plant_fit import _secant_jacobian
 
@@ -266,8 +267,8 @@ def _timing_term(bounds: np.ndarray | None) -> float:
     step = np.array([0.02 * v[names[0]]])
     jac, r0 = _secant_jacobian(lambda x: residuals(base, {**v, names[0]: float(x[0])}, exp, SIGMA),
                                np.array([v[names[0]]]), step, np.array([1.0]))
-    sol = _Solution(names, jac, np.linalg.pinv(jac.T @ jac), r0, np.zeros(1), np.ones(1))
-    return float(_timing(base, v, exp, SIGMA, sol)[0, 0])
+    sol = Solution(names, jac, np.linalg.pinv(jac.T @ jac), r0, np.zeros(1), np.ones(1))
+    return float(timing_term(base, v, exp, SIGMA, sol)[0, 0])
 
 
 def test_the_timing_term_is_zero_when_the_timing_is_exact_and_grows_with_the_window():

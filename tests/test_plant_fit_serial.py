@@ -124,8 +124,8 @@ def test_the_emulators_timing_can_replace_the_fits(serial_fit):
 
 def test_the_intervals_carry_the_writes_unknown_arrival(serial_fit):
     """Through a pty the record bounds each write's arrival to a window (about 0.6 ms: `fit_data.arrival_bounds`):
-    its part of each interval (`fit_consider._timing`) is in fit.json, within the interval; the virtual bench has none
-    (tests/test_plant_fit_reply_angle.py)."""
+    its part of each interval (`fit_consider.timing_term`) is in fit.json, within the interval; the virtual bench has
+    none (tests/test_plant_fit_reply_angle.py)."""
     # the median write's window: 0.60 ms on ten recordings, 1.6 ms on the one whose link stalled most
     assert 0.3 < serial_fit["arrival_window_ms"] < 5.0, serial_fit["arrival_window_ms"]
     for name, p in serial_fit["params"].items():

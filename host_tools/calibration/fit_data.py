@@ -55,7 +55,7 @@ class Experiment:
     bounds: np.ndarray | None = None
     req_cmd: np.ndarray | None = None
     # per sample: how far above its encoder reading a simulation window starting there starts (rad; None: 0). The
-    # reading places the foot only to its count: `fit_consider._stuck_starts` draws it within the count
+    # reading places the foot only to its count: `fit_consider.stuck_starts_term` draws it within the count
     start_shift: np.ndarray | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S,

@@ -57,7 +57,7 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
     FitParam("torque_constant_scale", "", 0.6, 1.4, "Kt relative to the base profile's"),
     # the rotor's acceleration per ampere (Kt / J_m): it alone carries the rotor across the backlash at each
     # reversal (the output's torque per ampere and inertia are fitted); it makes a narrow valley with the backlash
-    # that least squares cannot follow, so it is fitted by its profile (`fit_profiles._rotor_profile`), never in the
+    # that least squares cannot follow, so it is fitted by its profile (`fit_profiles.rotor_profile`), never in the
     # least squares
     FitParam("rotor_accel_scale", "", 0.7, 1.3, "the rotor's Kt/J_m relative to the base profile's"),
     FitParam("current_time_constant_s", "s", 1e-4, 0.01, "driver current lag"),
@@ -71,7 +71,7 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
 )}
 # backlash is not in the first least squares: its effect (a dead time at each reversal of the command) moves the
 # residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope; it is profiled over a grid
-# (`_backlash_profile`, docs/calibration.md)
+# (`backlash_profile`, docs/calibration.md)
 DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
                "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
                "encoder_offset_deg", "rotor_accel_scale")
@@ -351,7 +351,7 @@ def _project_along(exp: Experiment, k: int, end: int, angle: np.ndarray, imu: np
     the level moves only the angle. Left at the reading, the level's error bent the start velocity and, at the turns
     of the default experiment's sweep, took seed 7's encoder offset 0.20 deg low on average over eight noise seeds,
     outside its interval on four (docs/calibration.md, "A moving window's start angle"). A window that starts stuck
-    keeps its reading: its count is a consider term (`fit_consider._stuck_starts`)."""
+    keeps its reading: its count is a consider term (`fit_consider.stuck_starts_term`)."""
     used = mask[k:end]
     if np.count_nonzero(used) >= 3:
         basis = np.column_stack([sens, np.ones(end - k)])

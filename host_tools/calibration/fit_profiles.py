@@ -9,18 +9,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from hal.virtual.plant import PlantParams
-from host_tools.calibration.fit_consider import _moved_solution, _Solution
+from host_tools.calibration.fit_consider import Solution, moved_solution
 from host_tools.calibration.fit_data import Experiment
 from host_tools.calibration.fit_model import PARAMS, residuals, rotor_side_sd
 
+__all__ = ["BACKLASH_ABS_CI_DEG", "RotorProfile", "backlash_profile", "backlash_valley", "cost_unit", "parabola_vertex",
+           "rotor_profile"]
+
 BACKLASH_ABS_CI_DEG = 0.5  # the backlash is identified when its profile's 95 % half-width is at most this
+LEVEL_95 = 0.5 * 3.841  # a profile's 95 % interval: its cost within chi-square(1)'s 95 % quantile / 2 (in `cost_unit`s)
 
 
 ROTOR_STEP = 0.05  # the rotor side's profile grid (relative Kt/J_m)
 ROTOR_POINTS = 9  # at most this many profile points (the base's, 1.0, included)
 
 
-def _cost_unit(r: np.ndarray, n: int) -> float:
+def cost_unit(r: np.ndarray, n: int) -> float:
     """One unit of chi-square in the least-squares cost (0.5 sum r^2) at residuals r with n parameters: the residual
     variance, inflated for the residuals' lag-1 correlation (m samples of AR(1) residuals carry m (1 - rho) /
     (1 + rho) of information), as the Jacobian's intervals are."""
@@ -30,7 +34,7 @@ def _cost_unit(r: np.ndarray, n: int) -> float:
     return s2 * (1.0 + rho) / (1.0 - rho)
 
 
-def _parabola(x: np.ndarray, y: np.ndarray) -> float:
+def parabola_vertex(x: np.ndarray, y: np.ndarray) -> float:
     """The vertex of the parabola through three points (x ascending), within them; the middle one's x when it is
     not convex."""
     a, b, _ = np.polyfit(x, y, 2)
@@ -38,8 +42,8 @@ def _parabola(x: np.ndarray, y: np.ndarray) -> float:
 
 
 @dataclass
-class _RotorProfile:
-    """`_rotor_profile`'s result: the rotor's Kt/J_m relative to the base's, its 95 % half-width, whether it is
+class RotorProfile:
+    """`rotor_profile`'s result: the rotor's Kt/J_m relative to the base's, its 95 % half-width, whether it is
     identified, the other parameters' values there, and their shift at the interval's farther-moving end (one
     vector over the solution's names)."""
 
@@ -50,17 +54,17 @@ class _RotorProfile:
     shift95: np.ndarray
 
 
-def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
-                   sol: _Solution) -> _RotorProfile:
+def rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+                   sol: Solution) -> RotorProfile:
     """The rotor's acceleration per ampere (Kt / J_m, relative to the base's) from the cost's profile over it.
 
     The rotor alone carries itself across the backlash at each reversal, so Kt/J_m shapes the current there, and
     the least squares cannot follow it: with the backlash it makes a narrow valley whose floor moves in steps (each
     crossing ends on a whole command period; docs/calibration.md, The rotor side). A profile can: at each point of a
-    grid (ROTOR_STEP) the other parameters are the solution moved to that Kt/J_m (`_moved_solution` from the
+    grid (ROTOR_STEP) the other parameters are the solution moved to that Kt/J_m (`moved_solution` from the
     base's solution: the backlash's valley searched, the others by a trust region on the solution's Jacobian). The
     tolerance table's spread (`rotor_side_sd`) is a prior: its penalty, in units of the cost's chi-square
-    (`_cost_unit`), is added, so a record that cannot tell the rotor side keeps about the base's. The grid walks
+    (`cost_unit`), is added, so a record that cannot tell the rotor side keeps about the base's. The grid walks
     from the base's on outwards while an end of it is within the interval (where the penalised cost is within the
     95 % quantile of chi-square(1) / 2 of its least), at most ROTOR_POINTS points. The best is the vertex of the
     parabola through the best point and its neighbours; the others there, and at the interval's ends, lie linearly
@@ -79,18 +83,18 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
                 or len(points) >= ROTOR_POINTS:
             return False
         moved = {"rotor_accel_scale": scale}
-        w, r = _moved_solution(sol, v, lambda w: residuals(base, {**w, **moved}, part, scales),
-                               lambda w: _backlash_valley(base, {**w, **moved}, part, scales))
+        w, r = moved_solution(sol, v, lambda w: residuals(base, {**w, **moved}, part, scales),
+                               lambda w: backlash_valley(base, {**w, **moved}, part, scales))
         points[k] = (r, w)
         return True
 
-    unit = _cost_unit(sol.r0, len(sol.names))
+    unit = cost_unit(sol.r0, len(sol.names))
 
     def penalised(k: int) -> float:
         return 0.5 * float(np.dot(points[k][0], points[k][0])) + 0.5 * unit * (k * ROTOR_STEP / sd) ** 2
 
     def within(k: int) -> bool:
-        return penalised(k) - min(penalised(j) for j in points) <= 0.5 * 3.841 * unit
+        return penalised(k) - min(penalised(j) for j in points) <= LEVEL_95 * unit
 
     add(-1)
     add(1)
@@ -101,11 +105,11 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
             ks = sorted(points)
             if not ((within(ks[0]) and add(ks[0] - 1)) or (within(ks[-1]) and add(ks[-1] + 1))):
                 break
-        unit = _cost_unit(points[min(points, key=penalised)][0], len(sol.names))
+        unit = cost_unit(points[min(points, key=penalised)][0], len(sol.names))
     best = min(points, key=penalised)
     offset = best * ROTOR_STEP
     if best - 1 in points and best + 1 in points:
-        offset = _parabola(np.array([(best + d) * ROTOR_STEP for d in (-1, 0, 1)]),
+        offset = parabola_vertex(np.array([(best + d) * ROTOR_STEP for d in (-1, 0, 1)]),
                            np.array([penalised(best + d) for d in (-1, 0, 1)]))
     ks = sorted(points)
     grid = np.array([k * ROTOR_STEP for k in ks])
@@ -120,7 +124,7 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
     def end(step: int, cost=penalised) -> tuple[float, bool]:
         """Where `cost` crosses its interval's level on that side, linearly between points; False: not in the grid."""
         low = min(points, key=cost)
-        level = cost(low) + 0.5 * 3.841 * unit
+        level = cost(low) + LEVEL_95 * unit
         k = low
         while k + step in points and cost(k + step) <= level:
             k += step
@@ -138,19 +142,19 @@ def _rotor_profile(base: PlantParams, v: dict[str, float], part: Experiment, sca
     shift95 = np.where(np.abs(ends[0]) >= np.abs(ends[1]), ends[0], ends[1])
     # identified when the data alone (the cost without the prior) close an interval inside the walked grid
     identified = end(-1, data)[1] and end(1, data)[1]
-    return _RotorProfile(1.0 + offset, half, bool(identified), there, shift95)
+    return RotorProfile(1.0 + offset, half, bool(identified), there, shift95)
 
 
-VALLEY_GRIDS = ((0.04, 4), (0.01, 4))  # `_backlash_valley`'s grids: (step in deg, steps either side of the best)
+VALLEY_GRIDS = ((0.04, 4), (0.01, 4))  # `backlash_valley`'s grids: (step in deg, steps either side of the best)
 
 
-def _backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+def backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
                    backlash_deg: float) -> float:
     """The least-squares cost with the backlash at `backlash_deg` and the other parameters held at v."""
     return 0.5 * float(np.sum(residuals(base, {**v, "backlash_deg": backlash_deg}, part, scales) ** 2))
 
 
-def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
+def backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
                      grids: tuple[tuple[float, int], ...] = VALLEY_GRIDS) -> float:
     """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid).
 
@@ -160,7 +164,7 @@ def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, s
     (BACKLASH_STEP_DEG) cannot follow it and stops on the valley's wall, where the current lag and the Coulomb
     friction make up for the crossings it times wrong (docs/calibration.md)."""
     def cost(b: float) -> float:
-        return _backlash_cost(base, v, part, scales, b)
+        return backlash_cost(base, v, part, scales, b)
 
     best = float(v["backlash_deg"])
     costs = {best: cost(best)}
@@ -177,7 +181,7 @@ def _backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, s
 BACKLASH_GRID_DEG = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0)
 
 
-def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float], n: int,
+def backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float], n: int,
                       around: float | None = None) -> tuple[float, float, bool]:
     """(best backlash, 95 % half-width, identified) from the cost over a grid of backlash values, the other
     parameters held at `v` (a conditional profile: the others are fitted again at the best, not at each point).
@@ -186,16 +190,16 @@ def _backlash_profile(base: PlantParams, v: dict[str, float], part: Experiment, 
     a finite-difference Jacobian sees as zero or as a spurious slope; a scan over the whole range does not.
     The interval is where the cost stays within the 95 % quantile of chi-square(1) / 2, in units of the
     residual variance inflated for the residuals' lag-1 correlation (as the Jacobian's intervals); identified
-    when that interval closes inside the grid and is no wider than `_ABS_CI`.
+    when that interval closes inside the grid and is no wider than BACKLASH_ABS_CI_DEG.
     """
     grid = np.array(BACKLASH_GRID_DEG if around is None else
                     sorted(set(np.clip(around + np.linspace(-0.5, 0.5, 11), 0.0, PARAMS["backlash_deg"].hi))))
-    cost = np.array([_backlash_cost(base, v, part, scales, float(b)) for b in grid])
+    cost = np.array([backlash_cost(base, v, part, scales, float(b)) for b in grid])
     k = int(np.argmin(cost))
-    threshold = 0.5 * 3.841 * _cost_unit(residuals(base, v, part, scales), n)
+    threshold = LEVEL_95 * cost_unit(residuals(base, v, part, scales), n)
     best = float(grid[k])
     if 0 < k < len(grid) - 1:  # the parabola through the best and its neighbours
-        best = _parabola(grid[k - 1:k + 2], cost[k - 1:k + 2])
+        best = parabola_vertex(grid[k - 1:k + 2], cost[k - 1:k + 2])
     inside = cost - cost[k] <= threshold
     lo_i, hi_i = k, k
     while lo_i > 0 and inside[lo_i - 1]:

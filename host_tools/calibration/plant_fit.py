@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hal.virtual.plant import PlantParams
-from host_tools.calibration.fit_consider import _Solution, _stuck_starts, _timing
+from host_tools.calibration.fit_consider import Solution, stuck_starts_term, timing_term
 from host_tools.calibration.fit_data import STALL_BOUND_S, Experiment
 from host_tools.calibration.fit_model import (
     DEFAULT_FIT,
@@ -35,10 +35,10 @@ from host_tools.calibration.fit_model import (
 )
 from host_tools.calibration.fit_profiles import (
     BACKLASH_ABS_CI_DEG,
-    _backlash_profile,
-    _backlash_valley,
-    _cost_unit,
-    _rotor_profile,
+    backlash_profile,
+    backlash_valley,
+    cost_unit,
+    rotor_profile,
 )
 
 __all__ = ["COLLINEARITY_LIMIT", "FitResult", "check_params", "fit_plant"]
@@ -65,17 +65,17 @@ class FitResult:
     jac_names: tuple[str, ...] = ()  # the parameters of the Jacobian (and `correlations`), in its order
     noise_scales: dict[str, float] = field(default_factory=dict)  # signal -> the residual scale it was weighed by
     unheard: dict[str, int] = field(default_factory=dict)  # segment -> used samples without a simulated current
-    # the part of each 95 % half-width that is the rotor side's (Kt/J_m) interval (`_rotor_profile`)
+    # the part of each 95 % half-width that is the rotor side's (Kt/J_m) interval (`rotor_profile`)
     rotor_ci95: dict[str, float] = field(default_factory=dict)
     rotor_sd: float = 0.0  # the tolerance table's relative spread of Kt/J_m, the profile's prior (`rotor_side_sd`)
-    # the part of each 95 % half-width that is the writes' arrival the record leaves unknown (`_timing`): 0 when the
+    # the part of each 95 % half-width that is the writes' arrival the record leaves unknown (`timing_term`): 0 when the
     # timing is exact (the virtual bench)
     timing_ci95: dict[str, float] = field(default_factory=dict)
     arrival_window_ms: float = 0.0  # the median window the record leaves a write's arrival (`fit_data.arrival_bounds`)
     # segment -> samples left out as a stall's (`Experiment.stalled`), and the bound that says so (ms; 0: none)
     stalled: dict[str, int] = field(default_factory=dict)
     stall_bound_ms: float = 0.0
-    # the part of each 95 % half-width that is the encoder's count at the windows that start stuck (`_stuck_starts`)
+    # the part of each 95 % half-width that is the encoder's count at the windows that start stuck (`stuck_starts_term`)
     stuck_ci95: dict[str, float] = field(default_factory=dict)
 
 
@@ -140,9 +140,9 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     zero = zero if abs(zero) > PARAMS["encoder_offset_deg"].hi else 0.0
     start["encoder_offset_deg"] = zero
     all_names = tuple(names)
-    # the rotor's Kt/J_m is fitted by its profile after the least squares (`_rotor_profile`), never in them
+    # the rotor's Kt/J_m is fitted by its profile after the least squares (`rotor_profile`), never in them
     names = ls_names = tuple(n for n in names if n != "rotor_accel_scale")
-    scan = "backlash_deg" in names  # profiled first, then in the least squares (`_backlash_profile`)
+    scan = "backlash_deg" in names  # profiled first, then in the least squares (`backlash_profile`)
     # the first solution leaves out the backlash and the driver's current lag: both shape the current at each
     # reversal, so with the backlash at a start far from the bench's the lag runs off to make up for it (seen:
     # 0.28 ms for 1.14 ms with a backlash of 0.55 deg for none) and the second fit starts from there
@@ -184,7 +184,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     names = first_names
     profile: tuple[float, float, bool] | None = None
     if scan:  # over the whole grid, the others at their fit (from a start far off, the grid misleads: not before)
-        profile = _backlash_profile(base, values(names, res.x), fit_part, scales, len(names))
+        profile = backlash_profile(base, values(names, res.x), fit_part, scales, len(names))
         start = {**start, "backlash_deg": profile[0]}
     # the three signals weighed by their own residual size at this first solution (the maximum-likelihood weights),
     # then everything fitted again from it, the backlash with the others: it and the driver's current lag trade
@@ -198,7 +198,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     x_fit, nfev, cost, message = np.asarray(res.x, dtype=float), int(res.nfev), float(res.cost), str(res.message)
     if "backlash_deg" in names:  # the backlash's valley, found on a fine grid, then the others fitted again in it
         fitted = values(names, x_fit)
-        best = _backlash_valley(base, fitted, fit_part, scales)
+        best = backlash_valley(base, fitted, fit_part, scales)
         if best != fitted["backlash_deg"]:
             rest = tuple(n for n in names if n != "backlash_deg")
             start = {**start, "backlash_deg": best}
@@ -210,12 +210,12 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     if "rotor_accel_scale" in all_names and values(names, x_fit)["backlash_deg"] > 0.0 and rotor_side_sd(base) > 0:
         # the rotor's Kt/J_m from its own profile, the others moved with it (with no backlash nothing crosses it)
         jac1, r1 = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), x_fit, steps, hi)
-        rotor = _rotor_profile(base, values(names, x_fit), fit_part, scales,
-                               _Solution(names, jac1, np.linalg.pinv(jac1.T @ jac1), r1, *bounds(names)))
+        rotor = rotor_profile(base, values(names, x_fit), fit_part, scales,
+                               Solution(names, jac1, np.linalg.pinv(jac1.T @ jac1), r1, *bounds(names)))
         start = {**start, "rotor_accel_scale": rotor.best}
         x_fit = np.array([rotor.values[n] for n in names])
     if profile is not None:  # the interval from the profile on a finer grid about the fit, the others at theirs
-        profile = _backlash_profile(base, values(names, x_fit), fit_part, scales, len(names),
+        profile = backlash_profile(base, values(names, x_fit), fit_part, scales, len(names),
                                     around=values(names, x_fit)["backlash_deg"])
     jac, r = _secant_jacobian(lambda x: residuals(base, values(names, x), fit_part, scales), x_fit,
                               steps, hi)
@@ -224,12 +224,12 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     clusters = np.tile(window_ids(fit_part), 3)
     cov = _covariance(jac, r, clusters)
     v = values(names, x_fit)
-    sol = _Solution(names, jac, bread, r, *bounds(names))
+    sol = Solution(names, jac, bread, r, *bounds(names))
     # the rotor side's interval carried into the others' as a consider term: their shift at its interval's ends
     rotor_shift = np.zeros(n) if rotor is None else rotor.shift95 / 1.96
     cov = cov + np.outer(rotor_shift, rotor_shift)
-    timing = _timing(base, v, fit_part, scales, sol)
-    stuck = _stuck_starts(base, v, fit_part, scales, sol)
+    timing = timing_term(base, v, fit_part, scales, sol)
+    stuck = stuck_starts_term(base, v, fit_part, scales, sol)
     cov = cov + timing + stuck
     ci = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     coll, corr = _collinearity(jac)
@@ -290,7 +290,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
 
 def _covariance(jac: np.ndarray, r: np.ndarray, clusters: np.ndarray) -> np.ndarray:
     """The parameters' covariance from the secant Jacobian and the residuals: the larger (element by element) of
-    the AR(1)-inflated least-squares one (`_cost_unit`) and the cluster-robust ("sandwich") one with each
+    the AR(1)-inflated least-squares one (`cost_unit`) and the cluster-robust ("sandwich") one with each
     simulation window as a cluster (the errors within a window are one trajectory's, correlated, whatever their
     shape)."""
     n = jac.shape[1]
@@ -300,7 +300,7 @@ def _covariance(jac: np.ndarray, r: np.ndarray, clusters: np.ndarray) -> np.ndar
     for c in np.unique(clusters):
         g = scores[clusters == c].sum(axis=0)
         meat += np.outer(g, g)
-    return np.maximum(_cost_unit(r, n) * bread, bread @ meat @ bread)
+    return np.maximum(cost_unit(r, n) * bread, bread @ meat @ bread)
 
 
 SECANT_STEP = 0.02  # of each parameter's scale: the step of the Jacobian the solver and the intervals use
