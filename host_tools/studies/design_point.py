@@ -7,7 +7,8 @@ design profile. Its figures (docs/design.md, "Reading the search"):
 
 * ``status``: ok, fault (the reason and when in ``fault`` / ``fault_at_s``), error or timeout;
 * ``moment_share``: the share of the normative stance moment the actuator delivered, as a bench measures it:
-  the motor's current from its status replies x the drive's ankle N·m per A (Kt x ratio x efficiency), plus the
+  the motor's current from its status replies x the drive's ankle N·m per A (Kt x ratio x efficiency driving,
+  Kt x ratio / backdriven efficiency where the current opposes the ankle's measured motion), plus the
   parallel spring's moment at the firmware's ankle angle (the spring of the plant the run had), against body
   mass x the normative moment at the same gait phase; per sample the part delivered in the demand's direction,
   capped at the demand, summed over the stance of every stride asked for (a run that latched a fault delivers
@@ -119,7 +120,9 @@ def _whole_run(p: DesignPoint, r: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
     t, i = a["t_s"].astype(float), a["current_meas_a"].astype(float)
     angle = a["fused_angle_rad"].astype(float)
     params = _drive(p)
-    nm_per_a = params.output_torque_per_amp_nm
+    # the transmission's gain by power direction: backdriven where the current opposes the ankle's motion
+    moving = np.sign(np.gradient(angle, t)) if len(t) > 1 else np.zeros_like(t)
+    nm_per_a = np.where(i * moving < 0.0, params.backdriven_torque_per_amp_nm, params.output_torque_per_amp_nm)
     state = a["supervisor_state"]
     from firmware.safety import SupervisorState
 

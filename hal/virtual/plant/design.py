@@ -35,6 +35,7 @@ from typing import Any
 
 from hal.virtual.plant.motors import MotorSpec, load_motor
 from hal.virtual.plant.params import PlantParams
+from hal.virtual.plant.transmission import planetary_backdriven_efficiency
 
 __all__ = ["BELT_PITCHES", "BELT_RATIO_TOLERANCE", "MAX_DRIVEN_PITCH_DIAMETER_M", "SPRING_SIDES", "Design",
            "DesignSpring", "belt_for_ratio", "design_from_mapping", "load_design", "nearest_belt_pairs",
@@ -266,7 +267,8 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
 
     Rules (docs/design.md, "Transmission"): Ke = 60 / (2 pi Kv); the pulleys' inertias scale with the fourth
     power of their pitch diameters (discs of the base's width); the static friction is the motor's back-drive
-    torque through the belt and the kinetic friction keeps the base's share of it.
+    torque through the belt and the kinetic friction keeps the base's share of it; the backdriven efficiency is
+    the planetary's by the meshing-loss argument (hal/virtual/plant/transmission.py) times the belt's.
     """
     m = design.motor_spec()
     driver_d, driven_d = design.driver_pitch_diameter_m, design.driven_pitch_diameter_m
@@ -286,6 +288,8 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
         * (driven_d / base.belt_driven_pitch_diameter_m) ** 4,
         actuator_backdrive_torque_nm=m.backdrive_torque_nm,
         coulomb_friction_nm=friction_share * m.backdrive_torque_nm * design.belt_ratio,
+        efficiency_backdriven=planetary_backdriven_efficiency(base.gearbox_efficiency, m.gear_ratio)
+        * base.belt_efficiency,
         **_spring_params(spring),
     )
 

@@ -20,10 +20,12 @@ class Coefficients:
 
     def __init__(self, *, inv_j: float, kto: float, ks: float, c0: float, kd: float, mg: float, psi0: float,
                  lo: float, hi: float, kst: float, cst: float, tc: float, tsx: float, tau: float, ker: float,
-                 bscale: float, ipk: float = math.inf, kp: float = 0.0, pe: float = 0.0, p2: bool = False) -> None:
+                 bscale: float, ipk: float = math.inf, kp: float = 0.0, pe: float = 0.0, p2: bool = False,
+                 kbo: float | None = None) -> None:
         """Store the constants (keyword arguments, in SI units divided by J where noted)."""
         self.inv_j = inv_j  # 1 / J_total [1/(kg m^2)]
-        self.kto = kto  # ankle torque per ampere / J
+        self.kto = kto  # ankle torque per ampere / J, driving (motor torque along the motion, or at rest)
+        self.kbo = kto if kbo is None else kbo  # the same, backdriven (motor torque against the sliding motion)
         self.ks = ks  # spring stiffness term (-k_l / J), 0 without spring
         self.c0 = c0  # constant torque / J (spring preload -k_l*theta0)
         self.kd = kd  # viscous damping / J
@@ -91,7 +93,8 @@ def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) ->
         if -c.tsx <= a <= c.tsx:
             return 0.0
         return a - c.tc if a > 0 else a + c.tc
-    a = c.kto * i + ext * c.inv_j + c.c0 - c.tc * s + c.ks * th - c.mg * math.sin(th + c.psi0) - c.kd * w
+    kt = c.kbo if i * s < 0.0 else c.kto
+    a = kt * i + ext * c.inv_j + c.c0 - c.tc * s + c.ks * th - c.mg * math.sin(th + c.psi0) - c.kd * w
     if c.kp != 0.0:
         a -= parallel_spring(c.kp, c.pe, c.p2, th)
     if th > c.hi:
@@ -120,7 +123,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
     (exp(-h/2/tau), exp(-h/tau)) for this h, from :func:`lag_factors` (computed once for the grid step).
     """
     th, w, i, s = state
-    inv_j, kto, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.ks, c.c0, c.kd, c.mg, c.psi0
+    inv_j, kto, kbo, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.kbo, c.ks, c.c0, c.kd, c.mg, c.psi0
     lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk
     kp, pe, p2 = c.kp, c.pe, c.p2
     tgt, brake, vr, emf = d.target_a, d.brake_a, d.v_over_r, d.emf
@@ -168,9 +171,10 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
                 continue
             s = 1 if a > 0.0 else -1
         f = c0 - tc * s
-        u1 = kto * i + f + x1
-        u2 = kto * i_m + f + x2
-        u4 = kto * i_e + f + x4
+        # the transmission's gain by power direction over the step (s fixed): backdriven where i opposes s
+        u1 = (kbo if i * s < 0.0 else kto) * i + f + x1
+        u2 = (kbo if i_m * s < 0.0 else kto) * i_m + f + x2
+        u4 = (kbo if i_e * s < 0.0 else kto) * i_e + f + x4
         a1 = u1 + ks * th - mg * math.sin(th + psi0) - kd * w
         if kp != 0.0:
             a1 -= parallel_spring(kp, pe, p2, th)

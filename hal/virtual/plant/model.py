@@ -50,7 +50,7 @@ class PlantState:
     current_q_a: float
     current_command_a: float
     motor_torque_nm: float  # electromagnetic torque on the rotor, Kt * i_q
-    output_torque_nm: float  # the motor's torque delivered at the ankle, Kt * i_q * N * efficiency
+    output_torque_nm: float  # the motor's torque at the ankle: Kt i_q N eta driving, Kt i_q N / eta_back backdriven
     external_torque_nm: float
     energy_j: float
     powered: bool
@@ -139,7 +139,8 @@ class Plant:
         self._spring_offset = (p.spring_offset_rad if fx.spring_offset_rad is None else fx.spring_offset_rad)
         inv_j = 1.0 / self.output_inertia_kg_m2
         self._c = Coefficients(
-            inv_j=inv_j, kto=p.output_torque_per_amp_nm * inv_j, ks=-self._spring_k * inv_j,
+            inv_j=inv_j, kto=p.output_torque_per_amp_nm * inv_j, kbo=p.backdriven_torque_per_amp_nm * inv_j,
+            ks=-self._spring_k * inv_j,
             c0=-self._spring_k * self._spring_offset * inv_j, kd=p.foot_damping_nm_s_per_rad * inv_j,
             mg=self._gravity_moment_nm * inv_j, psi0=p.com_angle_at_zero_rad,
             lo=p.stop_min_rad, hi=p.stop_max_rad,
@@ -279,7 +280,7 @@ class Plant:
             motor_angle_rad=n * th + self.motor_angle_offset_rad + phi, motor_velocity_rad_s=n * w + dw,
             current_q_a=i,
             current_command_a=self._command_a, motor_torque_nm=p.kt_nm_per_a * i,
-            output_torque_nm=p.output_torque_per_amp_nm * i, external_torque_nm=ext,
+            output_torque_nm=p.output_torque_nm(i, s), external_torque_nm=ext,
             energy_j=self._energy(th, w), powered=self._powered, stuck=s == 0 and a == 0.0,
             in_contact=not lo <= th <= hi)
 

@@ -34,6 +34,7 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "belt_driven_pitch_diameter_m": ("transmission", 1e-3, 1.0),
     "gearbox_efficiency": ("transmission", 0.1, 1.0),
     "belt_efficiency": ("transmission", 0.1, 1.0),
+    "efficiency_backdriven": ("transmission", 0.1, 1.0),
     "actuator_output_inertia_kg_m2": ("transmission", 0.0, 1.0),
     "ankle_pulley_inertia_kg_m2": ("transmission", 0.0, 1.0),
     "backlash_deg": ("transmission", 0.0, 10.0),
@@ -60,9 +61,10 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "parallel_two_sided": ("spring", 0, 1),
 }
 OPTIONAL = {"parallel_stiffness_nm_per_rad": 0.0, "parallel_engage_rad": 0.0, "parallel_two_sided": False,
-            "backlash_deg": None}
+            "backlash_deg": None, "efficiency_backdriven": None}
 """Keys a plant profile may leave out, with their values then: [spring] (no parallel spring); backlash_deg None =
-the bench imperfection's figure (profiles/bench_imperfections.toml [gearbox_backlash])."""
+the bench imperfection's figure (profiles/bench_imperfections.toml [gearbox_backlash]); efficiency_backdriven None =
+one efficiency as a torque gain in both power directions (see PlantParams.backdriven_torque_per_amp_nm)."""
 _BOOLS = ("parallel_two_sided",)
 
 #: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
@@ -117,6 +119,9 @@ class PlantParams:
     parallel_two_sided: bool = False
     # gearbox free play at the actuator (gearbox) output, degrees; None: the bench imperfection's figure
     backlash_deg: float | None = None
+    # the transmission's (gearbox x belt) efficiency when the ankle drives the rotor (power into the motor);
+    # None: `efficiency` applied as the same torque gain in both directions (docs/plant.md, "Efficiency")
+    efficiency_backdriven: float | None = None
 
     def __post_init__(self) -> None:
         """Check every value against its allowed range and the cross-field rules."""
@@ -136,6 +141,24 @@ class PlantParams:
     def output_torque_per_amp_nm(self) -> float:
         """Ankle torque per ampere of q-axis current: Kt * N * efficiency."""
         return self.kt_nm_per_a * self.total_ratio * self.efficiency
+
+    @property
+    def backdriven_torque_per_amp_nm(self) -> float:
+        """Ankle torque per ampere while the ankle drives the rotor (motor torque against the motion).
+
+        Power through the transmission loses a share in either direction: driving, the ankle gets
+        eta_fwd Kt N i; backdriven, holding the rotor's Kt i takes Kt N i / eta_back at the ankle, so the motor
+        receives eta_back of the ankle's power. Without ``efficiency_backdriven`` the forward gain serves both
+        directions (the motor then receives 1 / eta_fwd of the ankle's power, more than is put in).
+        """
+        if self.efficiency_backdriven is None:
+            return self.output_torque_per_amp_nm
+        return self.kt_nm_per_a * self.total_ratio / self.efficiency_backdriven
+
+    def output_torque_nm(self, current_a: float, direction: int) -> float:
+        """The motor's torque at the ankle for q current and the ankle's direction of motion (+1/-1, 0 at rest)."""
+        backdriven = current_a * direction < 0.0
+        return (self.backdriven_torque_per_amp_nm if backdriven else self.output_torque_per_amp_nm) * current_a
 
     @property
     def reflected_inertia_kg_m2(self) -> float:
