@@ -29,9 +29,10 @@ def test_reported_motor_temperature_follows_the_two_node_model() -> None:
         reference.step(1e-3, 20.0)
     assert v.temp_motor_c == pytest.approx(reference.winding_c, abs=0.15)
     assert v.temp_motor_c == pytest.approx(winding.winding_c, abs=0.1)  # the reply carries 0.1 C steps
-    # The default one-node model gives a different reading for the same current: the hook is in use.
+    # The default one-node model gives a different reading for the same current (by more than three times the
+    # 0.15 C agreement with the two-node reference above): the hook is in use.
     default = values_at(_held(20.0, 4.0), 4.0)
-    assert abs(default.temp_motor_c - v.temp_motor_c) > 1.0
+    assert abs(default.temp_motor_c - v.temp_motor_c) > 0.5
 
 
 def _held(current_a: float, until_s: float) -> Rig:
@@ -43,8 +44,8 @@ def _held(current_a: float, until_s: float) -> Rig:
 def test_a_hot_ambient_latches_over_temperature_through_the_two_node_model() -> None:
     rig = Rig(Ak60Config(temp_motor_max_c=80.0), initial_angle_rad=0.6283)
     rig.motor.meter.attach_thermal(_winding(ambient_c=75.0))
-    hold_current(rig, 20.0, 3.0)
-    v = values_at(rig, 3.0)
+    hold_current(rig, 20.0, 4.0)
+    v = values_at(rig, 4.0)
     assert v.fault == FaultCode.OVER_TEMP_MOTOR and v.temp_motor_c > 80.0
     assert rig.motor.mode is DriveMode.RELEASED
 

@@ -10,9 +10,10 @@ from host_tools.studies.fault_heat import HOT_WALK, SETTLE_S, hot_walk_row, hot_
 def test_the_hot_walk_trips_after_the_winding_crosses_fault_c_and_the_safe_command_follows():
     row = hot_walk_row()
     assert row["detected"] and row["reason"] == "OVER_TEMPERATURE"
-    # the trip follows the model's crossing by at most a reading period (10 Hz) plus the 0.1 C reporting step's heat
-    assert row["onset_s"] < row["trip_s"] < row["onset_s"] + 0.5
-    assert HOT_WALK["fault_c"] < row["winding_at_trip_c"] < HOT_WALK["fault_c"] + 0.5
+    # the trip follows the model's crossing by at most the 0.1 C reporting step plus a reading period's (10 Hz) heat:
+    # bounded in temperature, not time (how long 0.1 C takes depends on the walk's heating rate near fault_c)
+    assert row["onset_s"] < row["trip_s"]
+    assert HOT_WALK["fault_c"] < row["winding_at_trip_c"] < HOT_WALK["fault_c"] + 0.2
     assert row["detect_ms"] == pytest.approx((row["trip_s"] - row["onset_s"]) * 1e3)
     assert row["trip_s"] < row["safe_s"] < row["trip_s"] + 0.005  # zero current on the wire within 5 ms
     # until the trip the hot run is its pair: no unintended motion before the safe command

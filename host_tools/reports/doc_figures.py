@@ -105,17 +105,20 @@ def motor_catalogue() -> str:
     from hal.virtual.plant.thermal import ThermalParams, WindingThermal
 
     lines = ["| file | actuator | supply | ratio | peak torque (output) | peak current | Kt (motor) | mass | "
-             "MIT P / V / T max | winding at rated current, 25 °C ambient | continuous current to the limit |",
+             "MIT P / V / T max | winding at rated current, 25 °C ambient (R_ha nominal / pessimistic) | "
+             "continuous current to the limit (insulation / magnets) |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in catalogue_names():
         m = load_motor(name)
         thermal = WindingThermal(ThermalParams.from_motor(m), ambient_c=25.0)
+        hot = WindingThermal(ThermalParams.from_motor(m, "pessimistic"), ambient_c=25.0)
         lines.append(
             f"| `{name}` | {m.model} | {m.supply_voltage_v:g} V | {m.gear_ratio:g}:1 | {m.peak_torque_nm:g} N·m | "
             f"{m.peak_current_a:g} A | {m.kt_nm_per_a:g} N·m/A | {m.mass_kg:g} kg | "
             f"{m.p_max_rad:g} rad / {m.v_max_rad_s:g} rad/s / {m.t_max_nm:g} N·m | "
-            f"{thermal.steady_state_c(m.rated_current_a)[0]:.1f} °C at {m.rated_current_a:g} A | "
-            f"{thermal.continuous_current_a():.1f} A to {m.max_winding_c:g} °C |")
+            f"{thermal.steady_state_c(m.rated_current_a)[0]:.1f} / {hot.steady_state_c(m.rated_current_a)[0]:.1f} °C "
+            f"at {m.rated_current_a:g} A | {thermal.continuous_current_a():.1f} A to {m.max_temperature_c:g} °C "
+            f"({m.max_winding_c:g} / {m.max_magnet_c:g}) |")
     taus = sorted({tuple(round(t, 1) for t in ThermalParams.from_motor(load_motor(n)).time_constants_s())
                    for n in catalogue_names()})
     lines += ["", "Thermal time constants (R fixed): " + "; ".join(

@@ -55,8 +55,10 @@ def thermal_summary(r: Any) -> dict:
     steady = math.nan
     tripped = sup.tripped_at_s if sup.tripped_at_s is not None else math.inf
     rms = log.rms_current_a(tripped)  # the walk's, not the safe state's after a trip
+    steady_hot = math.nan
     if winding is not None and math.isfinite(rms):
         steady = winding.steady_state_c(rms)[0]  # depends on the ambient only, not the state
+        steady_hot = _pessimistic_steady_c(heat["motor"], heat["ambient_c"], rms)
     fast, slow = winding.params.time_constants_s() if winding is not None else (math.nan, math.nan)
     return {
         "emulation_only": True,
@@ -70,12 +72,23 @@ def thermal_summary(r: Any) -> dict:
         "housing_c_by_stride": [_finite(row.housing_c, 2) for row in log.strides],
         "rms_current_a": _finite(rms, 3),
         "steady_state_c": _finite(steady, 1) if not math.isinf(steady) else "runaway",
+        # the same with the housing-to-ambient resistance at the upper end of its range (the design bound)
+        "steady_state_pessimistic_c": _finite(steady_hot, 1) if not math.isinf(steady_hot) else "runaway",
         "time_constants_s": [_finite(fast, 1), _finite(slow, 1)],
         "derating_started_s": None if derating is None else round(derating, 4),
         "over_temperature_at_s": None if over is None else round(over, 4),
         "motor_reported_c_max": _finite(log.reported_c_max, 1),
         "motor_reported_c_by_stride": [_finite(row.reported_c, 1) for row in log.strides],
     }
+
+
+def _pessimistic_steady_c(motor: str, ambient_c: float, rms_a: float) -> float:
+    """The winding's steady state at rms_a with the motor's housing resistance at its pessimistic end."""
+    from hal.virtual.plant.motors import load_motor
+    from hal.virtual.plant.thermal import ThermalParams, WindingThermal
+
+    params = ThermalParams.from_motor(load_motor(motor), "pessimistic")
+    return WindingThermal(params, ambient_c).steady_state_c(rms_a)[0]
 
 
 def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:

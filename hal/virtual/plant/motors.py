@@ -54,11 +54,13 @@ SPEC: dict[str, dict[str, tuple[float, float]]] = {
     "thermal": {
         "winding_to_housing_k_per_w": (0.01, 50.0),
         "housing_to_ambient_k_per_w": (0.01, 50.0),
+        "housing_to_ambient_max_k_per_w": (0.01, 50.0),
         "winding_heat_capacity_j_per_k": (0.1, 1e4),
         "housing_heat_capacity_j_per_k": (1.0, 1e5),
         "copper_tempco_per_k": (0.003, 0.0045),
         "resistance_reference_c": (-40.0, 150.0),
         "max_winding_c": (60.0, 250.0),
+        "max_magnet_c": (60.0, 250.0),
     },
 }
 
@@ -91,16 +93,23 @@ class MotorSpec:
     t_max_nm: float
     winding_to_housing_k_per_w: float
     housing_to_ambient_k_per_w: float
+    housing_to_ambient_max_k_per_w: float  # the pessimistic end of the housing's resistance (design bound)
     winding_heat_capacity_j_per_k: float
     housing_heat_capacity_j_per_k: float
     copper_tempco_per_k: float
     resistance_reference_c: float
-    max_winding_c: float
+    max_winding_c: float  # the insulation's class limit
+    max_magnet_c: float  # the magnets' maximum working temperature (their grade)
 
     @property
     def output_torque_per_amp_nm(self) -> float:
         """Ideal output torque per ampere, Kt * gear ratio (no gearbox loss)."""
         return self.kt_nm_per_a * self.gear_ratio
+
+    @property
+    def max_temperature_c(self) -> float:
+        """The lower of the insulation's and the magnets' limits, the winding taken as the hottest part."""
+        return min(self.max_winding_c, self.max_magnet_c)
 
     @property
     def thermal_resistance_k_per_w(self) -> float:
@@ -153,6 +162,10 @@ def _check_consistency(v: dict[str, Any], where: str) -> None:
             raise ValueError(
                 f"{where}: {table}.{rated} = {v[rated]!r} exceeds {peak} = {v[peak]!r} "
                 f"(allowed range [0, {v[peak]}])")
+    if v["housing_to_ambient_max_k_per_w"] < v["housing_to_ambient_k_per_w"]:
+        raise ValueError(
+            f"{where}: thermal.housing_to_ambient_max_k_per_w = {v['housing_to_ambient_max_k_per_w']!r} is below "
+            f"housing_to_ambient_k_per_w (allowed range [{v['housing_to_ambient_k_per_w']}, 50])")
     if v["housing_heat_capacity_j_per_k"] < v["winding_heat_capacity_j_per_k"]:
         raise ValueError(
             f"{where}: thermal.housing_heat_capacity_j_per_k = {v['housing_heat_capacity_j_per_k']!r} is below "

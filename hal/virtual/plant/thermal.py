@@ -4,12 +4,20 @@
     C_h dT_h/dt = (T_w - T_h) / R_wh - (T_h - T_a) / R_ha
     P_cu = k I^2 R(T_w),   R(T) = R_ref (1 + alpha (T - T_ref))
 
-I is the q-axis current the driver regulates (the plant's and the VESC telemetry's "motor current"),
-R_ref the maker's phase-to-phase resistance and k = 1 (``COPPER_LOSS_FACTOR``): the makers' motor
-constant Km (torque per square root of copper loss) is Kt / sqrt(R_ll) for every catalogue motor, so
-their copper loss at torque Kt I is (Kt I / Km)^2 = R_ll I^2, the same DC equivalent the plant and the
-AK60-6 driver model use (v_q = R i + Ke w). Iron and friction losses are left out (they heat the
-housing mostly and are not published for the catalogue motors).
+I is the q-axis current the driver regulates (the plant's and the VESC telemetry's "motor current") and R_ref
+the maker's phase-to-phase (line-to-line) resistance. The drivers' q current is amplitude-invariant: VESC's
+FOC (mcpwm_foc.c) takes i_alpha = i_a, i_beta = (i_a + 2 i_b)/sqrt(3), so |i_dq| is the phase current's
+amplitude. Three phases of RMS amplitude/sqrt(2) through R_phase each dissipate
+
+    P_cu = 3 (i_q / sqrt(2))^2 R_phase = 1.5 i_q^2 R_phase = 0.75 i_q^2 R_ll     (star winding, R_ll = 2 R_phase)
+
+(the amplitude-invariant transform's power is 3/2 (v_d i_d + v_q i_q): P. C. Krause, O. Wasynczuk, S. D. Sudhoff,
+*Analysis of Electric Machinery and Drive Systems*, 2nd ed., Wiley 2002, sec. 3.3), so k = 0.75
+(``COPPER_LOSS_FACTOR``). A delta winding gives the same: R_ll = 2/3 R_delta and the phase current is
+1/sqrt(3) of the line's. The makers' motor constant Km is Kt / sqrt(R_ll) for every catalogue motor, a catalogue
+formula (copper loss R_ll I^2 of a DC current through two phases), not the loss of the q current the driver
+regulates, which is 4/3 smaller. Iron and friction losses are left out (they heat the housing mostly and are not
+published for the catalogue motors).
 
 The step is backward Euler on the 2x2 linear system (R's temperature dependence enters linearly), so
 it is stable for any step; the plant steps far below the 17 s winding time constant.
@@ -17,7 +25,7 @@ it is stable for any step; the plant steps far below the 17 s winding time const
 >>> from hal.virtual.plant.motors import load_motor
 >>> t = WindingThermal(ThermalParams.from_motor(load_motor("ak60_6")), ambient_c=25.0)
 >>> round(t.steady_state_c(6.5)[0], 1)  # rated current, from 25 C ambient
-53.6
+45.8
 """
 
 from __future__ import annotations
@@ -27,8 +35,10 @@ from dataclasses import dataclass
 
 from hal.virtual.plant.motors import MotorSpec
 
-#: Copper loss per (q-axis ampere)^2 per ohm of phase-to-phase resistance (see the module docstring).
-COPPER_LOSS_FACTOR = 1.0
+#: Copper loss per (q-axis ampere)^2 per ohm of phase-to-phase resistance: 1.5 R_phase = 0.75 R_ll (module docstring).
+COPPER_LOSS_FACTOR = 0.75
+THERMAL_BOUNDS = ("nominal", "pessimistic")
+"""The housing-to-ambient resistance a run takes: the motor profile's figure, or the upper end of its range."""
 
 
 @dataclass(frozen=True)
@@ -59,17 +69,20 @@ class ThermalParams:
                 raise ValueError(f"thermal parameter {name} = {value!r} must be finite (tempco >= 0)")
 
     @classmethod
-    def from_motor(cls, m: MotorSpec) -> ThermalParams:
-        """The thermal parameters of a catalogue motor."""
+    def from_motor(cls, m: MotorSpec, bound: str = "nominal") -> ThermalParams:
+        """The thermal parameters of a catalogue motor; bound "pessimistic": the housing resistance's upper end."""
+        if bound not in THERMAL_BOUNDS:
+            raise ValueError(f"thermal bound {bound!r} is not allowed: one of {', '.join(THERMAL_BOUNDS)}")
+        r_ha = m.housing_to_ambient_max_k_per_w if bound == "pessimistic" else m.housing_to_ambient_k_per_w
         return cls(
             winding_to_housing_k_per_w=m.winding_to_housing_k_per_w,
-            housing_to_ambient_k_per_w=m.housing_to_ambient_k_per_w,
+            housing_to_ambient_k_per_w=r_ha,
             winding_heat_capacity_j_per_k=m.winding_heat_capacity_j_per_k,
             housing_heat_capacity_j_per_k=m.housing_heat_capacity_j_per_k,
             resistance_ohm=m.phase_resistance_ohm,
             copper_tempco_per_k=m.copper_tempco_per_k,
             resistance_reference_c=m.resistance_reference_c,
-            max_winding_c=m.max_winding_c,
+            max_winding_c=m.max_temperature_c,
         )
 
     def time_constants_s(self) -> tuple[float, float]:
