@@ -112,9 +112,10 @@ def test_moment_share_counts_only_what_goes_the_demands_way_up_to_the_demand():
     assert math.isnan(moment_share(t, demand, demand, np.zeros(6, bool)))
 
 
-def _row(point, kg, share, status="ok", hot=True, energy=math.nan, rms=2.0):
+def _row(point, kg, share, status="ok", hot=True, energy=math.nan, rms=2.0, margin=25.0, tension=500.0):
     return {"point": point, "actuator_kg": kg, "moment_share": share, "status": status, "within_thermal": hot,
-            "energy_per_stride_j": energy, "tracking_rms_deg": rms}
+            "energy_per_stride_j": energy, "tracking_rms_deg": rms, "thermal_margin_c": margin,
+            "belt_tension_n": tension, "belt_rated_n": 600.0}
 
 
 def c(share, rms=5.0):
@@ -133,6 +134,14 @@ def test_pareto_and_the_lightest_design_that_walks():
     assert lightest(rows, c(1.0)) is None and lightest(rows, c(0.9, 8.0))["point"] == 6
     e = [_row(0, 1.0, 0.95, energy=10.0), _row(1, 1.0, 0.95, energy=12.0), _row(2, 1.1, 0.95, energy=8.0)]
     assert [r["point"] for r in pareto(e)] == [0, 2]  # energy counts when every row has it
+
+
+def test_a_design_walks_only_with_its_thermal_margin_and_its_belt_within_rating():
+    assert walks(_row(0, 1.0, 0.95, margin=20.0, tension=600.0), c(0.9))
+    assert not walks(_row(0, 1.0, 0.95, margin=19.9), c(0.9))  # the steady winding too near the derating start
+    assert not walks(_row(0, 1.0, 0.95, margin=math.nan), c(0.9))  # no thermal figure: not shown to walk
+    assert not walks(_row(0, 1.0, 0.95, tension=600.1), c(0.9))  # the belt above its rated working tension
+    assert walks(_row(0, 1.0, 0.95, tension=900.0), WalkCriteria(0.9, 5.0, 20.0, belt_within_rating=False))
 
 
 def test_the_reports_ak60_6_walks_20_kg_and_falls_short_at_80(tmp_path):
@@ -169,7 +178,7 @@ def test_same_table_on_one_or_two_workers_and_after_an_interrupted_run(tmp_path)
 
 def test_the_command_writes_the_table_report_and_plot(tmp_path, capsys):
     spec = spec_file(tmp_path, 'motors = ["ak60_6"]\nbody_masses_kg = [20]\nstrides = 1\nmin_moment_share = 0.0\n'
-                     'max_tracking_rms_deg = 90\n')
+                     'max_tracking_rms_deg = 90\nmin_thermal_margin_c = -200\nbelt_within_rating = false\n')
     out = tmp_path / "out"
     assert main(["design", str(spec), "--out", str(out), "--workers", "1", "--quiet"]) == 0
     md = (out / "design.md").read_text(encoding="utf-8")

@@ -24,6 +24,7 @@ import numpy as np
 
 from firmware.control.reference import GaitReference
 from hal.virtual.plant import PlantParams
+from hal.virtual.plant.design import Design
 from hal.virtual.plant.walking import WalkingLoad
 from host_tools.outdir import save_figure
 
@@ -214,6 +215,21 @@ def stance_moment_share(t_s: np.ndarray, current_meas_a: np.ndarray, nm_per_a: f
             "motor_stance_peak_moment_share": round(float(given[stance].max() / demand[stance].max()), 4)}
 
 
+def belt_check(params: PlantParams, spec: Design | None, control_limit_a: float, peak_a: float,
+               run_peak_a: float | None) -> dict:
+    """The belt's effective tension at the run's peak current, the firmware limit and peak current, and its rating
+    (a design profile's belt; None otherwise)."""
+    from hal.virtual.plant.design import belt_tension_per_amp_n
+
+    per_a = belt_tension_per_amp_n(params)
+    return {"n_per_motor_a": round(per_a, 1),
+            "at_run_peak_n": None if run_peak_a is None else round(per_a * run_peak_a, 0),
+            "at_control_limit_n": round(per_a * control_limit_a, 0), "at_peak_current_n": round(per_a * peak_a, 0),
+            "belt": None if spec is None else f"{spec.belt_pitch_mm:g} mm pitch, {spec.width_mm:g} mm wide",
+            "rated_working_tension_n": None if spec is None else spec.rated_tension_n,
+            "within_rating": None if spec is None or run_peak_a is None else per_a * run_peak_a <= spec.rated_tension_n}
+
+
 def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
                  current_meas_a: np.ndarray | None = None) -> tuple[dict, list[str]]:
     """The design check of a walking run (RunResult r, directory out, the run's command and measured current over
@@ -238,6 +254,11 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
                     "saturated_fraction": round(float(at_limit.mean()), 4) if sel.any() else None,
                     "near_limit_fraction": round(float(near_limit.mean()), 4) if sel.any() else None,
                     "heel_strikes_sensed": fw.load_detector.heel_strikes, "toe_offs_sensed": fw.load_detector.toe_offs}
+    run_peak = (float(np.abs(np.asarray(current_meas_a, dtype=float)[sel]).max())
+                if current_meas_a is not None and sel.any() else None)
+    # a drawn or --plant plant keeps the design's belt only when it is the design's plant (cfg.plant_file unset)
+    check["belt"] = belt_check(params, cfg.design if cfg.plant_file is None else None, fw.config.current_limit_a,
+                               check["drive"]["peak_current_a"], run_peak)
     if current_meas_a is not None and math.isfinite(start):
         ff = fw.config.feedforward_params
         check["run"].update(stance_moment_share(t_s, current_meas_a, ff.torque_constant_nm_per_a * ff.gear_ratio
@@ -247,7 +268,14 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
     beyond = (f" (not counting the {se['stance_fraction_above_no_load']} of the stance that asks for the no-load "
               f"speed {se['no_load_speed_rpm']} rpm or more, up to {se['peak_demand_speed_rpm']} rpm: no torque "
               "there at any mass)" if se["stance_fraction_above_no_load"] > 0 else "")
+    b = check["belt"]
+    rated = (f" against {b['rated_working_tension_n']} N rated ({b['belt']}, assumed rating: "
+             "hal/virtual/plant/transmission.py)" if b["rated_working_tension_n"] is not None else
+             " (no design profile: the belt's pitch and width, hence its rating, unknown)")
     lines = ["", f"## Actuator design check (walking, {cfg.body_mass_kg:g} kg)", "",
+             f"Belt tension (backdriven, the larger direction): {b['n_per_motor_a']} N per motor A; "
+             f"{b['at_run_peak_n']} N at this run's peak reported current, {b['at_control_limit_n']} N at the "
+             f"firmware limit, {b['at_peak_current_n']} N at peak current{rated}.", "",
              f"Deliverable at the ankle: peak {d['peak_torque_nm']} N·m ({d['peak_current_a']} A), continuous "
              f"{d['continuous_torque_nm']} N·m ({d['rated_current_a']} A), firmware limit "
              f"{d['control_limit_torque_nm']} N·m ({d['control_limit_a']} A), no-load speed "

@@ -19,7 +19,12 @@ design profile. Its figures (docs/design.md, "Reading the search"):
 * from summary.json's ``thermal`` and ``battery`` (NaN where the run has none): the winding temperature after the
   strides and its steady state (emulation only), the temperature the motor reported, energy per stride at the
   battery and distance per charge; ``thermal_limit_c``: the firmware's over-temperature threshold ([thermal]
-  fault_c) or the winding's insulation limit, whichever is lower;
+  fault_c) or the winding's insulation or magnet limit, whichever is lower; ``steady_state_pessimistic_c``: the
+  steady state with the housing-to-ambient resistance at the upper end of its range, ``thermal_margin_c`` how far it
+  stays below [thermal] derate_start_c;
+* ``belt_tension_n``: the belt's peak effective tension, the largest reported current x Kt x gearbox ratio over the
+  driver pulley's pitch radius, taken backdriven (divided by the gearbox's backdriven efficiency, the larger of the
+  two directions); ``belt_rated_n``: the belt's rated working tension (hal/virtual/plant/transmission.py, assumed);
 * ``actuator_kg``: host_tools/studies/design_mass.py; ``keeps_up_to_kg``: summary.json's actuator design check
   (host_tools/reports/actuator.py, on the plant the bench ran), at peak current (``_limit``: the firmware's limit).
 """
@@ -45,7 +50,8 @@ FIGURES = ("fault", "fault_at_s", "strides_walked", "moment_share", "tracking_rm
            "peak_electrical_w", "winding_c_end", "winding_c_max", "steady_state_c", "motor_reported_c_max",
            "thermal_limit_c", "within_thermal", "over_temperature_at_s", "energy_per_stride_j",
            "distance_per_charge_km", "motor_kg", "transmission_kg", "spring_kg", "actuator_kg", "keeps_up_to_kg",
-           "keeps_up_to_kg_limit", "sim_time_s", "wall_time_s")
+           "keeps_up_to_kg_limit", "steady_state_pessimistic_c", "thermal_margin_c", "belt_tension_n",
+           "belt_rated_n", "sim_time_s", "wall_time_s")
 KEPT = ("summary.json", "report.md", "actuator.png")  # of a point's outputs, beside its design profile
 
 
@@ -173,7 +179,7 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
     fault = ",".join(s["faults"])
     thermal, battery = s.get("thermal"), s.get("battery")
     thermal_limits = getattr(r.firmware.config, "thermal", None)  # [thermal]: where the firmware latches
-    limit = min(motor.max_winding_c, getattr(thermal_limits, "fault_c", math.inf))
+    limit = min(motor.max_temperature_c, getattr(thermal_limits, "fault_c", math.inf))
     steady = _num(thermal, "steady_state_c")
     hottest = steady if not math.isnan(steady) else _num(thermal, "winding_c_max")
     over = _num(thermal, "over_temperature_at_s")
@@ -184,6 +190,13 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
     keeps = (s.get("actuator") or {}).get("keeps_up_to_body_mass_kg")  # the design check on the bench's plant
     mass = actuator_mass(motor.mass_kg, p.driver_teeth, p.driven_teeth, p.pitch_mm, p.spring_nm_per_rad,
                          p.spring_engage_deg, p.spring_sided, params.stop_min_rad, params.stop_max_rad)
+    from hal.virtual.plant.design import belt_tension_per_amp_n, load_design
+
+    hot = _num(thermal, "steady_state_pessimistic_c")
+    derate = getattr(thermal_limits, "derate_start_c", math.nan)
+    design = load_design(Path(p.profile_name))
+    rated = design.rated_tension_n if design is not None else math.nan
+    tension = float(i.max()) * belt_tension_per_amp_n(params) if len(i) else math.nan
     return {"fault": fault, "fault_at_s": round(sup.tripped_at_s, 4) if sup.tripped_at_s is not None else math.nan,
             "strides_walked": walked, "moment_share": round(share, 4),
             "tracking_rms_deg": _num(s, "encoder_rms_error_deg"),
@@ -194,7 +207,9 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
             "thermal_limit_c": limit, "within_thermal": bool(within), "over_temperature_at_s": over,
             "energy_per_stride_j": _num(battery, "energy_per_stride_j"),
             "distance_per_charge_km": _num(battery, "distance_per_charge_km"),
-            **mass, "keeps_up_to_kg": _num(keeps, "peak"), "keeps_up_to_kg_limit": _num(keeps, "control_limit")}
+            **mass, "keeps_up_to_kg": _num(keeps, "peak"), "keeps_up_to_kg_limit": _num(keeps, "control_limit"),
+            "steady_state_pessimistic_c": hot, "thermal_margin_c": round(derate - hot, 1),
+            "belt_tension_n": round(tension, 1), "belt_rated_n": rated}
 
 
 def _write_summary(r: Any, out: Path) -> dict[str, Any]:

@@ -5,7 +5,9 @@ report's AK60-6 transmission with its limit, and the table of every point (docs/
 A point **walks** the person when its run completed without a fault, the winding stays within its thermal
 limit (the steady state of continuous walking when summary.json has it, else the hottest the run saw), it
 delivered at least the spec's ``min_moment_share`` of the stance moment and tracked the gait within its
-``max_tracking_rms_deg`` (the encoder's RMS error). The Pareto front of each body mass and
+``max_tracking_rms_deg`` (the encoder's RMS error), its steady winding with the housing resistance at the
+pessimistic end stays ``min_thermal_margin_c`` below the firmware's derating start, and its belt's peak tension is
+within the belt's rated working tension (``belt_within_rating``). The Pareto front of each body mass and
 speed is taken among the points that walk, on actuator mass (lower), moment share (higher) and energy per stride
 at the battery (lower; left out where no point has it).
 """
@@ -33,8 +35,12 @@ def _num(v: object) -> float:
 def walks(row: dict[str, Any], c: WalkCriteria) -> bool:
     """Whether the point walks the person (module docstring)."""
     share, rms = _num(row.get("moment_share")), _num(row.get("tracking_rms_deg"))
+    margin = _num(row.get("thermal_margin_c"))
+    tension, rated = _num(row.get("belt_tension_n")), _num(row.get("belt_rated_n"))
+    belt_ok = not c.belt_within_rating or (not math.isnan(rated) and tension <= rated)
     return row.get("status") == "ok" and bool(row.get("within_thermal")) and not math.isnan(share) \
-        and share >= c.min_moment_share and not math.isnan(rms) and rms <= c.max_tracking_rms_deg
+        and share >= c.min_moment_share and not math.isnan(rms) and rms <= c.max_tracking_rms_deg \
+        and not math.isnan(margin) and margin >= c.min_thermal_margin_c and belt_ok
 
 
 def groups(rows: list[dict[str, Any]]) -> list[tuple[float, str]]:
@@ -101,6 +107,14 @@ def _shortfall(rows: list[dict[str, Any]], mass: float, c: WalkCriteria) -> str:
     if not best["within_thermal"] and not best["fault"]:
         why.append(f"winding {_fmt(best['steady_state_c'], '.0f')} °C steady (limit "
                    f"{_fmt(best['thermal_limit_c'], '.0f')} °C)")
+    margin = _num(best.get("thermal_margin_c"))
+    if not best["fault"] and (math.isnan(margin) or margin < c.min_thermal_margin_c):
+        why.append(f"winding {_fmt(best.get('steady_state_pessimistic_c'), '.0f')} °C steady with the housing "
+                   f"resistance at its pessimistic end, {_fmt(margin, '.0f')} °C below the derating start (needs "
+                   f"{c.min_thermal_margin_c:g})")
+    tension, rated = _num(best.get("belt_tension_n")), _num(best.get("belt_rated_n"))
+    if c.belt_within_rating and not (tension <= rated):
+        why.append(f"belt tension {_fmt(tension, '.0f')} N at its peak current against {_fmt(rated, '.0f')} N rated")
     keeps = _num(best["keeps_up_to_kg"])
     if not math.isnan(keeps) and keeps < mass:
         why.append(f"its envelope keeps up to {keeps:g} kg at peak current, {mass - keeps:.1f} kg short")
@@ -176,7 +190,10 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
           "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking), "
           f"it delivers at least {c.min_moment_share:.0%} of the stance moment (measured as a bench does: the "
           "motor's reported current x the drive's N·m per A, plus the plant's spring at the firmware's angle) and "
-          f"the encoder measures at most {c.max_tracking_rms_deg:g}° RMS tracking error. Winding "
+          f"the encoder measures at most {c.max_tracking_rms_deg:g}° RMS tracking error, its steady winding with the "
+          f"housing resistance at its pessimistic end stays {c.min_thermal_margin_c:g} °C below the firmware's "
+          "derating start" + (" and its belt's peak tension is within the belt's rated working tension"
+                              if c.belt_within_rating else "") + ". Winding "
           "temperatures are the thermal model's (emulation only); the actuator mass is an estimate "
           "(docs/design.md). n/a: the run's summary has no such figure.", ""]
     md += ["## The lightest design that walks each body mass and speed", ""]
@@ -221,8 +238,9 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
                       f"{_fmt(r['steady_state_c'], '.1f')} |")
     md += ["", "## Every point", "",
            "| point | motor | belt | ratio | spring | battery | kg | speed | status | moment share | peak A | peak W "
-           "| winding °C end / steady / reported | energy/stride J | km/charge | actuator kg | keeps up to kg |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "| winding °C end / steady / reported | steady, R_ha pessimistic °C | belt N peak / rated "
+           "| energy/stride J | km/charge | actuator kg | keeps up to kg |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         st = r["status"] if not r["fault"] else f"fault {r['fault']} at {_fmt(r['fault_at_s'])} s"
         if r["status"] in ("error", "timeout"):
@@ -233,6 +251,8 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
                   f"{r['speed']} | {st} | {_fmt(r['moment_share'], '.3f')} | {_fmt(r['peak_current_a'], '.1f')} | "
                   f"{_fmt(r['peak_electrical_w'], '.0f')} | {_fmt(r['winding_c_end'], '.1f')} / "
                   f"{_fmt(r['steady_state_c'], '.1f')} / {_fmt(r['motor_reported_c_max'], '.1f')} | "
+                  f"{_fmt(r.get('steady_state_pessimistic_c'), '.1f')} | {_fmt(r.get('belt_tension_n'), '.0f')} / "
+                  f"{_fmt(r.get('belt_rated_n'), '.0f')} | "
                   f"{_fmt(r['energy_per_stride_j'], '.1f')} | {_fmt(r['distance_per_charge_km'], '.1f')} | "
                   f"{_fmt(r['actuator_kg'], '.3f')} | {_fmt(r['keeps_up_to_kg'], 'g')} |")
     md += ["", "Files: `results.parquet`, `results.csv` (every column), `pareto.png`, `points/NNNN/` (each point's "

@@ -16,7 +16,10 @@ speeds, each point a walking run of the firmware on its design profile; checked 
     ambient_c = 25.0                   # the motor's surroundings, -40..80 C (pafp run --ambient-c)
     min_moment_share = 0.9             # a design "walks" the person when it delivers this share of the stance
                                        # moment, without a fault and within the thermal limit,
-    max_tracking_rms_deg = 5.0         # and tracks the gait within this RMS (the encoder's, in RUN)
+    max_tracking_rms_deg = 5.0         # and tracks the gait within this RMS (the encoder's, in RUN),
+    min_thermal_margin_c = 20.0        # its steady winding (housing resistance at its pessimistic end) this far
+                                       # below [thermal] derate_start_c,
+    belt_within_rating = true          # and its belt's peak tension within the belt's rated working tension
 
     [[belt]]                           # one per ratio: the belt's tooth pair and pitch
     driver_teeth = 12
@@ -49,7 +52,7 @@ __all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "WalkCriteria", "load_des
 
 SEARCH_KEYS = ("profile", "motors", "batteries", "body_masses_kg", "speeds", "strides", "controller", "seed",
                "timeout_s", "ambient_c", "min_moment_share",
-               "max_tracking_rms_deg")
+               "max_tracking_rms_deg", "min_thermal_margin_c", "belt_within_rating")
 BELT_KEYS = ("driver_teeth", "driven_teeth", "pitch_mm")
 SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
 MAX_POINTS = 10_000
@@ -61,6 +64,8 @@ class WalkCriteria:
 
     min_moment_share: float = 0.9
     max_tracking_rms_deg: float = 5.0
+    min_thermal_margin_c: float = 20.0  # the pessimistic steady winding this far below [thermal] derate_start_c
+    belt_within_rating: bool = True  # the belt's peak tension within its rated working tension
 
 
 @dataclass(frozen=True)
@@ -283,9 +288,15 @@ def load_design_spec(path: Path) -> DesignSpec:
     seed = _int(path, "[search] seed", s.get("seed", 0), 0, 2**32 - 1)
     timeout = _number(path, "[search] timeout_s", s.get("timeout_s", 900.0), 0.0, 86_400.0, True)
     ambient = _number(path, "[search] ambient_c", s.get("ambient_c", 25.0), -40.0, 80.0)
+    belt_rule = s.get("belt_within_rating", True)
+    if not isinstance(belt_rule, bool):
+        raise _err(path, "[search] belt_within_rating", belt_rule, "true or false")
     criteria = WalkCriteria(_number(path, "[search] min_moment_share", s.get("min_moment_share", 0.9), 0.0, 1.0),
                             _number(path, "[search] max_tracking_rms_deg", s.get("max_tracking_rms_deg", 5.0), 0.0,
-                                    90.0, True))
+                                    90.0, True),
+                            _number(path, "[search] min_thermal_margin_c", s.get("min_thermal_margin_c", 20.0),
+                                    -200.0, 200.0),
+                            belt_rule)
     belts, springs = _belts(path, doc), _springs(path, doc)
     n = len(motors) * len(belts) * len(springs) * len(batteries) * len(masses) * len(speeds)
     if not 1 <= n <= MAX_POINTS:

@@ -8,6 +8,7 @@ A design profile is a firmware profile (``profiles/firmware.toml``'s sections, c
     belt_driver_teeth = 30      # the actuator's pulley
     belt_driven_teeth = 140     # the ankle's pulley: belt ratio = driven / driver
     belt_pitch_mm = 2.0         # a standard pitch (BELT_PITCHES)
+    belt_width_mm = 12.0        # optional: a stock width of the pitch (transmission.BELT_WIDTHS_MM; default its widest)
     battery = "molicel_p42a_12s1p"   # optional: a profiles/batteries/ name
     [design.spring]             # optional; absent or stiffness 0: no spring
     stiffness_nm_per_rad = 100.0
@@ -35,10 +36,15 @@ from typing import Any
 
 from hal.virtual.plant.motors import MotorSpec, load_motor
 from hal.virtual.plant.params import PlantParams
-from hal.virtual.plant.transmission import planetary_backdriven_efficiency
+from hal.virtual.plant.transmission import (
+    belt_tension_n,
+    belt_width_mm,
+    planetary_backdriven_efficiency,
+    rated_belt_tension_n,
+)
 
 __all__ = ["BELT_PITCHES", "BELT_RATIO_TOLERANCE", "MAX_DRIVEN_PITCH_DIAMETER_M", "SPRING_SIDES", "Design",
-           "DesignSpring", "belt_for_ratio", "design_from_mapping", "load_design", "nearest_belt_pairs",
+           "DesignSpring", "belt_for_ratio", "belt_tension_per_amp_n", "design_from_mapping", "load_design", "nearest_belt_pairs",
            "plant_params_for"]
 
 BELT_PITCHES: dict[float, tuple[str, int]] = {
@@ -57,7 +63,7 @@ shell above the keel, so a ratio that needs one is refused."""
 BELT_RATIO_TOLERANCE = 0.01
 """A ratio asked of :func:`belt_for_ratio` must be met by a whole tooth pair within 1 %."""
 SPRING_SIDES = ("one", "two")
-_KEYS = ("motor", "belt_driver_teeth", "belt_driven_teeth", "belt_pitch_mm", "spring", "battery")
+_KEYS = ("motor", "belt_driver_teeth", "belt_driven_teeth", "belt_pitch_mm", "spring", "battery", "belt_width_mm")
 _SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
 MOTOR_KEYS = ("supply_voltage_v", "kv_rpm_per_v", "kt_nm_per_a", "phase_resistance_ohm", "phase_inductance_h",
               "pole_pairs", "rotor_inertia_kg_m2", "peak_current_a")
@@ -93,6 +99,17 @@ class Design:
     belt_pitch_mm: float
     spring: DesignSpring | None = None
     battery: str | None = None
+    belt_width_mm: float | None = None  # None: the pitch's widest stock width
+
+    @property
+    def width_mm(self) -> float:
+        """The belt's width (the pitch's widest stock width unless the design names one)."""
+        return belt_width_mm(self.belt_pitch_mm, self.belt_width_mm)
+
+    @property
+    def rated_tension_n(self) -> float:
+        """The belt's rated working tension (hal/virtual/plant/transmission.py, BELT_RATED_N_PER_MM: assumed)."""
+        return rated_belt_tension_n(self.belt_pitch_mm, self.width_mm)
 
     @property
     def belt_ratio(self) -> float:
@@ -124,6 +141,8 @@ class Design:
                                  "belt_driven_teeth": self.belt_driven_teeth, "belt_pitch_mm": self.belt_pitch_mm}
         if self.battery is not None:
             table["battery"] = self.battery
+        if self.belt_width_mm is not None:
+            table["belt_width_mm"] = self.belt_width_mm
         if self.spring is not None:
             table["spring"] = {"stiffness_nm_per_rad": self.spring.stiffness_nm_per_rad,
                                "engage_deg": self.spring.engage_deg, "sided": self.spring.sided}
@@ -193,8 +212,18 @@ def design_from_mapping(table: dict[str, Any], source: str) -> Design:
     spring = None
     if "spring" in table:
         spring = _spring(table["spring"], source)
+    width = table.get("belt_width_mm")
+    if width is not None:
+        try:
+            width = belt_width_mm(pitch, float(width) if _is_number(width) else width)
+        except ValueError as e:
+            raise ValueError(f"{source}: [design] belt_width_mm = {table['belt_width_mm']!r}: {e}") from None
     return Design(motor=motor, belt_driver_teeth=driver, belt_driven_teeth=driven, belt_pitch_mm=pitch,
-                  spring=spring, battery=battery)
+                  spring=spring, battery=battery, belt_width_mm=width)
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _spring(table: object, source: str) -> DesignSpring:
@@ -292,6 +321,14 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
         * base.belt_efficiency,
         **_spring_params(spring),
     )
+
+
+def belt_tension_per_amp_n(params: PlantParams) -> float:
+    """Belt tension per ampere of q current in the worse direction: backdriven, holding the rotor's Kt i takes
+    Kt i N_gearbox / eta_back at the actuator's output (more than driving gives), over the driver pulley's radius."""
+    torque = params.kt_nm_per_a * params.gearbox_ratio / planetary_backdriven_efficiency(
+        params.gearbox_efficiency, params.gearbox_ratio)
+    return belt_tension_n(torque, params.belt_driver_pitch_diameter_m)
 
 
 def _spring_params(spring: DesignSpring | None) -> dict[str, Any]:

@@ -1,4 +1,5 @@
-"""Transmission physics of a design: efficiency by power direction through a planetary stage and a belt.
+"""Transmission physics of a design: efficiency by power direction through a planetary stage and a belt, and the
+belt's tension against its rating.
 
 A planetary stage with the ring fixed, the sun driven and the carrier the output (the quasi-direct-drive
 actuators' layout) has a ratio i = 1 + z_ring / z_sun. Its losses are those of the tooth meshes, which carry only
@@ -26,7 +27,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["MAX_SINGLE_STAGE_RATIO", "planetary_backdriven_efficiency", "planetary_stages"]
+__all__ = ["BELT_RATED_N_PER_MM", "BELT_WIDTHS_MM", "MAX_SINGLE_STAGE_RATIO", "belt_tension_n", "belt_width_mm",
+           "planetary_backdriven_efficiency", "planetary_stages", "rated_belt_tension_n"]
 
 MAX_SINGLE_STAGE_RATIO = 10.0
 """Largest ratio built as one sun-planet-carrier stage [I]: a larger ratio needs planets too small for the sun
@@ -54,3 +56,40 @@ def planetary_backdriven_efficiency(efficiency: float, ratio: float) -> float:
         raise ValueError(f"gearbox efficiency {efficiency!r} is too low for a {ratio:g}:1 planetary: its meshes "
                          f"would be lossier than the whole stage (allowed range ({1.0 / i:.3f}, 1] per stage)")
     return (i / (1.0 + (i - 1.0) / eta0)) ** n
+
+
+BELT_WIDTHS_MM: dict[float, tuple[float, ...]] = {
+    2.0: (6.0, 9.0, 12.0),
+    3.0: (9.0, 15.0),
+    5.0: (9.0, 15.0, 25.0),
+    8.0: (20.0, 30.0),
+}
+"""Stock widths per pitch (mm), narrowest first [I]; a design's belt is the widest unless it names one (the design
+search checks the belt at its best: a narrower belt only lowers the rating)."""
+BELT_RATED_N_PER_MM: dict[float, float] = {2.0: 20.0, 3.0: 30.0, 5.0: 50.0, 8.0: 90.0}
+"""Rated working tension per mm of belt width, per pitch [I]. Stand-ins of the order of the belt makers' low-speed
+ratings for glass-cord GT2 belts, NOT read from a maker's table (Gates' PowerGrip GT2 Drive Design Manual no. 17195
+and Light Power & Precision manual were not reachable to check): a 6 mm GT2 belt is rated 120 N here against its
+breaking load of about 1 kN (FarmBot's acceptance test of its 6 mm GT2 belt: 100 kg - 20 kg hung weight,
+genesis.farm.bot/v1.6/bom/drivetrain/belt). Replace them with the belt maker's table before building."""
+
+
+def belt_width_mm(pitch_mm: float, width_mm: float | None = None) -> float:
+    """The belt's width: the given stock width of the pitch, or the pitch's widest."""
+    widths = BELT_WIDTHS_MM[pitch_mm]
+    if width_mm is None:
+        return widths[-1]
+    if width_mm not in widths:
+        raise ValueError(f"belt width {width_mm!r} mm is not allowed for the {pitch_mm:g} mm pitch: one of "
+                         f"{', '.join(f'{w:g}' for w in widths)}")
+    return width_mm
+
+
+def rated_belt_tension_n(pitch_mm: float, width_mm: float) -> float:
+    """The belt's rated working tension (BELT_RATED_N_PER_MM x width)."""
+    return BELT_RATED_N_PER_MM[pitch_mm] * width_mm
+
+
+def belt_tension_n(actuator_torque_nm: float, driver_pitch_diameter_m: float) -> float:
+    """The belt's effective (tight-side minus slack-side) tension carrying the actuator's output torque."""
+    return abs(actuator_torque_nm) / (0.5 * driver_pitch_diameter_m)
