@@ -60,7 +60,8 @@ __all__ = ["BELT_RATIO", "EXIT_TASK_EXCEPTION", "FeedbackAngle", "SerialRunConfi
 
 log = logging.getLogger(__name__)
 
-BELT_RATIO = 28 / 6  # rotor : output is 28 : 1 and the planetary 6 : 1, so pid_pos = 28/6 * ankle angle
+BELT_RATIO = 28 / 6  # the report's belt (rotor : output 28 : 1 over a 6 : 1 planetary): pid_pos = 28/6 * ankle angle;
+# a run takes its profile's [safety] belt_ratio (a design's own belt)
 GC_EVERY_TICKS = 100  # probe ticks between two young-generation collections (the collector is off meanwhile)
 STOP_DRAIN_TIMEOUT_S = 0.5  # the stop path waits at most this long for the port to send the safe frames
 EXIT_TASK_EXCEPTION = 3
@@ -363,7 +364,9 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     clock = WallClock(f_cpu, spin_s=cfg.realtime.spin_s)
     now = SchedulerNow()  # the board is built before the scheduler: bound to it below
     wd = Watchdog(int(WATCHDOG_TIMEOUT_S * f_cpu))
-    feedback_angle = FeedbackAngle()
+    # the profile's belt (a design profile's [safety] belt_ratio is its own), as the firmware's plausibility check
+    # of the output encoder against the motor's position takes it
+    feedback_angle = FeedbackAngle(fw_cfg.safety.belt_ratio)
     if cfg.encoder == "sim":
         assert ports.devices is not None
         devices = ports.devices
