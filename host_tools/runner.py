@@ -112,6 +112,7 @@ class RunConfig:
     body_mass_kg: float = 80.0  # walk: the walker's mass (the moment scales with it)
     moment_csv: Path | None = None  # walk: the ankle moment per kg (default: the packaged normative curve)
     speed: str | None = None  # a speed group of the packaged data (host_tools/walk.py SPEEDS): reference and moment
+    population: str | None = None  # walk: "adult" or "child" moment curves (None: by body mass, host_tools/walk.py)
     # the load cell and heel/toe FSRs on the ADC (hal/virtual/ground_sensors.py); None: fitted when walking
     ground_sensors: bool | None = None
     sensor_faults: tuple[str, ...] = ()  # "PART:MODE" from the start, e.g. "fsr_heel:open" (SENSOR_FAULTS)
@@ -263,7 +264,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     reference = gait_reference(reference_record(cfg.reference_csv, cfg.speed), fw_cfg.stride_s)
     clock = VirtualClock(f_cpu)
     now = SchedulerNow()  # the bench is built before the scheduler: bound to it below
-    load = (walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv, cfg.speed) if cfg.scenario == "walk"
+    load = (walking_load(cfg.body_mass_kg, fw_cfg.stride_s, cfg.moment_csv, cfg.speed, cfg.population)
+            if cfg.scenario == "walk"
             else None)
     bench_options, bench_record = cfg.bench_setup()
     if load is not None:

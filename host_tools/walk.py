@@ -10,7 +10,8 @@ from pathlib import Path
 from hal.virtual.plant.ground import GroundReaction
 from hal.virtual.plant.walking import WalkingLoad
 
-__all__ = ["GRF_CSV", "MOMENT_COLUMN", "SCENARIOS", "ground_reaction", "moment_curve", "walking_load"]
+__all__ = ["ADULT_FREE_PEAK_MOMENT_NM_PER_KG", "CHILD_MAX_BODY_MASS_KG", "GRF_CSV", "MOMENT_COLUMN", "POPULATIONS",
+           "SCENARIOS", "adult_moment_scale", "ground_reaction", "moment_curve", "population_for", "walking_load"]
 
 SCENARIOS = ("suspended", "walk")
 SPEEDS = {"very-slow": "Very Slow", "slow": "Slow", "free": "Free", "fast": "Fast", "very-fast": "Very Fast"}
@@ -18,6 +19,19 @@ SPEEDS = {"very-slow": "Very Slow", "slow": "Slow", "free": "Free", "fast": "Fas
 ALL_SPEEDS = "ankle_normative_all_speeds.csv"
 MOMENT_COLUMN = "ankle_moment_nm_per_kg_mean"
 NORMATIVE = "firmware/data/ankle_normative.csv"
+POPULATIONS = ("adult", "child")
+"""Whose ankle moment the packaged curves give (``--population``): the measured children's, or adult-shaped."""
+CHILD_MAX_BODY_MASS_KG = 50.0
+"""[I] Above this body mass the walker is taken as an adult unless ``--population child`` says otherwise."""
+ADULT_FREE_PEAK_MOMENT_NM_PER_KG = 1.50
+"""ASSUMPTION, adult-shaped data (no adult set is packaged): the adult peak plantarflexor moment at free speed, the
+middle of the 1.4-1.6 N·m/kg that adult references give at natural cadence and self-selected speed (D. A. Winter,
+*The Biomechanics and Motor Control of Human Gait*, 2nd ed., Univ. of Waterloo Press 1991, ankle moment of the
+natural-cadence group; Bovi G, Rabuffetti M, Mazzoleni P, Ferrarin M, "A multiple-task gait analysis approach:
+kinematic, kinetic and EMG reference data for healthy young and adult subjects", Gait Posture 2011;33(1):6-13). The
+children's curves of every speed group (Schwartz et al. 2008, free-speed peak 1.226) are scaled by this over the
+children's free-speed peak: the shape, timing, angles, ground reaction in body weights and events stay the
+children's, and so does the speed dependence between groups. Power per kg scales with the moment (same angles)."""
 GRF_CSV = "grf_normative_all_speeds.csv"
 """Ground reaction forces in body weights, all speed groups (Schwartz et al. 2008): firmware/data/README.md."""
 
@@ -27,9 +41,35 @@ def all_speeds_path() -> Path:
     return Path(str(resources.files("firmware.data").joinpath(ALL_SPEEDS)))
 
 
-def moment_curve(path: Path | None = None, speed: str | None = None) -> tuple[list[float], list[float], str]:
+def population_for(body_mass_kg: float, population: str | None = None) -> str:
+    """The population of a walker: the one given, else adult above CHILD_MAX_BODY_MASS_KG, else child."""
+    if population is None:
+        return "adult" if body_mass_kg > CHILD_MAX_BODY_MASS_KG else "child"
+    if population not in POPULATIONS:
+        raise ValueError(f"population {population!r} unknown: one of {', '.join(POPULATIONS)}")
+    return population
+
+
+def adult_moment_scale() -> float:
+    """The factor from the children's packaged moment curves to the adult-shaped ones (ADULT_FREE_PEAK_...)."""
+    _, moment, _ = _packaged_moment(None, None)
+    return ADULT_FREE_PEAK_MOMENT_NM_PER_KG / max(moment)
+
+
+def moment_curve(path: Path | None = None, speed: str | None = None,
+                 population: str = "child") -> tuple[list[float], list[float], str]:
     """(percent_gait, ankle moment N m/kg, source) from a CSV shaped like the normative one ('#' lines skipped),
-    or the packaged curve of a speed group (SPEEDS)."""
+    or the packaged curve of a speed group (SPEEDS), adult-shaped for population "adult" (a user's CSV is taken as
+    given)."""
+    percent, moment, source = _packaged_moment(path, speed)
+    if population == "adult" and path is None:
+        k = adult_moment_scale()
+        return percent, [k * m for m in moment], f"{source} (adult-shaped: x {k:.3f}, host_tools/walk.py)"
+    return percent, moment, source
+
+
+def _packaged_moment(path: Path | None, speed: str | None) -> tuple[list[float], list[float], str]:
+    """The moment curve as the file gives it (module docstring of moment_curve)."""
     if speed is not None:
         if speed not in SPEEDS:
             raise ValueError(f"speed {speed!r} unknown: one of {list(SPEEDS)}")
@@ -70,9 +110,10 @@ def _columns(text: str, source: str, names: tuple[str, ...], speed_category: str
 
 
 def walking_load(body_mass_kg: float, stride_s: float, path: Path | None = None,
-                 speed: str | None = None) -> WalkingLoad:
-    """The ground's moment for body_mass_kg on the stride; ValueError naming a bad value or file."""
-    percent, moment, source = moment_curve(path, speed)
+                 speed: str | None = None, population: str | None = None) -> WalkingLoad:
+    """The ground's moment for body_mass_kg on the stride (the population's curve: population_for); ValueError
+    naming a bad value or file."""
+    percent, moment, source = moment_curve(path, speed, population_for(body_mass_kg, population))
     try:
         return WalkingLoad(percent, moment, body_mass_kg, stride_s)
     except ValueError as e:

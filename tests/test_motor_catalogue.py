@@ -142,3 +142,17 @@ def test_unreadable_profile_names_the_file(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="broken.toml: not valid TOML"):
         load_motor(tmp_path / "broken.toml")
     assert math.isfinite(load_motor("ak80_9").kt_nm_per_a)
+
+
+@pytest.mark.parametrize("name", ["ak10_9", "ak60_6", "ak70_10", "ak80_64"])
+def test_the_rotor_inertia_agrees_with_the_makers_mechanical_time_constant(name: str) -> None:
+    """J = tau_m Kt^2 / R_ll (the makers' convention, as their Km = Kt / sqrt(R_ll)): within 2 % wherever the maker's
+    tau_m is trusted (the AK80-9's printed tau_m equals its L/R, so its inertia is borrowed: see its profile)."""
+    m = load_motor(name)
+    j = m.mechanical_time_constant_s * m.kt_nm_per_a ** 2 / m.phase_resistance_ohm
+    assert m.rotor_inertia_kg_m2 == pytest.approx(j, rel=0.02)
+
+
+def test_the_ak80_9s_printed_time_constant_is_its_electrical_one() -> None:
+    m = load_motor("ak80_9")
+    assert m.mechanical_time_constant_s == pytest.approx(m.phase_inductance_h / m.phase_resistance_ohm, rel=0.01)

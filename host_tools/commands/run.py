@@ -85,6 +85,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                       help="the gait (angle reference and, walking, moment) of that speed group of the packaged "
                            "normative data (Schwartz et al. 2008; default: free speed); the stride time stays "
                            "the profile's")
+    walk.add_argument("--population", choices=("adult", "child"), default=None,
+                      help="walk: whose ankle moment: the packaged children's curves (Schwartz et al. 2008) or "
+                           "adult-shaped ones (scaled to an adult's 1.5 N·m/kg free-speed peak, an assumption: "
+                           "host_tools/walk.py); default adult above 50 kg body mass, else child",)
     walk.add_argument("--ground-sensors", choices=("auto", "on", "off"), default="auto",
                       help="the pylon load cell and heel/toe FSRs on the ADC, gait events from them (docs/hardware.md, "
                            "'Ground sensors'): auto (default) fits them when walking")
@@ -184,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
                         plant_seed=args.plant_seed, plant_file=args.plant, ideal=tuple(args.ideal),
                         controller=_controller(fw_cfg, args), scenario=args.scenario,
                         body_mass_kg=args.body_mass, moment_csv=args.moment, speed=args.speed,
+                        population=args.population,
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
                         sensor_faults=tuple(args.sensor_fault), design=_design(args),
                         battery=args.battery,
@@ -195,7 +200,8 @@ def run(args: argparse.Namespace) -> int:
         if args.scenario == "walk":
             from host_tools.walk import walking_load
 
-            walking_load(args.body_mass, fw_cfg.stride_s, args.moment, args.speed)  # a bad mass or CSV stops here
+            walking_load(args.body_mass, fw_cfg.stride_s, args.moment, args.speed,
+                         args.population)  # a bad mass or CSV stops here
         board_profile(args.board)  # fail early with a clear message, before anything runs
         cfg.bench_setup()  # the plant draw and the imperfection names, checked before anything runs
         if args.reference is not None:
@@ -234,7 +240,8 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")
     if args.scenario != "walk":
-        for option, value in (("--body-mass", args.body_mass), ("--moment", args.moment)):
+        for option, value in (("--body-mass", args.body_mass), ("--moment", args.moment),
+                              ("--population", args.population)):
             if value is not None:
                 return (f"{option} {value} is not allowed without --scenario walk: it sets the walking load, "
                         f"and the foot is {args.scenario}")

@@ -238,7 +238,7 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
 
     cfg, fw = r.config, r.firmware
     params = cfg.bench_setup()[0]["plant_params"]  # the plant the bench ran (a design's, a drawn one, --plant)
-    load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv, cfg.speed)
+    load = walking_load(cfg.body_mass_kg, fw.config.stride_s, cfg.moment_csv, cfg.speed, cfg.population)
     check = design_check(params, fw.config.current_limit_a, load, fw.reference,
                          rated_current_a=fw.config.motor.rated_current_a)
     start = r.gait_start_s if r.gait_start_s is not None else math.inf
@@ -254,6 +254,13 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
                     "saturated_fraction": round(float(at_limit.mean()), 4) if sel.any() else None,
                     "near_limit_fraction": round(float(near_limit.mean()), 4) if sel.any() else None,
                     "heel_strikes_sensed": fw.load_detector.heel_strikes, "toe_offs_sensed": fw.load_detector.toe_offs}
+    from host_tools.walk import population_for
+
+    population = population_for(cfg.body_mass_kg, cfg.population)
+    check["gait_data"] = {"population": population, "speed": cfg.speed or "free",
+                          "moment": str(cfg.moment_csv) if cfg.moment_csv is not None else
+                          "Schwartz et al. 2008 (children)" + (", adult-shaped (assumed 1.5 N·m/kg free-speed peak, "
+                                                               "host_tools/walk.py)" if population == "adult" else "")}
     run_peak = (float(np.abs(np.asarray(current_meas_a, dtype=float)[sel]).max())
                 if current_meas_a is not None and sel.any() else None)
     # a drawn or --plant plant keeps the design's belt only when it is the design's plant (cfg.plant_file unset)
@@ -272,7 +279,9 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
     rated = (f" against {b['rated_working_tension_n']} N rated ({b['belt']}, assumed rating: "
              "hal/virtual/plant/transmission.py)" if b["rated_working_tension_n"] is not None else
              " (no design profile: the belt's pitch and width, hence its rating, unknown)")
+    g = check["gait_data"]
     lines = ["", f"## Actuator design check (walking, {cfg.body_mass_kg:g} kg)", "",
+             f"Gait data: {g['population']}, {g['speed']} speed; moment: {g['moment']}.", "",
              f"Belt tension (backdriven, the larger direction): {b['n_per_motor_a']} N per motor A; "
              f"{b['at_run_peak_n']} N at this run's peak reported current, {b['at_control_limit_n']} N at the "
              f"firmware limit, {b['at_peak_current_n']} N at peak current{rated}.", "",

@@ -41,6 +41,7 @@ SPEC: dict[str, dict[str, tuple[float, float]]] = {
         "mass_kg": (0.05, 20.0),
         "gear_ratio": (1.0, 200.0),
         "rotor_inertia_kg_m2": (1e-7, 1e-2),
+        "mechanical_time_constant_s": (1e-5, 0.1),
         "rated_torque_nm": (0.05, 500.0),
         "peak_torque_nm": (0.1, 1000.0),
         "no_load_speed_rpm": (1.0, 10000.0),
@@ -84,6 +85,7 @@ class MotorSpec:
     mass_kg: float
     gear_ratio: float
     rotor_inertia_kg_m2: float
+    mechanical_time_constant_s: float  # the maker's tau_m = J R / Kt^2 (the check of the rotor inertia)
     rated_torque_nm: float
     peak_torque_nm: float
     no_load_speed_rpm: float
