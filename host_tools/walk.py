@@ -132,3 +132,22 @@ def ground_reaction(load: WalkingLoad, speed: str | None = None) -> GroundReacti
     foot = load_ground_profile()[2]
     return GroundReaction(load, percent, vertical, fore_aft, ankle_height_m=foot.ankle_height_m, heel_m=foot.heel_m,
                           toe_m=foot.toe_m)
+
+
+def curve_negative_work_j(body_mass_kg: float, stride_s: float, speed: str | None = None,
+                          population: str | None = None, samples: int = 2000) -> float:
+    """The negative ankle work of one stride of the packaged curves (> 0, joules): -integral of min(0, P) with the
+    ankle power P = -M(t) x the reference's angular velocity (M the population's plantarflexor moment x body mass,
+    the velocity dorsiflexion-positive: push-off's plantarflexion under a plantarflexor moment generates)."""
+    from firmware.control.reference import GaitReference
+
+    load = walking_load(body_mass_kg, stride_s, None, speed, population)
+    ref = (GaitReference.from_csv(all_speeds_path(), stride_s=stride_s, select={"speed_category": SPEEDS[speed]})
+           if speed is not None else GaitReference.normative(stride_s=stride_s))
+    dt = stride_s / samples
+    work = 0.0
+    for k in range(samples):
+        t = (k + 0.5) * dt
+        power = -load.moment_nm(100.0 * t / stride_s) * ref.velocity_rad_s(t)
+        work += min(0.0, power) * dt
+    return -work

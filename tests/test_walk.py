@@ -18,12 +18,19 @@ from hal.virtual.plant.walking import WalkingLoad
 from host_tools.cli import main
 from host_tools.reports.actuator import design_check
 from host_tools.runner import RunConfig, run_virtual
-from host_tools.walk import moment_curve, walking_load
+from host_tools.walk import (
+    ADULT_FREE_PEAK_MOMENT_NM_PER_KG,
+    adult_moment_scale,
+    curve_negative_work_j,
+    moment_curve,
+    population_for,
+    walking_load,
+)
 
 
 def test_walking_load_is_the_normative_moment_times_mass_in_stance_only():
     percent, moment, _ = moment_curve()
-    load = walking_load(60.0, 1.1)
+    load = walking_load(60.0, 1.1, population="child")
     assert load(5.0) == 0.0  # no gait clock bound yet: nothing walks
     load.bind(lambda: 1.0)
     assert load(0.99) == 0.0
@@ -169,3 +176,31 @@ def test_a_drive_within_the_speed_envelope_counts_no_instant_apart():
     assert check["speed_envelope"]["stance_fraction_above_no_load"] == 0.0
     assert check["speed_envelope"]["stride_fraction_above_no_load"] == 0.0
     assert check["keeps_up_to_body_mass_kg"]["peak"] == pytest.approx(34.6, abs=0.5)
+
+
+def test_adult_curves_are_the_childrens_scaled_to_the_assumed_adult_peak_and_a_users_csv_is_kept(tmp_path):
+    assert population_for(50.0) == "child" and population_for(50.1) == "adult"
+    assert population_for(80.0, "child") == "child"
+    with pytest.raises(ValueError, match="population 'elder' unknown: one of adult, child"):
+        population_for(80.0, "elder")
+    k = adult_moment_scale()
+    for speed in ("very-slow", "free", "fast"):
+        p_child, child, _ = moment_curve(speed=speed)
+        p_adult, adult, source = moment_curve(speed=speed, population="adult")
+        assert p_adult == p_child and adult == pytest.approx([k * m for m in child]) and "adult-shaped" in source
+    assert max(moment_curve(speed="free", population="adult")[1]) == pytest.approx(ADULT_FREE_PEAK_MOMENT_NM_PER_KG)
+    own = tmp_path / "m.csv"
+    own.write_text("percent_gait,ankle_moment_nm_per_kg_mean\n0,0\n50,1.3\n100,0\n", encoding="utf-8")
+    assert moment_curve(own, population="adult")[1] == [0.0, 1.3, 0.0]  # a user's curve is theirs
+    # the default walk (80 kg) is an adult's: its load is the adult curve
+    assert walking_load(80.0, 1.1).moment_nm(48.0) == pytest.approx(80.0 * k * moment_curve()[1][24])
+    # negative ankle work of the curve scales with the moment (same angles)
+    assert curve_negative_work_j(80.0, 1.1, "free", "adult") == pytest.approx(
+        k * curve_negative_work_j(80.0, 1.1, "free", "child"), rel=1e-9)
+
+
+def test_population_without_walking_is_refused_in_one_line(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", "--quiet", "--population", "adult", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--population adult is not allowed without --scenario walk" in err and len(err.strip().splitlines()) == 1

@@ -4,7 +4,8 @@
 temperature the motor reported in its status replies (the bench figure), the steady state the walk tends to
 (the model's steady state at the RMS current of the strides completed before any trip) and when the firmware
 began derating or latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's
-terminals, regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking
+terminals (the motor's, plus the electronics' quiescent load hal/virtual/plant/battery.py QUIESCENT_W x the stride),
+regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking
 speed.
 
 Walking speed: Schwartz et al. 2008 give each speed group's dimensionless speed v* = v / sqrt(g L)
@@ -98,8 +99,12 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
     if battery is None:
         return None
     log: HeatLog = heat["log"]
+    from hal.virtual.plant.battery import QUIESCENT_W
+
     energies = log.stride_energies_j()
-    per_stride = sum(energies) / len(energies) if energies else math.nan
+    motor_per_stride = sum(energies) / len(energies) if energies else math.nan
+    per_stride = motor_per_stride + QUIESCENT_W * stride_s  # the electronics draw whatever the motor does
+    walked_s = len(energies) * stride_s
     p = battery.params
     strides = p.capacity_wh * 3600.0 / per_stride if per_stride > 0 else math.nan
     speed_m_s = walking_speed_m_s(speed)
@@ -108,7 +113,12 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
         "capacity_wh": round(p.capacity_wh, 2),
         "mass_kg": round(p.mass_kg, 3),
         "energy_per_stride_j": _finite(per_stride, 3),
+        "motor_energy_per_stride_j": _finite(motor_per_stride, 3),
+        "quiescent_w": round(QUIESCENT_W, 3),
         "regenerated_j": round(battery.regenerated_j, 3),
+        # regeneration accepted over the whole run (settling, ramp and strides) per stride walked: an upper figure
+        "regenerated_per_stride_j": _finite(battery.regenerated_j / len(energies), 3) if energies else None,
+        "walked_s": round(walked_s, 3),
         "rejected_regeneration_j": round(battery.rejected_j, 3),
         "min_bus_v": _finite(log.bus_v_min, 3),
         "bus_v_by_stride": [round(row.bus_v, 3) for row in log.strides],
@@ -146,7 +156,9 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
         lines += ["", "Supply: ideal (no battery profile: `--battery NAME`)."]
         return lines
     lines += [f"| battery | {battery['name']}, {battery['capacity_wh']} Wh |",
-              f"| energy per stride at the battery | {fig(battery['energy_per_stride_j'], ' J')} |",
+              f"| energy per stride at the battery | {fig(battery['energy_per_stride_j'], ' J')} (motor "
+              f"{fig(battery['motor_energy_per_stride_j'], ' J')}, electronics {battery['quiescent_w']} W) |",
+              f"| regenerated per stride | {fig(battery['regenerated_per_stride_j'], ' J')} |",
               f"| regenerated into the battery | {battery['regenerated_j']} J |",
               f"| lowest bus voltage | {fig(battery['min_bus_v'], ' V')} |",
               f"| strides / distance per charge at {battery['speed_m_s']} m/s | "

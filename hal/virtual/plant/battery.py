@@ -32,6 +32,21 @@ from hal.virtual.plant.sourced import check_number, read_profile, read_sourced_t
 #: Directory of the battery profiles inside the packaged ``profiles``.
 BATTERY_DIR = "batteries"
 
+MCU_W = 0.29
+"""The controller board's MCU: an STM32F407 at 168 MHz runs on about 87 mA typical at 3.3 V with every peripheral
+clocked (ST DS8626, "Typical and maximum current consumption in Run mode ... 168 MHz, all peripherals enabled")."""
+IMU_W = 0.04
+"""The BNO085 streaming its rotation vector at 100 Hz: about 12 mA at 3.3 V (CEVA BNO08X data sheet, power table;
+recalled, order of magnitude)."""
+LOGIC_SUPPLY_EFFICIENCY = 0.85
+"""[I] The buck converter from the pack to the 3.3 V rail."""
+DRIVER_IDLE_W = 1.0
+"""[I] The motor driver's own logic, gate driver and current sensing at idle: CubeMars publishes no standby figure;
+a VESC-class board idles at about 20 mA on a 48 V bus."""
+QUIESCENT_W = (MCU_W + IMU_W) / LOGIC_SUPPLY_EFFICIENCY + DRIVER_IDLE_W
+"""The electronics' load on the pack whatever the motor does (about 1.4 W), added to the motor's energy per stride
+by the run's battery figures (host_tools/reports/thermal.py)."""
+
 _CELL_SPEC: dict[str, tuple[float, float]] = {
     "capacity_ah": (0.05, 500.0),
     "resistance_ohm": (1e-4, 1.0),
