@@ -290,7 +290,9 @@ sided = "{design.spring.sided}"
     s = json.loads((Path(point.profile_name).parent / "summary.json").read_text())
     assert not s["faults"] and s["complete"]
     assert s["actuator"]["drive"]["peak_current_a"] == load_motor(design.motor).peak_current_a  # the design's drive
-    assert s["actuator"]["keeps_up_to_body_mass_kg"]["peak"] >= 80.0
+    # the keeps-up-to rule weighs the drive alone (no spring): at 3.44:1 the motor alone keeps up to less than 80 kg
+    # (47 kg at peak current); the 400 N m/rad spring carries the rest, as the moment share measures
+    assert s["actuator"]["keeps_up_to_body_mass_kg"]["peak"] < 80.0
     # the spring carries part of the stance moment: the motor's own share is below the actuator's
     assert s["actuator"]["run"]["motor_stance_moment_share"] < row["moment_share"]
 

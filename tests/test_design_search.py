@@ -21,6 +21,7 @@ from host_tools.studies.design_report import is_report_design, lightest, pareto,
 from host_tools.studies.design_spec import SpecError, WalkCriteria, load_design_spec, pick_battery
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 from host_tools.studies.sweep_table import TIMING_COLUMNS
+from host_tools.walk import adult_moment_scale
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORT_BELT = "[[belt]]\ndriver_teeth = 30\ndriven_teeth = 140\npitch_mm = 2.0\n"
@@ -150,9 +151,11 @@ def test_the_reports_ak60_6_walks_20_kg_and_falls_short_at_80(tmp_path):
     _write_profiles(points, tmp_path / "o")
     light, adult = run_design_point(points[0]), run_design_point(points[1])
     assert is_report_design(light) and is_report_design(adult)
-    for row in (light, adult):  # the envelope of the AK60-6 + 6:1 + 14:3 belt (issue 23: 34.6 and 18.3 kg)
-        assert row["keeps_up_to_kg"] == pytest.approx(34.6, abs=0.5)
-        assert row["keeps_up_to_kg_limit"] == pytest.approx(18.3, abs=0.5)
+    # the envelope of the AK60-6 + 6:1 + 14:3 belt (issue 23: 34.6 and 18.3 kg on the children's curve, which the
+    # 20 kg walker has; the 80 kg walker's adult-shaped curve asks 1.223 times the moment per kg: 28.3 and 15.0 kg)
+    for row, k in ((light, 1.0), (adult, adult_moment_scale())):
+        assert row["keeps_up_to_kg"] == pytest.approx(34.6 / k, abs=0.5)
+        assert row["keeps_up_to_kg_limit"] == pytest.approx(18.3 / k, abs=0.5)
         assert row["actuator_kg"] > row["motor_kg"] == 0.368 and row["thermal_limit_c"] == 90.0  # [thermal] fault_c
     assert light["status"] == "ok" and light["strides_walked"] == 2 and 0.5 < light["moment_share"] <= 1.0
     assert 0 < light["peak_current_a"] <= 12.5 and light["peak_electrical_w"] > 0 and light["tracking_rms_deg"] > 0
@@ -197,17 +200,18 @@ def test_the_command_writes_the_table_report_and_plot(tmp_path, capsys):
 def test_a_design_whose_steady_winding_passes_the_firmwares_threshold_does_not_walk(tmp_path):
     belt = REPORT_BELT.replace("30", "18").replace("140", "144")  # AK80-9 at 8:1 walks 80 kg, its winding warms
     rows = []
-    for ambient in (25, 50):
+    for ambient in (25, 60):
         spec = load_design_spec(spec_file(tmp_path, f'motors = ["ak80_9"]\nbody_masses_kg = [80]\nstrides = 2\n'
                                           f"ambient_c = {ambient}\nmin_moment_share = 0.5\n", belt))
         (p,) = spec.points(tmp_path / f"o{ambient}")
         _write_profiles([p], tmp_path / f"o{ambient}")
         rows.append(run_design_point(p))
-        assert ("--ambient-c 50" in rerun_command(p)) == (ambient == 50)
+        assert ("--ambient-c 60" in rerun_command(p)) == (ambient == 60)
     cool, warm = rows
     assert cool["status"] == warm["status"] == "ok" and cool["thermal_limit_c"] == 90.0
-    assert cool["steady_state_c"] < 90.0 < warm["steady_state_c"]  # the same losses, 25 K warmer surroundings
-    assert warm["steady_state_c"] - cool["steady_state_c"] > 25.0  # and the copper's resistance rises with it
-    assert cool["within_thermal"] and walks(cool, c(0.5, 90)) and not warm["within_thermal"]
-    assert not walks(warm, c(0.5, 90))
+    assert cool["steady_state_c"] < 90.0 < warm["steady_state_c"]  # the same losses, 35 K warmer surroundings
+    assert warm["steady_state_c"] - cool["steady_state_c"] > 35.0  # and the copper's resistance rises with it
+    loose = WalkCriteria(0.5, 90, min_thermal_margin_c=-200.0, belt_within_rating=False)  # the thermal limit only
+    assert cool["within_thermal"] and walks(cool, loose) and not warm["within_thermal"]
+    assert not walks(warm, loose)
     assert cool["energy_per_stride_j"] > 0 and cool["distance_per_charge_km"] > 0  # the 12S pack, i23-heat's keys

@@ -93,7 +93,7 @@ def test_walking_at_a_light_mass_senses_heel_strikes_and_toe_offs(controller):
 
 def test_design_check_saturation_grows_with_body_mass_and_the_limit_mass_is_consistent():
     params = load_plant_params()
-    load = walking_load(80.0, 1.1)
+    load = walking_load(80.0, 1.1)  # an adult's curve (above 50 kg); the other masses below scale the same curve
     ref = GaitReference.normative(stride_s=1.1)
     check = design_check(params, 12.0, load, ref, masses_kg=(20.0, 40.0, 60.0, 80.0))
     sat = [row["saturated_fraction_peak"] for row in check["by_body_mass"]]
@@ -101,11 +101,12 @@ def test_design_check_saturation_grows_with_body_mass_and_the_limit_mass_is_cons
     peak = check["drive"]["peak_torque_nm"]
     assert peak == pytest.approx(0.078 * 22.7 * 28.0 * 0.855, rel=1e-3)
     limit_kg = check["keeps_up_to_body_mass_kg"]["peak"]
-    below = design_check(params, 12.0, walking_load(limit_kg - 1, 1.1), ref, masses_kg=())["demand"]
-    above = design_check(params, 12.0, walking_load(limit_kg + 1, 1.1), ref, masses_kg=())["demand"]
+    below = design_check(params, 12.0, walking_load(limit_kg - 1, 1.1, population="adult"), ref, masses_kg=())["demand"]
+    above = design_check(params, 12.0, walking_load(limit_kg + 1, 1.1, population="adult"), ref, masses_kg=())["demand"]
     assert below["saturated_fraction_peak"] == 0.0 < above["saturated_fraction_peak"]
     assert 50 <= check["demand"]["peak_speed_rpm"] <= 60  # the report designs for 55 rpm
-    assert check["demand"]["peak_torque_nm"] == pytest.approx(80 * max(np.abs(moment_curve()[1])), rel=1e-3)
+    assert check["demand"]["peak_torque_nm"] == pytest.approx(
+        80 * max(np.abs(moment_curve(population="adult")[1])), rel=1e-3)
 
 
 def test_cli_walk_writes_the_actuator_check(tmp_path):
@@ -171,11 +172,13 @@ def test_keeps_up_to_leaves_the_instants_beyond_the_no_load_speed_to_the_speed_e
 
 
 def test_a_drive_within_the_speed_envelope_counts_no_instant_apart():
-    check = design_check(load_plant_params(), 12.0, walking_load(80.0, 1.1), GaitReference.normative(stride_s=1.1),
-                         masses_kg=())
+    ref = GaitReference.normative(stride_s=1.1)
+    check = design_check(load_plant_params(), 12.0, walking_load(80.0, 1.1, population="child"), ref, masses_kg=())
     assert check["speed_envelope"]["stance_fraction_above_no_load"] == 0.0
     assert check["speed_envelope"]["stride_fraction_above_no_load"] == 0.0
-    assert check["keeps_up_to_body_mass_kg"]["peak"] == pytest.approx(34.6, abs=0.5)
+    assert check["keeps_up_to_body_mass_kg"]["peak"] == pytest.approx(34.6, abs=0.5)  # on the children's curve
+    adult = design_check(load_plant_params(), 12.0, walking_load(80.0, 1.1), ref, masses_kg=())
+    assert adult["keeps_up_to_body_mass_kg"]["peak"] == pytest.approx(34.6 / adult_moment_scale(), abs=0.5)  # 28.3
 
 
 def test_adult_curves_are_the_childrens_scaled_to_the_assumed_adult_peak_and_a_users_csv_is_kept(tmp_path):

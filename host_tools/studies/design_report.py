@@ -187,7 +187,8 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
           f"{len(rows)} points ({status_counts(rows)}) on {where} in "
           f"{_fmt(wall_time_s, '.1f')} s; {spec.strides} strides each, controller {spec.controller}, seed {spec.seed}. "
           f"A design walks the person when its run has no fault, its winding stays within the thermal limit (the "
-          "firmware's over-temperature threshold or the insulation's, the steady state of continuous walking), "
+          "firmware's over-temperature threshold or the insulation's or magnets', the steady state of continuous "
+          "walking), "
           f"it delivers at least {c.min_moment_share:.0%} of the stance moment (measured as a bench does: the "
           "motor's reported current x the drive's N·m per A, plus the plant's spring at the firmware's angle) and "
           f"the encoder measures at most {c.max_tracking_rms_deg:g}° RMS tracking error, its steady winding with the "
@@ -206,8 +207,10 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
             md.append(f"- **{mass:g} kg, {speed}**: point {best['point']}, {_label(best)}: "
                       f"{_fmt(best['actuator_kg'], '.3f')} kg, moment share {_fmt(best['moment_share'], '.1%')}, "
                       f"peak {_fmt(best['peak_current_a'], '.1f')} A, winding {_fmt(best['winding_c_end'], '.1f')} °C "
-                      f"after {spec.strides} strides ({_fmt(best['steady_state_c'], '.1f')} °C steady, limit "
-                      f"{_fmt(best['thermal_limit_c'], '.0f')} °C), {_fmt(best['energy_per_stride_j'], '.1f')} J per "
+                      f"after {spec.strides} strides ({_fmt(best['steady_state_c'], '.1f')} °C steady, "
+                      f"{_fmt(best.get('steady_state_pessimistic_c'), '.1f')} °C with R_ha pessimistic, limit "
+                      f"{_fmt(best['thermal_limit_c'], '.0f')} °C), belt {_fmt(best.get('belt_tension_n'), '.0f')} N "
+                      f"of {_fmt(best.get('belt_rated_n'), '.0f')} N rated, {_fmt(best['energy_per_stride_j'], '.1f')} J per "
                       f"stride, {_fmt(best['distance_per_charge_km'], '.1f')} km per charge; "
                       f"`{rerun_command(by_index[best['point']])}`")
     md += ["", "## The report's actuator (AK60-6, 14:3 belt, no spring)", ""]
