@@ -98,3 +98,17 @@ def test_the_integrator_brakes_with_the_backdriven_gain() -> None:
     extra = (two.backdriven_torque_per_amp_nm - one.output_torque_per_amp_nm) * -4.0 / two.output_inertia_kg_m2
     assert a_two - a_one == pytest.approx(extra, rel=1e-9)
     assert dv_two - dv_one == pytest.approx(extra * 0.0005, rel=0.01)
+
+
+def test_a_designs_belt_is_its_pitchs_widest_unless_it_names_a_stock_width() -> None:
+    from hal.virtual.plant.design import design_from_mapping
+
+    table = {"motor": "ak70_10", "belt_driver_teeth": 18, "belt_driven_teeth": 62, "belt_pitch_mm": 5.0}
+    d = design_from_mapping(dict(table), "t")
+    assert d.width_mm == 25.0 and d.rated_tension_n == 25.0 * 50.0
+    assert design_from_mapping({**table, "belt_width_mm": 15}, "t").rated_tension_n == 15.0 * 50.0
+    with pytest.raises(ValueError, match=r"^t: \[design\] belt width 12.0 mm is not allowed for the 5 mm pitch: "
+                                         r"one of 9, 15, 25$"):
+        design_from_mapping({**table, "belt_width_mm": 12}, "t")
+    with pytest.raises(ValueError, match=r"belt_width_mm = 'wide' is outside the allowed range \[1, 100\] mm"):
+        design_from_mapping({**table, "belt_width_mm": "wide"}, "t")

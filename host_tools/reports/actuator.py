@@ -24,7 +24,7 @@ import numpy as np
 
 from firmware.control.reference import GaitReference
 from hal.virtual.plant import PlantParams
-from hal.virtual.plant.design import Design
+from hal.virtual.plant.design import Design, belt_tension_per_amp_n
 from hal.virtual.plant.walking import WalkingLoad
 from host_tools.outdir import save_figure
 
@@ -219,8 +219,6 @@ def belt_check(params: PlantParams, spec: Design | None, control_limit_a: float,
                run_peak_a: float | None) -> dict:
     """The belt's effective tension at the run's peak current, the firmware limit and peak current, and its rating
     (a design profile's belt; None otherwise)."""
-    from hal.virtual.plant.design import belt_tension_per_amp_n
-
     per_a = belt_tension_per_amp_n(params)
     return {"n_per_motor_a": round(per_a, 1),
             "at_run_peak_n": None if run_peak_a is None else round(per_a * run_peak_a, 0),
@@ -234,7 +232,7 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
                  current_meas_a: np.ndarray | None = None) -> tuple[dict, list[str]]:
     """The design check of a walking run (RunResult r, directory out, the run's command and measured current over
     time): summary entry (with the run's measured saturation and stance moment), plot, report lines."""
-    from host_tools.walk import walking_load
+    from host_tools.walk import population_for, walking_load
 
     cfg, fw = r.config, r.firmware
     params = cfg.bench_setup()[0]["plant_params"]  # the plant the bench ran (a design's, a drawn one, --plant)
@@ -254,8 +252,6 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
                     "saturated_fraction": round(float(at_limit.mean()), 4) if sel.any() else None,
                     "near_limit_fraction": round(float(near_limit.mean()), 4) if sel.any() else None,
                     "heel_strikes_sensed": fw.load_detector.heel_strikes, "toe_offs_sensed": fw.load_detector.toe_offs}
-    from host_tools.walk import population_for
-
     population = population_for(cfg.body_mass_kg, cfg.population)
     check["gait_data"] = {"population": population, "speed": cfg.speed or "free",
                           "moment": str(cfg.moment_csv) if cfg.moment_csv is not None else

@@ -210,7 +210,8 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
                       f"after {spec.strides} strides ({_fmt(best['steady_state_c'], '.1f')} °C steady, "
                       f"{_fmt(best.get('steady_state_pessimistic_c'), '.1f')} °C with R_ha pessimistic, limit "
                       f"{_fmt(best['thermal_limit_c'], '.0f')} °C), belt {_fmt(best.get('belt_tension_n'), '.0f')} N "
-                      f"of {_fmt(best.get('belt_rated_n'), '.0f')} N rated, {_fmt(best['energy_per_stride_j'], '.1f')} J per "
+                      f"of {_fmt(best.get('belt_rated_n'), '.0f')} N rated, "
+                      f"{_fmt(best['energy_per_stride_j'], '.1f')} J per "
                       f"stride, {_fmt(best['distance_per_charge_km'], '.1f')} km per charge; "
                       f"`{rerun_command(by_index[best['point']])}`")
     md += ["", "## The report's actuator (AK60-6, 14:3 belt, no spring)", ""]

@@ -21,8 +21,8 @@ import pyarrow.parquet as pq
 
 from hal.virtual.plant.design import load_design
 from host_tools.commands.design import _write_profiles, columns
-from host_tools.studies.design_report import walks, write_design_report
 from host_tools.studies.design_point import design_error_row, run_design_point
+from host_tools.studies.design_report import walks, write_design_report
 from host_tools.studies.design_spec import load_design_spec
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 

@@ -44,8 +44,8 @@ from hal.virtual.plant.transmission import (
 )
 
 __all__ = ["BELT_PITCHES", "BELT_RATIO_TOLERANCE", "MAX_DRIVEN_PITCH_DIAMETER_M", "SPRING_SIDES", "Design",
-           "DesignSpring", "belt_for_ratio", "belt_tension_per_amp_n", "design_from_mapping", "load_design", "nearest_belt_pairs",
-           "plant_params_for"]
+           "DesignSpring", "belt_for_ratio", "belt_tension_per_amp_n", "design_from_mapping", "load_design",
+           "nearest_belt_pairs", "plant_params_for"]
 
 BELT_PITCHES: dict[float, tuple[str, int]] = {
     2.0: ("GT2 2 mm (2MGT)", 12),
@@ -214,16 +214,14 @@ def design_from_mapping(table: dict[str, Any], source: str) -> Design:
         spring = _spring(table["spring"], source)
     width = table.get("belt_width_mm")
     if width is not None:
+        width = _number(width, "belt_width_mm", 1.0, 100.0, source, " mm")
         try:
-            width = belt_width_mm(pitch, float(width) if _is_number(width) else width)
+            belt_width_mm(pitch, width)
         except ValueError as e:
-            raise ValueError(f"{source}: [design] belt_width_mm = {table['belt_width_mm']!r}: {e}") from None
+            raise ValueError(f"{source}: [design] {e}") from None
     return Design(motor=motor, belt_driver_teeth=driver, belt_driven_teeth=driven, belt_pitch_mm=pitch,
                   spring=spring, battery=battery, belt_width_mm=width)
 
-
-def _is_number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _spring(table: object, source: str) -> DesignSpring:
