@@ -18,6 +18,7 @@ timing studies.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import select
 import signal
@@ -86,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
                         help="switch one imperfection of the real bench off (as `pafp run --ideal`), or all")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="stop after S seconds (default: run until Ctrl-C or SIGTERM)")
+                        help="stop after S seconds (default, or inf: run until Ctrl-C or SIGTERM)")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes each device received (<role>.rx.bin) and sent (<role>.tx.bin) "
                              "with a time index into DIR (docs/serial_mode.md)")
@@ -151,7 +152,9 @@ def _check(args: argparse.Namespace) -> None:
     if args.device == "bench" and args.port and not args.imu_port:
         raise EmulateError("`bench --port MOTOR_DEVICE` also needs --imu-port IMU_DEVICE")
     if args.duration is not None and not args.duration > 0:
-        raise EmulateError(f"--duration {args.duration} out of range: > 0 seconds")
+        raise EmulateError(f"--duration {args.duration} out of range: > 0 seconds (inf: until stopped)")
+    if args.duration is not None and not math.isfinite(args.duration * 1e9):
+        args.duration = None  # inf, or so long that its nanoseconds overflow: until stopped
 
 
 def _run_can(args: argparse.Namespace) -> int:
@@ -161,7 +164,7 @@ def _run_can(args: argparse.Namespace) -> int:
 
     from hal.errors import HalError
     from hal.pycan import open_can, parse_can_url
-    from host_tools.serial_mode.can_emulate import WallCanMotor
+    from host_tools.serial_mode.can_emulate import WallCanMotor, deepen_receive_buffer
 
     stop: list[str] = []
 
@@ -173,9 +176,9 @@ def _run_can(args: argparse.Namespace) -> int:
     port, capture, devices, endpoints = None, None, None, []
     try:
         try:
-            if args.device == "imu":
-                raise EmulateError("--can serves the motor: `motor --can URL`, or `bench --can URL` with the IMU "
-                                   "on a pty")
+            if args.device not in ("motor", "bench"):
+                raise EmulateError(f"--can serves the motor, not `{args.device}`: `motor --can URL`, or "
+                                   "`bench --can URL` with the IMU on a pty")
             _check(args)
             url = parse_can_url(args.can, "--can")
             t0 = time.perf_counter_ns()
@@ -186,6 +189,7 @@ def _run_can(args: argparse.Namespace) -> int:
             if args.capture is not None:
                 capture = WireCapture(args.capture, lambda: clock_ns() / 1e9, side="device")
             port = open_can(url)
+            deepen_receive_buffer(port.bus)
             motor = WallCanMotor(capture.tap_can("motor", port, f"can-{url.mode}") if capture else port, url,
                                  args.fixture, clock_ns, world=devices.world if devices is not None else None)
             if devices is not None:
