@@ -12,6 +12,7 @@ from __future__ import annotations
 import heapq
 import time
 from collections.abc import Callable
+from typing import Any
 
 from hal.can import CanFrame, CanPort
 from hal.pycan import CanUrl
@@ -85,9 +86,12 @@ class WallCanMotor:
     """The AK60-6 over CAN on ``port`` (a :class:`~hal.can.CanPort`), one plant, wall-clock ns."""
 
     def __init__(self, port: CanPort, url: CanUrl, fixture: Fixture | str | None = "suspended",
-                 clock_ns: Callable[[], int] | None = None, world: World | None = None) -> None:
+                 clock_ns: Callable[[], int] | None = None, world: World | None = None, *,
+                 plant_options: dict[str, Any] | None = None, can_config: Ak60CanConfig | None = None) -> None:
         """Start the plant and the device now; with `world` (and its clock), the device joins that plant
-        (`pafp emulate bench --can`: the IMU on a pty sees the same foot)."""
+        (`pafp emulate bench --can`: the IMU on a pty sees the same foot). plant_options: the plant's parameters,
+        initial angle and backlash (``plant_params``, ``initial_angle_rad``, ``backlash_rad``; default: the
+        packaged AK60-6 plant); can_config: the CAN side (default: the URL's id and mode, the AK60-6's ranges)."""
         if clock_ns is None:
             t0 = time.perf_counter_ns()
             clock_ns = lambda: time.perf_counter_ns() - t0  # noqa: E731
@@ -95,10 +99,13 @@ class WallCanMotor:
         self.port = port
         if world is None:
             fx = fixture_by_name(fixture) if isinstance(fixture, str) else fixture
-            world = World(Plant(None, fx), NS_PER_S)
+            o = plant_options or {}
+            world = World(Plant(o.get("plant_params"), fx, initial_angle_rad=o.get("initial_angle_rad", 0.0),
+                                backlash_rad=o.get("backlash_rad", 0.0)), NS_PER_S)
         self.world = world
         self.bus = WallCanBus()
-        self.device = Ak60Can(self.world, self.bus, Ak60CanConfig(driver_id=url.driver_id, mode=url.mode))
+        cc = can_config if can_config is not None else Ak60CanConfig(driver_id=url.driver_id, mode=url.mode)
+        self.device = Ak60Can(self.world, self.bus, cc)
         self.frames_in = 0
         self.frames_out = 0
         self.tx_refused = 0
