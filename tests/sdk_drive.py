@@ -54,8 +54,8 @@ def tmcc(seconds, motor_type, log):
                     1.0 if k % 2 else -1.0)),
                 ("velocity", lambda: dev.set_speed_gains(kd=2.0), lambda k: dev.set_output_velocity_radians_per_second(
                     2.0 if k % 2 else -2.0)),
-                ("position", lambda: dev.set_impedance_gains_real_unit(K=10.0, B=0.5), lambda k: dev.set_output_angle_radians(
-                    0.3 if k % 2 else -0.3))):
+                ("position", lambda: dev.set_impedance_gains_real_unit(K=10.0, B=0.5),
+                 lambda k: dev.set_output_angle_radians(0.3 if k % 2 else -0.3))):
             setup()
             rows = log.setdefault(name, [])
             t0 = time.monotonic()
@@ -63,8 +63,9 @@ def tmcc(seconds, motor_type, log):
                 k = int(t / 0.5) + 1
                 command(k)
                 dev.update()
-                rows.append([round(t, 4), k, dev.get_output_angle_radians(), dev.get_output_velocity_radians_per_second(),
-                             dev.get_current_qaxis_amps(), dev.get_temperature_celsius(), dev.get_motor_error_code()])
+                rows.append([round(t, 4), k, dev.get_output_angle_radians(),
+                             dev.get_output_velocity_radians_per_second(), dev.get_current_qaxis_amps(),
+                             dev.get_temperature_celsius(), dev.get_motor_error_code()])
                 time.sleep(0.005)
         dev.set_current_gains()
         dev.set_motor_current_qaxis_amps(0.0)

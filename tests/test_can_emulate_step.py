@@ -94,7 +94,7 @@ def test_set_pos_spd_moves_at_the_commanded_speed(emu) -> None:
     """SET_POS_SPD's int16 speed is in units of 10 ERPM (manual 5.1.7): 100 -> 1000 ERPM = 1000/14 rpm at the
     rotor, 11.9 deg/s at the actuator's output (/6)."""
     frame = _servo(6, struct.pack(">ihh", 30 * 10_000, 100, 3000))  # 30 deg at 1000 ERPM, 30 000 ERPM/s
-    m = emu(1, frame)
+    emu(1, frame)
     angles = []
     for k in range(2, 251):
         angles.append(emu(k).device.core.pid_pos_deg())

@@ -80,7 +80,8 @@ def _summary(rows: list[tuple], leg: VirtualLeg, fsm: AnkleStateMachine, strides
     def track(col: int) -> dict:
         m = tracking_metrics(t, ref, np.array([r[col] for r in rows]), start_s=GAIT_START_S + leg.stride_s,
                              stride_s=leg.stride_s, strides=strides - 1)
-        return {"rms_deg": round(m.rms_error_deg, 4), "max_deg": round(m.max_error_deg, 4), "lag_ms": round(m.lag_ms, 2)}
+        return {"rms_deg": round(m.rms_error_deg, 4), "max_deg": round(m.max_error_deg, 4),
+                "lag_ms": round(m.lag_ms, 2)}
 
     core = leg.drive.core
     sim_s = float(t[-1])
