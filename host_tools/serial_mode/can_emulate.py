@@ -1,8 +1,10 @@
-"""`pafp emulate motor --can URL`: the virtual AK60-6 (servo or MIT mode) on a real CAN bus, in wall-clock time.
+"""`pafp emulate motor --can URL`: the virtual AK motor (servo or MIT mode) on a real CAN bus, in wall-clock time.
 
 The device model (:class:`~hal.virtual.devices.ak60_can.Ak60Can`, the UART model's plant, meter and
 protections) lives in a world clocked in nanoseconds of the wall clock. Frames read from the python-can
-bus are handed to it stamped with their arrival; the frames it sends are written when their time comes
+bus are handed to it in their order, stamped with the instant they were taken (their arrival as far as the
+loop can tell: hal.can's frames carry no kernel timestamp), after the world has run everything due before
+it; the frames it sends are written when their time comes
 (the reply latency after the command, the status period). The real bus adds its own wire time. The
 loop waits in ``recv`` until the next device event, at most 1 ms.
 """
@@ -29,7 +31,8 @@ MAX_SLEEP_S = 0.001
 MAX_FRAMES_PER_STEP = 256  # then the due frames go out and a stop request is seen, however fast frames come
 RECEIVE_BUFFER_BYTES = 4 << 20
 """Asked of the bus's socket: a burst that finds the emulator descheduled waits there instead of being dropped
-(Linux grants up to net.core.rmem_max; the default, 208 KiB, holds about 200 udp_multicast frames)."""
+(Linux books twice the size asked, within net.core.rmem_max; its default, 208 KiB, holds about 200 udp_multicast
+frames)."""
 
 
 def deepen_receive_buffer(bus: object, size: int = RECEIVE_BUFFER_BYTES) -> int:
