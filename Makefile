@@ -18,6 +18,10 @@ SHELL := /bin/bash
 # --no-compile: pip does not byte-compile the ~4700 modules of the dependencies up front (13 s of CPU); Python
 # compiles each one the first time it is imported, so only what runs is compiled.
 SOURCES := $(shell sed -n 's/^ *"\([a-z0-9_/]*\.py\)",$$/\1/p' setup.py)
+# The clients extra (opensourceleg, TMotorCANControl), installed without the numpy<2 and middleware pins they declare
+# but do not need (pyproject.toml's note; tests/test_sdk_clients.py drives the emulator with them). Read from
+# pyproject.toml when the recipe runs (the venv's Python exists by then).
+CLIENTS = $$($(PY) -c 'import tomllib; print(*tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["clients"])')
 EXTENSIONS = find firmware protocol hal rtos host_tools -name '*.so' -delete; rm -f ./*__mypyc*.so; rm -rf build
 
 $(STAMP): pyproject.toml setup.py $(SOURCES)
@@ -28,6 +32,9 @@ $(STAMP): pyproject.toml setup.py $(SOURCES)
 	@set -o pipefail; $(PY) -m pip install -v --no-compile -e '.[dev]' 2>&1 | tee build/install.log \
 	  | { grep --line-buffered '^ *pafp build:' | sed -u 's/^ *//' || true; } \
 	  || { tail -n 40 build/install.log; echo "make: pip install failed, its output is in build/install.log"; exit 1; }
+	@echo "$(PY) -m pip install --no-deps <pyproject's clients extra> >> build/install.log"
+	@$(PY) -m pip install --no-compile --no-deps $(CLIENTS) >> build/install.log 2>&1 \
+	  || { tail -n 20 build/install.log; echo "make: installing the SDK clients failed (build/install.log)"; exit 1; }
 	@touch $(STAMP)
 
 install: $(STAMP)

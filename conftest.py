@@ -14,6 +14,9 @@ import pytest
 from host_tools.build_info import compiled_sources, stale_sources
 
 _COMPILED = {p.resolve() for p in compiled_sources()}
+_OSL = Path(__file__).parent / "host_tools" / "osl"
+_NEEDS_OPENSOURCELEG = {(_OSL / name).resolve() for name in ("virtual_leg.py", "example_controller.py", "walk_osl.py")}
+"""Modules of the osl extra: their doctests are collected only where opensourceleg is installed."""
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -24,4 +27,9 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
-    return True if collection_path.resolve() in _COMPILED else None
+    path = collection_path.resolve()
+    if path in _NEEDS_OPENSOURCELEG:
+        import importlib.util
+
+        return True if importlib.util.find_spec("opensourceleg") is None else None
+    return True if path in _COMPILED else None

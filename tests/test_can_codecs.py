@@ -107,8 +107,27 @@ def test_servo_other_packets_round_trip(duty, erpm, pos_deg, spd, acc):
     assert abs(servo.decode_command(P.SET_DUTY << 8, servo.encode_command(P.SET_DUTY, duty)).value - duty) <= 5e-6
     assert abs(servo.decode_command(P.SET_RPM << 8, servo.encode_command(P.SET_RPM, erpm)).value - erpm) <= 0.5
     assert abs(servo.decode_command(P.SET_POS << 8, servo.encode_command(P.SET_POS, pos_deg)).value - pos_deg) <= 5e-5
-    c = servo.decode_command(P.SET_POS_SPD << 8, servo.encode_command(P.SET_POS_SPD, pos_deg, spd, acc))
-    assert abs(c.value - pos_deg) <= 5e-5 and (c.speed, c.accel) == (spd, acc)
+    c = servo.decode_command(P.SET_POS_SPD << 8, servo.encode_command(P.SET_POS_SPD, pos_deg, spd * 10, acc * 10))
+    assert abs(c.value - pos_deg) <= 5e-5 and (c.speed_erpm, c.accel_erpm_s) == (spd * 10, acc * 10)
+
+
+def test_servo_scalings_as_the_manual_routines_pack_them():
+    """Manual V1.0.8 5.1.5-5.1.7: SET_POS int32 deg x 10 000; SET_POS_SPD int32 deg x 10 000, int16 spd / 10,
+    int16 RPA / 10 (180 deg at 5000 ERPM and 30 000 ERPM/s, the manual's own example values)."""
+    P = servo.PacketId
+    assert servo.encode_command(P.SET_POS, 180.0) == (1_800_000).to_bytes(4, "big")
+    assert servo.encode_command(P.SET_POS_SPD, 180.0, 5000, 30_000) == bytes.fromhex("001b7740" "01f4" "0bb8")
+    assert servo.encode_command(P.SET_ORIGIN_HERE, 2) == b"\x02"  # restore the default zero
+
+
+def test_servo_special_frames_unknown_packets_and_error_codes():
+    assert servo.special_frame(0x01, b"\xff" * 7 + b"\xfc") == "enter"  # power on, as opensourceleg sends it
+    assert servo.special_frame(0x68, b"\xff" * 7 + b"\xfd") == "exit"
+    assert servo.special_frame(0x101, b"\xff" * 7 + b"\xfc") == ""  # packet 1: a SET_CURRENT of -1 mA
+    assert servo.special_frame(0x01, b"\x00\x00\x03\xe8") == ""  # a real SET_DUTY
+    with pytest.raises(servo.UnknownPacket, match="packet id 7"):
+        servo.decode_command(0x0701, b"\x01")
+    assert [servo.error_code(f) for f in (0, 1, 2, 4, 5, 6, 11, 18)] == [0, 3, 4, 2, 1, 1, 5, 6]
 
 
 @given(finite)

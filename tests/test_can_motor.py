@@ -167,9 +167,10 @@ def test_can_runs_track_and_are_deterministic(link):
 def test_emulate_can_serves_the_motor_not_the_imu_alone(capsys):
     from host_tools.cli import main
 
-    assert main(["emulate", "imu", "--can", "can://virtual/x?id=1&mode=mit"]) == 2
-    assert capsys.readouterr().err.strip() == ("pafp emulate: --can serves the motor: `motor --can URL`, or "
-                                               "`bench --can URL` with the IMU on a pty")
+    for device in ("imu", "ground"):
+        assert main(["emulate", device, "--can", "can://virtual/x?id=1&mode=mit"]) == 2
+        assert capsys.readouterr().err.strip() == (f"pafp emulate: --can serves the motor, not `{device}`: "
+                                                   "`motor --can URL`, or `bench --can URL` with the IMU on a pty")
     assert main(["emulate", "motor", "--can", "can://virtual/x?id=1&mode=foc"]) == 2
     assert "mode='foc' not one of ('servo', 'mit')" in capsys.readouterr().err
 

@@ -97,3 +97,18 @@ def test_serves_on_a_serial_port_given_by_path() -> None:
         os.close(slave)
     assert proc.returncode == 0, err
     assert "motor: frames_in=1 frames_out=1 errors=0" in out
+
+
+@pytest.mark.parametrize("duration", ["inf", "1e300"])
+def test_endless_duration_serves_until_stopped(duration: str) -> None:
+    """--duration inf (or one whose nanoseconds overflow) serves until a signal, no OverflowError after the path."""
+    proc = _start("imu", "--pty", "--duration", duration)
+    try:
+        assert proc.stdout.readline().startswith("imu: /dev/")  # type: ignore[union-attr]
+        time.sleep(0.3)
+        assert proc.poll() is None
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0 and err == "", err
+    assert out.strip().splitlines()[-1].startswith("pafp emulate: stopped (SIGTERM)")

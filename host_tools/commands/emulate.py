@@ -18,6 +18,7 @@ timing studies.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import select
 import signal
@@ -38,6 +39,7 @@ from host_tools.wire_capture import WireCapture
 
 if TYPE_CHECKING:
     from host_tools.serial_mode.can_emulate import WallCanMotor
+    from host_tools.serial_mode.served_plant import ServedPlant
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
 MAX_SLEEP_S = 0.001
@@ -85,8 +87,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="draw the plant from its tolerances around the profile with seed N")
     parser.add_argument("--ideal", action="append", default=[], metavar="NAME",
                         help="switch one imperfection of the real bench off (as `pafp run --ideal`), or all")
+    parser.add_argument("--motor", default=None, metavar="NAME",
+                        help="serve this catalogue motor (profiles/motors/ name or a motor profile): its Kt, ratio, "
+                             "pole pairs, peak current, thermal model and CAN ranges (default ak60_6)")
+    parser.add_argument("--profile", type=Path, default=None, metavar="DESIGN.toml",
+                        help="serve a design profile's [design] (profiles/designs/): its motor, belt and spring")
+    parser.add_argument("--status-hz", type=float, default=500.0, metavar="HZ",
+                        help="--can servo mode: the status frame's rate, as set in the drive (1..500, default 500)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="stop after S seconds (default: run until Ctrl-C or SIGTERM)")
+                        help="stop after S seconds (default, or inf: run until Ctrl-C or SIGTERM)")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes each device received (<role>.rx.bin) and sent (<role>.tx.bin) "
                              "with a time index into DIR (docs/serial_mode.md)")
@@ -151,7 +160,9 @@ def _check(args: argparse.Namespace) -> None:
     if args.device == "bench" and args.port and not args.imu_port:
         raise EmulateError("`bench --port MOTOR_DEVICE` also needs --imu-port IMU_DEVICE")
     if args.duration is not None and not args.duration > 0:
-        raise EmulateError(f"--duration {args.duration} out of range: > 0 seconds")
+        raise EmulateError(f"--duration {args.duration} out of range: > 0 seconds (inf: until stopped)")
+    if args.duration is not None and not math.isfinite(args.duration * 1e9):
+        args.duration = None  # inf, or so long that its nanoseconds overflow: until stopped
 
 
 def _run_can(args: argparse.Namespace) -> int:
@@ -161,7 +172,8 @@ def _run_can(args: argparse.Namespace) -> int:
 
     from hal.errors import HalError
     from hal.pycan import open_can, parse_can_url
-    from host_tools.serial_mode.can_emulate import WallCanMotor
+    from hal.virtual.devices.ak60_can import Ak60CanConfig
+    from host_tools.serial_mode.can_emulate import WallCanMotor, deepen_receive_buffer
 
     stop: list[str] = []
 
@@ -173,21 +185,30 @@ def _run_can(args: argparse.Namespace) -> int:
     port, capture, devices, endpoints = None, None, None, []
     try:
         try:
-            if args.device == "imu":
-                raise EmulateError("--can serves the motor: `motor --can URL`, or `bench --can URL` with the IMU "
-                                   "on a pty")
+            if args.device not in ("motor", "bench"):
+                raise EmulateError(f"--can serves the motor, not `{args.device}`: `motor --can URL`, or "
+                                   "`bench --can URL` with the IMU on a pty")
             _check(args)
             url = parse_can_url(args.can, "--can")
+            if not 1.0 <= args.status_hz <= 500.0:
+                raise EmulateError(f"--status-hz {args.status_hz} out of range: 1..500 Hz (the drive's upload "
+                                   "rates, CubeMars manual 5.2.1)")
+            served = _served(args)
             t0 = time.perf_counter_ns()
             clock_ns: Callable[[], int] = lambda: time.perf_counter_ns() - t0  # noqa: E731
             if args.device == "bench":
                 devices = WallDevices(["imu"], bauds=_bauds(args), fixture=args.fixture, seed=args.seed,
-                                      clock_ns=clock_ns)
+                                      clock_ns=clock_ns, **served.options)
             if args.capture is not None:
                 capture = WireCapture(args.capture, lambda: clock_ns() / 1e9, side="device")
             port = open_can(url)
+            deepen_receive_buffer(port.bus)
+            can_config = Ak60CanConfig(driver_id=url.driver_id, mode=url.mode, limits=served.limits,
+                                       status_period_s=1.0 / args.status_hz)
             motor = WallCanMotor(capture.tap_can("motor", port, f"can-{url.mode}") if capture else port, url,
-                                 args.fixture, clock_ns, world=devices.world if devices is not None else None)
+                                 args.fixture, clock_ns, world=devices.world if devices is not None else None,
+                                 plant_options=served.options, can_config=can_config)
+            served.attach_thermal(motor.device.core.meter)
             if devices is not None:
                 if capture is not None:
                     capture.open("imu", "rx", "tx")
@@ -225,14 +246,13 @@ def _run_can(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bench_options(args: argparse.Namespace) -> dict:
-    """The plant (--plant, --plant-seed) and the real bench's imperfections (--ideal), as `pafp run` builds them."""
-    from host_tools.runner import RunConfig
+def _served(args: argparse.Namespace) -> ServedPlant:
+    """The plant, motor and CAN ranges of --plant, --plant-seed, --ideal, --motor, --profile (served_plant.py)."""
+    from host_tools.serial_mode.served_plant import served_plant
 
-    options, _ = RunConfig(seed=args.seed, plant_seed=getattr(args, "plant_seed", None),
-                           plant_file=getattr(args, "plant", None),
-                           ideal=tuple(getattr(args, "ideal", ()))).bench_setup()
-    return {k: options[k] for k in ("plant_params", "imu_config", "initial_angle_rad", "backlash_rad")}
+    return served_plant(seed=args.seed, plant_seed=getattr(args, "plant_seed", None),
+                        plant_file=getattr(args, "plant", None), ideal=tuple(getattr(args, "ideal", ())),
+                        motor=getattr(args, "motor", None), profile=getattr(args, "profile", None))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -242,8 +262,11 @@ def run(args: argparse.Namespace) -> int:
     capture = None
     try:
         _check(args)
+        served = _served(args)
         devices = WallDevices(_ROLES[args.device], bauds=_bauds(args), fixture=args.fixture, seed=args.seed,
-                              **_bench_options(args))
+                              **served.options)
+        if devices.motor is not None:
+            served.attach_thermal(devices.motor.meter)
         if args.capture is not None:
             check_capture_dir(args.capture)
             capture = WireCapture(args.capture, lambda: devices.now() / 1e9, side="device")

@@ -10,22 +10,29 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from firmware.app import Firmware
 from hal.binding import open_uart
 from hal.errors import HalError
 from host_tools.wire_capture import WireCapture
 
-if TYPE_CHECKING:
-    from host_tools.serial_mode.serial_run import SerialRunConfig
-
-__all__ = ["RECONNECT_EVERY_S", "STOP_AFTER_LOSS_S", "LinkEvent", "LinkWatch"]
+__all__ = ["RECONNECT_EVERY_S", "STOP_AFTER_LOSS_S", "LinkEvent", "LinkPorts", "LinkWatch"]
 
 log = logging.getLogger(__name__)
 
 STOP_AFTER_LOSS_S = 0.030  # after a lost link: zero current, the brake (10 ms later), then stop
 RECONNECT_EVERY_S = 0.2
+
+
+class LinkPorts(Protocol):
+    """What the watch reads of the run's configuration (serial_run.SerialRunConfig has these)."""
+
+    motor: str
+    imu: str
+    baud: int
+    imu_baud: int
+    reconnect: bool
 
 
 @dataclass
@@ -40,11 +47,10 @@ class LinkEvent:
     reconnects: int = 0
 
 
-
 class LinkWatch:
     """Watches for LINK_LOST: records the event; stops shortly after, or reopens the port with reconnect."""
 
-    def __init__(self, cfg: SerialRunConfig, fw: Firmware, wire: WireCapture | None = None) -> None:
+    def __init__(self, cfg: LinkPorts, fw: Firmware, wire: WireCapture | None = None) -> None:
         """Nothing lost yet; `cfg` names the ports and whether to reconnect."""
         self.cfg, self.fw, self.wire = cfg, fw, wire
         self.event: LinkEvent | None = None

@@ -134,7 +134,7 @@ class Ak60(EventDevice):
         self._fault_until = NEVER
         self._actions: list[tuple[int, int, Callable[[int], None]]] = []
         self._seq = 0
-        self.values = ValueSource(self)
+        self.values = ValueSource(self, self.meter, p.pole_pairs, cfg)
         self._kinds: dict[type, int] = {cls: kind for kind, cls in enumerate(_MESSAGES)}
         world.add(self)
 

@@ -6,10 +6,12 @@ is a node of a :class:`~hal.virtual.can_bus.VirtualCanBus` that takes frames add
 ``driver_id`` (PROTOCOLS.md G; codecs in :mod:`protocol.can_servo` and ``can_mit``):
 
 * servo mode: commands on 29-bit IDs ``(packet << 8) | driver_id`` (SET_CURRENT, SET_CURRENT_BRAKE,
-  SET_DUTY, SET_RPM, SET_POS, SET_POS_SPD, SET_ORIGIN_HERE) act as their UART counterparts; a status
-  frame (ID ``0x29xx``: output angle x 0.1 deg wrapped to +-3200 deg, ERPM, q current, motor
-  temperature, fault) goes out every ``status_period_s`` whether or not a command came. SET_POS_SPD's
-  speed and acceleration are taken as x 10 ERPM and x 10 ERPM/s (unverified against the manual);
+  SET_DUTY, SET_RPM, SET_POS, SET_POS_SPD, SET_ORIGIN_HERE, with the manual's scalings: protocol.can_servo)
+  act as their UART counterparts; a status frame (ID ``0x29xx``: output angle x 0.1 deg wrapped to
+  +-3200 deg, ERPM, q current, motor temperature, the manual's error code) goes out every
+  ``status_period_s`` (1..500 Hz, as the drive is configured) whether or not a command came. Unknown packet
+  ids (opensourceleg's packet-7 "mode switch") are counted in ``unknown_packets`` and ignored; the MIT-style
+  power-on/off/zero frames clients send on extended IDs are handled by ``_servo_special``;
 * MIT mode: the special frames enter motor mode, exit it (torque off) and zero the position; a command
   (accepted in motor mode only) sets p_des, v_des, kp, kd, t_ff, and the law
   ``torque = kp (p_des - p) + kd (v_des - v) + t_ff`` (p, v: output angle from the zero, output
@@ -77,6 +79,8 @@ class Ak60Can(EventDevice):
         self.frames_in = 0
         self.frames_out = 0
         self.ignored_frames = 0
+        self.unknown_packets = 0  # servo mode: packet ids outside the manual's 0..6 (e.g. opensourceleg's 7)
+        self.special_frames = 0  # servo mode: MIT-style power-on/off/zero frames on extended IDs
         self.bus: CanBusPort | None = bus
         if bus is not None:
             bus.attach(self)
@@ -123,6 +127,7 @@ class Ak60Can(EventDevice):
         if self._status_at <= t:
             self._status(t)
             self._status_at = t + self._status_period
+        self.core._update_next()  # a command may have started or stopped the core's loop or timeout
         self._update_next()
 
     def _commanded(self, t: int) -> None:
@@ -139,12 +144,20 @@ class Ak60Can(EventDevice):
         if self.mode == "mit":
             self._handle_mit(frame.data, t)
             return
+        if self._servo_special(can_servo.special_frame(frame.arbitration_id, frame.data), t):
+            return
         try:
             cmd = can_servo.decode_command(frame.arbitration_id, frame.data)
+        except can_servo.UnknownPacket:
+            self.unknown_packets += 1
+            return
         except ValueError:
             self.ignored_frames += 1
             return
         P = can_servo.PacketId
+        if cmd.packet == P.SET_ORIGIN_HERE and cmd.value not in (0, 1, 2):
+            self.ignored_frames += 1
+            return
         self._commanded(t)
         if cmd.packet == P.SET_CURRENT:
             core._drive_current(cmd.value, t)
@@ -157,9 +170,28 @@ class Ak60Can(EventDevice):
         elif cmd.packet == P.SET_POS:
             core._drive_position(math.radians(cmd.value), 0.0, 0.0, t)
         elif cmd.packet == P.SET_POS_SPD:
-            core._drive_position(math.radians(cmd.value), cmd.speed * 10.0, cmd.accel * 10.0, t)
+            core._drive_position(math.radians(cmd.value), cmd.speed_erpm, cmd.accel_erpm_s, t)
         elif cmd.packet == P.SET_ORIGIN_HERE:
-            core._on_set_origin(OriginMode.TEMPORARY if cmd.value == 0 else OriginMode.PERMANENT, t)
+            core._on_set_origin(OriginMode(int(cmd.value)), t)
+
+    def _servo_special(self, special: str, t: int) -> bool:
+        """A MIT-style special frame sent to the servo-mode drive (what opensourceleg's power_on/power_off and
+        TMotorCANControl's servo manager send): True if it was one.
+
+        The manual defines these frames for MIT mode only (5.3); read as servo packets they would be SET_DUTY with
+        8 data bytes. The model takes them for what the clients mean: power-on changes nothing (a servo-mode drive
+        is on and streams its status regardless), power-off releases the motor (torque off, as in MIT mode), the
+        zero frame sets a temporary origin. None of them is a command for the command timeout. Counted in
+        ``special_frames``.
+        """
+        if not special:
+            return False
+        self.special_frames += 1
+        if special == "exit":
+            self.core._release(t)
+        elif special == "zero":
+            self.core._on_set_origin(OriginMode.TEMPORARY, t)
+        return True
 
     def _handle_mit(self, data: bytes, t: int) -> None:
         core = self.core
@@ -200,7 +232,7 @@ class Ak60Can(EventDevice):
         core = self.core
         p, v = self._output()
         reply = can_mit.MitReply(self.driver_id, p, v, core.meter.current_a * self._nm_per_a,
-                                 int(round(core.meter.temp_motor_c)), core.fault)
+                                 int(round(core.meter.temp_motor_c)), can_servo.error_code(core.fault))
         self._out(CanFrame(can_mit.MASTER_ID, can_mit.encode_reply(reply, self.limits)), t)
 
     def _status(self, t: int) -> None:
@@ -209,5 +241,5 @@ class Ak60Can(EventDevice):
         deg = (core.pid_pos_deg() + 3200.0) % 6400.0 - 3200.0
         erpm = core._velocity * 60.0 / (2.0 * math.pi) * self._pole_pairs
         status = can_servo.ServoStatus(deg, erpm, core.meter.current_a, int(round(core.meter.temp_motor_c)),
-                                       core.fault)
+                                       can_servo.error_code(core.fault))
         self._out(CanFrame(can_servo.status_id(self.driver_id), can_servo.encode_status(status), True), t)

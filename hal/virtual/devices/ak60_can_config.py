@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from protocol import can_mit
+from protocol import can_mit, can_servo
 
 __all__ = ["MODES", "Ak60CanConfig"]
 
@@ -21,7 +21,7 @@ class Ak60CanConfig:
 
     driver_id: int = 1
     mode: str = "servo"
-    status_period_s: float = 0.002  # 500 Hz, the upload rate set in the maker's tool (an assumption)
+    status_period_s: float = 0.002  # 500 Hz: the drive's highest upload rate (1..500 Hz, set in the maker's tool)
     limits: can_mit.MitLimits = can_mit.AK60_6
 
     def __post_init__(self) -> None:
@@ -30,5 +30,7 @@ class Ak60CanConfig:
             raise ValueError(f"driver_id {self.driver_id!r} out of range: an int in 0..127")
         if self.mode not in MODES:
             raise ValueError(f"CAN mode {self.mode!r} invalid: one of {MODES}")
-        if not (math.isfinite(self.status_period_s) and 1e-4 <= self.status_period_s <= 1.0):
-            raise ValueError(f"status_period_s {self.status_period_s!r} out of range [0.0001, 1] s")
+        lo, hi = 1.0 / can_servo.STATUS_HZ_MAX, 1.0 / can_servo.STATUS_HZ_MIN
+        if not (math.isfinite(self.status_period_s) and lo <= self.status_period_s <= hi):
+            raise ValueError(f"status_period_s {self.status_period_s!r} out of range [{lo}, {hi}] s (the drive's "
+                             f"{can_servo.STATUS_HZ_MIN}..{can_servo.STATUS_HZ_MAX} Hz, manual 5.2.1)")

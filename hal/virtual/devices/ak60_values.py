@@ -13,16 +13,26 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Final
+from typing import Final, Protocol
 
+from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.ak60_loops import radians
+from hal.virtual.devices.ak60_meter import Ak60Meter
 from protocol.vesc_message import CommandId, WireField
 from protocol.vesc_values import selective_layout
 
-if TYPE_CHECKING:
-    from hal.virtual.devices.ak60 import Ak60
+__all__ = ["DriverState", "ValueSource", "wrap_int32"]
 
-__all__ = ["ValueSource", "wrap_int32"]
+
+class DriverState(Protocol):
+    """What the values read of the driver besides its meter (the AK60-6 model, ``hal.virtual.devices.ak60``)."""
+
+    fault: int
+    timed_out: bool
+
+    def pid_pos_deg(self) -> float:
+        """The output angle in degrees at the last sample, minus the origin."""
+        ...
 
 _PID_POS_LIMIT_DEG: Final = (2**31 - 1) / 1e6
 _MAX_LAYOUTS: Final = 256  # selective reply layouts kept
@@ -41,13 +51,13 @@ def wrap_int32(value: int) -> int:
 class ValueSource:
     """The GET_VALUES fields of one driver: ``value(name)``, ``read(fields)`` and the reply payloads."""
 
-    def __init__(self, dev: Ak60) -> None:
-        """Read the fields from the driver dev (its meter, fault, position and configuration)."""
+    def __init__(self, dev: DriverState, meter: Ak60Meter, pole_pairs: int, config: Ak60Config) -> None:
+        """Read the fields from the driver dev (fault, position, timeout), its meter and configuration."""
         self._dev = dev
-        self._meter = dev.meter
-        self._rpm_to_erpm = 60.0 / math.tau * dev.params.pole_pairs
-        self._controller_id = dev.config.controller_id
-        self._mask_echo = dev.config.selective_mask_echo
+        self._meter = meter
+        self._rpm_to_erpm = 60.0 / math.tau * pole_pairs
+        self._controller_id = config.controller_id
+        self._mask_echo = config.selective_mask_echo
         self._layouts: dict[int, _Layout] = {}  # by selective mask
         packer, fields = selective_layout(_VALUES_MASK)  # GET_VALUES carries the fields of bits 0..20
         self._values_layout = _Layout(bytes((int(CommandId.GET_VALUES),)), packer, fields)

@@ -21,8 +21,7 @@ from typing import Any
 
 from hal.registry import Registry
 
-__all__ = ["AK60_6", "BNO08X", "DEVICES", "FSR_HEEL", "FSR_TOE", "GROUND_BOARD", "KINDS", "LOAD_CELL", "DeviceModel",
-           "adc_sensor_models", "device_model"]
+__all__ = ["AK60_6", "BNO08X", "DEVICES", "KINDS", "DeviceModel", "adc_sensor_models", "device_model"]
 
 KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground"), "adc": ("sensor",)}
 """Peripheral kind a device model may sit on -> the bench roles of that kind that carry a device (a sensor on
@@ -74,46 +73,10 @@ def _build_bno08x(world: Any, link: Any, *, seed: int = 0, config: Any = None) -
     return Bno08x(world, config, seed=seed, link=link)
 
 
-def _build_ground_board(world: Any, link: Any, *, seed: int = 0, config: Any = None) -> Any:
-    from hal.virtual.devices.firmata_board import FirmataBoard
-    from hal.virtual.ground_sensors import AdcSettings, wire_ground_sensors
-    from hal.virtual.plant.ground import NoGround
-
-    sensors = wire_ground_sensors(None, world.f_hz, NoGround(), AdcSettings(), seed=seed)
-    return FirmataBoard(world, sensors.codes_at, len(sensors.adc.channels), link=link)
-
-
-def _build_load_cell(ground: Any, f_hz: int, *, seed: int = 0, config: Any = None) -> Any:
-    from hal.virtual.devices.load_cell import LoadCell
-    from hal.virtual.ground_sensors import load_ground_profile
-
-    return LoadCell(load_ground_profile(config)[0], ground, f_hz, seed)
-
-
-def _build_fsr_heel(ground: Any, f_hz: int, *, seed: int = 0, config: Any = None) -> Any:
-    from hal.virtual.ground_sensors import foot_fsr
-
-    return foot_fsr(ground, f_hz, "fsr_heel", config)
-
-
-def _build_fsr_toe(ground: Any, f_hz: int, *, seed: int = 0, config: Any = None) -> Any:
-    from hal.virtual.ground_sensors import foot_fsr
-
-    return foot_fsr(ground, f_hz, "fsr_toe", config)
-
-
 AK60_6 = DeviceModel("motor", "uart", 921_600, _build_ak60,
                      "CubeMars AK60-6 driver, VESC servo mode (PROTOCOLS.md C)")
 BNO08X = DeviceModel("imu", "uart", 115_200, _build_bno08x,
                      "BNO08x IMU in UART-RVC, 100 Hz frames (PROTOCOLS.md D)")
-
-GROUND_BOARD = DeviceModel("ground", "uart", 115_200, _build_ground_board,
-                           "load cell and heel/toe FSRs, unloaded, behind a Firmata board (docs/hardware.md)")
-
-LOAD_CELL = DeviceModel("sensor", "adc", 0, _build_load_cell,
-                        "pylon load cell: axial force and sagittal moment (channels load_force, load_moment)")
-FSR_HEEL = DeviceModel("sensor", "adc", 0, _build_fsr_heel, "heel FSR in its divider (channel fsr_heel)")
-FSR_TOE = DeviceModel("sensor", "adc", 0, _build_fsr_toe, "toe FSR in its divider (channel fsr_toe)")
 
 DEVICES = Registry("device", {
     "ak60-6": "hal.virtual.devices.registry:AK60_6",
@@ -122,12 +85,12 @@ DEVICES = Registry("device", {
     "bno08x": "hal.virtual.devices.registry:BNO08X",
     "bno085": "hal.virtual.devices.registry:BNO08X",
     "imu": "hal.virtual.devices.registry:BNO08X",
-    "ground-sensors": "hal.virtual.devices.registry:GROUND_BOARD",
-    "firmata": "hal.virtual.devices.registry:GROUND_BOARD",
-    "ground": "hal.virtual.devices.registry:GROUND_BOARD",
-    "load-cell": "hal.virtual.devices.registry:LOAD_CELL",
-    "fsr-heel": "hal.virtual.devices.registry:FSR_HEEL",
-    "fsr-toe": "hal.virtual.devices.registry:FSR_TOE",
+    "ground-sensors": "hal.virtual.devices.ground_models:GROUND_BOARD",
+    "firmata": "hal.virtual.devices.ground_models:GROUND_BOARD",
+    "ground": "hal.virtual.devices.ground_models:GROUND_BOARD",
+    "load-cell": "hal.virtual.devices.ground_models:LOAD_CELL",
+    "fsr-heel": "hal.virtual.devices.ground_models:FSR_HEEL",
+    "fsr-toe": "hal.virtual.devices.ground_models:FSR_TOE",
 }, group="pafp.devices")
 """Device name -> :class:`DeviceModel` (aliases point to the same model)."""
 
