@@ -107,7 +107,9 @@ def check_writable(path: Path, option: str = "--out") -> None:
 
 
 def check_out_dir(out: Path) -> None:
-    """Refuse an ``out`` that is a file, holds files not from a run, or is not writable (:func:`check_writable`)."""
+    """Refuse an ``out`` that is or holds an input, is a file, holds files not from a run, or is not writable
+    (:func:`check_writable`)."""
+    check_holds_no_input(out)
     _check_previous_run(out)
     check_writable(out)
 
