@@ -125,6 +125,8 @@ def run_command(command: str, body: Callable[[argparse.Namespace], int | None], 
         logger.debug("pafp %s raised", command, exc_info=True)
         print(line, file=sys.stderr)
         return code
+    finally:
+        protect_inputs([])  # the next command (in this process: tests, a study's worker) names its own
 
 
 def _check_output(option: str, out: Path, inputs: list[Path]) -> None:

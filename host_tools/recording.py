@@ -54,10 +54,11 @@ def config_from_dict(d: dict) -> FirmwareConfig:
                                   "calibration": [list(r) for r in d["ground_sensors"]["calibration"]]})})
 
 
-def check_header(header: dict, path: Path) -> FirmwareConfig:
-    """The firmware configuration of a record's header, every key a replay or a fit uses checked: RecordError in one
-    line naming the record, the key and what was expected (a version-1 record has no header checksum, and a
-    hand-edited one may name what this pafp does not know)."""
+def check_header(header: dict, path: Path, controller: bool = True) -> FirmwareConfig:
+    """The firmware configuration of a record's header, every key a replay or a fit uses checked (its controller
+    built unless ``controller`` is False: a replay with another one): RecordError in one line naming the record, the
+    key and what was expected (a version-1 record has no header checksum, and a hand-edited one may name what this
+    pafp does not know)."""
     from firmware.control.registry import build_controller
     from hal.record.format import RecordError
     from host_tools.walk import SPEEDS
@@ -92,21 +93,22 @@ def check_header(header: dict, path: Path) -> FirmwareConfig:
         raise bad("reference.csv", f"= {csv!r}: the gait reference CSV it names cannot be read (not found)")
     try:
         cfg = config_from_dict(header["firmware"])
-        build_controller(cfg.controller, cfg, dict(cfg.controller_params))
+        if controller:
+            build_controller(cfg.controller, cfg, dict(cfg.controller_params))
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         what = f"missing key {e}" if isinstance(e, KeyError) else " ".join(str(e).split())
         raise bad("firmware", f"does not describe a firmware configuration: {what}") from None
     return cfg
 
 
-def read_record_header(path: Path) -> tuple[dict, FirmwareConfig]:
+def read_record_header(path: Path, controller: bool = True) -> tuple[dict, FirmwareConfig]:
     """(the header, its firmware configuration) of the record at ``path``, checked (:func:`check_header`;
     RecordError naming the byte offset or the key)."""
     from hal.record.reader import RecordReader
 
     reader = RecordReader(path)
     reader.close()
-    return reader.header, check_header(reader.header, path)
+    return reader.header, check_header(reader.header, path, controller)
 
 
 def _board_header(board: Board) -> dict:

@@ -14,6 +14,13 @@ ALLOWED_EXITS = {0, 1, 2, 74}
 """What any input may make a command exit with (3, an internal error, is a bug)."""
 
 
+def record_run(out: Path, *extra: str) -> Path:
+    """A one-stride virtual run with --record into ``out`` (record.bin, telemetry, report, summary)."""
+    assert main(["run", "--strides", "1", "--quiet", "--no-plot", "--no-trace", "--record", *extra,
+                 "--out", str(out)]) == 0
+    return out
+
+
 def pafp(capsys, *argv: object) -> tuple[int, str, str]:
     """Run `pafp argv` in this process: (exit code, stdout, stderr)."""
     try:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 import tomlkit
-from contract_cases import ALLOWED_EXITS, pafp
+from contract_cases import ALLOWED_EXITS, pafp, record_run
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -115,11 +115,7 @@ def work(tmp_path_factory):
              "criteria": read_toml(profile_path("faults/criteria.toml"), "criteria"),
              "taskset": read_toml(profile_path("tasksets/davis2007.toml"), "task set"),
              "fault_spec": faults, "design_spec": design, "sweep_spec": sweep}
-    from host_tools.cli import main
-
-    run = root / "run"
-    assert main(["run", "--strides", "1", "--quiet", "--no-plot", "--no-trace", "--record", "--capture",
-                 str(root / "capture"), "--out", str(run)]) == 0
+    record_run(root / "run", "--capture", str(root / "capture"))
     return root, seeds
 
 

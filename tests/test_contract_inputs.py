@@ -10,7 +10,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from contract_cases import one_line, pafp, split_record, with_header
+from contract_cases import one_line, pafp, record_run, split_record, with_header
 
 from profiles import profile_path
 
@@ -19,12 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """A one-stride virtual run with --record."""
-    out = tmp_path_factory.mktemp("rec") / "run"
-    from host_tools.cli import main
-
-    assert main(["run", "--strides", "1", "--quiet", "--no-plot", "--no-trace", "--record", "--out", str(out)]) == 0
-    return out
+    return record_run(tmp_path_factory.mktemp("rec") / "run")
 
 
 # --- records (issue 35, case 2) ------------------------------------------------------------------------------------

@@ -11,19 +11,14 @@ import shutil
 from pathlib import Path
 
 import pytest
-from contract_cases import one_line, pafp, tree
+from contract_cases import one_line, pafp, record_run, tree
 
 from profiles import profile_path
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """A one-stride virtual run with --record (record.bin, telemetry, report, summary)."""
-    out = tmp_path_factory.mktemp("rec") / "run"
-    from host_tools.cli import main
-
-    assert main(["run", "--strides", "1", "--quiet", "--no-plot", "--no-trace", "--record", "--out", str(out)]) == 0
-    return out
+    return record_run(tmp_path_factory.mktemp("rec") / "run")
 
 
 @pytest.fixture

@@ -131,7 +131,7 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
     reader = RecordReader(path)
     header = reader.header
     try:
-        recorded_cfg = check_header(header, path)  # RecordError naming the key
+        recorded_cfg = check_header(header, path, controller=fw_cfg is None and controller is None)
         f_cpu = int(header["f_cpu_hz"])
         replay = ReplayBoard(header, {"telemetry": telemetry_out} if telemetry_out is not None else None)
         names = list(header["tasks"])

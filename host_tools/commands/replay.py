@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / (time.strftime("%Y%m%d-%H%M%S") + "-replay")
     try:
         path = find_record(args.run_dir)
-        header, fw_cfg = read_record_header(path)  # every key the replay uses checked: one line naming it
+        # every key the replay uses checked, one line naming it (the recorded controller unless another is given)
+        header, fw_cfg = read_record_header(path, args.controller is None and args.profile is None)
         if args.profile is not None:
             from firmware.config import load_firmware_config
 
