@@ -53,7 +53,7 @@ def register_fault_handler() -> None:
         serial.protocol_handler_packages.append("hal.serial")
 
 
-def _number(url: str, key: str, text: str) -> float:
+def _number(key: str, text: str) -> float:
     try:
         value = float(text)
     except ValueError:
@@ -82,28 +82,28 @@ def parse_fault_url(url: str) -> tuple[str, Any]:
                             "(on the firmware's clock) or phase=P (a gait phase, 0 <= P < 1), not both")
     if "at" not in options and "phase" not in options:
         raise FaultUrlError("one of at=SECONDS or phase=P (a gait phase, 0 <= P < 1) is required")
-    phase = _number(url, "phase", options["phase"]) if "phase" in options else None
+    phase = _number("phase", options["phase"]) if "phase" in options else None
     if phase is not None and not 0.0 <= phase < 1.0:
         raise FaultUrlError(f"phase={options['phase']} out of range: a gait phase, 0 <= P < 1")
-    at = _number(url, "at", options["at"]) if phase is None else 0.0
-    duration = _number(url, "duration", options["duration"]) if "duration" in options else math.inf
+    at = _number("at", options["at"]) if phase is None else 0.0
+    duration = _number("duration", options["duration"]) if "duration" in options else math.inf
     params: dict[str, Any] = {}
     for k, v in options.items():
         if k not in _OWN_KEYS:
             try:
-                params[k] = _number(url, k, v)
+                params[k] = _number(k, v)
             except FaultUrlError:
                 params[k] = v  # a named choice
     try:
-        fault = make_injector(name, at, duration, int(_number(url, "seed", options.get("seed", "0"))), **params)
+        fault = make_injector(name, at, duration, int(_number("seed", options.get("seed", "0"))), **params)
     except ValueError as e:
         raise FaultUrlError(str(e)) from None
     if not isinstance(fault, ByteFault):
         raise FaultUrlError(f"fault {name} acts on the {fault.WHERE}, not on a serial line: it exists on "
-                              "the virtual bench only (pafp faults)")
+                            "the virtual bench only (pafp faults)")
     if fault.DANGEROUS and options.get("allow_dangerous") != "1":
         raise FaultUrlError(f"fault {name} is refused on a real port: {fault.HAZARD}; add "
-                              "allow_dangerous=1 only with the foot free of any person (docs/hardware.md)")
+                            "allow_dangerous=1 only with the foot free of any person (docs/hardware.md)")
     fault.phase = phase
     if phase is not None:
         fault.move_onset(math.inf)  # placed once the gait clock runs (Serial.follow_gait)
