@@ -197,7 +197,7 @@ def validate_plant_params(p: PlantParams) -> None:
             continue
         if value is None and f.name in OPTIONAL:
             continue
-        values = value if isinstance(value, tuple) else (value,)
+        values = value if isinstance(value, tuple) and f.name == "load_masses_kg" else (value,)  # the one list
         for v in values:
             bad_type = isinstance(v, bool) or not isinstance(v, (int, float))
             if bad_type or not math.isfinite(v) or not lo <= v <= hi:
