@@ -167,6 +167,8 @@ def _check_control(value: Callable[[str], Any], control_hz: int, motor: MotorRat
 
 def _parameters(cls: Callable[..., Any], table: dict[str, Any]) -> Any:
     """cls(**table) for a dataclass of parameters; ValueError naming an unknown or a missing key and the keys."""
+    if not isinstance(table, dict):
+        raise ValueError(f"= {table!r}: expected a table of the keys {', '.join(f.name for f in fields(cls))}")
     keys = [f.name for f in fields(cls)]  # type: ignore[arg-type]
     required = [f.name for f in fields(cls) if f.default is MISSING]  # type: ignore[arg-type]
     unknown = [k for k in table if k not in keys]

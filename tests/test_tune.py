@@ -169,7 +169,7 @@ def test_pafp_tune_refuses_a_missing_plant_file_before_any_run(tmp_path, capsys)
     assert main(["tune", "--budget", "5", "--strides", "1", "--quiet", "--plant", str(tmp_path / "missing.toml"),
                  "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert f"--plant {tmp_path / 'missing.toml'}: cannot read it" in err and len(err.strip().splitlines()) == 1
+    assert f"cannot read plant profile {tmp_path / 'missing.toml'}" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
 
 

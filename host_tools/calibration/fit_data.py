@@ -17,7 +17,7 @@ import numpy as np
 
 from hal.record.format import Kind
 from hal.record.reader import RecordReader
-from host_tools.recording import RECORD_NAME
+from host_tools.recording import RECORD_NAME, read_record_header
 
 __all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "STALL_BOUND_S", "WINDOW_S", "Experiment", "encoder_velocity",
            "load_experiment", "reading_mean"]
@@ -374,6 +374,7 @@ def load_experiment(run_dir: Path) -> Experiment:
         if not f.is_file():
             raise ValueError(f"{f}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
                              "`pafp run --experiment sysid`, or any serial run)")
+    read_record_header(record)  # a damaged or foreign header: one line naming the key, not a KeyError
     w = _wire(record)
     t_cmd, i_cmd = w.t_cmd, w.i_cmd
     cols = ("time_s", "encoder_angle_rad", "imu_pitch_rad", "current_meas_a", "supervisor_state_name")
