@@ -83,11 +83,11 @@ def test_residual_bias_is_within_three_half_widths(fitted):
     assert all(e <= 3.0 for e in errors.values()), errors
 
 
-@pytest.mark.xfail(reason="not yet: on the hand-made plant the current lag came 0.37 half-widths apart (inertia 0.07) "
-                          "under Sandybridge with one thread, seed 7 within 0.05. The model's backlash crossing ends on a "
-                          "whole command period, so a parameter moved by a millionth can move one reply's mean current by "
-                          "0.1 A: a cliff of ~200 chi-square units that the solver ends on one side of or the other as "
-                          "rounding takes it (issue 34)", strict=False)
+@pytest.mark.xfail(reason="not yet: on the hand-made plant the current lag came 0.37 half-widths apart (inertia "
+                          "0.07) under Sandybridge with one thread, seed 7 within 0.05. The model's backlash crossing "
+                          "ends on a whole command period, so a parameter moved by a millionth can move one reply's "
+                          "mean current by 0.1 A: a cliff of ~200 chi-square units that the solver ends on one side "
+                          "of or the other as rounding takes it (issue 34)", strict=False)
 def test_the_fit_does_not_hang_on_the_blas_kernel(fitted):
     """The same recording fitted by `pafp fit` in a process of its own under another BLAS kernel and one thread
     (`_other_kernel`) gives every identified value within 0.05 of its half-width of this process's fit. Before the
