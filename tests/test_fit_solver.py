@@ -36,6 +36,6 @@ def test_a_valley_of_parameters_six_orders_apart_is_solved_to_its_floor():
 
 
 def test_the_imu_bias_is_not_a_fit_parameter():
-    """Each simulation window takes its own IMU offset, which holds the bias: asking to fit it is refused in one line."""
+    """Each simulation window takes its own IMU offset, which holds the bias: asking to fit it is refused, one line."""
     with pytest.raises(ValueError, match="imu_bias_deg cannot be fitted"):
         check_params(("output_inertia_kg_m2", "imu_bias_deg"), "output_inertia_kg_m2,imu_bias_deg")
