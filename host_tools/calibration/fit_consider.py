@@ -13,13 +13,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hal.virtual.plant import PlantParams
+from host_tools.calibration import fit_solver as solver
 from host_tools.calibration.fit_data import Experiment
 from host_tools.calibration.fit_model import encoder_step, residuals, stuck_starts
 
 __all__ = ["Solution", "drawn_term", "linear_shift", "moved_solution", "stuck_starts_term", "timing_term"]
 
-MOVED_NFEV = 10  # at most this many simulations per trust-region pass of `moved_solution` (two passes a point)
-MOVED_TOL = 1e-4  # their cost and step tolerance (the solution's own is SOLVER_TOL: these are a profile point's)
+MOVED_NFEV = 20  # at most this many simulations per trust-region pass of `moved_solution` (two passes a point)
+# their cost and relative step tolerance (`fit_solver`; the solution's own is SOLVER_TOL): a few thousandths of a
+# half-width at most, so that the profile's points, and the solution taken between them, do not hang on the path
+MOVED_TOL = 1e-6
 
 
 @dataclass
@@ -55,17 +58,14 @@ def moved_solution(sol: Solution, start: dict[str, float], fun, valley=None) -> 
     column is made of steps (each reversal's crossing ends on a whole period): the valley's grid follows it, a
     secant step cannot.
     """
-    from scipy.optimize import least_squares
-
     free = [k for k, n in enumerate(sol.names) if n != "backlash_deg"]
     names = tuple(sol.names[k] for k in free)
     jac, lo, hi = sol.jac[:, free], sol.lo[free], sol.hi[free]
 
     def solve(w: dict[str, float]) -> tuple[dict[str, float], np.ndarray]:
         x0 = np.clip(np.array([w[n] for n in names]), lo, hi)
-        res = least_squares(lambda x: fun({**w, **{n: float(a) for n, a in zip(names, x, strict=True)}}), x0,
-                            jac=lambda x: jac, bounds=(lo, hi), x_scale=np.maximum(np.abs(x0), 0.05 * (hi - lo)),
-                            max_nfev=MOVED_NFEV, method="trf", ftol=MOVED_TOL, xtol=MOVED_TOL)
+        res = solver.solve(lambda x: fun({**w, **{n: float(a) for n, a in zip(names, x, strict=True)}}), x0, lo, hi,
+                           lambda x: jac, MOVED_NFEV, MOVED_TOL)
         return {**w, **{n: float(a) for n, a in zip(names, res.x, strict=True)}}, np.asarray(res.fun)
 
     w, r = dict(start), None

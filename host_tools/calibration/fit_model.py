@@ -73,8 +73,8 @@ PARAMS: dict[str, FitParam] = {p.name: p for p in (
 # residuals in steps a finite-difference Jacobian sees as zero or as a spurious slope; it is profiled over a grid
 # (`backlash_profile`, docs/calibration.md)
 DEFAULT_FIT = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "coulomb_friction_nm", "static_friction_nm",
-               "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "imu_bias_deg",
-               "encoder_offset_deg", "rotor_accel_scale")
+               "gravity_moment_nm", "backlash_deg", "current_time_constant_s", "imu_lag_s", "encoder_offset_deg",
+               "rotor_accel_scale")
 
 
 def base_values(p: PlantParams) -> dict[str, float]:

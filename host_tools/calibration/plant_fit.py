@@ -20,10 +20,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hal.virtual.plant import PlantParams
+from host_tools.calibration import fit_solver as solver
 from host_tools.calibration.fit_consider import Solution, stuck_starts_term, timing_term
 from host_tools.calibration.fit_data import STALL_BOUND_S, Experiment
 from host_tools.calibration.fit_model import (
     DEFAULT_FIT,
+    FREE_IMU_OFFSET,
     PARAMS,
     SIGMA,
     base_values,
@@ -79,12 +81,6 @@ class FitResult:
     stuck_ci95: dict[str, float] = field(default_factory=dict)
 
 
-# the solver stops when the cost (in units of the noise scales: 0.5 per sample's unit error) changes by less than this
-# fraction (about 0.01 on the default experiment, against one interval's 1.92) or the step by less than this fraction
-# of the parameters' scale (intervals are >= 0.1 % of their values). scipy's 1e-8 took 438 simulations on
-# `--plant-seed 7`'s default experiment; 1e-5 took 288 but stopped short on the 10 s experiment of seed 21 (its static
-# friction 2.29 half-widths off, -0.23 with 1e-6, -0.48 with 1e-8)
-SOLVER_TOL = 1e-6
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
 HELD_OUT_EVERY = 4  # one stretch in four is held out of the fit and used to check it
 REL_CI_LIMIT = 0.5  # a 95 % half-width above half the value (for parameters whose scale is their value)
@@ -115,6 +111,9 @@ def check_params(names: tuple[str, ...], given: str = "") -> None:
     if unknown or not names:
         raise ValueError(f"{where}: {unknown[0] if unknown else 'empty'} is not a fit parameter: choose from "
                          f"{', '.join(PARAMS)}")
+    if FREE_IMU_OFFSET and "imu_bias_deg" in names:
+        raise ValueError(f"{where}: imu_bias_deg cannot be fitted: each simulation window takes its own IMU offset "
+                         "(the bias drifts), which holds the bias's part")
     if not set(names) - {"backlash_deg", "rotor_accel_scale"}:
         raise ValueError(f"{where}: backlash_deg and rotor_accel_scale are profiled with other parameters fitted: "
                          "name at least one more")
@@ -124,8 +123,6 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
               held_out: float = 0.2, max_nfev: int = 60) -> FitResult:
     """Least squares on the windowed simulation error over the first (1 - held_out) of the experiment."""
     import time
-
-    from scipy.optimize import least_squares
 
     check_params(names)
     wall0 = time.perf_counter()
@@ -165,7 +162,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         lo, hi = bounds(names)
         if x0 is None:
             x0 = np.clip(np.array([start[n] for n in names]), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-        scale = np.maximum(np.abs(x0), 0.05 * (hi - lo))
+        scale = solver.scales(x0, lo, hi)
         steps = np.array([FIXED_STEPS.get(n, SECANT_STEP * float(c)) for n, c in zip(names, scale, strict=True)])
 
         def fun(x: np.ndarray) -> np.ndarray:
@@ -175,9 +172,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
             last[:] = [(names, np.array(x), r)]
             return r
 
-        res = least_squares(fun, x0, bounds=(lo, hi), x_scale=scale, max_nfev=max_nfev, method="trf",
-                            ftol=SOLVER_TOL, xtol=SOLVER_TOL,
-                            jac=lambda x: _secant_jacobian(fun, np.asarray(x, dtype=float), steps, hi)[0])
+        res = solver.solve(fun, x0, lo, hi, lambda x: _secant_jacobian(fun, np.asarray(x, dtype=float), steps, hi)[0],
+                           max_nfev, scale=scale)
         return res, steps, hi
 
     res, steps, hi = solve(first_names)
