@@ -1,8 +1,8 @@
 """The safety supervisor: limits, timeouts and faults latch the firmware into a safe state.
 
 The supervisor is pure logic: the tasks hand it what they saw (`SafetyInputs`) once per control
-period, and it answers with the state and, in the safe state, what the motor must be told (zero
-current first, then the brake). A trip latches: only `reset` (a power cycle) leaves SAFE.
+period, and it answers with the state and, in the safe state, what the motor must be told (the profile's
+``safe_state``, firmware/safe_state.py). A trip latches: only `reset` (a power cycle) leaves SAFE.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
+from firmware.safe_state import BEHAVIOURS, SafeCommand, SafePolicy
 from firmware.safety_limits import SafetyLimits, ThermalLimits
 from protocol.telemetry import FaultReason, SupervisorState
 
@@ -40,14 +41,6 @@ class SafetyInputs:
     motor_temp_c: float = math.nan  # the motor's winding temperature, fresh (ThermalGuard.fresh_c) or NaN
 
 
-@dataclass(frozen=True)
-class SafeCommand:
-    """What the motor is told in the safe state: `brake` False = zero current, True = brake current."""
-
-    brake: bool
-    current_a: float
-
-
 class Supervisor:
     """Latched safety state machine: INIT until the sensors speak, RUN, then SAFE on any fault."""
 
@@ -57,6 +50,8 @@ class Supervisor:
         self.thermal = thermal or ThermalLimits()
         self._fault_c = self.thermal.fault_c
         self.state = SupervisorState.INIT
+        # any behaviour until the firmware binds the policy to its motor link's offer (FirmwareTasks does)
+        self.policy = SafePolicy.of(self.limits, BEHAVIOURS, "any")
         self.reason = FaultReason.NONE
         self.tripped_at_s: float | None = None
         self.detail = ""  # what was measured when it tripped (e.g. "command age 23.4 ms > 20.0 ms")
@@ -93,12 +88,9 @@ class Supervisor:
             self.state = _RUN
         return self.state
 
-    def safe_command(self, now_s: float) -> SafeCommand:
-        """In SAFE: zero current for `brake_delay_s` after the trip, then the brake."""
-        tripped = self.tripped_at_s if self.tripped_at_s is not None else now_s
-        if now_s - tripped >= self.limits.brake_delay_s:
-            return SafeCommand(brake=True, current_a=self.limits.brake_current_a)
-        return SafeCommand(brake=False, current_a=0.0)
+    def safe_command(self, now_s: float, *, loaded: bool = False, drive_fault: bool = False) -> SafeCommand:
+        """In SAFE: the policy's drive command now (``brake``: zero current for `brake_delay_s`, then the brake)."""
+        return self.policy.command(now_s, self.tripped_at_s, loaded=loaded, drive_fault=drive_fault)
 
     def _describe(self, reason: FaultReason, x: SafetyInputs) -> str:
         """The measured value behind a trip and its limit (ages in ms), for the log and the summary."""

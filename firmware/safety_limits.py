@@ -12,8 +12,9 @@ from typing import Any
 
 from firmware.control.validation import check_int_range, check_range
 from firmware.motor_ratings import MotorRatings
+from firmware.safe_state import SAFE_STATES
 
-__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "MISS_STREAK_MAX", "PEAK_CURRENT_A",
+__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "MISS_STREAK_MAX", "PEAK_CURRENT_A",
            "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S", "SafetyLimits",
            "ThermalLimits"]
 
@@ -41,6 +42,9 @@ a sensor that never spoke; the serial start-up check gives a port 1 s (docs/seri
 BRAKE_DELAY_MAX_S = 1.0
 """Longest zero-current phase before the brake: the motor's own command timeout (VESC APPCONF_TIMEOUT_MSEC,
 1 s, PROTOCOLS.md B.2), after which it would let go on its own anyway."""
+DAMPING_KD_MAX = 5.0
+"""Largest MIT damping kd: the AK series' MIT field range for kd, 0..5 N*m*s/rad (PROTOCOLS.md G); the law's torque
+is further clamped to the motor's MIT torque range, which is within its peak (firmware/motor_ratings.py)."""
 MISS_STREAK_MAX = 1000
 """Longest deadline-miss streak: TIMEOUT_MAX_S at the fastest control rate a profile may set (10 kHz); the
 firmware configuration also holds it to TIMEOUT_MAX_S at its own control rate."""
@@ -64,6 +68,10 @@ class SafetyLimits:
     # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
+    # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, damping,
+    # graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
+    safe_state: str = "brake"
+    damping_kd: float = 1.0
     # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
     # is read as MotorRatings)
     motor: MotorRatings = field(default_factory=MotorRatings)
@@ -101,6 +109,10 @@ class SafetyLimits:
         check_range("motor_encoder_gap_rad", self.motor_encoder_gap_rad, 0.0, span, lo_open=True,
                     unit="rad (at most the span of the angle limits)")
         check_range("belt_ratio", self.belt_ratio, 0.0, 100.0, lo_open=True, unit="(output over input pulley)")
+        if self.safe_state not in SAFE_STATES:
+            raise ValueError(f"safe_state = {self.safe_state!r} is not allowed: one of {', '.join(SAFE_STATES)}")
+        check_range("damping_kd", self.damping_kd, 0.0, DAMPING_KD_MAX, lo_open=True,
+                    unit="N m s/rad (MIT mode's kd range on the AK series)")
 
 
 TEMPERATURE_RANGE_C = (40.0, 180.0)

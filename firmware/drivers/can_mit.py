@@ -11,8 +11,9 @@ mode" (PROTOCOLS.md G). Replies come on the master ID (0, as Ben Katz's mini-che
 series follows) with the driver id in byte 0; the motor answers every frame, the special ones too, in
 order: ``requests`` and ``replies`` count the commands and their answers, ``max_age_s`` is the
 longest command-to-reply time as the driver took them, a command sent while the previous one is
-unanswered counts a ``missing_replies``. The stop path sends
-zero torque then "exit motor mode".
+unanswered counts a ``missing_replies``. The safe behaviours MIT mode carries are release (zero torque) and
+damping (kp = 0, kd > 0; the profile's "brake" is the damper at ``brake_kd``). The stop path sends zero torque
+then "exit motor mode" (torque off), or for damping the damper, which it leaves on.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from typing import ClassVar
 
 from firmware.config import FirmwareConfig
 from firmware.drivers.can_link import CanLink
-from firmware.drivers.motor_link import SafeStop
+from firmware.drivers.motor_link import SafeStop, stop_command
+from firmware.safe_state import SafeCommand
 from hal.can import CanFrame, CanPort
 from protocol import can_mit
 
@@ -38,6 +40,7 @@ class CanMitDriver(CanLink):
     """Talks to an AK-series motor (the AK60-6 by default) in MIT mode over ``port``; callers pass the time."""
 
     LINK: ClassVar[str] = "can-mit"
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "damping")
 
     def __init__(self, port: CanPort, driver_id: int = 1, *, nm_per_a: float = AK60_6_NM_PER_A,
                  brake_kd: float = 1.0, limits: can_mit.MitLimits = can_mit.AK60_6,
@@ -101,6 +104,22 @@ class CanMitDriver(CanLink):
 
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Send the torque (or damping) command, after "enter motor mode" the first time; return data bytes."""
+        cmd = can_mit.MitCommand(kd=self.brake_kd) if brake else can_mit.MitCommand(t_ff=current_a * self.nm_per_a)
+        return self._command(cmd, now_s)
+
+    def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
+        """Send the safe state's MIT command: zero torque (release), or kp = 0 with the damper's kd; return data bytes."""
+        return self._command(self._safe_command(command), now_s)
+
+    def _safe_command(self, command: SafeCommand) -> can_mit.MitCommand:
+        if command.behaviour == "damping":
+            return can_mit.MitCommand(kd=command.kd)
+        if command.behaviour == "brake":
+            return can_mit.MitCommand(kd=self.brake_kd)
+        return can_mit.MitCommand()
+
+    def _command(self, cmd: can_mit.MitCommand, now_s: float) -> int:
+        """Send one MIT command, after "enter motor mode" the first time; return data bytes."""
         written = 0
         outstanding = self._outstanding
         if outstanding:  # unanswered by now: their replies are lost or late (a late one counts as stale)
@@ -112,7 +131,6 @@ class CanMitDriver(CanLink):
             self.entered = True
             self._outstanding.append((now_s, False))  # the motor answers the special frame too
             written += 8
-        cmd = can_mit.MitCommand(kd=self.brake_kd) if brake else can_mit.MitCommand(t_ff=current_a * self.nm_per_a)
         if not self._put_data(can_mit.encode_command(cmd, self.limits), now_s):
             return written
         self.stats.requests += 1
@@ -120,10 +138,20 @@ class CanMitDriver(CanLink):
         self.last_command_s = now_s
         return written + 8
 
-    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero torque, then exit motor mode (torque off); wait until both have left."""
-        frames = (CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits)),
-                  CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
+    def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper (left on, motor
+        mode entered first if it was not); wait until they have left."""
+        cmd = stop_command(command)
+        zero = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits))
+        if cmd.behaviour == "damping":
+            kd = cmd.kd
+            damper = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(kd=kd), self.limits))
+            if self.entered:
+                return self._stop((zero, damper), ("MIT command (zero torque, kp = kd = 0)",
+                                                   f"MIT command (damping, kp = 0, kd = {kd})"), now_s, timeout_s)
+            return self._stop((CanFrame(self.driver_id, can_mit.ENTER_MOTOR_MODE), damper),
+                              ("ENTER_MOTOR_MODE", f"MIT command (damping, kp = 0, kd = {kd})"), now_s, timeout_s)
+        frames = (zero, CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
         stop = self._stop(frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"), now_s, timeout_s)
         self.entered = False
         return stop

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 from firmware.config import FirmwareConfig
 from firmware.drivers.motor_links import make_motor_driver
+from firmware.safe_state import SafePolicy
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
@@ -74,7 +75,9 @@ def stop_frames(board: Board, config: FirmwareConfig) -> tuple[bytes, list[CanFr
     rec = Board(motor_uart=uart, imu_uart=board.imu_uart, telemetry_uart=board.telemetry_uart,
                 encoder=board.encoder, estop=board.estop, led=board.led, watchdog=board.watchdog,
                 now_cycles=board.now_cycles, f_cpu_hz=board.f_cpu_hz, can=can)
-    make_motor_driver(rec, config).send_stop(0.0, config.safety.brake_current_a, WRITE_TIMEOUT_S)
+    driver = make_motor_driver(rec, config)
+    stop = SafePolicy.of(config.safety, driver.SAFE_BEHAVIOURS, config.motor_link).stop_command()
+    driver.send_stop(0.0, stop, WRITE_TIMEOUT_S)
     return bytes(uart.data), list(can.frames) if can is not None else []
 
 
