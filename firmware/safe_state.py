@@ -8,9 +8,12 @@ The behaviours are the drive's own (docs/devices.md, "Safe behaviours"); which o
 * ``handbrake``: the open-loop current vector at ``brake_current_a``, a position hold (UART only);
 * ``damping``: MIT mode's kp = 0, kd = ``damping_kd`` (CAN MIT only);
 * ``graded``: while the foot is loaded (stance: the ground sensors when healthy, else the load the motor
-  current shows) the link's damper (``short``, or ``damping`` on MIT); unloaded (swing) a gentler one that
-  lets the foot go (the brake at ``brake_current_a``, capped by it; on MIT ``damping_kd`` / 4); and
-  ``release`` once the drive reports its own fault (it ignores commands then, and releasing is what it does).
+  current shows) the link's damper (``short``, or ``damping`` at ``damping_kd`` on MIT); unloaded (swing) one
+  that lets the foot go gently (on MIT ``damping_kd`` / 4; on UART and CAN servo the short still: under the
+  swing foot's own weight it lets it sink at a few degrees per second, and a brake capped at
+  ``brake_current_a`` would hide the load the next heel strike puts on it from the load detector); and
+  ``release`` once the drive reports its own fault (it has released the motor and ignores commands; releasing
+  keeps a faulted drive from being asked to drive again when its fault clears).
 
 A link offers what its protocol carries (``SAFE_BEHAVIOURS`` of each driver); a profile asking for one the link
 lacks is refused before the run (:func:`check_offered`).
@@ -52,8 +55,8 @@ def check_offered(safe_state: str, offered: tuple[str, ...], link: str) -> None:
     """ValueError naming safe_state, the link and what it offers when the link cannot carry the safe state."""
     if safe_state not in SAFE_STATES:
         raise ValueError(f"[safety] safe_state = {safe_state!r} is not allowed: one of {', '.join(SAFE_STATES)}")
-    if safe_state == "graded":  # release, and the damper with the gentler one: MIT's kd, or the short and the brake
-        ok = "release" in offered and ("damping" in offered or ("short" in offered and "brake" in offered))
+    if safe_state == "graded":  # release, and a damper: MIT's kd or the short
+        ok = "release" in offered and ("damping" in offered or "short" in offered)
     else:
         ok = safe_state in offered
     if not ok:
@@ -76,7 +79,7 @@ class SafePolicy:
                        "handbrake": SafeCommand("handbrake", brake_current_a),
                        "damping": SafeCommand("damping", kd=damping_kd)}.get(safe_state)
         self._stance = SafeCommand("damping", kd=damping_kd) if mit else SafeCommand("short")
-        self._swing = SafeCommand("damping", kd=damping_kd * SWING_KD_SHARE) if mit else self._brake
+        self._swing = SafeCommand("damping", kd=damping_kd * SWING_KD_SHARE) if mit else self._stance
         self.last = self._stance if self._fixed is None else self._fixed
 
     @classmethod

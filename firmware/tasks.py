@@ -30,7 +30,16 @@ from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor_links import make_motor_driver
 from firmware.logger import TelemetryLogger
 from firmware.safe_state import SafeCommand, SafePolicy
-from firmware.safety import FaultReason, MotorEncoderGap, SafetyInputs, Supervisor, SupervisorState, ThermalGuard
+from firmware.safety import (
+    FaultReason,
+    FrozenImu,
+    JamCheck,
+    MotorEncoderGap,
+    SafetyInputs,
+    Supervisor,
+    SupervisorState,
+    ThermalGuard,
+)
 from hal.interfaces import Board
 from protocol.rvc import RVC_RATE_HZ
 from rtos import Job
@@ -81,6 +90,9 @@ class FirmwareTasks:
         sup.policy = SafePolicy.of(c.safety, self.motor.SAFE_BEHAVIOURS, c.motor_link)
         self.thermal = ThermalGuard(c.thermal)  # derating from the motor's reported winding temperature
         self.motor_encoder_gap = MotorEncoderGap(c.safety.belt_ratio)
+        lim = c.safety
+        self.frozen_imu = FrozenImu(lim.imu_frozen_motion_rad)
+        self.jam = JamCheck(lim.jam_current_share, lim.jam_still_rad, lim.jam_reference_rad_s)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
         self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
                            if c.imu_lowpass_hz > 0 else None)
@@ -145,7 +157,14 @@ class FirmwareTasks:
         x.current_meas_a = feedback.current_a
         x.last_motor_reply_s = feedback.received_s
         x.last_command_s = self.motor.last_command_s
-        x.last_imu_frame_s = self.imu.last_frame_s
+        imu = self.imu
+        x.last_imu_frame_s = imu.last_frame_s
+        x.last_imu_poll_s = imu.last_poll_s
+        x.imu_frozen_s = self.frozen_imu.update(imu.changed_s, imu.last_frame_s, self.encoder.angle_rad)
+        out = self.out  # the last period's command and reference, against the encoder's speed now
+        x.jam_s = self.jam.update(x.now_s, out.current_cmd_a, self._current_limit_a * self.thermal.factor,
+                                  self.encoder.angle_rad, self.obs.reference_velocity_rad_s)
+        x.loaded = self.obs.stance
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
                                                                 feedback.received_s, x.now_s)

@@ -42,8 +42,8 @@ def test_fixed_safe_states_and_the_brakes_delay() -> None:
 
 
 @pytest.mark.parametrize(("offered", "stance", "swing"), [
-    (UART, SafeCommand("short"), SafeCommand("brake", 2.0)),
-    (SERVO, SafeCommand("short"), SafeCommand("brake", 2.0)),
+    (UART, SafeCommand("short"), SafeCommand("short")),
+    (SERVO, SafeCommand("short"), SafeCommand("short")),
     (MIT, SafeCommand("damping", kd=1.5), SafeCommand("damping", kd=1.5 * 0.25)),
 ])
 def test_graded_damps_while_loaded_lets_go_gently_in_swing_and_releases_on_a_drive_fault(
