@@ -70,7 +70,7 @@ class SafetyLimits:
     belt_ratio: float = 89.127 / 19.1
     # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, damping,
     # graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
-    safe_state: str = "brake"
+    safe_state: str = "graded"
     damping_kd: float = 1.0
     # a frozen IMU: its frames bit-identical for imu_timeout_s while the encoder moved more than this
     imu_frozen_motion_rad: float = math.radians(1.0)

@@ -108,7 +108,7 @@ def test_the_stop_path_ends_with_the_safe_behaviour_can() -> None:
         (0x101, can_servo.encode_command(P.SET_CURRENT, 0.0)), (0x001, can_servo.encode_command(P.SET_DUTY, 0.0))]
     _, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000, motor_link="can-mit").board,
                             _cfg("can-mit", "damping"))
-    assert [f.data for f in frames] == [can_mit.ENTER_MOTOR_MODE,
+    assert [f.data for f in frames] == [can_mit.encode_command(can_mit.MitCommand()),
                                         can_mit.encode_command(can_mit.MitCommand(kd=1.0))]
 
 

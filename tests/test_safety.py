@@ -14,7 +14,7 @@ def running(now=1.0, **kw):
 
 
 def started() -> Supervisor:
-    s = Supervisor()
+    s = Supervisor(SafetyLimits(safe_state="brake"))  # the brake's zero-current-then-brake sequence
     assert s.check(running(0.9)) is SupervisorState.RUN
     return s
 

@@ -59,11 +59,12 @@ def stop_bench(proc: subprocess.Popen) -> str:
 
 
 def safe_frames(mode: str) -> list[tuple[int, bytes]]:
-    """The stop path's two frames, (arbitration id, data), as the motor must receive them last."""
+    """The stop path's two frames, (arbitration id, data), as the motor must receive them last: zero current or
+    torque, then the shipped profile's safe state (graded: the phase short in servo mode, the damper in MIT mode)."""
     if mode == "mit":
-        return [(1, can_mit.encode_command(can_mit.MitCommand())), (1, can_mit.EXIT_MOTOR_MODE)]
+        return [(1, can_mit.encode_command(can_mit.MitCommand())), (1, can_mit.encode_command(can_mit.MitCommand(kd=1.0)))]
     return [(0x101, can_servo.encode_command(can_servo.PacketId.SET_CURRENT, 0.0)),
-            (0x201, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE, 2.0))]
+            (0x001, can_servo.encode_command(can_servo.PacketId.SET_DUTY, 0.0))]
 
 
 def received(log: Path) -> list[can.Message]:

@@ -139,18 +139,14 @@ class CanMitDriver(CanLink):
         return written + 8
 
     def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper (left on, motor
-        mode entered first if it was not); wait until they have left."""
+        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper (left on: a motor
+        not in motor mode ignores both and stays released); wait until they have left."""
         cmd = stop_command(command)
         zero = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits))
         if cmd.behaviour == "damping":
-            kd = cmd.kd
-            damper = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(kd=kd), self.limits))
-            if self.entered:
-                return self._stop((zero, damper), ("MIT command (zero torque, kp = kd = 0)",
-                                                   f"MIT command (damping, kp = 0, kd = {kd})"), now_s, timeout_s)
-            return self._stop((CanFrame(self.driver_id, can_mit.ENTER_MOTOR_MODE), damper),
-                              ("ENTER_MOTOR_MODE", f"MIT command (damping, kp = 0, kd = {kd})"), now_s, timeout_s)
+            damper = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(kd=cmd.kd), self.limits))
+            return self._stop((zero, damper), ("MIT command (zero torque, kp = kd = 0)",
+                                               f"MIT command (damping, kp = 0, kd = {cmd.kd})"), now_s, timeout_s)
         frames = (zero, CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
         stop = self._stop(frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"), now_s, timeout_s)
         self.entered = False
