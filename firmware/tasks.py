@@ -161,7 +161,7 @@ class FirmwareTasks:
         x.last_imu_frame_s = imu.last_frame_s
         x.last_imu_poll_s = imu.last_poll_s
         x.imu_frozen_s = self.frozen_imu.update(imu.changed_s, imu.last_frame_s, self.encoder.angle_rad)
-        out = self.out  # the last period's command and reference, against the encoder's speed now
+        out = self.out  # the last period's command and reference, against the encoder's angle now
         x.jam_s = self.jam.update(x.now_s, out.current_cmd_a, self._current_limit_a * self.thermal.factor,
                                   self.encoder.angle_rad, self.obs.reference_velocity_rad_s)
         x.loaded = self.obs.stance

@@ -51,7 +51,7 @@ def test_uart_a_fault_ends_with_the_phase_short_on_the_motors_wire(tmp_path: Pat
 @pytest.mark.parametrize(("mode", "safe_state", "last"), [
     ("servo", "short", (can_servo.command_id(can_servo.PacketId.SET_DUTY, 1),
                         can_servo.encode_command(can_servo.PacketId.SET_DUTY, 0.0))),
-    ("mit", "damping", (1, can_mit.encode_command(can_mit.MitCommand(kd=1.0)))),
+    ("mit", "damping", (1, can_mit.encode_command(can_mit.MitCommand(kd=1.0)))),  # damping: kd = damping_kd always
 ])
 def test_can_a_fault_ends_with_the_safe_behaviour_on_the_motors_wire(
         tmp_path: Path, mode: str, safe_state: str, last: tuple[int, bytes]) -> None:

@@ -104,12 +104,16 @@ def test_the_stop_path_ends_with_the_safe_behaviour_can() -> None:
     P = can_servo.PacketId
     _, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000, motor_link="can-servo").board,
                             _cfg("can-servo", "short"))
+    # alone: the bxCAN sends by identifier, so a zero current (0x101) queued beside it would go out last
+    assert [(f.arbitration_id, f.data) for f in frames] == [(0x001, can_servo.encode_command(P.SET_DUTY, 0.0))]
+    _, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000, motor_link="can-servo").board,
+                            _cfg("can-servo", "brake"))
     assert [(f.arbitration_id, f.data) for f in frames] == [
-        (0x101, can_servo.encode_command(P.SET_CURRENT, 0.0)), (0x001, can_servo.encode_command(P.SET_DUTY, 0.0))]
+        (0x101, can_servo.encode_command(P.SET_CURRENT, 0.0)),
+        (0x201, can_servo.encode_command(P.SET_CURRENT_BRAKE, 2.0))]
     _, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000, motor_link="can-mit").board,
                             _cfg("can-mit", "damping"))
-    assert [f.data for f in frames] == [can_mit.encode_command(can_mit.MitCommand()),
-                                        can_mit.encode_command(can_mit.MitCommand(kd=1.0))]
+    assert [f.data for f in frames] == [can_mit.encode_command(can_mit.MitCommand(kd=1.0))]
 
 
 @pytest.mark.parametrize(("link", "state", "mode"), [

@@ -13,7 +13,8 @@ order: ``requests`` and ``replies`` count the commands and their answers, ``max_
 longest command-to-reply time as the driver took them, a command sent while the previous one is
 unanswered counts a ``missing_replies``. The safe behaviours MIT mode carries are release (zero torque) and
 damping (kp = 0, kd > 0; the profile's "brake" is the damper at ``brake_kd``). The stop path sends zero torque
-then "exit motor mode" (torque off), or for damping the damper, which it leaves on.
+then "exit motor mode" (torque off), or for damping the damper alone (it replaces any torque; a zero-torque frame
+of the same identifier could leave a mailbox after it), which it leaves on.
 """
 
 from __future__ import annotations
@@ -108,7 +109,7 @@ class CanMitDriver(CanLink):
         return self._command(cmd, now_s)
 
     def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
-        """Send the safe state's MIT command: zero torque (release), or kp = 0 with the damper's kd; return data bytes."""
+        """Send the safe state's MIT command: zero torque (release), or kp = 0 and the damper's kd; return the bytes."""
         return self._command(self._safe_command(command), now_s)
 
     def _safe_command(self, command: SafeCommand) -> can_mit.MitCommand:
@@ -139,14 +140,13 @@ class CanMitDriver(CanLink):
         return written + 8
 
     def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper (left on: a motor
-        not in motor mode ignores both and stays released); wait until they have left."""
+        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper alone (left on: a
+        motor not in motor mode ignores it and stays released); wait until they have left."""
         cmd = stop_command(command)
-        zero = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits))
         if cmd.behaviour == "damping":
             damper = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(kd=cmd.kd), self.limits))
-            return self._stop((zero, damper), ("MIT command (zero torque, kp = kd = 0)",
-                                               f"MIT command (damping, kp = 0, kd = {cmd.kd})"), now_s, timeout_s)
+            return self._stop((damper,), (f"MIT command (damping, kp = 0, kd = {cmd.kd})",), now_s, timeout_s)
+        zero = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits))
         frames = (zero, CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
         stop = self._stop(frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"), now_s, timeout_s)
         self.entered = False

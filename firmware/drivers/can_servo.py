@@ -8,7 +8,10 @@ commands sent; ``max_age_s`` is the longest time between two status frames as th
 (the oldest feedback the firmware held); ``stale_replies`` counts status frames from a motor in fault.
 A silent bus leaves ``feedback.received_s`` behind, which the supervisor bounds (MOTOR_TIMEOUT); a
 failing port latches ``link_lost``. The safe behaviours are servo mode's: release (SET_CURRENT 0), the brake
-(SET_CURRENT_BRAKE) and the phase short (SET_DUTY 0); the stop path sends zero current, then the safe command.
+(SET_CURRENT_BRAKE) and the phase short (SET_DUTY 0); the stop path sends the safe command (the brake after a
+zero current, as on the UART). The bxCAN sends its mailboxes by identifier, lowest first, whatever order they were
+filled in: a zero current (0x1xx) queued beside the short (0x0xx) would go out after it and release the motor, so
+the short goes alone; the brake's pair (0x1xx then 0x2xx) keeps its order.
 """
 
 from __future__ import annotations
@@ -96,7 +99,8 @@ class CanServoDriver(CanLink):
         P = can_servo.PacketId
         behaviour = command.behaviour
         if behaviour == "brake":
-            packet, value, name = P.SET_CURRENT_BRAKE, abs(command.current_a), f"SET_CURRENT_BRAKE({abs(command.current_a)} A)"
+            packet, value = P.SET_CURRENT_BRAKE, abs(command.current_a)
+            name = f"SET_CURRENT_BRAKE({value} A)"
         elif behaviour == "short":
             packet, value, name = P.SET_DUTY, 0.0, "SET_DUTY(0.0)"
         else:
@@ -105,11 +109,12 @@ class CanServoDriver(CanLink):
         return frame, name
 
     def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero current, then the safe command (a number: the brake current); wait until they have
-        left the mailboxes."""
+        """The stop path: the safe command (a number: the brake current), the brake after a zero current; wait until
+        they have left the mailboxes."""
         cmd = stop_command(command)
-        release = self._safe_frame(SafeCommand("release"))
-        pairs = (release,) if cmd.behaviour == "release" else (release, self._safe_frame(cmd))
+        pairs = (self._safe_frame(cmd),)
+        if cmd.behaviour == "brake":
+            pairs = (self._safe_frame(SafeCommand("release")), *pairs)
         return self._stop(tuple(f for f, _ in pairs), tuple(n for _, n in pairs), now_s, timeout_s)
 
     def published(self) -> dict[str, object]:

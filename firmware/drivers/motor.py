@@ -211,7 +211,7 @@ class MotorDriver(MotorLink):
 
 
 def safe_message(command: SafeCommand) -> Message:
-    """The VESC command of a safe behaviour: SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE, or SET_CURRENT 0 (release)."""
+    """The VESC command of a safe behaviour: SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE or SET_CURRENT 0 (release)."""
     behaviour = command.behaviour
     if behaviour == "brake":
         return SetCurrentBrake(command.current_a)

@@ -166,7 +166,8 @@ def hazard_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         controls = "; ".join(CONTROLS.get(k, k) for k in reasons if k != "undetected") or "none: no check catches it"
         ex = _worst(mine, "excursion_deg")
         out.append({
-            "fault": fault, "safe_state": safe, "hazard": cls.HAZARD, "where": cls.WHERE, "points": len(mine), "detection": detection,
+            "fault": fault, "safe_state": safe, "hazard": cls.HAZARD, "where": cls.WHERE, "points": len(mine),
+            "detection": detection,
             "control": controls,
             "detect_ms": max((_num(r["detect_ms"]) for r in mine if r["detected"]), default=math.nan),
             "safe_ms": (_worst(mine, "time_to_safe_ms") or (math.nan, -1))[0],
