@@ -5,11 +5,11 @@ host the whole control loop is one Python thread: a controller stuck in ``update
 blocking call) stalls the supervisor and the stop path with it, and nothing stops the motor before its
 own 1 s command timeout. :class:`HostWatchdog` is a second thread. The firmware's watchdog task kicks it
 (the board's watchdog handle, once per kick period when the control task has run); when no kick has come
-for ``timeout_s`` it writes the stop frames (zero current, then the brake), pre-built at start-up by the
-motor driver's own stop path, on a handle of its own (a duplicate of the UART's file descriptor, or a
+for ``timeout_s`` it writes the stop frames (the profile's safe state, firmware/safe_state.py), pre-built at
+start-up by the motor driver's own stop path, on a handle of its own (a duplicate of the UART's file descriptor, or a
 second python-can bus on the same channel), asks the loop to stop at its next scheduling point, and writes
-them again every ``timeout_s`` while the loop stays silent (the motor's own timeout would release the
-brake). Limits: a thread needs the interpreter's lock, which a pure-Python loop hands over every switch
+them again every ``timeout_s`` while the loop stays silent (the motor's own timeout would end the safe
+behaviour). Limits: a thread needs the interpreter's lock, which a pure-Python loop hands over every switch
 interval (5 ms) but C code that holds it does not; ports the loop serves in-process (``sim://``) stall
 with the loop, so there the watchdog is not armed. docs/serial_mode.md, "The host watchdog".
 """
@@ -214,7 +214,7 @@ class HostWatchdog:
             r.silent_ms = round((self.clock() - last) * 1e3, 3)
             r.task = self.running()
             self.on_fire()
-            log.error("host watchdog: no kick for %.0f ms (task %s running): sent zero current and the brake",
+            log.error("host watchdog: no kick for %.0f ms (task %s running): sent the safe state's frames",
                       r.silent_ms, r.task)
 
     def halt(self) -> WatchdogRecord:
