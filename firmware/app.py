@@ -73,8 +73,9 @@ class Firmware(FirmwareTasks):
 
     # Events from outside the task table ----------------------------------------------------------
     def stop(self, now_s: float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path (power-down, end of run): zero current then the brake, on the wire before returning."""
-        return self.motor.send_stop(now_s, self.supervisor.limits.brake_current_a, timeout_s)
+        """The stop path (power-down, end of run): zero current then the safe state's command, on the wire before
+        returning."""
+        return self.motor.send_stop(now_s, self.supervisor.policy.stop_command(), timeout_s)
 
     def on_watchdog_reset(self, t_cycles: int) -> None:
         """The IWDG fired: count it and latch the safe state (a real MCU would reboot into INIT)."""

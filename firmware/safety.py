@@ -1,8 +1,8 @@
 """The safety supervisor: limits, timeouts and faults latch the firmware into a safe state.
 
 The supervisor is pure logic: the tasks hand it what they saw (`SafetyInputs`) once per control
-period, and it answers with the state and, in the safe state, what the motor must be told (zero
-current first, then the brake). A trip latches: only `reset` (a power cycle) leaves SAFE.
+period, and it answers with the state and, in the safe state, what the motor must be told (the profile's
+``safe_state``, firmware/safe_state.py). A trip latches: only `reset` (a power cycle) leaves SAFE.
 """
 
 from __future__ import annotations
@@ -12,13 +12,14 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
+from firmware.safe_state import BEHAVIOURS, SafeCommand, SafePolicy
 from firmware.safety_limits import SafetyLimits, ThermalLimits
 from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FaultReason", "MotorEncoderGap", "SafetyInputs", "SafetyLimits", "SafeCommand", "Supervisor",
-           "SupervisorState", "ThermalGuard", "ThermalLimits"]
+__all__ = ["FaultReason", "FrozenImu", "JamCheck", "MotorEncoderGap", "SafetyInputs", "SafetyLimits", "SafeCommand",
+           "Supervisor", "SupervisorState", "ThermalGuard", "ThermalLimits"]
 
 
 @dataclass
@@ -31,6 +32,10 @@ class SafetyInputs:
     last_motor_reply_s: float | None = None
     last_command_s: float | None = None
     last_imu_frame_s: float | None = None
+    last_imu_poll_s: float | None = None  # when the IMU port was last read (None: take now)
+    imu_frozen_s: float = 0.0  # how long the IMU's frames have been bit-identical while the encoder moved (FrozenImu)
+    jam_s: float = 0.0  # how long the motor has pushed at its limit without motion against a moving reference
+    loaded: bool = False  # the foot in stance (the controller's stance flag): a jam is judged over jam_stance_time_s
     disagreement_rad: float = 0.0
     motor_fault_code: int = 0
     deadline_miss_streak: int = 0
@@ -38,14 +43,6 @@ class SafetyInputs:
     link_lost: bool = False
     motor_encoder_gap_rad: float = 0.0
     motor_temp_c: float = math.nan  # the motor's winding temperature, fresh (ThermalGuard.fresh_c) or NaN
-
-
-@dataclass(frozen=True)
-class SafeCommand:
-    """What the motor is told in the safe state: `brake` False = zero current, True = brake current."""
-
-    brake: bool
-    current_a: float
 
 
 class Supervisor:
@@ -57,6 +54,8 @@ class Supervisor:
         self.thermal = thermal or ThermalLimits()
         self._fault_c = self.thermal.fault_c
         self.state = SupervisorState.INIT
+        # any behaviour until the firmware binds the policy to its motor link's offer (FirmwareTasks does)
+        self.policy = SafePolicy.of(self.limits, BEHAVIOURS, "any")
         self.reason = FaultReason.NONE
         self.tripped_at_s: float | None = None
         self.detail = ""  # what was measured when it tripped (e.g. "command age 23.4 ms > 20.0 ms")
@@ -93,12 +92,9 @@ class Supervisor:
             self.state = _RUN
         return self.state
 
-    def safe_command(self, now_s: float) -> SafeCommand:
-        """In SAFE: zero current for `brake_delay_s` after the trip, then the brake."""
-        tripped = self.tripped_at_s if self.tripped_at_s is not None else now_s
-        if now_s - tripped >= self.limits.brake_delay_s:
-            return SafeCommand(brake=True, current_a=self.limits.brake_current_a)
-        return SafeCommand(brake=False, current_a=0.0)
+    def safe_command(self, now_s: float, *, loaded: bool = False, drive_fault: bool = False) -> SafeCommand:
+        """In SAFE: the policy's drive command now (``brake``: zero current for `brake_delay_s`, then the brake)."""
+        return self.policy.command(now_s, self.tripped_at_s, loaded=loaded, drive_fault=drive_fault)
 
     def _describe(self, reason: FaultReason, x: SafetyInputs) -> str:
         """The measured value behind a trip and its limit (ages in ms), for the log and the summary."""
@@ -106,6 +102,14 @@ class Supervisor:
         ages = {FaultReason.COMMAND_STALE: (x.last_command_s, lim.command_timeout_s, "command"),
                 FaultReason.MOTOR_TIMEOUT: (x.last_motor_reply_s, lim.motor_timeout_s, "motor feedback"),
                 FaultReason.IMU_TIMEOUT: (x.last_imu_frame_s, lim.imu_timeout_s, "IMU frame")}
+        if reason is FaultReason.IMU_FROZEN:
+            return f"IMU frames bit-identical for {x.imu_frozen_s * 1e3:.1f} ms > {lim.imu_timeout_s * 1e3:.1f} ms " \
+                   f"while the encoder moved more than {math.degrees(lim.imu_frozen_motion_rad):.2f} deg"
+        if reason is FaultReason.MOTOR_JAM:
+            return f"current at {lim.jam_current_share:.0%} of its limit, the encoder within " \
+                   f"{math.degrees(lim.jam_still_rad):.2f} deg, the reference moving, for {x.jam_s * 1e3:.1f} ms > " \
+                   f"{(lim.jam_stance_time_s if x.loaded else lim.jam_time_s) * 1e3:.1f} ms " \
+                   f"({'stance' if x.loaded else 'swing'})"
         if reason in ages:
             last_s, limit_s, what = ages[reason]
             if last_s is None:
@@ -158,8 +162,14 @@ class Supervisor:
         if (now_s > lim.startup_grace_s) if last_s is None else (now_s - last_s > lim.motor_timeout_s):
             return FaultReason.MOTOR_TIMEOUT
         last_s = x.last_imu_frame_s
-        if (now_s > lim.startup_grace_s) if last_s is None else (now_s - last_s > lim.imu_timeout_s):
-            return FaultReason.IMU_TIMEOUT
+        if last_s is None:
+            if now_s > lim.startup_grace_s:
+                return FaultReason.IMU_TIMEOUT
+        else:  # silent up to the last read of its port (a host's stall of the IMU task is not the IMU's silence),
+            poll_s = x.last_imu_poll_s  # and never longer than twice the limit, read or not
+            age_s = (now_s if poll_s is None else poll_s) - last_s
+            if age_s > lim.imu_timeout_s or now_s - last_s > 2.0 * lim.imu_timeout_s:
+                return FaultReason.IMU_TIMEOUT
         if x.motor_temp_c > self._fault_c:  # NaN (no fresh reading) never latches
             return FaultReason.OVER_TEMPERATURE
         if self.state is _RUN:
@@ -171,6 +181,10 @@ class Supervisor:
                 return FaultReason.SENSOR_DISAGREEMENT
             if x.motor_encoder_gap_rad > lim.motor_encoder_gap_rad:
                 return FaultReason.MOTOR_ENCODER_DISAGREEMENT
+            if x.imu_frozen_s > lim.imu_timeout_s:
+                return FaultReason.IMU_FROZEN
+            if x.jam_s > (lim.jam_stance_time_s if x.loaded else lim.jam_time_s):
+                return FaultReason.MOTOR_JAM
         return _NONE
 
 
@@ -205,6 +219,64 @@ class MotorEncoderGap:
             self._encoder0, self._motor0 = encoder_rad, motor_position_rad
         self.gap_rad = abs((encoder_rad - self._encoder0) - (motor_position_rad - self._motor0) / self.belt_ratio)
         return self.gap_rad
+
+
+class FrozenImu:
+    """An IMU stuck at a plausible value: its frames keep coming, index counting, with bit-identical measurements.
+
+    A healthy BNO08x's pitch resolves 0.01 deg and its accelerations 1 mg, so while the foot turns by a degree
+    its frames cannot repeat; at rest they may. ``update`` returns how long identical frames have kept coming
+    (from the change to the newest frame: a silent IMU is IMU_TIMEOUT's), counted only once the encoder has
+    moved more than ``motion_rad`` since they last changed (else 0).
+    """
+
+    def __init__(self, motion_rad: float) -> None:
+        """Nothing seen yet."""
+        self.motion_rad = motion_rad
+        self._changed_s: float | None = None
+        self._encoder0 = 0.0
+
+    def update(self, changed_s: float | None, last_frame_s: float | None, encoder_rad: float) -> float:
+        """Seconds of identical frames (the content last changed at changed_s, the newest frame came at last_frame_s),
+        if the encoder has moved enough since the change; else 0."""
+        if changed_s is None or last_frame_s is None:
+            return 0.0
+        if changed_s != self._changed_s:
+            self._changed_s = changed_s
+            self._encoder0 = encoder_rad
+            return 0.0
+        if abs(encoder_rad - self._encoder0) > self.motion_rad:
+            return last_frame_s - changed_s
+        return 0.0
+
+
+class JamCheck:
+    """A jammed output: the current command near its limit, the encoder still, the reference moving.
+
+    Each alone is normal (a loaded stance saturates the current; a foot at rest is still; the gait's reference
+    moves); together they mean the motor pushes against something that does not give. Still is judged on the
+    encoder's angle (within ``still_rad`` of where the window began), not its differenced speed, which a
+    single count's flicker on a stop's compliance swings by 1.6 rad/s. ``update`` returns how long all three
+    have held (docs/safety.md, "Jam").
+    """
+
+    def __init__(self, current_share: float, still_rad: float, reference_rad_s: float) -> None:
+        """Near the limit: at least current_share of it; still: within still_rad; moving: above reference_rad_s."""
+        self.current_share = current_share
+        self.still_rad = still_rad
+        self.reference_rad_s = reference_rad_s
+        self._since: float | None = None
+        self._angle0 = 0.0
+
+    def update(self, now_s: float, current_a: float, limit_a: float, angle_rad: float,
+               reference_velocity_rad_s: float) -> float:
+        """Seconds the three conditions have held up to now_s (0.0 when one does not)."""
+        if abs(current_a) < self.current_share * limit_a or abs(reference_velocity_rad_s) <= self.reference_rad_s:
+            self._since = None
+            return 0.0
+        if self._since is None or abs(angle_rad - self._angle0) > self.still_rad:  # (re)start: it moved
+            self._since, self._angle0 = now_s, angle_rad
+        return now_s - self._since
 
 
 class ThermalGuard:

@@ -12,10 +12,11 @@ from typing import Any
 
 from firmware.control.validation import check_int_range, check_range
 from firmware.motor_ratings import MotorRatings
+from firmware.safe_state import SAFE_STATES
 
-__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "MISS_STREAK_MAX", "PEAK_CURRENT_A",
-           "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S", "SafetyLimits",
-           "ThermalLimits"]
+__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "MISS_STREAK_MAX",
+           "PEAK_CURRENT_A", "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S",
+           "SafetyLimits", "ThermalLimits"]
 
 # The hardware's bounds on every limit; a limit beyond them is no limit at all (or asks the motor for what it
 # cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C). The two
@@ -41,6 +42,9 @@ a sensor that never spoke; the serial start-up check gives a port 1 s (docs/seri
 BRAKE_DELAY_MAX_S = 1.0
 """Longest zero-current phase before the brake: the motor's own command timeout (VESC APPCONF_TIMEOUT_MSEC,
 1 s, PROTOCOLS.md B.2), after which it would let go on its own anyway."""
+DAMPING_KD_MAX = 5.0
+"""Largest MIT damping kd: the AK series' MIT field range for kd, 0..5 N*m*s/rad (PROTOCOLS.md G); the law's torque
+is further clamped to the motor's MIT torque range, which is within its peak (firmware/motor_ratings.py)."""
 MISS_STREAK_MAX = 1000
 """Longest deadline-miss streak: TIMEOUT_MAX_S at the fastest control rate a profile may set (10 kHz); the
 firmware configuration also holds it to TIMEOUT_MAX_S at its own control rate."""
@@ -55,7 +59,7 @@ class SafetyLimits:
     current_limit_a: float = 20.0
     motor_timeout_s: float = 0.020
     command_timeout_s: float = 0.020
-    imu_timeout_s: float = 0.050
+    imu_timeout_s: float = 0.040
     disagreement_rad: float = math.radians(6.0)
     deadline_miss_streak: int = 3
     startup_grace_s: float = 0.5
@@ -64,6 +68,20 @@ class SafetyLimits:
     # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
+    # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, damping,
+    # graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
+    safe_state: str = "graded"
+    damping_kd: float = 1.0
+    # a frozen IMU: its frames bit-identical for imu_timeout_s while the encoder moved more than this
+    imu_frozen_motion_rad: float = math.radians(1.0)
+    # a jam: the current command at jam_current_share of its limit, the encoder within jam_still_rad, the
+    # reference's speed above jam_reference_rad_s, all for longer than jam_time_s in swing, jam_stance_time_s in
+    # stance (where a push-off the motor is too weak for looks the same for a while; docs/safety.md, "Jam")
+    jam_current_share: float = 0.5
+    jam_still_rad: float = math.radians(0.5)
+    jam_reference_rad_s: float = 0.1
+    jam_time_s: float = 0.025
+    jam_stance_time_s: float = 0.045
     # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
     # is read as MotorRatings)
     motor: MotorRatings = field(default_factory=MotorRatings)
@@ -101,6 +119,19 @@ class SafetyLimits:
         check_range("motor_encoder_gap_rad", self.motor_encoder_gap_rad, 0.0, span, lo_open=True,
                     unit="rad (at most the span of the angle limits)")
         check_range("belt_ratio", self.belt_ratio, 0.0, 100.0, lo_open=True, unit="(output over input pulley)")
+        if self.safe_state not in SAFE_STATES:
+            raise ValueError(f"safe_state = {self.safe_state!r} is not allowed: one of {', '.join(SAFE_STATES)}")
+        check_range("imu_frozen_motion_rad", self.imu_frozen_motion_rad, 0.0, span, lo_open=True,
+                    unit="rad (at most the span of the angle limits)")
+        check_range("jam_current_share", self.jam_current_share, 0.0, 1.0, lo_open=True, unit="(of the current limit)")
+        check_range("jam_still_rad", self.jam_still_rad, 0.0, span, lo_open=True,
+                    unit="rad (at most the span of the angle limits)")
+        check_range("jam_reference_rad_s", self.jam_reference_rad_s, 0.0, 10.0, unit="rad/s")
+        for name in ("jam_time_s", "jam_stance_time_s"):
+            check_range(name, getattr(self, name), 0.0, TIMEOUT_MAX_S, lo_open=True,
+                        unit="s (a stalled peak-current command crosses any range of motion in 0.1 s once freed)")
+        check_range("damping_kd", self.damping_kd, 0.0, DAMPING_KD_MAX, lo_open=True,
+                    unit="N m s/rad (MIT mode's kd range on the AK series)")
 
 
 TEMPERATURE_RANGE_C = (40.0, 180.0)

@@ -29,7 +29,17 @@ from firmware.drivers.ground_sensors import GroundSensorDriver
 from firmware.drivers.imu import ImuDriver
 from firmware.drivers.motor_links import make_motor_driver
 from firmware.logger import TelemetryLogger
-from firmware.safety import FaultReason, MotorEncoderGap, SafetyInputs, Supervisor, SupervisorState, ThermalGuard
+from firmware.safe_state import SafeCommand, SafePolicy
+from firmware.safety import (
+    FaultReason,
+    FrozenImu,
+    JamCheck,
+    MotorEncoderGap,
+    SafetyInputs,
+    Supervisor,
+    SupervisorState,
+    ThermalGuard,
+)
 from hal.interfaces import Board
 from protocol.rvc import RVC_RATE_HZ
 from rtos import Job
@@ -56,6 +66,7 @@ class ControlOutput:
     brake: bool = False
     fused_angle_rad: float = 0.0
     torque_est_nm: float = 0.0
+    safe: SafeCommand | None = None  # in SAFE: the safe state's drive command (firmware/safe_state.py)
 
 
 class FirmwareTasks:
@@ -74,9 +85,14 @@ class FirmwareTasks:
         self.imu = ImuDriver(board.imu_uart)
         self.motor = make_motor_driver(board, c)  # the driver of the link the profile names (motor_links.MOTOR_LINKS)
         self.logger = TelemetryLogger(board.telemetry_uart)
-        self.supervisor = Supervisor(c.safety, c.thermal)
+        self.supervisor = sup = Supervisor(c.safety, c.thermal)
+        # the profile's safe state on this link (refused here, before the run, if the link lacks it)
+        sup.policy = SafePolicy.of(c.safety, self.motor.SAFE_BEHAVIOURS, c.motor_link)
         self.thermal = ThermalGuard(c.thermal)  # derating from the motor's reported winding temperature
         self.motor_encoder_gap = MotorEncoderGap(c.safety.belt_ratio)
+        lim = c.safety
+        self.frozen_imu = FrozenImu(lim.imu_frozen_motion_rad)
+        self.jam = JamCheck(lim.jam_current_share, lim.jam_still_rad, lim.jam_reference_rad_s)
         self.estimator = AngleEstimator(self.ts_s, offset_tau_s=c.estimator_offset_tau_s)
         self.imu_filter = (ButterworthLowPass(c.imu_lowpass_order, c.imu_lowpass_hz, RVC_RATE_HZ)
                            if c.imu_lowpass_hz > 0 else None)
@@ -141,7 +157,14 @@ class FirmwareTasks:
         x.current_meas_a = feedback.current_a
         x.last_motor_reply_s = feedback.received_s
         x.last_command_s = self.motor.last_command_s
-        x.last_imu_frame_s = self.imu.last_frame_s
+        imu = self.imu
+        x.last_imu_frame_s = imu.last_frame_s
+        x.last_imu_poll_s = imu.last_poll_s
+        x.imu_frozen_s = self.frozen_imu.update(imu.changed_s, imu.last_frame_s, self.encoder.angle_rad)
+        out = self.out  # the last period's command and reference, against the encoder's angle now
+        x.jam_s = self.jam.update(x.now_s, out.current_cmd_a, self._current_limit_a * self.thermal.factor,
+                                  self.encoder.angle_rad, self.obs.reference_velocity_rad_s)
+        x.loaded = self.obs.stance
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
                                                                 feedback.received_s, x.now_s)
@@ -165,8 +188,13 @@ class FirmwareTasks:
         out.fused_angle_rad = fused
         state = self.supervisor.state
         if state is _SAFE:
-            cmd = self.supervisor.safe_command(now_s)
-            out.current_cmd_a, out.brake = cmd.current_a, cmd.brake
+            # loaded: the ground sensors while healthy, else the load the motor current shows (quasi-static)
+            fb = self.motor.feedback
+            loaded = self.load_detector.update(now_s, fb.current_a, fused, 0.0)
+            if ground is not None and ground.healthy:
+                loaded = ground_stance
+            cmd = self.supervisor.safe_command(now_s, loaded=loaded, drive_fault=fb.fault != 0)
+            out.current_cmd_a, out.brake, out.safe = cmd.current_a, cmd.brake, cmd
             if self._controller_state is not _SAFE:
                 self._controller_state = _SAFE
                 self._reset_controller(now_s)
@@ -267,7 +295,11 @@ class FirmwareTasks:
         now_s = job.start / self.f_cpu_hz
         before = self.motor.decoder.stats.bytes_in
         self.motor.poll(now_s)
-        written = self.motor.send(self.out.current_cmd_a, now_s, brake=self.out.brake)
+        safe = self.out.safe
+        if safe is None:
+            written = self.motor.send(self.out.current_cmd_a, now_s, brake=self.out.brake)
+        else:
+            written = self.motor.send_safe(safe, now_s)
         self.out.torque_est_nm = self.motor.feedback.current_a * self._nm_per_a
         return written + self.motor.decoder.stats.bytes_in - before
 

@@ -28,7 +28,7 @@ __all__ = ["INIT_TASK", "RECORD_NAME", "STOP_TASK", "RunRecording", "check_heade
 
 RECORD_NAME = "record.bin"
 INIT_TASK = 254  # the section of the firmware's constructor
-STOP_TASK = 255  # the section of the stop path (zero current, then the brake)
+STOP_TASK = 255  # the section of the stop path (the safe state's frames)
 
 
 def config_dict(cfg: FirmwareConfig) -> dict:

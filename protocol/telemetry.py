@@ -64,6 +64,8 @@ class FaultReason(IntEnum):
     CONTROLLER_ERROR = 13
     MOTOR_ENCODER_DISAGREEMENT = 14
     OVER_TEMPERATURE = 15
+    IMU_FROZEN = 16
+    MOTOR_JAM = 17
 
 
 def _wire(fmt: str, default: Any = MISSING) -> Any:

@@ -154,7 +154,7 @@ def test_duty_mode_drives_forward() -> None:
     rig = Rig()
     rig.send(SetDuty(0.2).encode())
     erpm, _ = _erpm_now(rig, 0.1)
-    assert erpm > 1000 and rig.motor.mode is DriveMode.LOOP
+    assert erpm > 1000 and rig.motor.mode is DriveMode.DUTY
 
 
 def test_brake_slows_the_falling_foot() -> None:

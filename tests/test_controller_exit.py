@@ -13,11 +13,11 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_serial_run import STALL_FAULTS, _emulator, _stop, _summary, assert_stopped_safely
+from test_serial_run import SAFE_UART, STALL_FAULTS, _emulator, _stop, _summary, assert_stopped_safely
 from test_serial_stop import assert_outputs_complete, fail_encoder_read
 
 from host_tools.cli import main
-from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
+from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake, SetDuty
 
 HERE = Path(__file__).resolve().parent
 CONTROLLERS = HERE / "misbehaving_controllers.py"
@@ -27,17 +27,18 @@ WAYS_OUT = [("Exits", "SystemExit: 0"), ("Interrupts", "KeyboardInterrupt"),
 
 
 def _commands(to_motor: bytes) -> list[object]:
-    """The current and brake commands in what went to the motor, in order."""
-    return [f for f in Decoder("to-motor").feed(to_motor) if isinstance(f, (SetCurrent, SetCurrentBrake))]
+    """The current, brake and duty commands in what went to the motor, in order."""
+    return [f for f in Decoder("to-motor").feed(to_motor) if isinstance(f, (SetCurrent, SetCurrentBrake, SetDuty))]
 
 
 def assert_safe_at_the_end(to_motor: bytes) -> None:
-    """The commands end with a run of brakes that follows a zero-current command (the safe state's sequence)."""
+    """The commands end with a run of the shipped safe state's phase short (duty 0) that follows a zero-current
+    command (the failing period's)."""
     cmds = _commands(to_motor)
     k = len(cmds)
-    while k > 0 and isinstance(cmds[k - 1], SetCurrentBrake):
+    while k > 0 and cmds[k - 1] == SetDuty(0.0):
         k -= 1
-    assert k < len(cmds) and cmds[-1].current_a > 0, cmds[-3:]
+    assert k < len(cmds), cmds[-3:]
     assert k > 0 and cmds[k - 1] == SetCurrent(0.0), cmds[max(0, k - 3):k + 2]
 
 
@@ -97,7 +98,7 @@ def watchdog_on_the_wire(device: Path, link: str, mode: str = "servo") -> tuple[
     """On the motor's side: ms from the loop's last bytes (frame) to the first safe pair, and how many pairs came."""
     if link == "uart":
         to_motor = (device / "motor.rx.bin").read_bytes()
-        safe = SetCurrent(0.0).encode() + SetCurrentBrake(2.0).encode()
+        safe = b"".join(m.encode() for m in SAFE_UART)
         first = to_motor.find(safe)
         assert first > 0, "no safe frames"
         rows = _rows(device / "index.csv", "motor.rx.bin")
@@ -107,7 +108,8 @@ def watchdog_on_the_wire(device: Path, link: str, mode: str = "servo") -> tuple[
 
     got = received(device / "motor.can.log")
     keys = [(m.arbitration_id, bytes(m.data)) for m in got]
-    starts = [i for i in range(1, len(keys) - 1) if keys[i:i + 2] == safe_frames(mode)]
+    safe = safe_frames(mode)  # the host watchdog's pre-built stop path: the shipped safe state's frame
+    starts = [i for i in range(1, len(keys) - len(safe) + 1) if keys[i:i + len(safe)] == safe]
     assert starts, "no safe frames"
     return (got[starts[0]].timestamp - got[starts[0] - 1].timestamp) * 1e3, len(starts)
 

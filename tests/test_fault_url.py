@@ -12,7 +12,7 @@ import serial
 
 from hal.serial.protocol_fault import parse_fault_url, register_fault_handler
 from host_tools.cli import main
-from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake
+from protocol.vesc import Decoder, SetCurrent, SetCurrentBrake, SetDuty
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_serial_run import _emulator, _stop, _summary, assert_age_over_limit  # noqa: E402 - the serial tests' bench
@@ -170,17 +170,18 @@ def _run_with_lost_replies(tmp_path: Path, caplog, onset: str) -> tuple[int, dic
 
 def _assert_motor_timeout_made_safe(code: int, s: dict, capture: Path, first_s: float) -> None:
     """MOTOR_TIMEOUT latched while the replies were lost, its measured age over 20 ms; the capture of what the
-    firmware sent ends with zero current, then the brake, and nothing else."""
+    firmware sent ends with zero current, then the shipped safe state (graded: duty 0, the phase short), and
+    nothing else."""
     assert code == 1 and s["faults"] == ["MOTOR_TIMEOUT"], (s["faults"], s["fault"])
     assert first_s <= s["fault"]["at_s"] < first_s + 1.0, (first_s, s["fault"])  # tripped in the window
     assert s["fault"]["detail"].endswith("> 20.0 ms")
     assert_age_over_limit(s["fault"]["detail"])
     frames = Decoder("to-motor").feed((capture / "motor.tx.bin").read_bytes())
-    commands = [f for f in frames if isinstance(f, (SetCurrent, SetCurrentBrake))]
+    commands = [f for f in frames if isinstance(f, (SetCurrent, SetCurrentBrake, SetDuty))]
     first_zero = max((i for i, f in enumerate(commands) if isinstance(f, SetCurrent) and f.current_a != 0.0),
                      default=-1) + 1  # under load the run may reach the fault before it commanded any current
-    assert commands[first_zero] == SetCurrent(0.0)
-    assert isinstance(commands[-1], SetCurrentBrake) and commands[-1].current_a > 0
+    assert commands[-1] == SetDuty(0.0), commands[-3:]
+    assert all(f in (SetCurrent(0.0), SetDuty(0.0)) for f in commands[first_zero:]), commands[first_zero:][:5]
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="ptys")

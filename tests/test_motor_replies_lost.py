@@ -14,7 +14,7 @@ from protocol.vesc import Decoder, GetValues, GetValuesSelective, Values, Values
 
 PERIOD_S = 0.001
 FLOAT_NOISE_S = 1e-9  # times are k * 1 ms in floats, as the firmware's are cycles / f_cpu
-LIMITS = SafetyLimits()  # motor_timeout_s 20 ms, startup_grace_s 0.5 s
+LIMITS = SafetyLimits(safe_state="brake")  # motor_timeout_s 20 ms, startup_grace_s 0.5 s; zero current, then brake
 
 
 class ScriptedMotor(Uart):

@@ -14,7 +14,7 @@ def running(now=1.0, **kw):
 
 
 def started() -> Supervisor:
-    s = Supervisor()
+    s = Supervisor(SafetyLimits(safe_state="brake"))  # the brake's zero-current-then-brake sequence
     assert s.check(running(0.9)) is SupervisorState.RUN
     return s
 
@@ -33,7 +33,7 @@ def test_init_until_both_sensors_have_spoken():
         (dict(motor_fault_code=6), FaultReason.MOTOR_FAULT),
         (dict(deadline_miss_streak=3), FaultReason.DEADLINE_MISSES),
         (dict(last_motor_reply_s=1.0 - 0.0201), FaultReason.MOTOR_TIMEOUT),
-        (dict(last_imu_frame_s=1.0 - 0.0501), FaultReason.IMU_TIMEOUT),
+        (dict(last_imu_frame_s=1.0 - 0.0401), FaultReason.IMU_TIMEOUT),
         (dict(angle_rad=math.radians(40)), FaultReason.ANGLE_LIMIT),
         (dict(current_meas_a=25.0), FaultReason.CURRENT_LIMIT),
         (dict(disagreement_rad=math.radians(10)), FaultReason.SENSOR_DISAGREEMENT),
@@ -49,7 +49,7 @@ def test_each_rule_trips_and_latches(kw, reason):
 
 def test_timeouts_just_inside_do_not_trip():
     s = started()
-    assert s.check(running(last_motor_reply_s=1.0 - 0.0199, last_imu_frame_s=1.0 - 0.0499)) \
+    assert s.check(running(last_motor_reply_s=1.0 - 0.0199, last_imu_frame_s=1.0 - 0.0399)) \
         is SupervisorState.RUN
 
 

@@ -13,7 +13,8 @@ from firmware.safety import FaultReason, SafetyInputs, SafetyLimits, Supervisor,
 NOW = 2.0
 LIMITS = SafetyLimits(angle_min_rad=-0.5, angle_max_rad=0.625, current_limit_a=20.0, motor_timeout_s=2.0 ** -6,
                       command_timeout_s=2.0 ** -5, imu_timeout_s=2.0 ** -4, disagreement_rad=0.125,
-                      deadline_miss_streak=3, startup_grace_s=0.5, brake_delay_s=2.0 ** -7, brake_current_a=2.0)
+                      deadline_miss_streak=3, startup_grace_s=0.5, brake_delay_s=2.0 ** -7, brake_current_a=2.0,
+                      safe_state="brake")
 
 
 def below(x: float) -> float:
@@ -187,6 +188,6 @@ def test_the_brake_comes_exactly_at_the_brake_delay():
 
 
 def test_a_zero_brake_delay_brakes_at_once():
-    s = Supervisor(SafetyLimits(brake_delay_s=0.0))
+    s = Supervisor(SafetyLimits(brake_delay_s=0.0, safe_state="brake"))
     s.trip(FaultReason.ESTOP, 1.0)
     assert s.safe_command(1.0).brake is True

@@ -66,9 +66,9 @@ def test_enum_codes_are_fixed():
     assert [m.name for m in FaultReason] == [
         "NONE", "ANGLE_LIMIT", "CURRENT_LIMIT", "MOTOR_TIMEOUT", "IMU_TIMEOUT", "SENSOR_DISAGREEMENT",
         "MOTOR_FAULT", "DEADLINE_MISSES", "ESTOP", "WATCHDOG", "TASK_OVERRUN", "LINK_LOST", "COMMAND_STALE",
-        "CONTROLLER_ERROR", "MOTOR_ENCODER_DISAGREEMENT", "OVER_TEMPERATURE",
+        "CONTROLLER_ERROR", "MOTOR_ENCODER_DISAGREEMENT", "OVER_TEMPERATURE", "IMU_FROZEN", "MOTOR_JAM",
     ]
-    assert [m.value for m in FaultReason] == list(range(16))
+    assert [m.value for m in FaultReason] == list(range(18))
 
 
 def test_crc16_is_ccitt_false():

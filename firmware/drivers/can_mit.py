@@ -11,8 +11,10 @@ mode" (PROTOCOLS.md G). Replies come on the master ID (0, as Ben Katz's mini-che
 series follows) with the driver id in byte 0; the motor answers every frame, the special ones too, in
 order: ``requests`` and ``replies`` count the commands and their answers, ``max_age_s`` is the
 longest command-to-reply time as the driver took them, a command sent while the previous one is
-unanswered counts a ``missing_replies``. The stop path sends
-zero torque then "exit motor mode".
+unanswered counts a ``missing_replies``. The safe behaviours MIT mode carries are release (zero torque) and
+damping (kp = 0, kd > 0; the profile's "brake" is the damper at ``brake_kd``). The stop path sends zero torque
+then "exit motor mode" (torque off), or for damping the damper alone (it replaces any torque; a zero-torque frame
+of the same identifier could leave a mailbox after it), which it leaves on.
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from typing import ClassVar
 
 from firmware.config import FirmwareConfig
 from firmware.drivers.can_link import CanLink
-from firmware.drivers.motor_link import SafeStop
+from firmware.drivers.motor_link import SafeStop, stop_command
+from firmware.safe_state import SafeCommand
 from hal.can import CanFrame, CanPort
 from protocol import can_mit
 
@@ -38,6 +41,7 @@ class CanMitDriver(CanLink):
     """Talks to an AK-series motor (the AK60-6 by default) in MIT mode over ``port``; callers pass the time."""
 
     LINK: ClassVar[str] = "can-mit"
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "damping")
 
     def __init__(self, port: CanPort, driver_id: int = 1, *, nm_per_a: float = AK60_6_NM_PER_A,
                  brake_kd: float = 1.0, limits: can_mit.MitLimits = can_mit.AK60_6,
@@ -101,6 +105,22 @@ class CanMitDriver(CanLink):
 
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Send the torque (or damping) command, after "enter motor mode" the first time; return data bytes."""
+        cmd = can_mit.MitCommand(kd=self.brake_kd) if brake else can_mit.MitCommand(t_ff=current_a * self.nm_per_a)
+        return self._command(cmd, now_s)
+
+    def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
+        """Send the safe state's MIT command: zero torque (release), or kp = 0 and the damper's kd; return the bytes."""
+        return self._command(self._safe_command(command), now_s)
+
+    def _safe_command(self, command: SafeCommand) -> can_mit.MitCommand:
+        if command.behaviour == "damping":
+            return can_mit.MitCommand(kd=command.kd)
+        if command.behaviour == "brake":
+            return can_mit.MitCommand(kd=self.brake_kd)
+        return can_mit.MitCommand()
+
+    def _command(self, cmd: can_mit.MitCommand, now_s: float) -> int:
+        """Send one MIT command, after "enter motor mode" the first time; return data bytes."""
         written = 0
         outstanding = self._outstanding
         if outstanding:  # unanswered by now: their replies are lost or late (a late one counts as stale)
@@ -112,7 +132,6 @@ class CanMitDriver(CanLink):
             self.entered = True
             self._outstanding.append((now_s, False))  # the motor answers the special frame too
             written += 8
-        cmd = can_mit.MitCommand(kd=self.brake_kd) if brake else can_mit.MitCommand(t_ff=current_a * self.nm_per_a)
         if not self._put_data(can_mit.encode_command(cmd, self.limits), now_s):
             return written
         self.stats.requests += 1
@@ -120,10 +139,15 @@ class CanMitDriver(CanLink):
         self.last_command_s = now_s
         return written + 8
 
-    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero torque, then exit motor mode (torque off); wait until both have left."""
-        frames = (CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits)),
-                  CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
+    def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper alone (left on: a
+        motor not in motor mode ignores it and stays released); wait until they have left."""
+        cmd = stop_command(command)
+        if cmd.behaviour == "damping":
+            damper = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(kd=cmd.kd), self.limits))
+            return self._stop((damper,), (f"MIT command (damping, kp = 0, kd = {cmd.kd})",), now_s, timeout_s)
+        zero = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits))
+        frames = (zero, CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
         stop = self._stop(frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"), now_s, timeout_s)
         self.entered = False
         return stop

@@ -7,7 +7,11 @@ waiting in the FIFOs updates ``feedback``) and ``send`` (one command frame into 
 commands sent; ``max_age_s`` is the longest time between two status frames as the driver took them
 (the oldest feedback the firmware held); ``stale_replies`` counts status frames from a motor in fault.
 A silent bus leaves ``feedback.received_s`` behind, which the supervisor bounds (MOTOR_TIMEOUT); a
-failing port latches ``link_lost``. The stop path sends zero current then the brake.
+failing port latches ``link_lost``. The safe behaviours are servo mode's: release (SET_CURRENT 0), the brake
+(SET_CURRENT_BRAKE) and the phase short (SET_DUTY 0); the stop path sends the safe command (the brake after a
+zero current, as on the UART). The bxCAN sends its mailboxes by identifier, lowest first, whatever order they were
+filled in: a zero current (0x1xx) queued beside the short (0x0xx) would go out after it and release the motor, so
+the short goes alone; the brake's pair (0x1xx then 0x2xx) keeps its order.
 """
 
 from __future__ import annotations
@@ -16,7 +20,8 @@ import math
 from typing import ClassVar
 
 from firmware.drivers.can_link import CanLink
-from firmware.drivers.motor_link import SafeStop
+from firmware.drivers.motor_link import SafeStop, stop_command
+from firmware.safe_state import SafeCommand
 from hal.can import CanFrame, CanPort
 from protocol import can_servo
 
@@ -29,6 +34,7 @@ class CanServoDriver(CanLink):
     """Talks to the AK60-6 in servo mode over ``port`` (driver id ``driver_id``); callers pass the time."""
 
     LINK: ClassVar[str] = "can-servo"
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "short")
 
     def __init__(self, port: CanPort, driver_id: int = 1) -> None:
         """Prepare the IDs; nothing is sent until ``send``."""
@@ -79,13 +85,37 @@ class CanServoDriver(CanLink):
         self.last_command_s = now_s
         return len(data)
 
-    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero current, then the brake; wait until both have left the mailboxes."""
-        frames = (CanFrame(self._current_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT, 0.0), True),
-                  CanFrame(self._brake_id, can_servo.encode_command(can_servo.PacketId.SET_CURRENT_BRAKE,
-                                                                    abs(brake_current_a)), True))
-        names = ("SET_CURRENT(0.0 A)", f"SET_CURRENT_BRAKE({abs(brake_current_a)} A)")
-        return self._stop(frames, names, now_s, timeout_s)
+    def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
+        """Send the safe state's command (SET_CURRENT 0, SET_CURRENT_BRAKE or SET_DUTY 0); return the data bytes."""
+        frame, _ = self._safe_frame(command)
+        self.stats.requests += 1
+        if not self._put(frame, now_s):
+            return 0
+        self.last_command_s = now_s
+        return len(frame.data)
+
+    def _safe_frame(self, command: SafeCommand) -> tuple[CanFrame, str]:
+        """The servo-mode frame of a safe behaviour and its name."""
+        P = can_servo.PacketId
+        behaviour = command.behaviour
+        if behaviour == "brake":
+            packet, value = P.SET_CURRENT_BRAKE, abs(command.current_a)
+            name = f"SET_CURRENT_BRAKE({value} A)"
+        elif behaviour == "short":
+            packet, value, name = P.SET_DUTY, 0.0, "SET_DUTY(0.0)"
+        else:
+            packet, value, name = P.SET_CURRENT, 0.0, "SET_CURRENT(0.0 A)"
+        frame = CanFrame(can_servo.command_id(packet, self.driver_id), can_servo.encode_command(packet, value), True)
+        return frame, name
+
+    def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: the safe command (a number: the brake current), the brake after a zero current; wait until
+        they have left the mailboxes."""
+        cmd = stop_command(command)
+        pairs = (self._safe_frame(cmd),)
+        if cmd.behaviour == "brake":
+            pairs = (self._safe_frame(SafeCommand("release")), *pairs)
+        return self._stop(tuple(f for f, _ in pairs), tuple(n for _, n in pairs), now_s, timeout_s)
 
     def published(self) -> dict[str, object]:
         """The port's overruns and refusals, frames not from this motor."""

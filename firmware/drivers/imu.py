@@ -11,7 +11,12 @@ __all__ = ["ImuDriver"]
 
 
 class ImuDriver(LinkState):
-    """Reads the IMU UART; `pitch_rad` is the newest frame's pitch, `last_frame_s` when it came."""
+    """Reads the IMU UART; `pitch_rad` is the newest frame's pitch, `last_frame_s` when it came.
+
+    `last_poll_s` is when the port was last read (frames or not): an age measured to it is the IMU's silence,
+    not the host's stall of this task. `changed_s` is when a frame last carried a measurement different from
+    the frame before it (its index aside): a sensor stuck at one value keeps sending bit-identical content.
+    """
 
     def __init__(self, uart: Uart, mounting_offset_rad: float = 0.0) -> None:
         """Bind the UART; `mounting_offset_rad` is subtracted from the sensor's pitch."""
@@ -20,6 +25,8 @@ class ImuDriver(LinkState):
         self.mounting_offset_rad = mounting_offset_rad
         self.latest: RvcFrame | None = None
         self.last_frame_s: float | None = None
+        self.last_poll_s: float | None = None
+        self.changed_s: float | None = None
         self.frames = 0
 
     def relink(self, uart: Uart) -> None:
@@ -35,6 +42,7 @@ class ImuDriver(LinkState):
 
     def poll(self, now_s: float) -> int:
         """Decode what has arrived; return the number of new frames (0 if none)."""
+        self.last_poll_s = now_s
         try:
             data = self.uart.read()
         except HalError as exc:  # port gone: latch it with the cause; the supervisor trips LINK_LOST
@@ -44,7 +52,17 @@ class ImuDriver(LinkState):
             return 0
         frames = self.decoder.feed(data)
         if frames:
+            before = self.latest
+            for f in frames:
+                if before is None or _content(f) != _content(before):
+                    self.changed_s = now_s
+                before = f
             self.latest = frames[-1]
             self.last_frame_s = now_s
             self.frames += len(frames)
         return len(frames)
+
+
+def _content(f: RvcFrame) -> tuple[float, float, float, float, float, float]:
+    """What a frame measured (angles and accelerations), without its index and flags."""
+    return (f.yaw_rad, f.pitch_rad, f.roll_rad, f.accel_x_mps2, f.accel_y_mps2, f.accel_z_mps2)

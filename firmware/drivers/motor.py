@@ -14,25 +14,30 @@ one period (1.8 ms at 921600 baud) is given up (`Decoder.skip_pending`, counted 
 
 from __future__ import annotations
 
-from typing import Final
+from typing import ClassVar, Final
 
 from firmware.config import FirmwareConfig
-from firmware.drivers.motor_link import MotorFeedback, MotorLink, MotorLinkStats, SafeStop
+from firmware.drivers.motor_link import MotorFeedback, MotorLink, MotorLinkStats, SafeStop, stop_command
+from firmware.safe_state import SafeCommand
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
 from protocol.vesc import (
     Decoder,
     GetValues,
     GetValuesSelective,
+    Message,
     SetCurrent,
     SetCurrentBrake,
+    SetDuty,
+    SetHandbrake,
     Values,
     ValuesSelective,
 )
 from protocol.vesc_codec import MessageCodec
 from protocol.vesc_values import selective_layout
 
-__all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "SafeStop", "selective_reply_bytes"]
+__all__ = ["FEEDBACK_MASK", "MotorDriver", "MotorFeedback", "MotorLinkStats", "SafeStop", "safe_message",
+           "selective_reply_bytes"]
 
 # The longest reply the driver asks for: the 73-byte GET_VALUES payload, 78 bytes on the wire.
 LONGEST_REPLY_BYTES: Final = len(Values().encode())
@@ -50,6 +55,8 @@ _COMMAND_BYTES: Final = len(SetCurrent(0.0).encode())  # SET_CURRENT and SET_CUR
 
 class MotorDriver(MotorLink):
     """Talks to the AK60-6 over `uart`; owns no timing: callers pass the time in seconds."""
+
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "short", "handbrake")
 
     def __init__(self, uart: Uart, *, full_every: int = 100, feedback_mask: int = FEEDBACK_MASK) -> None:
         """Prepare the codec and the constant request frames."""
@@ -140,7 +147,15 @@ class MotorDriver(MotorLink):
 
     def send(self, current_a: float, now_s: float, *, brake: bool = False, request: bool = True) -> int:
         """Write the current (or brake) command, then a feedback request; return bytes written."""
-        frame = (self._brake_codec if brake else self._current_codec).frame((current_a,))
+        return self._write((self._brake_codec if brake else self._current_codec).frame((current_a,)), now_s, request)
+
+    def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
+        """Write the safe state's command (SET_CURRENT 0, SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE), then a
+        feedback request (the policy reads the drive's fault and load in SAFE too); return bytes written."""
+        return self._write(safe_message(command).encode(), now_s, request)
+
+    def _write(self, frame: bytes, now_s: float, request: bool) -> int:
+        """Write one command frame and, if asked, the feedback request after it; return bytes written."""
         if request and self._skip_request:  # a full reply is still on the wire: let it finish
             request, self._skip_request = False, False
         if request:
@@ -163,14 +178,20 @@ class MotorDriver(MotorLink):
             self.last_command_s = now_s
         return written
 
-    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero current, then the brake, in one write; wait until both have left the UART.
+    def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: zero current, then the safe command (a number: the brake current), in one write; wait
+        until both have left the UART.
 
         No feedback request follows: nothing will read a reply. A failing port is latched as lost.
         """
-        frames = (self._current_codec.frame((0.0,)), self._brake_codec.frame((brake_current_a,)))
-        data = frames[0] + frames[1]
-        stop = SafeStop(data, now_s, (repr(SetCurrent(0.0)), repr(SetCurrentBrake(brake_current_a))))
+        cmd = stop_command(command)
+        names = [repr(SetCurrent(0.0))]
+        data = self._current_codec.frame((0.0,))
+        if cmd.behaviour != "release":
+            message = safe_message(cmd)
+            data += message.encode()
+            names.append(repr(message))
+        stop = SafeStop(data, now_s, tuple(names))
         try:
             stop.written = self.uart.write(data)
             stop.drained = self.uart.flush(timeout_s)
@@ -187,3 +208,15 @@ class MotorDriver(MotorLink):
     def crc_errors(self) -> int:
         """Frames the codec rejected for a bad CRC."""
         return self.decoder.stats.crc_errors
+
+
+def safe_message(command: SafeCommand) -> Message:
+    """The VESC command of a safe behaviour: SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE or SET_CURRENT 0 (release)."""
+    behaviour = command.behaviour
+    if behaviour == "brake":
+        return SetCurrentBrake(command.current_a)
+    if behaviour == "short":
+        return SetDuty(0.0)
+    if behaviour == "handbrake":
+        return SetHandbrake(command.current_a)
+    return SetCurrent(0.0)

@@ -1,7 +1,8 @@
 """What every motor driver publishes, whatever its link (UART, CAN servo mode, CAN MIT mode).
 
 The firmware's tasks and the reports read a motor driver through :class:`MotorLink` only: ``poll``
-(take the feedback that arrived), ``send`` (the current or brake command), ``send_stop`` (the stop
+(take the feedback that arrived), ``send`` (the current or brake command), ``send_safe`` (one drive command
+of the safe state, firmware/safe_state.py, among the link's ``SAFE_BEHAVIOURS``), ``send_stop`` (the stop
 path), ``feedback`` (:class:`MotorFeedback`), ``stats`` (:class:`MotorLinkStats`), ``last_command_s``,
 the latched ``link_lost`` of :class:`~firmware.drivers.link.LinkState`, ``decoder.stats.bytes_in``
 (bytes taken, for the motor task's cost model), ``crc_errors`` and ``published()`` (link-specific
@@ -12,13 +13,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from mypy_extensions import mypyc_attr
 
 from firmware.drivers.link import LinkState
+from firmware.safe_state import SafeCommand
 
-__all__ = ["MotorFeedback", "MotorLink", "MotorLinkStats", "RxCounter", "RxStats", "SafeStop"]
+__all__ = ["MotorFeedback", "MotorLink", "MotorLinkStats", "RxCounter", "RxStats", "SafeStop", "stop_command"]
 
 
 @dataclass
@@ -91,6 +93,11 @@ class RxCounter:
         self.stats = RxStats()
 
 
+def stop_command(command: SafeCommand | float) -> SafeCommand:
+    """The stop path's command: a SafeCommand as given, a number as the brake current (zero current, then the brake)."""
+    return command if isinstance(command, SafeCommand) else SafeCommand("brake", abs(float(command)))
+
+
 @mypyc_attr(allow_interpreted_subclasses=True)
 class MotorLink(LinkState):
     """The motor driver interface (see the module docstring); subclasses set the attributes in __init__."""
@@ -99,6 +106,8 @@ class MotorLink(LinkState):
     stats: MotorLinkStats
     last_command_s: float | None
     decoder: Any
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release",)
+    """The safe behaviours the link's protocol carries (docs/devices.md, "Safe behaviours")."""
 
     def poll(self, now_s: float) -> int:
         """Take what arrived; return the number of feedback messages taken."""
@@ -108,8 +117,13 @@ class MotorLink(LinkState):
         """Send the current (or brake) command; return the bytes written."""
         raise NotImplementedError
 
-    def send_stop(self, now_s: float, brake_current_a: float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: the link's safe command, on the wire before returning."""
+    def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
+        """Send one drive command of the safe state (one of ``SAFE_BEHAVIOURS``); return the bytes written."""
+        raise NotImplementedError
+
+    def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
+        """The stop path: zero current, then the safe command (a number: the brake current), on the wire before
+        returning."""
         raise NotImplementedError
 
     @property

@@ -5,11 +5,11 @@ host the whole control loop is one Python thread: a controller stuck in ``update
 blocking call) stalls the supervisor and the stop path with it, and nothing stops the motor before its
 own 1 s command timeout. :class:`HostWatchdog` is a second thread. The firmware's watchdog task kicks it
 (the board's watchdog handle, once per kick period when the control task has run); when no kick has come
-for ``timeout_s`` it writes the stop frames (zero current, then the brake), pre-built at start-up by the
-motor driver's own stop path, on a handle of its own (a duplicate of the UART's file descriptor, or a
+for ``timeout_s`` it writes the stop frames (the profile's safe state, firmware/safe_state.py), pre-built at
+start-up by the motor driver's own stop path, on a handle of its own (a duplicate of the UART's file descriptor, or a
 second python-can bus on the same channel), asks the loop to stop at its next scheduling point, and writes
-them again every ``timeout_s`` while the loop stays silent (the motor's own timeout would release the
-brake). Limits: a thread needs the interpreter's lock, which a pure-Python loop hands over every switch
+them again every ``timeout_s`` while the loop stays silent (the motor's own timeout would end the safe
+behaviour). Limits: a thread needs the interpreter's lock, which a pure-Python loop hands over every switch
 interval (5 ms) but C code that holds it does not; ports the loop serves in-process (``sim://``) stall
 with the loop, so there the watchdog is not armed. docs/serial_mode.md, "The host watchdog".
 """
@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 from firmware.config import FirmwareConfig
 from firmware.drivers.motor_links import make_motor_driver
+from firmware.safe_state import SafePolicy
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
 from hal.interfaces import Board, Uart
@@ -74,7 +75,9 @@ def stop_frames(board: Board, config: FirmwareConfig) -> tuple[bytes, list[CanFr
     rec = Board(motor_uart=uart, imu_uart=board.imu_uart, telemetry_uart=board.telemetry_uart,
                 encoder=board.encoder, estop=board.estop, led=board.led, watchdog=board.watchdog,
                 now_cycles=board.now_cycles, f_cpu_hz=board.f_cpu_hz, can=can)
-    make_motor_driver(rec, config).send_stop(0.0, config.safety.brake_current_a, WRITE_TIMEOUT_S)
+    driver = make_motor_driver(rec, config)
+    stop = SafePolicy.of(config.safety, driver.SAFE_BEHAVIOURS, config.motor_link).stop_command()
+    driver.send_stop(0.0, stop, WRITE_TIMEOUT_S)
     return bytes(uart.data), list(can.frames) if can is not None else []
 
 
@@ -211,7 +214,7 @@ class HostWatchdog:
             r.silent_ms = round((self.clock() - last) * 1e3, 3)
             r.task = self.running()
             self.on_fire()
-            log.error("host watchdog: no kick for %.0f ms (task %s running): sent zero current and the brake",
+            log.error("host watchdog: no kick for %.0f ms (task %s running): sent the safe state's frames",
                       r.silent_ms, r.task)
 
     def halt(self) -> WatchdogRecord:

@@ -21,7 +21,7 @@ __all__ = ["RECONNECT_EVERY_S", "STOP_AFTER_LOSS_S", "LinkEvent", "LinkPorts", "
 
 log = logging.getLogger(__name__)
 
-STOP_AFTER_LOSS_S = 0.030  # after a lost link: zero current, the brake (10 ms later), then stop
+STOP_AFTER_LOSS_S = 0.030  # after a lost link: the safe state on the ports still open, then stop
 RECONNECT_EVERY_S = 0.2
 
 

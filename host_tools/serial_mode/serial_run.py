@@ -9,8 +9,8 @@ docs/devices.md) or the in-process plant (``sim``). A lowest-priority probe samp
 lost link (stop after the safe command went out, or reopen with ``reconnect``) and is not firmware.
 
 Every way out of the loop ends in the firmware's stop path before a port closes: the end of the duration,
-SIGINT / SIGTERM / SIGHUP (`StopSignals`), a lost port, an exception in a task. The stop path writes zero
-current then the brake to the motor and waits until the port has sent them (`Firmware.stop`); the result
+SIGINT / SIGTERM / SIGHUP (`StopSignals`), a lost port, an exception in a task. The stop path writes the
+profile's safe state to the motor and waits until the port has sent them (`Firmware.stop`); the result
 records the reason, the frames and how long after the signal they left (docs/serial_mode.md).
 On the wall clock a late job is the host's stall: a deadline-miss streak and a watchdog expiry are
 counted as warnings; the supervisor latches on the ages of the last command and the last feedback.

@@ -9,8 +9,11 @@ are taken from the onset to the end of the faulted run, against the fault-free r
 * ``excursion_deg``, ``velocity_dps``, ``torque_nm``: the largest unintended ankle angle, velocity and output
   torque (faulted minus fault-free), from the onset until the safe command reached the motor (to the run's end
   when none did), from the plant's truth (emulation only);
-* ``settle_excursion_deg``: the same excursion over the settle time after the safe command (the safe state's own
-  motion: zero current, then the brake);
+* ``settle_excursion_deg``: the same excursion over the settle time after the safe command;
+* ``safe_excursion_deg``, ``safe_impact_dps``: the safe state's own motion, from where the foot was when the safe
+  command reached the motor to the run's end, and its speed entering a mechanical stop in that time;
+* ``torque_share``: ``torque_nm`` as a share of the design's rated output torque (the motor's rated current x
+  Kt x the transmission's ratio and efficiency of the plant the point ran), so one criterion fits every design;
 * ``detected``, ``reason``, ``detect_ms``: the supervisor's latched reason and its delay after the onset;
 * ``safe_ms``: when the first safe command (zero current or the brake) reached the motor, after the onset;
 * ``stop_hit``, ``impact_dps``: whether the foot went past a mechanical stop, and its speed on entering it;
@@ -20,10 +23,12 @@ are taken from the onset to the end of the faulted run, against the fault-free r
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import math
 import time
+import tomllib
 from typing import Any
 
 import numpy as np
@@ -34,14 +39,17 @@ __all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "fault_free_arrays"
            "point_run_config", "run_fault_point"]
 
 GAIT_START_MAX_S = 1.5  # the fault-free run covers a gait start up to this late (sensors up, start-up ramp)
-FIGURES = ("onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "detected", "reason", "detect_ms",
-           "safe_ms", "excursion_deg", "velocity_dps", "torque_nm", "settle_excursion_deg", "stop_hit", "impact_dps",
-           "cmd_peak_a", "cmd_last_a", "sim_time_s", "wall_time_s")
+IDENTITY = ("design", "safe_state")  # the point's plant and safe state, named in every row (errors too)
+FIGURES = (*IDENTITY, "onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "detected", "reason",
+           "detect_ms", "safe_ms", "excursion_deg", "velocity_dps", "torque_nm", "torque_share", "settle_excursion_deg",
+           "safe_excursion_deg", "safe_impact_dps", "stop_hit", "impact_dps", "cmd_peak_a", "cmd_last_a",
+           "sim_time_s", "wall_time_s")
 
 
 def _base_row(p: FaultPoint) -> dict[str, Any]:
     return {"point": p.index, "fault": p.fault, "params": ", ".join(f"{k}={v}" for k, v in p.params),
-            "scenario": p.scenario, "body_mass_kg": p.body_mass_kg, "controller": p.controller, "link": p.link,
+            "scenario": p.scenario, "body_mass_kg": p.body_mass_kg, "design": _design_name(p),
+            "safe_state": _firmware(p).safety.safe_state, "controller": p.controller, "link": p.link,
             "onset_phase": p.onset_phase, "duration_s": p.duration_s, "seed": p.seed}
 
 
@@ -49,7 +57,7 @@ def fault_error_row(p: FaultPoint, status: str, error: str, wall_time_s: float =
     """The row of a point without figures (status error, timeout or not_fired)."""
     row = _base_row(p)
     row.update({"status": status, "error": error})
-    row.update({f: math.nan for f in FIGURES})
+    row.update({f: math.nan for f in FIGURES if f not in IDENTITY})
     row.update({"fired": False, "fired_count": 0, "fired_what": "", "detected": False, "reason": "",
                 "stop_hit": False, "wall_time_s": wall_time_s})
     return row
@@ -64,7 +72,33 @@ def _firmware(p: FaultPoint) -> Any:
         changes["motor_link"] = p.link
     if p.controller != fw.controller:
         changes.update(controller=p.controller, controller_params={})
+    if p.safe_state and p.safe_state != fw.safety.safe_state:
+        changes["safety"] = dataclasses.replace(fw.safety, safe_state=p.safe_state)
     return fw.with_changes(**changes) if changes else fw
+
+
+@functools.lru_cache(maxsize=16)
+def _design_of(profile_text: str, profile_name: str) -> Any:
+    """The profile's [design] (its plant: motor, belt, spring), or None: the campaign runs the plant it names."""
+    from hal.virtual.plant.design import design_from_mapping
+
+    doc = tomllib.loads(profile_text)
+    return design_from_mapping(doc["design"], profile_name) if "design" in doc else None
+
+
+def _design_name(p: FaultPoint) -> str:
+    d = _design_of(p.profile_text, p.profile_name)
+    return "ak60_6" if d is None else f"{d.motor} {d.belt_driven_teeth}/{d.belt_driver_teeth}"
+
+
+def plant_params_of(p: FaultPoint) -> Any:
+    """The nominal plant parameters the point's runs use (the design's when its profile has one)."""
+    from hal.virtual.plant import load_plant_params
+    from hal.virtual.plant.design import plant_params_for
+
+    design = _design_of(p.profile_text, p.profile_name)
+    base = load_plant_params()
+    return base if design is None else plant_params_for(design, base)
 
 
 def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, progress_name: str = "") -> Any:
@@ -75,7 +109,7 @@ def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, 
     fw = _firmware(p)
     return RunConfig(strides=1, seed=p.seed, firmware=fw, trace_capacity=0, scenario=p.scenario,
                      body_mass_kg=p.body_mass_kg, controller=controller_for(fw, p.scenario, p.body_mass_kg),
-                     faults=faults, duration_s=duration_s)
+                     faults=faults, duration_s=duration_s, design=_design_of(p.profile_text, p.profile_name))
 
 
 @functools.lru_cache(maxsize=16)  # the points of one scenario, controller and link share their fault-free run
@@ -93,7 +127,7 @@ def _fault_free(p: FaultPoint, duration_s: float) -> tuple[float, float, dict[st
 def _key(p: FaultPoint) -> FaultPoint:
     """The point as the fault-free run's cache key: only what the fault-free run depends on."""
     return FaultPoint(0, "", (), p.scenario, p.body_mass_kg, p.controller, p.link, 0.0, 0.0, p.seed, 0.0, 0.0,
-                      p.profile_name, p.profile_text)
+                      p.profile_name, p.profile_text, p.safe_state)
 
 
 def onset_of(p: FaultPoint) -> tuple[float, float]:
@@ -108,8 +142,9 @@ def _stride_of(p: FaultPoint) -> float:
 
 
 def figures(onset_s: float, faulted: dict[str, np.ndarray], base: dict[str, np.ndarray], trip_s: float | None,
-            reason: str, safe_s: float | None) -> dict[str, Any]:
-    """A point's figures from the two runs' observer arrays (see the module docstring)."""
+            reason: str, safe_s: float | None, params: Any = None, rated_output_nm: float = math.nan) -> dict[str, Any]:
+    """A point's figures from the two runs' observer arrays (see the module docstring); params: the plant's (its
+    stops; default the shipped AK60-6 plant), rated_output_nm: the design's rated output torque."""
     from hal.virtual.plant import load_plant_params
 
     n = min(len(faulted["t_s"]), len(base["t_s"]))
@@ -120,12 +155,14 @@ def figures(onset_s: float, faulted: dict[str, np.ndarray], base: dict[str, np.n
     d_angle = np.abs(faulted["angle_rad"][:n] - base["angle_rad"][:n])
     d_vel = np.abs(faulted["velocity_rad_s"][:n] - base["velocity_rad_s"][:n])
     d_tq = np.abs(faulted["torque_nm"][:n] - base["torque_nm"][:n])
-    params = load_plant_params()
+    params = load_plant_params() if params is None else params
     w = t >= onset_s
     angle, vel = faulted["angle_rad"][:n][w], faulted["velocity_rad_s"][:n][w]
-    beyond = (angle > params.stop_max_rad) | (angle < params.stop_min_rad)
-    entries = np.flatnonzero(beyond & ~np.concatenate([[False], beyond[:-1]]))
-    impact = float(np.max(np.abs(vel[entries]))) if len(entries) else 0.0
+    impact, hit = _impact(angle, vel, params)
+    after = t > until  # the safe state's own motion: from where the foot was when it took over
+    own = faulted["angle_rad"][:n][after]
+    safe_excursion = float(np.max(np.abs(own - own[0]))) if len(own) else math.nan
+    safe_impact = _impact(own, faulted["velocity_rad_s"][:n][after], params)[0] if len(own) else math.nan
     ct, ci, safe = faulted["cmd_t_s"], faulted["cmd_a"], faulted["cmd_safe"]
     between = (ct >= onset_s) & (ct < until) & ~safe
 
@@ -136,11 +173,25 @@ def figures(onset_s: float, faulted: dict[str, np.ndarray], base: dict[str, np.n
         "detect_ms": (trip_s - onset_s) * 1e3 if trip_s is not None else math.nan,
         "safe_ms": (safe_s - onset_s) * 1e3 if safe_s is not None else math.nan,
         "excursion_deg": math.degrees(peak(d_angle, pre)), "velocity_dps": math.degrees(peak(d_vel, pre)),
-        "torque_nm": peak(d_tq, pre), "settle_excursion_deg": math.degrees(peak(d_angle, post)),
-        "stop_hit": bool(len(entries)), "impact_dps": math.degrees(impact),
+        "torque_nm": peak(d_tq, pre), "torque_share": peak(d_tq, pre) / rated_output_nm,
+        "settle_excursion_deg": math.degrees(peak(d_angle, post)),
+        "safe_excursion_deg": math.degrees(safe_excursion), "safe_impact_dps": math.degrees(safe_impact),
+        "stop_hit": hit, "impact_dps": math.degrees(impact),
         "cmd_peak_a": float(np.max(np.abs(ci[between]))) if between.any() else 0.0,
         "cmd_last_a": float(ci[between][-1]) if between.any() else math.nan,
     }
+
+
+def _impact(angle: np.ndarray, vel: np.ndarray, params: Any) -> tuple[float, bool]:
+    """(the largest speed entering a mechanical stop, whether any stop was entered) along angle and vel."""
+    beyond = (angle > params.stop_max_rad) | (angle < params.stop_min_rad)
+    entries = np.flatnonzero(beyond & ~np.concatenate([[False], beyond[:-1]]))
+    return (float(np.max(np.abs(vel[entries]))) if len(entries) else 0.0), bool(len(entries))
+
+
+def rated_output_nm(p: FaultPoint) -> float:
+    """The design's rated output torque at the ankle: the motor's rated current x the plant's torque per ampere."""
+    return float(_firmware(p).motor.rated_current_a * plant_params_of(p).output_torque_per_amp_nm)
 
 
 def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, float]:
@@ -192,6 +243,7 @@ def run_fault_point(p: FaultPoint) -> dict[str, Any]:
     row = _base_row(p)
     row.update({"status": "ok", "error": "", "onset_s": round(onset_s, 6), "fired": True,
                 "fired_first_s": rec.first_s, "fired_count": rec.count, "fired_what": rec.what})
-    row.update(figures(onset_s, obs.arrays(), base, trip_s, sup.reason.name if trip_s is not None else "", safe_s))
+    row.update(figures(onset_s, obs.arrays(), base, trip_s, sup.reason.name if trip_s is not None else "", safe_s,
+                       plant_params_of(p), rated_output_nm(p)))
     row.update({"sim_time_s": round(r.sim_time_s, 6), "wall_time_s": round(time.perf_counter() - t0, 4)})
     return row

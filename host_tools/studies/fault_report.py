@@ -24,15 +24,18 @@ from host_tools.studies.fault_spec import FaultSpec
 from host_tools.studies.sweep_table import status_counts
 
 __all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "load_criteria", "rerun_command",
-           "write_fault_report"]
+           "safe_state_rows", "write_fault_report"]
 
 #: criterion -> (the row's figure, unit, what it bounds)
 CRITERIA: dict[str, tuple[str, str, str]] = {
     "excursion_deg": ("excursion_deg", "deg", "unintended ankle excursion, onset to safe command"),
     "velocity_dps": ("velocity_dps", "deg/s", "unintended ankle velocity, onset to safe command"),
     "torque_nm": ("torque_nm", "N m", "unintended output torque, onset to safe command"),
+    "torque_share": ("torque_share", "x rated", "unintended output torque over the design's rated output torque"),
     "time_to_safe_ms": ("safe_ms", "ms", "onset to the safe command on the wire (detected points)"),
     "impact_dps": ("impact_dps", "deg/s", "speed entering a mechanical stop"),
+    "safe_excursion_deg": ("safe_excursion_deg", "deg", "the safe state's own excursion, from the safe command on"),
+    "safe_impact_dps": ("safe_impact_dps", "deg/s", "speed entering a mechanical stop in the safe state"),
 }
 #: The supervisor check behind each fault reason: the risk control, named after its hazard.
 CONTROLS: dict[str, str] = {
@@ -51,6 +54,8 @@ CONTROLS: dict[str, str] = {
     "MOTOR_ENCODER_DISAGREEMENT": "implausible encoder: its motion against the motor's position through the belt",
     "ESTOP": "the e-stop",
     "OVER_TEMPERATURE": "the motor's reported winding temperature above [thermal] fault_c",
+    "IMU_FROZEN": "IMU frames bit-identical for imu_timeout_s while the encoder moved",
+    "MOTOR_JAM": "current near its limit, no motion, the reference moving, for jam_time_s",
 }
 HEAT_FIGURE = "excursion_deg"
 TRACES = 3
@@ -143,11 +148,16 @@ def check_criteria(rows: list[dict[str, Any]], criteria: dict[str, dict[str, flo
     return failures
 
 
+def _safe_state(r: dict[str, Any]) -> str:
+    return str(r.get("safe_state", ""))
+
+
 def hazard_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per fault: hazard, detection (reasons and counts), control, worst detect / safe times and residuals."""
+    """Per fault (and safe state, when the campaign compares several): hazard, detection (reasons and counts),
+    control, worst detect / safe times and residuals."""
     out = []
-    for fault in dict.fromkeys(r["fault"] for r in rows):
-        mine = [r for r in rows if r["fault"] == fault and r["status"] == "ok"]
+    for fault, safe in dict.fromkeys((r["fault"], _safe_state(r)) for r in rows):
+        mine = [r for r in rows if r["fault"] == fault and _safe_state(r) == safe and r["status"] == "ok"]
         cls = injector_class(fault)
         reasons: dict[str, int] = {}
         for r in mine:
@@ -157,7 +167,8 @@ def hazard_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         controls = "; ".join(CONTROLS.get(k, k) for k in reasons if k != "undetected") or "none: no check catches it"
         ex = _worst(mine, "excursion_deg")
         out.append({
-            "fault": fault, "hazard": cls.HAZARD, "where": cls.WHERE, "points": len(mine), "detection": detection,
+            "fault": fault, "safe_state": safe, "hazard": cls.HAZARD, "where": cls.WHERE, "points": len(mine),
+            "detection": detection,
             "control": controls,
             "detect_ms": max((_num(r["detect_ms"]) for r in mine if r["detected"]), default=math.nan),
             "safe_ms": (_worst(mine, "time_to_safe_ms") or (math.nan, -1))[0],
@@ -167,6 +178,27 @@ def hazard_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "impact_dps": (_worst(mine, "impact_dps") or (math.nan, -1))[0],
             "torque_nm": (_worst(mine, "torque_nm") or (math.nan, -1))[0],
         })
+    return out
+
+
+def safe_state_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per scenario and design, per safe state: what the safe state itself does, over every fault's points."""
+    out = []
+    keys = dict.fromkeys((r["scenario"], r["body_mass_kg"], str(r.get("design", "")), _safe_state(r)) for r in rows)
+    for scenario, mass, design, safe in keys:
+        mine = [r for r in rows if r["status"] == "ok" and r["scenario"] == scenario and r["body_mass_kg"] == mass
+                and str(r.get("design", "")) == design and _safe_state(r) == safe]
+
+        def worst(figure: str, of: list[dict[str, Any]] = mine) -> float:
+            return max((v for v in (_num(r[figure]) for r in of) if not math.isnan(v)), default=math.nan)
+        caught = [r for r in mine if r["detected"]]
+        out.append({"scenario": scenario if scenario == "suspended" else f"walk {mass:g} kg", "design": design,
+                    "safe_state": safe, "points": len(mine), "caught": len(caught),
+                    "safe_excursion_deg": worst("safe_excursion_deg", caught),
+                    "safe_impact_dps": worst("safe_impact_dps", caught),
+                    "stop_entries": sum(1 for r in caught if _num(r["safe_impact_dps"]) > 0),
+                    "excursion_deg": worst("excursion_deg"), "impact_dps": worst("impact_dps"),
+                    "torque_share": worst("torque_share")})
     return out
 
 
@@ -273,10 +305,23 @@ def write_fault_report(spec: FaultSpec, rows: list[dict[str, Any]], out: Path, f
            "[deg/s] | worst point |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for h in hazard_rows(rows):
         cmd = f"`{rerun_command(spec, h['worst_point'])}`" if h["worst_point"] >= 0 else ""
-        md.append(f"| {h['fault']} | {h['hazard']} | {h['where']} | {h['detection']} | {h['control']} | "
+        name = f"{h['fault']} ({h['safe_state']})" if len(spec.safe_states) > 1 else h["fault"]
+        md.append(f"| {name} | {h['hazard']} | {h['where']} | {h['detection']} | {h['control']} | "
                   f"{_fmt(h['detect_ms'])} | {_fmt(h['safe_ms'])} | {_fmt(h['excursion_deg'], '.2f')} | "
                   f"{_fmt(h['settle_excursion_deg'], '.2f')} | {_fmt(h['torque_nm'], '.2f')} | "
                   f"{_fmt(h['impact_dps'], '.0f')} | {h['worst_point']}: {cmd} |")
+    md += ["", "## Safe states side by side", "",
+           "Over every caught point of a scenario: the safe state's own travel from where it took over and its "
+           "speed into a stop (with how many caught points entered one), and over every point the worst excursion "
+           "to the safe command, stop impact and unintended torque over the design's rated output.", "",
+           "| scenario | design | safe state | points (caught) | own excursion [deg] | own stop impact [deg/s] "
+           "(points) | excursion to safe [deg] | stop impact [deg/s] | torque / rated |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for s in safe_state_rows(rows):
+        md.append(f"| {s['scenario']} | {s['design']} | {s['safe_state']} | {s['points']} ({s['caught']}) | "
+                  f"{_fmt(s['safe_excursion_deg'])} | {_fmt(s['safe_impact_dps'], '.0f')} ({s['stop_entries']}) | "
+                  f"{_fmt(s['excursion_deg'], '.2f')} | {_fmt(s['impact_dps'], '.0f')} | "
+                  f"{_fmt(s['torque_share'], '.2f')} |")
     ok = [r for r in rows if r["status"] == "ok"]
     md += ["", "## Worst unintended excursion by fault and onset", "", "![heat map](plots/heatmap.png)", ""]
     if ok:

@@ -1,5 +1,5 @@
-"""The spec of a fault campaign (`pafp faults SPEC.toml`): faults x onsets x durations x scenarios x controllers x
-motor links, checked whole before any run (docs/safety.md)::
+"""The spec of a fault campaign (`pafp faults SPEC.toml`): faults x onsets x durations x scenarios x safe states x
+controllers x motor links, checked whole before any run (docs/safety.md)::
 
     [campaign]
     profile = "../firmware.toml"     # firmware profile, relative to the spec (default profiles/firmware.toml)
@@ -9,6 +9,7 @@ motor links, checked whole before any run (docs/safety.md)::
     durations_s = [0.05, 0.2]        # how long each fault acts, (0, 10] s
     controllers = ["cascade"]        # shipped controllers
     links = ["uart", "can-servo"]    # motor links (firmware/drivers/motor_links.py)
+    safe_states = ["brake", "short"] # [safety] safe_state values compared side by side (default: the profile's)
     settle_s = 0.3                   # simulated time kept after the fault's end, (0, 5] s
     timeout_s = 120                  # wall seconds per point
 
@@ -17,13 +18,18 @@ motor links, checked whole before any run (docs/safety.md)::
     [[scenario]]
     name = "walk"                    # the ground's moment in stance for a walker of body_mass_kg
     body_mass_kg = 20
+    [[scenario]]
+    name = "walk"
+    body_mass_kg = 80
+    profile = "../designs/adult_80kg.toml"  # this scenario's firmware profile (a design profile: its plant too)
 
     [[fault]]
     name = "task_overrun"            # a name of hal.virtual.faults.INJECTORS; its parameters beside it
     factor = 50
 
-Points are the product fault (outermost) x scenario x controller x link x duration x onset (innermost), numbered
-from 0; a fault that names its links (the CAN bus faults) is paired only with those links.
+Points are the product fault (outermost) x scenario x safe state x controller x link x duration x onset
+(innermost), numbered from 0; a fault that names its links (the CAN bus faults) is paired only with those links,
+and a safe state only with the links that offer it (firmware/safe_state.py).
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from typing import Any
 
 from firmware.config import DEFAULT_PROFILE
 from firmware.drivers.motor_links import MOTOR_LINKS
+from firmware.safe_state import SAFE_STATES, check_offered
 from hal.virtual.faults import INJECTORS, injector_class, make_injector
 from host_tools.studies.spec_values import SpecValues
 from host_tools.studies.sweep_spec import SpecError
@@ -44,9 +51,9 @@ from profiles import profile_path
 __all__ = ["DEFAULT_CRITERIA", "FaultPoint", "FaultSpec", "load_fault_spec"]
 
 DEFAULT_CRITERIA = profile_path("faults/criteria.toml")
-CAMPAIGN_KEYS = ("profile", "criteria", "seed", "onsets", "durations_s", "controllers", "links", "settle_s",
-                 "timeout_s")
-SCENARIOS = {"suspended": (), "walk": ("body_mass_kg",)}
+CAMPAIGN_KEYS = ("profile", "criteria", "seed", "onsets", "durations_s", "controllers", "links", "safe_states",
+                 "settle_s", "timeout_s")
+SCENARIOS = {"suspended": ("profile",), "walk": ("body_mass_kg", "profile")}
 MAX_POINTS = 100_000
 
 
@@ -68,12 +75,14 @@ class FaultPoint:
     timeout_s: float
     profile_name: str
     profile_text: str
+    safe_state: str = ""  # the [safety] safe_state this point runs with ("": the profile's own)
 
     def label(self) -> str:
         """A short description for tables."""
         where = self.scenario if self.scenario == "suspended" else f"walk {self.body_mass_kg:g} kg"
+        safe = f", safe state {self.safe_state}" if self.safe_state else ""
         return (f"{self.fault} at phase {self.onset_phase:g} for {self.duration_s * 1e3:g} ms, {where}, "
-                f"{self.controller}, {self.link}")
+                f"{self.controller}, {self.link}{safe}")
 
 
 @dataclass(frozen=True)
@@ -89,22 +98,24 @@ class FaultSpec:
     durations_s: tuple[float, ...]
     controllers: tuple[str, ...]
     links: tuple[str, ...]
-    scenarios: tuple[tuple[str, float], ...]
+    scenarios: tuple[tuple[str, float, str, str], ...]  # name, body mass, profile path, profile text
     faults: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...]
     settle_s: float
     timeout_s: float
     digest: str
-
+    safe_states: tuple[str, ...] = ("",)  # "": the profile's own
     def points(self) -> list[FaultPoint]:
         """Every point, in index order."""
         out: list[FaultPoint] = []
-        for (name, params), (scen, mass), ctrl, link, dur, onset in itertools.product(
-                self.faults, self.scenarios, self.controllers, self.links, self.durations_s, self.onsets):
+        offered = _offers(self.links)
+        for (name, params), (scen, mass, prof, text), safe, ctrl, link, dur, onset in itertools.product(
+                self.faults, self.scenarios, self.safe_states, self.controllers, self.links, self.durations_s,
+                self.onsets):
             links = injector_class(name).LINKS
-            if links and link not in links:
+            if (links and link not in links) or (safe and safe not in offered[link]):
                 continue
             out.append(FaultPoint(len(out), name, params, scen, mass, ctrl, link, onset, dur, self.seed,
-                                  self.settle_s, self.timeout_s, str(self.profile), self.profile_text))
+                                  self.settle_s, self.timeout_s, prof, text, safe))
         return out
 
     @property
@@ -150,6 +161,11 @@ def load_fault_spec(path: Path) -> FaultSpec:
             raise _err(path, "[campaign] links", link, f"one of {', '.join(MOTOR_LINKS)}")
     settle = _number(path, "[campaign] settle_s", camp.get("settle_s", 0.3), 0.0, 5.0, True)
     timeout = _number(path, "[campaign] timeout_s", camp.get("timeout_s", 120.0), 0.0, 86_400.0, True)
+    safe_states = tuple(_list(path, camp, "safe_states", [""]))
+    for safe in safe_states:
+        if safe != "" and safe not in SAFE_STATES:
+            raise _err(path, "[campaign] safe_states", safe, f"one of {', '.join(SAFE_STATES)}")
+    profile_text = Path(profile).read_text(encoding="utf-8")
     scenarios = []
     for k, s in enumerate(doc.get("scenario", [{"name": "suspended"}])):
         name = s.get("name")
@@ -159,7 +175,13 @@ def load_fault_spec(path: Path) -> FaultSpec:
         if extra:
             raise SpecError(f"fault spec {path}: [[scenario]] {k} ({name}) key {extra[0]!r} unknown")
         mass = _number(path, f"[[scenario]] {k} body_mass_kg", s.get("body_mass_kg", 80.0), 1.0, 300.0)
-        scenarios.append((name, mass))
+        prof, text = Path(profile), profile_text
+        if "profile" in s:
+            prof = (base / str(s["profile"])).resolve()
+            if not prof.is_file():
+                raise _err(path, f"[[scenario]] {k} profile", str(prof), "an existing file")
+            text = prof.read_text(encoding="utf-8")
+        scenarios.append((name, mass, str(prof), text))
     faults = []
     for k, f in enumerate(doc.get("fault", [])):
         name = f.get("name")
@@ -173,13 +195,29 @@ def load_fault_spec(path: Path) -> FaultSpec:
         faults.append((name, params))
     if not faults:
         raise SpecError(f"fault spec {path}: no [[fault]]: name at least one of {', '.join(INJECTORS)}")
-    profile_text = Path(profile).read_text(encoding="utf-8")
-    digest = hashlib.sha256("\0".join([text, profile_text, Path(criteria).read_text(encoding="utf-8")])
-                            .encode()).hexdigest()
+    texts = [text, profile_text, Path(criteria).read_text(encoding="utf-8"), *(s[3] for s in scenarios)]
+    digest = hashlib.sha256("\0".join(texts).encode()).hexdigest()
     spec = FaultSpec(path, Path(profile), profile_text, Path(criteria), seed, onsets, durations, controllers, links,
-                     tuple(scenarios), tuple(faults), settle, timeout, digest)
+                     tuple(scenarios), tuple(faults), settle, timeout, digest, safe_states)
     n = spec.n_points
     if not 1 <= n <= MAX_POINTS:
         raise SpecError(f"fault spec {path}: {n} points out of range: 1..{MAX_POINTS} (no fault applies to the "
                         "links given?)" if n == 0 else f"fault spec {path}: {n} points out of range: 1..{MAX_POINTS}")
     return spec
+
+
+def _offers(links: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
+    """The safe behaviours each link's driver offers (a safe state is paired only with the links offering it)."""
+    out = {}
+    for link in links:
+        offered = MOTOR_LINKS.load(link, "links").SAFE_BEHAVIOURS
+        out[link] = tuple(s for s in SAFE_STATES if _offered(s, offered, link))
+    return out
+
+
+def _offered(safe_state: str, offered: tuple[str, ...], link: str) -> bool:
+    try:
+        check_offered(safe_state, offered, link)
+    except ValueError:
+        return False
+    return True

@@ -8,12 +8,16 @@ the byte that completed it. A request at tick ``t`` samples the plant at ``t`` a
 ``t + reply_latency``. Conventions (docs/devices.md):
 
 * currents: the q-axis current is the plant's (it already models the FOC lag and the 22.7 A clamp);
-  SET_CURRENT_REL is relative to that peak; HANDBRAKE acts as a brake current;
+  SET_CURRENT_REL is relative to that peak;
+* the safe behaviours (SET_DUTY, SET_CURRENT_BRAKE, SET_HANDBRAKE) follow the winding's laws of
+  :mod:`~hal.virtual.devices.ak60_winding`, evaluated every ``winding_period_s``: duty 0 shorts the phases,
+  the brake regenerates at most the short-circuit current, the handbrake holds an open-loop current vector;
 * ERPM = rotor rpm x 14; tachometer = 6 steps per electrical revolution since power-up;
 * ``pid_pos`` = the actuator's output angle (rotor angle / 6, the planetary's output, before the belt)
   in degrees, multi-turn (single-turn 0..360 after SET_POS_SINGLE), minus the origin set by
   SET_POS_ORIGIN; ROTOR_POSITION streams it (SET_DETECT 4) at ``rotor_position_scale``;
-* the command timeout, faults and the fault stop time follow VESC's ``mc_interface``.
+* the command timeout (then ``timeout_brake_current_a``, VESC's ``timeout.c``), faults and the fault stop
+  time follow VESC's ``mc_interface``.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.ak60_loops import InnerLoops, LoopMode, degrees, radians
 from hal.virtual.devices.ak60_meter import Ak60Meter
 from hal.virtual.devices.ak60_values import ValueSource
+from hal.virtual.devices.ak60_winding import Winding
 from hal.virtual.devices.vesc_rx import TimedBytes
 from hal.virtual.devices.world import NEVER, Link, World
 from hal.virtual.events import EventDevice
@@ -74,8 +79,10 @@ class DriveMode(Enum):
 
     RELEASED = "released"
     CURRENT = "current"
+    LOOP = "loop"  # the speed or position loop (InnerLoops)
+    DUTY = "duty"  # the winding's laws (ak60_winding.Winding)
     BRAKE = "brake"
-    LOOP = "loop"
+    HANDBRAKE = "handbrake"
 
 
 @dataclass
@@ -114,6 +121,12 @@ class Ak60(EventDevice):
         self._latency = world.ticks(cfg.reply_latency_s)
         self._stream_period = max(1, world.ticks(cfg.stream_period_s))
         self._loop_period = max(1, world.ticks(cfg.inner_loop_period_s))
+        self._winding_period = max(1, world.ticks(cfg.winding_period_s))
+        self.winding = Winding(p.ke_v_s_per_rad, p.phase_resistance_ohm, p.phase_inductance_h, p.pole_pairs)
+        self._duty = 0.0
+        # the plant's current lag over one winding period (the handbrake's vector is held in the stator frame:
+        # its q projection follows the rotor at once, so the command leads the lag by one period)
+        self._lag_decay = math.exp(-self._winding_period / world.f_hz / p.current_time_constant_s)
         self._timeout = world.ticks(cfg.timeout_s)
         self._fault_stop = world.ticks(cfg.fault_stop_time_s)
         # read at every event: copied from the (interpreted, frozen) configuration into native fields
@@ -206,8 +219,7 @@ class Ak60(EventDevice):
         if self._timeout_at <= t:
             self._timeout_at, self.timed_out = NEVER, True
             self.stats.timeouts += 1
-            log.debug("ak60: command timeout at %.6f s, motor released", self.world.seconds(t))
-            self._release(t)
+            self._on_timeout(t)
         if self._loop_at <= t:
             self._loop_tick(t)
         if self._stream_at <= t:
@@ -236,13 +248,6 @@ class Ak60(EventDevice):
             self.plant.set_supply_voltage(max(meter.v_in_v, 0.1), t_s)
         if self._next_target is not None:
             meter.target_a, self._next_target = self._next_target, None
-        if self.mode is DriveMode.BRAKE:
-            meter.target_a = self._brake_target()
-
-    def _brake_target(self) -> float:
-        if not self.plant.powered:
-            return 0.0
-        return -self._brake_a * math.tanh(self._velocity / self.params.brake_speed_scale_rad_s)
 
     def _target(self, current_a: float, t: int) -> None:
         """From t on the q current heads for current_a (clamped to the peak; 0 when unpowered)."""
@@ -276,8 +281,10 @@ class Ak60(EventDevice):
             self._on_selective(msg.mask, t)
         elif kind == _SET_CURRENT_REL:
             self._drive_current(msg.current_rel * self._peak_a, t)
-        elif kind == _SET_CURRENT_BRAKE or kind == _SET_HANDBRAKE:
+        elif kind == _SET_CURRENT_BRAKE:
             self._drive_brake(msg.current_a, t)
+        elif kind == _SET_HANDBRAKE:
+            self._drive_winding(DriveMode.HANDBRAKE, msg.current_a, t)
         elif kind == _SET_DUTY:
             self._drive_duty(msg.duty, t)
         elif kind == _SET_RPM:
@@ -300,13 +307,9 @@ class Ak60(EventDevice):
         # _ALIVE only resets the timeout (in _receive)
 
     # ------------------------------------------------------------------- driving
-    def _apply(self, mode: DriveMode, current_a: float, t: int) -> None:
-        """Put a current (or brake) command on the plant from tick t."""
-        t_s = t / self.world.f_hz
-        if mode is DriveMode.BRAKE:
-            self.plant.set_brake_current(current_a, t_s)
-        else:
-            self.plant.set_current_command(current_a, t_s)
+    def _apply(self, current_a: float, t: int) -> None:
+        """Put a q-current command on the plant from tick t."""
+        self.plant.set_current_command(current_a, t / self.world.f_hz)
 
     def _accepts(self) -> bool:
         if self.fault:
@@ -317,16 +320,20 @@ class Ak60(EventDevice):
     def _drive_current(self, current_a: float, t: int) -> None:
         if self._accepts():
             self.mode, self._loop_at = DriveMode.CURRENT, NEVER
-            self._apply(DriveMode.CURRENT, current_a, t)
+            self._apply(current_a, t)
             self._target(current_a, t)
 
-    def _drive_brake(self, current_a: float, t: int) -> None:
+    def _drive_winding(self, mode: DriveMode, value: float, t: int) -> None:
+        """Duty (value: the duty cycle), brake or handbrake (value: the current) from t, by the winding's laws."""
         if self._accepts():
-            self.mode, self._loop_at = DriveMode.BRAKE, NEVER
-            self._brake_a = min(abs(current_a), self._peak_a)
-            self._apply(DriveMode.BRAKE, self._brake_a, t)
-            if self._sampled_at == t:
-                self.meter.target_a = self._brake_target()
+            if mode is DriveMode.DUTY:
+                cap = self.config.max_duty
+                self._duty = max(-cap, min(cap, value))
+            else:
+                self._brake_a = min(abs(value), self._peak_a)
+            self.mode = mode
+            self._winding_tick(t)
+            self._update_next()  # called from the CAN node's event too: the world reads next_event
 
     def _drive_loop(self, t: int, start: Callable[[float, float], None]) -> None:
         if self._accepts():
@@ -334,9 +341,13 @@ class Ak60(EventDevice):
             start(self.meter.current_a, self._velocity)
             self.mode = DriveMode.LOOP
             self._loop_tick(t)
+            self._update_next()
 
     def _drive_duty(self, duty: float, t: int) -> None:
-        self._drive_loop(t, lambda i, w: self.loops.start_duty(duty, i, w))
+        self._drive_winding(DriveMode.DUTY, duty, t)
+
+    def _drive_brake(self, current_a: float, t: int) -> None:
+        self._drive_winding(DriveMode.BRAKE, current_a, t)
 
     def _drive_speed(self, erpm: float, t: int) -> None:
         self._drive_loop(t, lambda i, w: self.loops.start_speed(erpm, i, w))
@@ -353,19 +364,50 @@ class Ak60(EventDevice):
         self._drive_loop(t, lambda i, w: self.loops.start_position(rotor_target, i, w, erpm, accel))
 
     def _loop_tick(self, t: int) -> None:
-        if self.mode is not DriveMode.LOOP:
-            self._loop_at = NEVER
+        mode = self.mode
+        if mode is not DriveMode.LOOP:
+            if mode is DriveMode.DUTY or mode is DriveMode.BRAKE or mode is DriveMode.HANDBRAKE:
+                self._winding_tick(t)
+            else:
+                self._loop_at = NEVER
             return
         self._sample(t)
         dt_s = self._loop_period / self.world.f_hz
-        current = self.loops.current_a(dt_s, self._angle, self._velocity, self.meter.v_in_v)
-        self._apply(DriveMode.CURRENT, current, t)
+        current = self.loops.current_a(dt_s, self._angle, self._velocity)
+        self._apply(current, t)
         self._target(current, t)
         self._loop_at = t + self._loop_period
 
+    def _winding_tick(self, t: int) -> None:
+        """The winding's law of the present mode at the rotor's angle and speed at t, until the next tick."""
+        self._sample(t)
+        mode, winding = self.mode, self.winding
+        if mode is DriveMode.DUTY:
+            current = winding.duty_current_a(self._duty, self.meter.v_in_v, self._velocity)
+        elif mode is DriveMode.BRAKE:
+            current = winding.brake_current_a(self._brake_a, self._velocity)
+        else:  # the vector's projection at the next tick, reached through the current loop's lag (deadbeat)
+            h = self._winding_period / self.world.f_hz
+            current = winding.handbrake_current_a(self._brake_a, self._angle + self._velocity * h)
+            decay = self._lag_decay
+            current = (current - self.meter.current_a * decay) / (1.0 - decay)
+        self._apply(current, t)
+        self._target(current, t)
+        self._loop_at = t + self._winding_period
+
+    def _on_timeout(self, t: int) -> None:
+        """No command for ``timeout_s``: VESC's timeout.c brakes with ``timeout_brake_current`` (0: releases)."""
+        brake_a = self.config.timeout_brake_current_a
+        log.debug("ak60: command timeout at %.6f s, %s", self.world.seconds(t),
+                  f"brake {brake_a} A" if brake_a > 0.0 else "motor released")
+        if brake_a > 0.0 and not self.fault:
+            self._drive_winding(DriveMode.BRAKE, brake_a, t)
+        else:
+            self._release(t)
+
     def _release(self, t: int) -> None:
         self.mode, self._loop_at = DriveMode.RELEASED, NEVER
-        self._apply(DriveMode.CURRENT, 0.0, t)
+        self._apply(0.0, t)
         self._target(0.0, t)
 
     def _raise_fault(self, code: int, t: int, hold_ticks: int) -> None:

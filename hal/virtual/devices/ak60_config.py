@@ -16,6 +16,8 @@ __all__ = ["Ak60Config"]
 _RANGES: dict[str, tuple[float, float]] = {
     "reply_latency_s": (0.0, 0.1),
     "timeout_s": (0.0, 3600.0),
+    "timeout_brake_current_a": (0.0, 100.0),
+    "winding_period_s": (1e-6, 1e-3),
     "rotor_position_scale": (1.0, 1e7),
     "stream_period_s": (1e-4, 10.0),
     "controller_id": (0, 255),
@@ -50,7 +52,11 @@ class Ak60Config:
     reply_latency_s: float = 50e-6
     """[I] from the stop bit of a request's last byte to the start bit of the reply's first byte."""
     timeout_s: float = 1.0
-    """Command timeout: VESC ``APPCONF_TIMEOUT_MSEC`` 1000; the motor is released (0 A) after it."""
+    """Command timeout: VESC ``APPCONF_TIMEOUT_MSEC`` 1000 (0: none); then the timeout brake (or release)."""
+    timeout_brake_current_a: float = 0.0
+    """Brake current after the command timeout (VESC ``APPCONF_TIMEOUT_BRAKE_CURRENT``, default 0.0: release);
+    a value > 0 is the regenerative brake (capped by the short-circuit current). Set in the drive's app
+    configuration with the maker's tool: none of the AK's command sets (UART servo, CAN servo, MIT) carries it."""
     rotor_position_scale: float = 1e4
     """ROTOR_POSITION wire scale (degrees x 1e4, the CubeMars manual capture; VESC uses 1e5)."""
     stream_period_s: float = 0.010
@@ -79,6 +85,10 @@ class Ak60Config:
     """Default position-mode speed limit (manual p.32: 12000 ERPM)."""
     pos_accel_erpm_per_s: float = 40000.0
     """Default position-mode acceleration limit (manual p.32: 40000 ERPM/s)."""
+    winding_period_s: float = 1e-4
+    """[I] how often the winding's laws (duty, brake, handbrake: ak60_winding) are evaluated at the rotor's angle
+    and speed: 10 kHz, the plant's step, well inside VESC's 20-30 kHz FOC loop and 10x faster than the
+    mechanical time constant of the phase short (about 2 ms at the ankle), so the sampling adds no lag of note."""
     max_duty: float = 0.95
     """Largest duty cycle (VESC ``l_max_duty`` 0.95)."""
     source_resistance_ohm: float = 0.05

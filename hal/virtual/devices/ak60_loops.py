@@ -1,9 +1,8 @@
-"""The AK60-6 driver's own duty, speed and position loops: each turns a set-point into a q-current command.
+"""The AK60-6 driver's own speed and position loops: each turns a set-point into a q-current command.
 
-CubeMars does not publish its loops or gains; these are simple, documented stand-ins (docs/devices.md):
+CubeMars does not publish its loops or gains; these are simple, documented stand-ins (docs/devices.md).
+Duty mode is not a loop here: it is the winding's law (:mod:`hal.virtual.devices.ak60_winding`).
 
-* duty ``d``: the current the bridge voltage would drive through the DC-equivalent motor,
-  ``i = (d V_in - Ke w_m) / R``;
 * speed (SET_RPM): PI on the motor-side speed, ``i = Kp e + Ki integral(e)``, integral clamped to the
   peak current (anti-windup), output clamped to +-peak;
 * position (SET_POS, SET_POS_SPD): P on the motor-side angle giving a speed reference, limited to the
@@ -32,7 +31,6 @@ _RAD_PER_DEG: Final = math.pi / 180.0
 class LoopMode(Enum):
     """Which inner loop makes the current command."""
 
-    DUTY = "duty"
     SPEED = "speed"
     POSITION = "position"
 
@@ -72,15 +70,11 @@ class InnerLoops:
         self.kp = cfg.speed_kp_a_s_per_rad
         self.ki = cfg.speed_ki_a_per_rad
         self.kp_pos = cfg.position_kp_per_s
-        self.max_duty = cfg.max_duty
         self.default_speed_erpm = cfg.pos_speed_erpm
         self.default_accel_erpm_s = cfg.pos_accel_erpm_per_s
-        self.r_ohm = params.phase_resistance_ohm
-        self.ke = params.ke_v_s_per_rad
         self.peak_a = params.peak_current_a
         self.pole_pairs = params.pole_pairs
-        self.mode = LoopMode.DUTY
-        self.duty = 0.0
+        self.mode: LoopMode | None = None  # None until a loop is started
         self.speed_target_rad_s = 0.0
         self.position_target_rad = 0.0
         self.max_speed_rad_s = 0.0
@@ -93,15 +87,10 @@ class InnerLoops:
         return peak if current_a > peak else -peak if current_a < -peak else current_a
 
     def _enter(self, mode: LoopMode, current_a: float, motor_velocity_rad_s: float) -> None:
-        if self.mode is not mode or mode is LoopMode.DUTY:
+        if self.mode is not mode:
             self.integral_a = self._clamp(current_a)
             self.speed_ref_rad_s = motor_velocity_rad_s
         self.mode = mode
-
-    def start_duty(self, duty: float, current_a: float, motor_velocity_rad_s: float) -> None:
-        """Duty-cycle mode (SET_DUTY), duty limited to +-max_duty."""
-        self._enter(LoopMode.DUTY, current_a, motor_velocity_rad_s)
-        self.duty = max(-self.max_duty, min(self.max_duty, duty))
 
     def start_speed(self, erpm: float, current_a: float, motor_velocity_rad_s: float) -> None:
         """Speed mode (SET_RPM) towards erpm."""
@@ -118,12 +107,9 @@ class InnerLoops:
         self.max_speed_rad_s = erpm_to_rad_s(speed, self.pole_pairs)
         self.max_accel_rad_s2 = erpm_to_rad_s(accel, self.pole_pairs)
 
-    def current_a(self, dt_s: float, motor_angle_rad: float, motor_velocity_rad_s: float,
-                  v_in_v: float) -> float:
-        """One loop period: the q-current command for the present rotor angle, speed and bus voltage."""
+    def current_a(self, dt_s: float, motor_angle_rad: float, motor_velocity_rad_s: float) -> float:
+        """One loop period: the q-current command for the present rotor angle and speed."""
         w = motor_velocity_rad_s
-        if self.mode is LoopMode.DUTY:
-            return self._clamp((self.duty * v_in_v - self.ke * w) / self.r_ohm)
         if self.mode is LoopMode.POSITION:
             err = self.position_target_rad - motor_angle_rad
             accel = self.max_accel_rad_s2

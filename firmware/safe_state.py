@@ -1,0 +1,106 @@
+"""What the motor is told in the safe state: the profile's ``[safety] safe_state`` as a drive command each period.
+
+The behaviours are the drive's own (docs/devices.md, "Safe behaviours"); which one, when, is this policy:
+
+* ``release``: zero current (the foot is free);
+* ``brake``: zero current for ``brake_delay_s``, then the regenerative brake at ``brake_current_a``;
+* ``short``: duty 0, the phases shorted: a damper whose torque grows with speed (UART, CAN servo);
+* ``handbrake``: the open-loop current vector at ``brake_current_a``, a position hold (UART only);
+* ``damping``: MIT mode's kp = 0, kd = ``damping_kd`` (CAN MIT only);
+* ``graded``: while the foot is loaded (stance: the ground sensors when healthy, else the load the motor
+  current shows) the link's damper (``short``, or ``damping`` at ``damping_kd`` on MIT); unloaded (swing) one
+  that lets the foot go gently (on MIT ``damping_kd`` / 4; on UART and CAN servo the short still: under the
+  swing foot's own weight it lets it sink at a few degrees per second, and a brake capped at
+  ``brake_current_a`` would hide the load the next heel strike puts on it from the load detector); and
+  ``release`` once the drive reports its own fault (it has released the motor and ignores commands; releasing
+  keeps a faulted drive from being asked to drive again when its fault clears).
+
+A link offers what its protocol carries (``SAFE_BEHAVIOURS`` of each driver); a profile asking for one the link
+lacks is refused before the run (:func:`check_offered`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Final
+
+__all__ = ["BEHAVIOURS", "SAFE_STATES", "SWING_KD_SHARE", "SafeCommand", "SafePolicy", "check_offered"]
+
+BEHAVIOURS: Final = ("release", "brake", "short", "handbrake", "damping")
+"""The drive commands a safe state is made of."""
+SAFE_STATES: Final = (*BEHAVIOURS, "graded")
+"""The values of ``[safety] safe_state``."""
+SWING_KD_SHARE: Final = 0.25
+"""[I] graded on MIT: the swing's kd as a share of ``damping_kd`` (a quarter: lets the unloaded foot go)."""
+
+
+@dataclass(frozen=True)
+class SafeCommand:
+    """One drive command of the safe state: the behaviour, its current (brake, handbrake) or its kd (damping)."""
+
+    behaviour: str
+    current_a: float = 0.0
+    kd: float = 0.0
+
+    @property
+    def brake(self) -> bool:
+        """True for the regenerative brake (the command the controllers' MotorCommand also offers)."""
+        return self.behaviour == "brake"
+
+
+RELEASE: Final = SafeCommand("release")
+
+
+def check_offered(safe_state: str, offered: tuple[str, ...], link: str) -> None:
+    """ValueError naming safe_state, the link and what it offers when the link cannot carry the safe state."""
+    if safe_state not in SAFE_STATES:
+        raise ValueError(f"[safety] safe_state = {safe_state!r} is not allowed: one of {', '.join(SAFE_STATES)}")
+    if safe_state == "graded":  # release, and a damper: MIT's kd or the short
+        ok = "release" in offered and ("damping" in offered or "short" in offered)
+    else:
+        ok = safe_state in offered
+    if not ok:
+        raise ValueError(f"[safety] safe_state = {safe_state!r} is not offered by the {link} link: it offers "
+                         f"{', '.join(offered)} (docs/devices.md, 'Safe behaviours')")
+
+
+class SafePolicy:
+    """The profile's safe state on one link: ``command`` gives the drive command of each period in SAFE."""
+
+    def __init__(self, safe_state: str, offered: tuple[str, ...], link: str, *, brake_current_a: float,
+                 brake_delay_s: float, damping_kd: float) -> None:
+        """Check the link offers the safe state; keep the currents, the brake's delay and the damper's kd."""
+        check_offered(safe_state, offered, link)
+        self.safe_state = safe_state
+        self.brake_delay_s = brake_delay_s
+        self._brake = SafeCommand("brake", brake_current_a)
+        mit = "damping" in offered
+        self._fixed = {"release": RELEASE, "brake": self._brake, "short": SafeCommand("short"),
+                       "handbrake": SafeCommand("handbrake", brake_current_a),
+                       "damping": SafeCommand("damping", kd=damping_kd)}.get(safe_state)
+        self._stance = SafeCommand("damping", kd=damping_kd) if mit else SafeCommand("short")
+        self._swing = SafeCommand("damping", kd=damping_kd * SWING_KD_SHARE) if mit else self._stance
+        self.last = self._stance if self._fixed is None else self._fixed
+
+    @classmethod
+    def of(cls, limits: Any, offered: tuple[str, ...], link: str) -> SafePolicy:
+        """The policy of a profile's [safety] limits (firmware.safety_limits.SafetyLimits) on a link offering these."""
+        return cls(limits.safe_state, offered, link, brake_current_a=limits.brake_current_a,
+                   brake_delay_s=limits.brake_delay_s, damping_kd=limits.damping_kd)
+
+    def command(self, now_s: float, tripped_at_s: float | None, *, loaded: bool, drive_fault: bool) -> SafeCommand:
+        """The drive command now, tripped_at_s after the trip (None: now), the foot loaded or not, the drive faulted."""
+        fixed = self._fixed
+        if fixed is None:  # graded
+            cmd = RELEASE if drive_fault else self._stance if loaded else self._swing
+        elif fixed is self._brake:
+            tripped = now_s if tripped_at_s is None else tripped_at_s
+            cmd = fixed if now_s - tripped >= self.brake_delay_s else RELEASE
+        else:
+            cmd = fixed
+        self.last = cmd
+        return cmd
+
+    def stop_command(self) -> SafeCommand:
+        """What the stop path leaves on the wire: the safe state's own behaviour (graded: the last one chosen)."""
+        return self.last

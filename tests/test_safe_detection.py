@@ -1,0 +1,111 @@
+"""What the supervisor detects beyond silence (firmware/safety.py): a jammed output, a frozen IMU, an IMU silence
+judged up to the port's last read (a host's stall of the IMU task is not the IMU's silence)."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import pytest
+
+from firmware.drivers.imu import ImuDriver
+from firmware.safety import FaultReason, FrozenImu, JamCheck, SafetyInputs, SafetyLimits, Supervisor, SupervisorState
+from hal.virtual.faults import make_injector
+from hal.virtual.faults.observer import Observer
+from host_tools.runner import RunConfig, run_virtual
+from protocol.rvc import RvcFrame
+
+LIMITS = SafetyLimits()
+
+
+def running(**kw: object) -> SafetyInputs:
+    base = dict(now_s=1.0, angle_rad=0.0, last_motor_reply_s=1.0, last_command_s=1.0, last_imu_frame_s=1.0)
+    base.update(kw)
+    return SafetyInputs(**base)  # type: ignore[arg-type]
+
+
+def started() -> Supervisor:
+    s = Supervisor()
+    assert s.check(running(now_s=0.5, last_motor_reply_s=0.5, last_command_s=0.5, last_imu_frame_s=0.5)) \
+        is SupervisorState.RUN
+    return s
+
+
+def test_jam_needs_all_three_and_restarts_on_motion() -> None:
+    j = JamCheck(current_share=0.5, still_rad=math.radians(0.5), reference_rad_s=0.1)
+    assert j.update(0.0, 5.9, 12.0, 0.0, 1.0) == 0.0  # below half the limit
+    assert j.update(0.0, 6.0, 12.0, 0.0, 1.0) == 0.0  # all three: the window opens
+    assert j.update(0.02, -6.0, 12.0, math.radians(0.4), 1.0) == pytest.approx(0.02)  # within 0.5 deg: still
+    assert j.update(0.03, 6.0, 12.0, math.radians(0.6), 1.0) == 0.0  # it moved: a new window
+    assert j.update(0.05, 6.0, 12.0, math.radians(0.6), 1.0) == pytest.approx(0.02)
+    assert j.update(0.06, 6.0, 12.0, math.radians(0.6), 0.05) == 0.0  # the reference stopped
+
+
+def test_a_jam_trips_after_its_time_longer_in_stance() -> None:
+    s = started()
+    assert s.check(running(jam_s=LIMITS.jam_time_s)) is SupervisorState.RUN
+    assert s.check(running(jam_s=LIMITS.jam_stance_time_s, loaded=True)) is SupervisorState.RUN
+    assert s.check(running(jam_s=LIMITS.jam_time_s + 1e-3)) is SupervisorState.SAFE
+    assert s.reason is FaultReason.MOTOR_JAM and "swing" in s.detail
+    s = started()
+    assert s.check(running(jam_s=LIMITS.jam_stance_time_s + 1e-3, loaded=True)) is SupervisorState.SAFE
+    assert s.reason is FaultReason.MOTOR_JAM and "stance" in s.detail
+
+
+def test_frozen_imu_counts_identical_frames_only_while_the_encoder_moves() -> None:
+    f = FrozenImu(math.radians(1.0))
+    assert f.update(1.00, 1.00, 0.0) == 0.0  # a change: the reference point
+    assert f.update(1.00, 1.05, math.radians(0.5)) == 0.0  # identical frames, but the foot barely moved
+    assert f.update(1.00, 1.05, math.radians(1.5)) == pytest.approx(0.05)  # it moved: 50 ms of identical frames
+    assert f.update(1.06, 1.06, math.radians(3.0)) == 0.0  # the content changed: healthy again
+
+
+def test_the_imu_driver_marks_content_changes_not_index_changes() -> None:
+    class Fake:
+        def __init__(self) -> None:
+            self.data = b""
+
+        def read(self) -> bytes:
+            data, self.data = self.data, b""
+            return data
+
+    uart = Fake()
+    imu = ImuDriver(uart)  # type: ignore[arg-type]
+    frame = RvcFrame(0, 0.1, 0.2, 0.0, 0.0, 0.0, 9.8)
+    uart.data = frame.encode()
+    assert imu.poll(1.0) == 1 and imu.changed_s == 1.0 and imu.last_poll_s == 1.0
+    uart.data = RvcFrame(1, 0.1, 0.2, 0.0, 0.0, 0.0, 9.8).encode()  # next index, same measurement
+    assert imu.poll(1.01) == 1 and imu.changed_s == 1.0 and imu.last_frame_s == 1.01
+    assert imu.poll(1.02) == 0 and imu.last_poll_s == 1.02 and imu.last_frame_s == 1.01
+    uart.data = RvcFrame(2, 0.1, 0.21, 0.0, 0.0, 0.0, 9.8).encode()
+    assert imu.poll(1.03) == 1 and imu.changed_s == 1.03
+
+
+def test_imu_silence_is_judged_up_to_the_ports_last_read_and_never_beyond_twice_the_limit() -> None:
+    t = LIMITS.imu_timeout_s
+    # the IMU task stalled (a host's stall): last read just after the last frame, now long after: no trip yet
+    assert started().check(running(last_imu_frame_s=1.0 - 1.5 * t, last_imu_poll_s=1.0 - 1.4 * t)) \
+        is SupervisorState.RUN
+    s = started()  # read since, and still nothing: silent
+    assert s.check(running(last_imu_frame_s=1.0 - 1.5 * t, last_imu_poll_s=1.0)) is SupervisorState.SAFE
+    assert s.reason is FaultReason.IMU_TIMEOUT
+    s = started()  # never read again: at twice the limit it trips anyway
+    assert s.check(running(last_imu_frame_s=1.0 - 2.01 * t, last_imu_poll_s=1.0 - 2.0 * t)) is SupervisorState.SAFE
+
+
+def _run(name: str, onset_s: float = 1.6, duration_s: float = 0.2):
+    logging.getLogger("firmware.safety").setLevel(logging.ERROR)
+    fault, obs = make_injector(name, onset_s, duration_s, seed=3), Observer()
+    r = run_virtual(RunConfig(strides=1, trace_capacity=0, faults=(obs, fault), duration_s=onset_s + duration_s))
+    return r.firmware.supervisor, obs
+
+
+def test_a_frozen_imu_is_caught_while_the_foot_moves() -> None:
+    sup, obs = _run("imu_frozen")
+    assert sup.reason is FaultReason.IMU_FROZEN and 1.6 < sup.tripped_at_s < 1.6 + 0.05
+
+
+def test_a_silent_imu_reaches_the_safe_command_within_50_ms() -> None:
+    sup, obs = _run("imu_silent")
+    safe_s = obs.safe_on_wire_s(sup.tripped_at_s)
+    assert sup.reason is FaultReason.IMU_TIMEOUT and safe_s is not None and safe_s - 1.6 <= 0.050
