@@ -112,7 +112,7 @@ class CanServoDriver(CanLink):
         """The stop path: the safe command (a number: the brake current), the brake after a zero current; wait until
         they have left the mailboxes."""
         cmd = stop_command(command)
-        pairs = (self._safe_frame(cmd),)
+        pairs: tuple[tuple[CanFrame, str], ...] = (self._safe_frame(cmd),)
         if cmd.behaviour == "brake":
             pairs = (self._safe_frame(SafeCommand("release")), *pairs)
         return self._stop(tuple(f for f, _ in pairs), tuple(n for _, n in pairs), now_s, timeout_s)
