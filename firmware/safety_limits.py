@@ -77,11 +77,11 @@ class SafetyLimits:
     # a jam: the current command at jam_current_share of its limit, the encoder within jam_still_rad, the
     # reference's speed above jam_reference_rad_s, all for longer than jam_time_s in swing, jam_stance_time_s in
     # stance (where a push-off the motor is too weak for looks the same for a while; docs/safety.md, "Jam")
-    jam_current_share: float = 0.5
+    jam_current_share: float = 0.95
     jam_still_rad: float = math.radians(0.5)
     jam_reference_rad_s: float = 0.1
     jam_time_s: float = 0.025
-    jam_stance_time_s: float = 0.045
+    jam_stance_time_s: float = 0.1
     # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
     # is read as MotorRatings)
     motor: MotorRatings = field(default_factory=MotorRatings)

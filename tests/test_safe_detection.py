@@ -10,6 +10,7 @@ import pytest
 
 from firmware.drivers.imu import ImuDriver
 from firmware.safety import FaultReason, FrozenImu, JamCheck, SafetyInputs, SafetyLimits, Supervisor, SupervisorState
+from hal.interfaces import Uart
 from hal.virtual.faults import make_injector
 from hal.virtual.faults.observer import Observer
 from host_tools.runner import RunConfig, run_virtual
@@ -61,16 +62,27 @@ def test_frozen_imu_counts_identical_frames_only_while_the_encoder_moves() -> No
 
 
 def test_the_imu_driver_marks_content_changes_not_index_changes() -> None:
-    class Fake:
+    class Fake(Uart):  # a Uart subclass: the compiled driver checks its argument's type
         def __init__(self) -> None:
+            super().__init__(115200, "fake imu")
             self.data = b""
 
-        def read(self) -> bytes:
-            data, self.data = self.data, b""
+        def _send(self, data: bytes) -> int:
+            return len(data)
+
+        def _receive(self, max_bytes: int) -> bytes:
+            n = len(self.data) if max_bytes < 0 else max_bytes
+            data, self.data = self.data[:n], self.data[n:]
             return data
 
+        def _rx_count(self) -> int:
+            return len(self.data)
+
+        def _tx_space(self) -> int:
+            return 64
+
     uart = Fake()
-    imu = ImuDriver(uart)  # type: ignore[arg-type]
+    imu = ImuDriver(uart)
     frame = RvcFrame(0, 0.1, 0.2, 0.0, 0.0, 0.0, 9.8)
     uart.data = frame.encode()
     assert imu.poll(1.0) == 1 and imu.changed_s == 1.0 and imu.last_poll_s == 1.0
