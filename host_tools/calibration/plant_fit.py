@@ -115,6 +115,9 @@ def check_params(names: tuple[str, ...], given: str = "") -> None:
     if unknown or not names:
         raise ValueError(f"{where}: {unknown[0] if unknown else 'empty'} is not a fit parameter: choose from "
                          f"{', '.join(PARAMS)}")
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ValueError(f"{where}: {repeated[0]} is named {names.count(repeated[0])} times: name each parameter once")
     if not set(names) - {"backlash_deg", "rotor_accel_scale"}:
         raise ValueError(f"{where}: backlash_deg and rotor_accel_scale are profiled with other parameters fitted: "
                          "name at least one more")

@@ -233,6 +233,11 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
     elif args.duration is not None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")
+    if getattr(args, "experiment", None) is not None:
+        for option, value in (("--strides", args.strides), ("--controller", args.controller)):
+            if value is not None:
+                return (f"{option} {value} is not allowed with --experiment {args.experiment}: the experiment is "
+                        f"its own controller and sets its own length (its [controller] table; docs/calibration.md)")
     if args.scenario != "walk":
         for option, value in (("--body-mass", args.body_mass), ("--moment", args.moment)):
             if value is not None:

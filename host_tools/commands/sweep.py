@@ -101,11 +101,10 @@ def run(args: argparse.Namespace) -> int:
 def _interrupted(spec: object, out: Path, rows: list, stop: object, where: str) -> int:
     """After a stop signal: the report of the rows finished so far, marked interrupted; exit 128 + N."""
     from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
+    from host_tools.studies.interrupt import stopped_line
     from host_tools.studies.sweep_report import write_report
 
-    n = spec.n_points  # type: ignore[attr-defined]
-    print(f"pafp sweep: stopped by {stop.signal}: {len(rows)} of {n} points finished, kept in "  # type: ignore[attr-defined]
-          f"{out}; `--resume` runs the rest", file=sys.stderr)
+    print(stopped_line("sweep", stop, len(rows), spec.n_points, out), file=sys.stderr)  # type: ignore[arg-type,attr-defined]
     if rows:
         try:
             write_report(spec, rows, out, where=where, interrupted=stop.signal)  # type: ignore[arg-type,attr-defined]

@@ -22,6 +22,7 @@ from host_tools.outdir import naming, write_atomic
 from host_tools.reports.gait_latency import event_summary, gait_event_lines
 from host_tools.reports.metrics import TrackingMetrics
 from host_tools.reports.process_clock import process_elapsed_s
+from host_tools.reports.run_files import file_digests
 from host_tools.reports.telemetry_csv import TelemetryCsv
 from host_tools.reports.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 from host_tools.runner import RunConfig, RunResult
@@ -360,6 +361,7 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
     if gait is not None:
         s["gait_events"] = gait
         md_extra = [*(md_extra or []), *gait_event_lines(gait)]
+    s["files_sha256"] = file_digests(out)  # ties record.bin and telemetry.csv to this run (`pafp fit` checks)
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)
     s["process_realtime_factor"] = round(r.sim_time_s / elapsed, 2) if elapsed > 0 else None

@@ -64,7 +64,33 @@ class SpecValues:
             doc = tomllib.loads(text)
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
             raise SpecError(f"{self.kind} {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
-        unknown = sorted(set(doc) - {t.strip("[]") for t in tables})
+        shapes = {t.strip("[]"): t for t in tables}
+        unknown = sorted(set(doc) - set(shapes))
         if unknown:
             raise SpecError(f"{self.kind} {path}: table {unknown[0]!r} unknown: {', '.join(tables)}")
+        for key, value in doc.items():
+            self._check_shape(path, shapes[key], value)
         return text, doc
+
+    def _check_shape(self, path: Path, table: str, value: object) -> None:
+        """SpecError unless ``value`` has the shape ``table`` names: a table for ``[x]``, an array of tables for
+        ``[[x]]`` (``x = "..."`` or ``[[x]]`` where ``[x]`` belongs are refused here, not as a TypeError later).
+
+        >>> SpecValues("x spec", "[a]")._check_shape(Path("s.toml"), "[a]", [{}])
+        Traceback (most recent call last):
+        ...
+        host_tools.studies.sweep_spec.SpecError: x spec s.toml: key 'a' is an array of tables ([[a]]): expected \
+a table, written [a]
+        """
+        name = table.strip("[]")
+        many = table.startswith("[[")
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            got = f"an array of tables ([[{name}]])"
+        elif isinstance(value, dict):
+            got = f"a table ([{name}])"
+        else:
+            got = f"a {type(value).__name__} ({name} = {value!r:.40})"
+        if (many and got.startswith("an array")) or (not many and got.startswith("a table")):
+            return
+        want = f"an array of tables, each written [[{name}]]" if many else f"a table, written [{name}]"
+        raise SpecError(f"{self.kind} {path}: key {name!r} is {got}: expected {want}")
