@@ -290,9 +290,9 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
               f"{t['misses']:>8}")
     t = s.get("thermal")
     if t is not None:  # the winding model and the supply (docs/design.md, "Winding temperature and battery in a run")
-        b = s.get("battery")
-        supply = ("ideal supply" if b is None else f"{b['name']}: {b['energy_per_stride_j']} J/stride, "
-                  f"{b['distance_per_charge_km']} km per charge at {b['speed_m_s']} m/s")
+        from host_tools.reports.thermal import supply_text
+
+        supply = supply_text(s.get("battery"))
         print(f"  winding {t['winding_c_end']} C at the end (max {t['winding_c_max']}, steady state "
               f"{t['steady_state_c']}, emulation only), motor reported max {t['motor_reported_c_max']} C; {supply}")
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),

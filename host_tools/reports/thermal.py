@@ -5,7 +5,8 @@ temperature the motor reported in its status replies (the bench figure), the ste
 (the model's steady state at the RMS current of the strides completed before any trip) and when the firmware
 began derating or latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's
 terminals, regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking
-speed.
+speed. The energy figures are a walking run's, over the strides completed before any fault latched; a suspended
+foot, or a walk that completed none, has none (``energy_figures_left_out`` says why).
 
 Walking speed: Schwartz et al. 2008 give each speed group's dimensionless speed v* = v / sqrt(g L)
 (0.17, 0.29, 0.43 free, 0.56, 0.69; /work/shared/data/gait/README.md); v = v* sqrt(g L) with the leg length
@@ -23,7 +24,7 @@ from typing import Any
 from host_tools.reports.heat_log import HeatLog
 from protocol.telemetry import FaultReason
 
-__all__ = ["DIMENSIONLESS_SPEED", "LEG_LENGTH_M", "battery_summary", "plot_thermal", "thermal_lines",
+__all__ = ["DIMENSIONLESS_SPEED", "LEG_LENGTH_M", "battery_summary", "plot_thermal", "supply_text", "thermal_lines",
            "thermal_summary", "walking_speed_m_s"]
 
 DIMENSIONLESS_SPEED = {"very-slow": 0.17, "slow": 0.29, "free": 0.43, "fast": 0.56, "very-fast": 0.69}
@@ -78,6 +79,34 @@ def thermal_summary(r: Any) -> dict:
     }
 
 
+def _walked_energies(r: Any, log: HeatLog) -> tuple[list[float], str | None]:
+    """(the supply energy of each stride walked, why there is none): only a walking run's strides completed before
+    the supervisor latched a fault count (after it the foot stands in its safe state, spending next to nothing,
+    which would make any distance per charge)."""
+    if getattr(r.config, "scenario", "suspended") != "walk":
+        return [], "the foot was not walking: --scenario walk measures them"
+    tripped = r.firmware.supervisor.tripped_at_s
+    done = [row for row in log.strides if tripped is None or row.end_s <= tripped]
+    if not done:
+        return [], ("no stride completed" + (f" before the fault at {tripped:.3f} s" if tripped is not None else ""))
+    return log.stride_energies_j()[:len(done)], None
+
+
+def supply_text(battery: dict | None) -> str:
+    """One line on the supply for a command's printout: the ideal supply, or the pack with its walking figures.
+
+    >>> supply_text({"name": "p", "energy_per_stride_j": None, "energy_figures_left_out": "no stride completed"})
+    'p: no energy per stride or distance per charge (no stride completed)'
+    """
+    if battery is None:
+        return "ideal supply"
+    if battery["energy_per_stride_j"] is None:
+        return (f"{battery['name']}: no energy per stride or distance per charge "
+                f"({battery.get('energy_figures_left_out') or 'not measured'})")
+    return (f"{battery['name']}: {battery['energy_per_stride_j']} J/stride over {battery.get('energy_strides')} "
+            f"strides, {battery['distance_per_charge_km']} km per charge at {battery['speed_m_s']} m/s")
+
+
 def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
     """summary.json's ``battery`` of a run (None on the ideal supply)."""
     heat: dict = r.heat
@@ -85,7 +114,7 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
     if battery is None:
         return None
     log: HeatLog = heat["log"]
-    energies = log.stride_energies_j()
+    energies, why_not = _walked_energies(r, log)
     per_stride = sum(energies) / len(energies) if energies else math.nan
     p = battery.params
     strides = p.capacity_wh * 3600.0 / per_stride if per_stride > 0 else math.nan
@@ -95,6 +124,8 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
         "capacity_wh": round(p.capacity_wh, 2),
         "mass_kg": round(p.mass_kg, 3),
         "energy_per_stride_j": _finite(per_stride, 3),
+        "energy_strides": len(energies),
+        "energy_figures_left_out": why_not,
         "regenerated_j": round(battery.regenerated_j, 3),
         "rejected_regeneration_j": round(battery.rejected_j, 3),
         "min_bus_v": _finite(log.bus_v_min, 3),
@@ -133,7 +164,8 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
         lines += ["", "Supply: ideal (no battery profile: `--battery NAME`)."]
         return lines
     lines += [f"| battery | {battery['name']}, {battery['capacity_wh']} Wh |",
-              f"| energy per stride at the battery | {fig(battery['energy_per_stride_j'], ' J')} |",
+              f"| energy per stride at the battery | {fig(battery['energy_per_stride_j'], ' J')}"
+              f"{'' if battery['energy_figures_left_out'] is None else ' (' + battery['energy_figures_left_out'] + ')'} |",
               f"| regenerated into the battery | {battery['regenerated_j']} J |",
               f"| lowest bus voltage | {fig(battery['min_bus_v'], ' V')} |",
               f"| strides / distance per charge at {battery['speed_m_s']} m/s | "
