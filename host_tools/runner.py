@@ -137,11 +137,15 @@ class RunConfig:
             raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
         if self.scenario not in SCENARIOS:
             raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
+        parts: dict[str, str] = {}
         for fault in self.sensor_faults:
             part, _, mode = fault.partition(":")
             if mode not in SENSOR_FAULTS.get(part, ()):
                 raise ValueError(f"sensor fault {fault!r} unknown: PART:MODE, one of "
                                  f"{[f'{p}:{m}' for p, ms in SENSOR_FAULTS.items() for m in ms]}")
+            if part in parts:  # one sensor has one mode: the last would silently win
+                raise ValueError(f"sensor fault {fault!r}: {part} already has {parts[part]!r}: one fault per sensor")
+            parts[part] = fault
         if self.sensor_faults and not self.sensors_fitted():
             raise ValueError("sensor faults need the ground sensors: walk, or fit them (ground_sensors)")
         if self.duration_s is not None and not (isinstance(self.duration_s, (int, float)) and

@@ -58,8 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
-                        help=f"the control law: {CONTROLLERS.spoken()} (shipped), or a class in a Python file "
+                        help=f"the control law: {CONTROLLERS.by_origin()}, or a class in a Python file "
                              "(docs/controllers.md); default: the profile's [controller], else cascade")
+    parser.add_argument("--imu-model", default=None, metavar="NAME",
+                        help="the IMU device model on the virtual bench: a name of the device registry "
+                             "(hal/virtual/devices/registry.py, plug-ins of the pafp.devices group too; docs/registries.md);"
+                             " default bno08x")
     parser.add_argument("--experiment", choices=("sysid",), default=None,
                         help="run the identification experiment (the shipped controller sysid, its [controller] "
                              "parameters from the profile when it names sysid) for its whole length instead of "
@@ -187,7 +191,12 @@ def run(args: argparse.Namespace) -> int:
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
                         sensor_faults=tuple(args.sensor_fault), design=_design(args),
                         battery=args.battery,
-                        ambient_c=25.0 if args.ambient_c is None else args.ambient_c)
+                        ambient_c=25.0 if args.ambient_c is None else args.ambient_c,
+                        bench_options={} if args.imu_model is None else {"imu_model": args.imu_model})
+        if args.imu_model is not None:
+            from hal.virtual.devices.registry import device_model_for
+
+            device_model_for("imu", args.imu_model, "--imu-model")  # an unknown name or another role stops here
         if args.battery is not None:
             from hal.virtual.plant.battery import load_battery
 
@@ -230,6 +239,9 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
             if value is not None:
                 return (f"{option} {value} is not allowed in serial mode (--motor/--imu): it sets the virtual "
                         "bench's motor model; a real motor reports its own temperature and supply")
+        if args.imu_model is not None:
+            return (f"--imu-model {args.imu_model} is not allowed in serial mode (--motor/--imu): it picks the "
+                    "virtual bench's IMU model; --imu names the port of the real one (or sim://NAME)")
     elif args.duration is not None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")

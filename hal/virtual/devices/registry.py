@@ -21,7 +21,7 @@ from typing import Any
 
 from hal.registry import Registry
 
-__all__ = ["AK60_6", "BNO08X", "DEVICES", "FSR_HEEL", "FSR_TOE", "GROUND_BOARD", "KINDS", "LOAD_CELL", "DeviceModel",
+__all__ = ["AK60_6", "device_model_for", "BNO08X", "DEVICES", "FSR_HEEL", "FSR_TOE", "GROUND_BOARD", "KINDS", "LOAD_CELL", "DeviceModel",
            "adc_sensor_models", "device_model"]
 
 KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground"), "adc": ("sensor",)}
@@ -138,6 +138,15 @@ def device_model(name: str, where: str = "device") -> DeviceModel:
     if not isinstance(model, DeviceModel):
         raise ValueError(f"{where} {name!r}: {DEVICES.reference(name)} is a {type(model).__name__}, "
                          "not a hal.virtual.devices.registry.DeviceModel")
+    return model
+
+
+def device_model_for(role: str, name: str, where: str) -> DeviceModel:
+    """device_model(name), checked to play ``role`` (``imu``, ``motor``); ValueError naming where otherwise."""
+    model = device_model(name, where)
+    if model.role != role:
+        raise ValueError(f"{where} {name!r} is a {model.role} device, not an {role.upper()} (a device model of "
+                         f"role {role!r}, e.g. {role})")
     return model
 
 
