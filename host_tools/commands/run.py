@@ -463,10 +463,12 @@ def _run_serial(args: argparse.Namespace) -> int:
     from host_tools.reports.report import tracking_text
 
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
-    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it tracking in RUN; "
-          f"{s['strides']} whole strides")
+    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it with the supervisor in "
+          f"RUN; {s['strides']} whole strides")
     for line in tracking_text(s["tracking"]):
         print(line)
+    if "encoder_headline" in s:
+        print(f"  encoder figures {s['encoder_headline']}")
     print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
           f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
     w = s["host_warnings"]
