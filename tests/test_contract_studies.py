@@ -136,12 +136,8 @@ def test_a_disk_that_fills_while_a_row_is_appended_is_exit_74_and_the_journal_ke
     assert main(["faults", str(spec), "--out", str(out), "--quiet"]) == 74
     line = _one_line(capsys.readouterr().err)
     assert f"cannot write {out / sweep_table.JOURNAL}: No space left on device" in line and "--resume" in line
-    text = (out / sweep_table.JOURNAL).read_text()
+    text = (out / sweep_table.JOURNAL).read_text()  # the first row whole, nothing of the second (--resume reruns it)
     assert text.endswith("\n") and [json.loads(ln)["point"] for ln in text.splitlines()] in ([0], [1])
-    monkeypatch.setattr(sweep_table.os, "write", real_write)
-    assert main(["faults", str(spec), "--out", str(out), "--quiet", "--resume"]) in (0, 1)
-    capsys.readouterr()
-    assert sorted(json.loads(ln)["point"] for ln in (out / sweep_table.JOURNAL).read_text().splitlines()) == [0, 1]
 
 
 def test_a_journal_torn_by_a_kill_is_cut_to_its_whole_rows_before_the_next_row(tmp_path):
@@ -204,3 +200,26 @@ def test_criteria_that_judge_nothing_are_refused(tmp_path, capsys, no_cluster, c
     assert main(["faults", str(spec), "--out", str(tmp_path / "out")]) == 2
     line = _one_line(capsys.readouterr().err)
     assert str(tmp_path / "criteria.toml") in line and "no criterion for" in line and "excursion_deg" in line
+
+
+# ---- pafp fit under a stop signal ---------------------------------------------------------------------------
+
+def test_fit_stopped_by_sigterm_says_so_and_leaves_no_staging_directory(tmp_path, capsys):
+    fw = tmp_path / "fw.toml"
+    fw.write_text((ROOT / "profiles" / "firmware.toml").read_text() + '\n[controller]\nname = "sysid"\nhold_s = '
+                  '0.5\nsweep_deg = 8.0\nsweep_deg_s = 16.0\nchirp_s = 1.0\nprbs_s = 0.5\n')
+    run = tmp_path / "run"
+    assert main(["run", "--experiment", "sysid", "--quiet", "--no-plot", "--no-trace", "--profile", str(fw),
+                 "--out", str(run)]) == 0
+    capsys.readouterr()
+    proc = subprocess.Popen([*PAFP, "fit", str(run), "--no-plot"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT)
+    assert proc.stdout is not None
+    line = proc.stdout.readline()  # "pafp fit: ... fitting N parameters -> ..." once the inputs are checked
+    assert line.startswith("pafp fit: "), line + proc.communicate()[1]
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "pafp fit: stopped by SIGTERM after " in err and "nothing written" in err and "Traceback" not in err
+    assert sorted(p.name for p in run.iterdir() if p.name.startswith(".") or p.name == "fit") == []
