@@ -80,11 +80,11 @@ def load_criteria(path: Path) -> dict[str, dict[str, float]]:
         raise ValueError(f"criteria {path}: table {extra[0]!r} unknown: [default] and [fault.<name>]")
     default = table(doc.get("default", {}), "[default]")
     per = doc.get("fault", {})
+    if not isinstance(per, dict):
+        raise ValueError(f"criteria {path}: key 'fault' must be tables [fault.<name>], not {type(per).__name__}")
     for name in per:
         if name not in INJECTORS:
             raise ValueError(f"criteria {path}: [fault.{name}] names no injector: one of {', '.join(INJECTORS)}")
-    if not isinstance(per, dict):
-        raise ValueError(f"criteria {path}: key 'fault' must be tables [fault.<name>], not {type(per).__name__}")
     out = {name: {**default, **table(per.get(name, {}), f"[fault.{name}]")} for name in INJECTORS}
     unjudged = [name for name, limits in out.items() if not limits]
     if unjudged:  # an empty file would pass every campaign without judging anything

@@ -47,6 +47,18 @@ class SpecValues:
             raise self.error(path, where, v, f"an int in {lo}..{hi}")
         return v
 
+    def choice(self, path: Path, where: str, v: object, choices: Any) -> str:
+        """v when it is a string among ``choices`` (a list, a dict or a registry), else the one-line error."""
+        if not isinstance(v, str) or v not in choices:
+            raise self.error(path, where, v, f"one of {', '.join(choices)}")
+        return v
+
+    def file(self, path: Path, where: str, v: object) -> Path:
+        """The existing file v names, relative to the spec's folder (v must be a string)."""
+        if not isinstance(v, str) or not v or not (path.parent / v).is_file():
+            raise self.error(path, where, v, "an existing file, relative to the spec")
+        return (path.parent / v).resolve()
+
     def nonempty_list(self, path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
         """doc[key] (default if absent) when it is a non-empty list without repeats (doc is the spec's table)."""
         v = doc.get(key, default)
