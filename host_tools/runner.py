@@ -190,9 +190,8 @@ class RunConfig:
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
         nominal = load_plant_params(self.plant_file)
         if self.design is not None:
-            from host_tools.design_profile import check_ratings
-
             from firmware.motor_ratings import MotorRatings
+            from host_tools.design_profile import check_ratings
 
             ratings = self.firmware.motor if self.firmware is not None else MotorRatings()
             check_ratings(self.design, ratings, "design profile")

@@ -79,7 +79,8 @@ def no_cluster(monkeypatch):
     ("faults", '[scenario]\nname = "walk"\n[[fault]]\nname = "imu_silent"\n', "scenario",
      "an array of tables, each written [[scenario]]"),
     ("faults", 'fault = "imu_silent"\n', "fault", "an array of tables, each written [[fault]]"),
-    ("faults", 'scenario = [1, 2]\n[[fault]]\nname = "imu_silent"\n', "scenario", "an array of tables, each written [[scenario]]"),
+    ("faults", 'scenario = [1, 2]\n[[fault]]\nname = "imu_silent"\n', "scenario",
+     "an array of tables, each written [[scenario]]"),
     ("design", "[[search]]\nstrides = 1\n", "search", "a table, written [search]"),
     ("design", "belt = 3\n", "belt", "an array of tables, each written [[belt]]"),
 ])

@@ -58,13 +58,14 @@ def run(args: argparse.Namespace) -> int:
     """Check the spec whole (every design's profile built), run the points not yet finished, write the report.
 
     Exit 2 for a bad spec, option or --out (before any run, before the cluster starts); 1 when a point gave no
-    figures (error, timeout); 74 when a result cannot be written during the search; 128 + N after signal N (design.md holds the points finished so far; --resume runs the rest).
+    figures (error, timeout); 74 when a result cannot be written during the search; 128 + N after signal N
+    (design.md holds the points finished so far; --resume runs the rest).
     """
     from host_tools.command_errors import study_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.studies.design_point import design_error_row, run_design_point
     from host_tools.studies.design_report import write_design_report
     from host_tools.studies.design_spec import load_design_spec
-    from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.studies.interrupt import Interrupted, interrupting, stopped_line
     from host_tools.studies.sweep_engine import dask_client, run_tasks
     from host_tools.studies.sweep_table import JOURNAL, check_out, read_rows

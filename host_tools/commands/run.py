@@ -62,8 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(docs/controllers.md); default: the profile's [controller], else cascade")
     parser.add_argument("--imu-model", default=None, metavar="NAME",
                         help="the IMU device model on the virtual bench: a name of the device registry "
-                             "(hal/virtual/devices/registry.py, plug-ins of the pafp.devices group too; docs/registries.md);"
-                             " default bno08x")
+                             "(hal/virtual/devices/registry.py, plug-ins of the pafp.devices group too; "
+                             "docs/registries.md); default bno08x")
     parser.add_argument("--experiment", choices=("sysid",), default=None,
                         help="run the identification experiment (the shipped controller sysid, its [controller] "
                              "parameters from the profile when it names sysid) for its whole length instead of "

@@ -331,7 +331,7 @@ def adc_summary(r: RunResult) -> dict | None:
     from hal.virtual.devices.registry import DEVICES
 
     adc = sensors.adc
-    codes = dict(zip(adc.channels, adc.read()))
+    codes = dict(zip(adc.channels, adc.read(), strict=True))
     shipped = {n.replace("-", "_") for n in DEVICES.shipped()}
     return {"bits": adc.bits, "vref_v": adc.vref_v, "at_s": round(r.sim_time_s, 6),
             "sensors": {part: {"origin": "shipped" if part in shipped else "plug-in",

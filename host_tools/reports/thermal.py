@@ -163,9 +163,10 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
     if battery is None:
         lines += ["", "Supply: ideal (no battery profile: `--battery NAME`)."]
         return lines
+    why_not = battery["energy_figures_left_out"]
     lines += [f"| battery | {battery['name']}, {battery['capacity_wh']} Wh |",
               f"| energy per stride at the battery | {fig(battery['energy_per_stride_j'], ' J')}"
-              f"{'' if battery['energy_figures_left_out'] is None else ' (' + battery['energy_figures_left_out'] + ')'} |",
+              f"{'' if why_not is None else f' ({why_not})'} |",
               f"| regenerated into the battery | {battery['regenerated_j']} J |",
               f"| lowest bus voltage | {fig(battery['min_bus_v'], ' V')} |",
               f"| strides / distance per charge at {battery['speed_m_s']} m/s | "

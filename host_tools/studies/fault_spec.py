@@ -126,7 +126,6 @@ def load_fault_spec(path: Path) -> FaultSpec:
     bad = sorted(set(camp) - set(CAMPAIGN_KEYS))
     if bad:
         raise SpecError(f"fault spec {path}: [campaign] key {bad[0]!r} unknown: one of {', '.join(CAMPAIGN_KEYS)}")
-    base = path.parent
     profile = _SPEC.file(path, "[campaign] profile", camp["profile"]) if "profile" in camp else DEFAULT_PROFILE
     criteria = _SPEC.file(path, "[campaign] criteria", camp["criteria"]) if "criteria" in camp else DEFAULT_CRITERIA
     seed = camp.get("seed", 0)

@@ -21,8 +21,8 @@ from typing import Any
 
 from hal.registry import Registry
 
-__all__ = ["AK60_6", "device_model_for", "BNO08X", "DEVICES", "FSR_HEEL", "FSR_TOE", "GROUND_BOARD", "KINDS", "LOAD_CELL", "DeviceModel",
-           "adc_sensor_models", "device_model"]
+__all__ = ["AK60_6", "BNO08X", "DEVICES", "FSR_HEEL", "FSR_TOE", "GROUND_BOARD", "KINDS", "LOAD_CELL", "DeviceModel",
+           "adc_sensor_models", "device_model", "device_model_for"]
 
 KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground"), "adc": ("sensor",)}
 """Peripheral kind a device model may sit on -> the bench roles of that kind that carry a device (a sensor on
