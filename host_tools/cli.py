@@ -1,10 +1,10 @@
-"""The `pafp` command line: one subcommand per module of host_tools.commands (or of a package's entry point)."""
+"""The `pafp` command line: one subcommand per module of host_tools.commands (or of a package's entry point), each
+run under the contract of host_tools/contract.py (inputs protected, one exit-code table, no traceback)."""
 
 from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 from typing import NoReturn
 
@@ -75,14 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     if stale:  # Python imports the extension, not the edited source
         print(f"pafp: warning: {len(stale)} compiled modules are older than their source (e.g. "
               f"{stale[0].relative_to(ROOT)}): run `make install` to rebuild", file=sys.stderr)
-    try:
-        return int(args._run(args) or 0)
-    except KeyboardInterrupt:
-        print("pafp: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into e.g. `head`, which has gone: not an error of ours
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
+    from host_tools.contract import run_command  # every command under the one contract (docs/commands.md)
+
+    return run_command(args.command, args._run, args)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -2,8 +2,11 @@
 
 A run writes into a hidden staging directory beside ``--out`` (``.<name>.<random>.partial``) and only
 :meth:`RunDir.publish` puts it in place, so ``--out`` never holds the files of two runs: it is either the
-previous run's directory, untouched, or the new one. An existing ``--out`` must be empty or a previous
-run's (it holds a ``summary.json``); anything else is refused before the run, not overwritten. Single files
+previous run's directory, untouched, or the new one. An existing ``--out`` must be empty or provably a previous
+output of pafp: it holds the ``MANIFEST`` publishing wrote, and nothing that manifest does not list (a
+``summary.json`` alone proves nothing); anything else is refused before the run, not replaced. An output that
+is one of the command's inputs, or holds one (host_tools/contract.py registers them with
+:func:`protect_inputs`), is refused too (:func:`check_holds_no_input`, called by :func:`check_writable`). Single files
 are written to a temporary name in their directory and renamed (:func:`write_atomic`, :func:`save_figure`).
 
 Every command checks its output paths before its work (:func:`check_writable`: not a file, creatable,
@@ -21,15 +24,16 @@ keeps the run's outputs in ``<name>.unpublished.<random>`` beside it (exit 74).
 >>> run = RunDir(root / "run1")
 >>> write_atomic(run.path / "summary.json", b"{}")
 >>> run.publish(); sorted(p.name for p in (root / "run1").iterdir())
-['summary.json']
+['.pafp-outputs.json', 'summary.json']
 >>> RunDir(root / "run1").publish()  # a previous run's directory is replaced as a whole
->>> list((root / "run1").iterdir())
-[]
+>>> [p.name for p in (root / "run1").iterdir()]
+['.pafp-outputs.json']
 """
 
 from __future__ import annotations
 
 import io
+import json
 import os
 import re
 import shutil
@@ -40,11 +44,13 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["EXIT_WRITE_FAILED", "MARKER", "MIN_FREE_BYTES", "OutDirError", "RunDir", "check_capture_dir",
-           "check_out_dir", "check_writable", "clean_stale", "naming", "save_figure", "write_atomic", "write_failed"]
+__all__ = ["EXIT_WRITE_FAILED", "MANIFEST", "MIN_FREE_BYTES", "OutDirError", "RunDir", "check_capture_dir",
+           "check_holds_no_input", "check_out_dir", "check_writable", "clean_stale", "mark_outputs", "naming",
+           "protect_inputs", "save_figure", "write_atomic", "write_failed"]
 
-MARKER = "summary.json"
-"""The file every run writes (interrupted ones too): a directory holding it is a previous run's."""
+MANIFEST = ".pafp-outputs.json"
+"""What pafp writes into every output directory it publishes: the names of the files it put there. A directory
+holding it and nothing it does not list is a previous output of pafp, which a new run may replace."""
 EXIT_WRITE_FAILED = 74
 """Exit code of a command whose output could not be written once its work had begun (EX_IOERR, sysexits.h)."""
 MIN_FREE_BYTES = 1 << 20
@@ -55,9 +61,34 @@ class OutDirError(ValueError):
     """An output directory that cannot take a run; the message names it and says what is allowed."""
 
 
+_INPUTS: list[Path] = []
+
+
+def protect_inputs(paths: list[Path]) -> list[Path]:
+    """Register the (resolved) inputs of the command being run: no output may be or hold one. Returns them."""
+    _INPUTS[:] = paths
+    return list(paths)
+
+
+def check_holds_no_input(out: Path, option: str = "--out", inputs: list[Path] | None = None) -> None:
+    """Refuse an output ``out`` (given as ``option``) that is an input, holds one, or lies inside an input file
+    (OutDirError naming both); ``inputs`` defaults to those registered by :func:`protect_inputs`. An output inside
+    an input directory is allowed (`pafp fit RUN`'s default RUN/fit): replacing it touches no input."""
+    target = Path(os.path.abspath(out)).resolve()
+    for source in _INPUTS if inputs is None else inputs:
+        if target == source or source.is_relative_to(target):
+            what = "is" if target == source else "holds"
+            raise OutDirError(f"{option} {out} {what} the input {source}: writing it would destroy the input; "
+                              f"name another {'file' if option == '--csv' else 'directory'}")
+        if target.is_relative_to(source) and not source.is_dir():
+            raise OutDirError(f"{option} {out} lies inside the input file {source}: name a directory")
+
+
 def check_writable(path: Path, option: str = "--out") -> None:
-    """Refuse a directory ``path`` (given as ``option``) that is a file, cannot be created or written, or whose
-    filesystem has less than MIN_FREE_BYTES free (OutDirError naming it)."""
+    """Refuse a directory ``path`` (given as ``option``) that is an input or holds one (:func:`check_holds_no_input`),
+    is a file, cannot be created or written, or whose filesystem has less than MIN_FREE_BYTES free (OutDirError
+    naming it)."""
+    check_holds_no_input(path, option)
     if path.exists() and not path.is_dir():
         raise OutDirError(f"{option} {path} is a file: a directory is needed")
     parent = _parent(path)
@@ -76,20 +107,45 @@ def check_writable(path: Path, option: str = "--out") -> None:
 
 
 def check_out_dir(out: Path) -> None:
-    """Refuse an ``out`` that is a file, holds files not from a run, or is not writable (:func:`check_writable`)."""
+    """Refuse an ``out`` that is or holds an input, is a file, holds files not from a run, or is not writable
+    (:func:`check_writable`)."""
+    check_holds_no_input(out)
     _check_previous_run(out)
     check_writable(out)
 
 
 def _check_previous_run(out: Path) -> None:
-    """Refuse an ``out`` that is a file or holds files not from a run."""
+    """Refuse an ``out`` that is a file or is not provably a previous output of pafp (:data:`MANIFEST`)."""
     if out.exists() and not out.is_dir():
         raise OutDirError(f"--out {out} is an existing file: name a new directory, an empty one or a previous run's")
     if out.is_dir():
         entries = sorted(p.name for p in out.iterdir())
-        if entries and MARKER not in entries:
-            raise OutDirError(f"--out {out} holds files that are not a pafp run's (e.g. {entries[0]!r}): name a new "
-                              "directory, an empty one or a previous run's (it has a summary.json)")
+        if not entries:
+            return
+        ours = _manifest(out)
+        foreign = [e for e in entries if e != MANIFEST and (ours is None or e not in ours)]
+        if foreign:
+            why = f"no {MANIFEST} lists its files" if ours is None else f"not in its {MANIFEST}"
+            raise OutDirError(f"--out {out} holds files that are not a pafp run's (e.g. {foreign[0]!r}; {why}): name a "
+                              "new directory, an empty one or one pafp published")
+
+
+def _manifest(out: Path) -> set[str] | None:
+    """The names the manifest in ``out`` lists, None when there is no readable one."""
+    try:
+        doc = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+        files = doc["files"]
+        if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+            return None
+        return set(files)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def mark_outputs(directory: Path) -> None:
+    """Write :data:`MANIFEST` into ``directory``: every name it holds is an output of pafp's."""
+    names = sorted(p.name for p in directory.iterdir() if p.name != MANIFEST)
+    write_atomic(directory / MANIFEST, json.dumps({"written_by": "pafp", "files": names}, indent=1) + "\n")
 
 
 def check_capture_dir(path: Path) -> None:
@@ -193,6 +249,7 @@ class RunDir:
         """Put the staged files at ``out``: a previous run's directory there is replaced as a whole. If something
         else wrote files that are not a run's into ``out`` meanwhile, nothing is replaced and the staging
         directory is kept (OutDirError naming it)."""
+        mark_outputs(self.path)
         if self.out.is_dir() and not any(self.out.iterdir()):
             self.out.rmdir()
         old = None

@@ -23,7 +23,8 @@ from hal.record.recorder import Recorder, SectionedBody
 from host_tools.build_info import describe, version
 from rtos import Job, Task
 
-__all__ = ["INIT_TASK", "RECORD_NAME", "STOP_TASK", "RunRecording", "config_dict", "config_from_dict"]
+__all__ = ["INIT_TASK", "RECORD_NAME", "STOP_TASK", "RunRecording", "check_header", "config_dict", "config_from_dict",
+           "read_record_header"]
 
 RECORD_NAME = "record.bin"
 INIT_TASK = 254  # the section of the firmware's constructor
@@ -51,6 +52,61 @@ def config_from_dict(d: dict) -> FirmwareConfig:
                              "ground_sensors": GroundSensorConfig.from_table(
                                  {**d["ground_sensors"],
                                   "calibration": [list(r) for r in d["ground_sensors"]["calibration"]]})})
+
+
+def check_header(header: dict, path: Path) -> FirmwareConfig:
+    """The firmware configuration of a record's header, every key a replay or a fit uses checked: RecordError in one
+    line naming the record, the key and what was expected (a version-1 record has no header checksum, and a
+    hand-edited one may name what this pafp does not know)."""
+    from firmware.control.registry import build_controller
+    from hal.record.format import RecordError
+    from host_tools.walk import SPEEDS
+
+    def bad(key: str, what: str) -> RecordError:
+        return RecordError(f"record {path}: header key {key!r} {what}")
+
+    def table(doc: dict, key: str, where: str) -> dict:
+        value = doc.get(key)
+        if not isinstance(value, dict):
+            raise bad(where, "missing: expected a table" if value is None else f"= {value!r}: expected a table")
+        return value
+
+    table(header, "firmware", "firmware")
+    f_cpu = header.get("f_cpu_hz")
+    if isinstance(f_cpu, bool) or not isinstance(f_cpu, int) or f_cpu <= 0:
+        raise bad("f_cpu_hz", f"= {f_cpu!r}: expected an integer > 0")
+    tasks = header.get("tasks")
+    if not isinstance(tasks, list) or not set(TASK_NAMES) <= set(t for t in tasks if isinstance(t, str)):
+        raise bad("tasks", f"= {tasks!r}: expected a list naming the firmware's tasks {list(TASK_NAMES)}")
+    for key in ("ports", "encoder"):
+        table(header, key, key)
+    reference = header.get("reference", {})
+    if not isinstance(reference, dict):
+        raise bad("reference", f"= {reference!r}: expected a table")
+    speed, csv = reference.get("speed"), reference.get("csv")
+    if speed is not None and speed not in SPEEDS:
+        raise bad("reference.speed", f"= {speed!r}: expected one of {list(SPEEDS)}")
+    if csv is not None and not (isinstance(csv, str) and csv):
+        raise bad("reference.csv", f"= {csv!r}: expected the path of the gait reference CSV")
+    if csv is not None and not Path(csv).is_file():
+        raise bad("reference.csv", f"= {csv!r}: the gait reference CSV it names cannot be read (not found)")
+    try:
+        cfg = config_from_dict(header["firmware"])
+        build_controller(cfg.controller, cfg, dict(cfg.controller_params))
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        what = f"missing key {e}" if isinstance(e, KeyError) else " ".join(str(e).split())
+        raise bad("firmware", f"does not describe a firmware configuration: {what}") from None
+    return cfg
+
+
+def read_record_header(path: Path) -> tuple[dict, FirmwareConfig]:
+    """(the header, its firmware configuration) of the record at ``path``, checked (:func:`check_header`;
+    RecordError naming the byte offset or the key)."""
+    from hal.record.reader import RecordReader
+
+    reader = RecordReader(path)
+    reader.close()
+    return reader.header, check_header(reader.header, path)
 
 
 def _board_header(board: Board) -> dict:

@@ -75,7 +75,7 @@ def test_points_are_the_product_and_every_design_has_its_profile(tmp_path):
     ("max_tracking_rms_deg = 0\n", REPORT_BELT, r"max_tracking_rms_deg = 0 out of range: a number in \(0, 90\]"),
     ("colour = 1\n", REPORT_BELT, "key 'colour' unknown"),
     ("", "", r"no \[\[belt\]\]"),
-    ("", REPORT_BELT.replace("30", "3"), r"belt_driver_teeth = 3 is outside the allowed range"),
+    ("", REPORT_BELT.replace("30", "3"), r"\[\[belt\]\] 0 driver_teeth = 3 out of range: an int in 12..157"),
     ("", REPORT_BELT + '[[spring]]\nstiffness_nm_per_rad = 50.0\nsided = "three"\n', r"sided = 'three' out of range"),
 ])
 def test_a_bad_spec_is_one_line_naming_the_value_before_any_run(tmp_path, search, tables, match, capsys):

@@ -96,7 +96,7 @@ def test_the_window_counts_on_the_firmware_clock_it_follows_and_not_before_its_s
     ("fault://loop://?fault=encoder_reversed&at=1", "virtual bench only"),
     ("fault://loop://?fault=imu_bias_step&at=1", "refused on a real port"),
     ("fault://loop://?fault=imu_silent", "one of at=SECONDS or phase=P"),
-    ("fault://loop://?fault=imu_silent&at=1&phase=0.5", "one of at=SECONDS or phase=P"),
+    ("fault://loop://?fault=imu_silent&at=1&phase=0.5", "at=1 and phase=0.5 both given: give either"),
     ("fault://loop://?fault=imu_silent&phase=1.5", "phase=1.5 out of range"),
     ("fault://loop://?fault=imu_silent&at=soon", "at='soon' is not a number"),
     ("fault://loop://?fault=imu_corrupt&at=1&bit_error_rate=5", "bit_error_rate = 5.0 out of range"),

@@ -132,7 +132,8 @@ def test_a_previous_run_is_replaced_whole_never_mixed(tmp_path, capsys):
     assert code == 0 and {"tracking.png", "trace.json", "summary.json"} <= {p.name for p in out.iterdir()}
     code, stdout, _ = _run(capsys, "--strides", "1", "--seed", "3", "--no-plot", "--no-trace", "--out", str(out))
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["report.md", "summary.json", "telemetry.bin", "telemetry.csv"]
+    assert sorted(p.name for p in out.iterdir()) == [".pafp-outputs.json", "report.md", "summary.json", "telemetry.bin",
+                                                     "telemetry.csv"]
     assert json.loads((out / "summary.json").read_text())["seed"] == 3
     assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no staging or old directory left behind
     assert "tracking.png" not in stdout and "trace.json" not in stdout

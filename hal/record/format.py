@@ -3,11 +3,13 @@
 Layout (little endian)::
 
     b"PAFPREC\\0"  u16 version  u32 n  n bytes of JSON header (what was run: firmware config, tasks, ports)
+                 u32 crc32(version, n and the header bytes)   (version 2; version 1 has no checksum)
     chunk*         u32 raw_len  u32 packed_len  u32 crc32(packed)  packed (zlib of raw_len bytes of events)
     end            u32 0  u32 0  u32 0  u32 n  n bytes of JSON footer (counts, how the run ended)
 
-A chunk is about ``CHUNK_BYTES`` of events: memory stays bounded and a run that dies loses at most the
-last chunk. An event is one tag byte (``kind << 2 | port``) and a fixed-size payload, or a u16 length and
+The header's checksum makes a flipped byte in it (a controller's or a task's name) a damaged record, not
+another run. A chunk is about ``CHUNK_BYTES`` of events: memory stays bounded and a run that dies loses at
+most the last chunk. An event is one tag byte (``kind << 2 | port``) and a fixed-size payload, or a u16 length and
 that many bytes (`Event` below). A reader that meets a short or damaged chunk raises `RecordError` naming
 the file offset, so ``pafp replay`` says where the record is bad in one line.
 """
@@ -21,10 +23,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO, Final
 
-__all__ = ["CHUNK_BYTES", "MAGIC", "VERSION", "Kind", "RecordError", "read_header", "read_chunks", "write_header"]
+__all__ = ["CHUNK_BYTES", "MAGIC", "READS", "VERSION", "Kind", "RecordError", "read_header", "read_chunks",
+           "write_header"]
 
 MAGIC: Final = b"PAFPREC\0"
-VERSION: Final = 1
+VERSION: Final = 2
+READS: Final = (1, 2)
+"""The versions this pafp reads: version 1 (no header checksum) as written before version 2."""
 CHUNK_BYTES: Final = 1 << 16
 _CHUNK = struct.Struct("<III")
 _U32 = struct.Struct("<I")
@@ -74,7 +79,8 @@ class RecordError(ValueError):
 def write_header(f: BinaryIO, header: dict) -> None:
     """Write the magic, the version and the JSON header."""
     blob = json.dumps(header, sort_keys=True).encode("utf-8")
-    f.write(MAGIC + struct.pack("<HI", VERSION, len(blob)) + blob)
+    lead = struct.pack("<HI", VERSION, len(blob))
+    f.write(MAGIC + lead + blob + _U32.pack(zlib.crc32(lead + blob)))
 
 
 def pack_chunk(raw: bytes, level: int = 1) -> bytes:
@@ -104,13 +110,19 @@ def read_header(f: BinaryIO, path: Path) -> dict:
     if magic != MAGIC:
         raise RecordError(f"record {path}: not a pafp input record at byte offset 0 (magic {magic!r}, "
                           f"expected {MAGIC!r})")
-    version, n = struct.unpack("<HI", _exact(f, 6, path, "the version and header length"))
-    if version != VERSION:
-        raise RecordError(f"record {path}: format version {version} at byte offset 8 not supported: "
-                          f"this pafp reads version {VERSION}")
+    lead = _exact(f, 6, path, "the version and header length")
+    version, n = struct.unpack("<HI", lead)
+    if version not in READS:
+        raise RecordError(f"record {path}: format version {version} at byte offset 8 not supported: this pafp reads "
+                          f"versions {', '.join(map(str, READS))}")
     offset = f.tell()
+    blob = _exact(f, n, path, "the header")
+    if version >= 2:
+        (crc,) = _U32.unpack(_exact(f, 4, path, "the header checksum"))
+        if zlib.crc32(lead + blob) != crc:
+            raise RecordError(f"record {path}: header at byte offset {offset} is damaged (checksum mismatch)")
     try:
-        header = json.loads(_exact(f, n, path, "the header").decode("utf-8"))
+        header = json.loads(blob.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise RecordError(f"record {path}: header at byte offset {offset} is not JSON ({e})") from None
     if not isinstance(header, dict):

@@ -61,14 +61,18 @@ class SerialUart(Uart):
         self.url = url
         blocking = url_scheme(url) in _BLOCKING_WRITE_SCHEMES
         factory = port_factory or serial.serial_for_url
+        refused: tuple[type[Exception], ...] = ()
         if url_scheme(url) == "fault":  # our fault-injecting wrapper (hal/serial/protocol_fault.py)
-            from hal.serial.protocol_fault import register_fault_handler
+            from hal.serial.protocol_fault import FaultUrlError, register_fault_handler
 
             register_fault_handler()
+            refused = (FaultUrlError,)
         try:
             self._port = factory(
                 url, baudrate=baud, timeout=0, write_timeout=None if blocking else 0, **serial_options
             )
+        except refused as exc:  # the URL itself refused: a bad input, not a lost port (named once by the caller)
+            raise ValueError(f"fault URL refused: {exc}") from None
         except _PORT_ERRORS as exc:
             raise PortLostError(url, f"cannot open: {exc}") from exc
         limit = getattr(self._port, "buffer_size", None) if blocking else None

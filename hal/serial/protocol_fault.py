@@ -35,11 +35,16 @@ from typing import Any
 import serial
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-__all__ = ["Serial", "parse_fault_url", "register_fault_handler"]
+__all__ = ["FaultUrlError", "Serial", "parse_fault_url", "register_fault_handler"]
 
 log = logging.getLogger(__name__)
 
 _OWN_KEYS = ("fault", "at", "phase", "duration", "allow_dangerous", "seed")
+
+
+class FaultUrlError(SerialException):
+    """A fault:// URL refused (a bad or missing part, a fault not allowed on a wire); the message names the part, not
+    the URL, which whoever opened the port names once."""
 
 
 def register_fault_handler() -> None:
@@ -52,7 +57,7 @@ def _number(url: str, key: str, text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise SerialException(f"{url}: {key}={text!r} is not a number") from None
+        raise FaultUrlError(f"{key}={text!r} is not a number") from None
     return value
 
 
@@ -63,19 +68,23 @@ def parse_fault_url(url: str) -> tuple[str, Any]:
 
     parts = urllib.parse.urlsplit(url)
     if parts.scheme != "fault":
-        raise SerialException(f"{url}: not a fault:// URL")
+        raise FaultUrlError("not a fault:// URL")
     inner = url[len("fault://"):].split("?", 1)[0]
     if not inner:
-        raise SerialException(f"{url}: name the port to wrap: fault://PORT?fault=NAME&at=SECONDS")
+        raise FaultUrlError("name the port to wrap: fault://PORT?fault=NAME&at=SECONDS")
     query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
     options = {k: v[-1] for k, v in query.items()}
     name = options.get("fault")
-    if not name or ("at" in options) == ("phase" in options):
-        raise SerialException(f"{url}: fault=NAME and one of at=SECONDS or phase=P (a gait phase, 0 <= P < 1) "
-                              "are required")
+    if not name:
+        raise FaultUrlError("fault=NAME is required (with at=SECONDS or phase=P)")
+    if "at" in options and "phase" in options:
+        raise FaultUrlError(f"at={options['at']} and phase={options['phase']} both given: give either at=SECONDS "
+                            "(on the firmware's clock) or phase=P (a gait phase, 0 <= P < 1), not both")
+    if "at" not in options and "phase" not in options:
+        raise FaultUrlError("one of at=SECONDS or phase=P (a gait phase, 0 <= P < 1) is required")
     phase = _number(url, "phase", options["phase"]) if "phase" in options else None
     if phase is not None and not 0.0 <= phase < 1.0:
-        raise SerialException(f"{url}: phase={options['phase']} out of range: a gait phase, 0 <= P < 1")
+        raise FaultUrlError(f"phase={options['phase']} out of range: a gait phase, 0 <= P < 1")
     at = _number(url, "at", options["at"]) if phase is None else 0.0
     duration = _number(url, "duration", options["duration"]) if "duration" in options else math.inf
     params: dict[str, Any] = {}
@@ -83,17 +92,17 @@ def parse_fault_url(url: str) -> tuple[str, Any]:
         if k not in _OWN_KEYS:
             try:
                 params[k] = _number(url, k, v)
-            except SerialException:
+            except FaultUrlError:
                 params[k] = v  # a named choice
     try:
         fault = make_injector(name, at, duration, int(_number(url, "seed", options.get("seed", "0"))), **params)
     except ValueError as e:
-        raise SerialException(f"{url}: {e}") from None
+        raise FaultUrlError(str(e)) from None
     if not isinstance(fault, ByteFault):
-        raise SerialException(f"{url}: fault {name} acts on the {fault.WHERE}, not on a serial line: it exists on "
+        raise FaultUrlError(f"fault {name} acts on the {fault.WHERE}, not on a serial line: it exists on "
                               "the virtual bench only (pafp faults)")
     if fault.DANGEROUS and options.get("allow_dangerous") != "1":
-        raise SerialException(f"{url}: fault {name} is refused on a real port: {fault.HAZARD}; add "
+        raise FaultUrlError(f"fault {name} is refused on a real port: {fault.HAZARD}; add "
                               "allow_dangerous=1 only with the foot free of any person (docs/hardware.md)")
     fault.phase = phase
     if phase is not None:

@@ -17,7 +17,7 @@ import numpy as np
 
 from hal.record.format import Kind
 from hal.record.reader import RecordReader
-from host_tools.recording import RECORD_NAME
+from host_tools.recording import RECORD_NAME, read_record_header
 from host_tools.reports.run_files import check_same_run
 
 __all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "STALL_BOUND_S", "WINDOW_S", "Experiment", "encoder_velocity",
@@ -375,6 +375,7 @@ def load_experiment(run_dir: Path) -> Experiment:
         if not f.is_file():
             raise ValueError(f"{f}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
                              "`pafp run --experiment sysid`, or any serial run)")
+    read_record_header(record)  # a damaged or foreign header: one line naming the key, not a KeyError
     check_same_run(run_dir)  # record.bin and telemetry.csv of one run, as its summary.json names them
     w = _wire(record)
     t_cmd, i_cmd = w.t_cmd, w.i_cmd

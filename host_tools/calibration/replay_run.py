@@ -23,7 +23,7 @@ from hal.record.format import Kind, RecordError
 from hal.record.reader import RecordReader, Section
 from hal.record.replay import ReplayBoard, replay_sections
 from hal.record.streams import item_bytes, port_name
-from host_tools.recording import INIT_TASK, RECORD_NAME, STOP_TASK, config_from_dict
+from host_tools.recording import INIT_TASK, RECORD_NAME, STOP_TASK, check_header
 from host_tools.runner import gait_reference
 from rtos import Job
 
@@ -35,6 +35,8 @@ _PROTOCOL = {"motor": "vesc", "telemetry": "telemetry", "imu": "rvc"}
 def find_record(run_dir: Path) -> Path:
     """The record of a run directory (or the record file itself); RecordError when there is none."""
     path = run_dir / RECORD_NAME if run_dir.is_dir() else run_dir
+    if path.exists() and not path.is_file():
+        raise RecordError(f"record {path}: not a regular file (a run directory or its {RECORD_NAME} is needed)")
     if not path.is_file():
         raise RecordError(f"record {path}: not found (a run records its inputs into {RECORD_NAME}: serial runs "
                           "always, virtual runs with --record)")
@@ -129,7 +131,7 @@ def replay_record(path: Path, fw_cfg: FirmwareConfig | None = None, controller: 
     reader = RecordReader(path)
     header = reader.header
     try:
-        recorded_cfg = config_from_dict(header["firmware"])
+        recorded_cfg = check_header(header, path)  # RecordError naming the key
         f_cpu = int(header["f_cpu_hz"])
         replay = ReplayBoard(header, {"telemetry": telemetry_out} if telemetry_out is not None else None)
         names = list(header["tasks"])

@@ -39,23 +39,19 @@ def _message_line(msgs: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     """Check the inputs, replay, write the outputs, print the verdict."""
     from hal.record.format import RecordError
-    from hal.record.reader import RecordReader
     from host_tools.calibration.replay_run import find_record, replay_record
     from host_tools.command_errors import input_error, output_error
     from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, write_atomic
-    from host_tools.recording import config_from_dict
+    from host_tools.recording import read_record_header
 
     out = args.out or Path("runs") / (time.strftime("%Y%m%d-%H%M%S") + "-replay")
     try:
         path = find_record(args.run_dir)
-        header = RecordReader(path)
-        header.close()
+        header, fw_cfg = read_record_header(path)  # every key the replay uses checked: one line naming it
         if args.profile is not None:
             from firmware.config import load_firmware_config
 
             fw_cfg = load_firmware_config(args.profile)
-        else:
-            fw_cfg = config_from_dict(header.header["firmware"])
         if args.controller is not None and args.controller != fw_cfg.controller:
             fw_cfg = fw_cfg.with_changes(controller=args.controller, controller_params={})
         controller = None
@@ -68,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as e:  # a file that cannot be read, a bad value (OutDirError, RecordError too)
         print(input_error("replay", e), file=sys.stderr)
         return 2
-    print(f"pafp replay: {path} ({header.header.get('mode')} run)"
+    print(f"pafp replay: {path} ({header.get('mode')} run)"
           + (" with a changed configuration" if changed else "") + f" -> {out}")
     try:
         with (run_dir.path / "telemetry.bin").open("wb") as tel:

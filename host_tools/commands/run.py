@@ -390,13 +390,12 @@ def _run_serial(args: argparse.Namespace) -> int:
     """Serial mode: check the ports, run on the wall clock, stop safely, write the same outputs (exit codes:
     docs/hardware.md)."""
     from host_tools.serial_mode.realtime import RealtimeSettings
-    from host_tools.serial_mode.serial_run import SerialRunConfig, StartupError, run_serial
-    from host_tools.stop_signals import StopSignals
+    from host_tools.serial_mode.serial_run import SerialRunConfig
 
     if not (args.motor and args.imu):
         print("pafp run: serial mode needs both --motor PORT and --imu PORT", file=sys.stderr)
         return 2
-    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, check_capture_dir, check_out_dir, write_failed
+    from host_tools.outdir import OutDirError, check_capture_dir, check_out_dir, mark_outputs
 
     out = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
@@ -428,6 +427,19 @@ def _run_serial(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:
         print(f"pafp run: {e}", file=sys.stderr)
         return 2
+    try:
+        return _serial_outputs(args, cfg, out, telemetry_pty)
+    finally:
+        if out.is_dir():  # written in place, not staged: marked as pafp's outputs (a later run may replace them)
+            mark_outputs(out)
+
+
+def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> int:  # SerialRunConfig, TelemetryPty
+    """Run in serial mode into ``out``, write the outputs, print the summary; the exit code."""
+    from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
+    from host_tools.serial_mode.serial_run import StartupError, run_serial
+    from host_tools.stop_signals import StopSignals
+
     print(f"pafp run: serial mode, motor {cfg.motor}, imu {cfg.imu}, {cfg.duration_s:g} s -> {out}", flush=True)
     if telemetry_pty is not None:
         print(f"telemetry: {telemetry_pty.path}  (watch it: pafp monitor {telemetry_pty.path})", flush=True)

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from host_tools.contract import shell_command
 from host_tools.reports.actuator import moment_share
 from host_tools.studies.design_spec import DesignPoint
 
@@ -65,9 +66,10 @@ def design_error_row(p: DesignPoint, status: str, error: str, wall_time_s: float
 
 def rerun_command(p: DesignPoint) -> str:
     """The `pafp run` command that runs the point as it ran here."""
-    return (f"pafp run --scenario walk --profile {p.profile_name} --body-mass {p.body_mass_kg:g} --speed {p.speed} "
-            f"--strides {p.strides} --controller {p.controller} --seed {p.seed}"
-            + (f" --ambient-c {p.ambient_c:g}" if p.ambient_c != 25.0 else ""))
+    return shell_command("pafp", "run", "--scenario", "walk", "--profile", p.profile_name, "--body-mass",
+                         f"{p.body_mass_kg:g}", "--speed", p.speed, "--strides", p.strides, "--controller",
+                         p.controller, "--seed", p.seed,
+                         *(["--ambient-c", f"{p.ambient_c:g}"] if p.ambient_c != 25.0 else []))
 
 
 def point_run_config(p: DesignPoint, trace: bool = False) -> Any:

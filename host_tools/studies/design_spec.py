@@ -19,13 +19,13 @@ speeds, each point a walking run of the firmware on its design profile; checked 
     max_tracking_rms_deg = 5.0         # and tracks the gait within this RMS (the encoder's, in RUN)
 
     [[belt]]                           # one per ratio: the belt's tooth pair and pitch
-    driver_teeth = 12
-    driven_teeth = 56
-    pitch_mm = 5.0
+    driver_teeth = 12                  # whole teeth from the pitch's smallest stock pulley (12 at 2 mm, 16 at 3,
+    driven_teeth = 56                  # 18 at 5, 22 at 8) to a 100 mm ankle pulley (157 at 2 mm, 104, 62, 39)
+    pitch_mm = 5.0                     # 2, 3, 5 or 8 mm
 
     [[spring]]                         # a parallel spring; one without stiffness (or 0) is "no spring"
-    stiffness_nm_per_rad = 150.0
-    engage_deg = 0.0
+    stiffness_nm_per_rad = 150.0       # 0..2000 N m/rad (the plant's hard stop)
+    engage_deg = 0.0                   # -30..30 deg
     sided = "one"
 
 Points are the product motor (outermost) x belt x spring x battery x body mass x speed (innermost), numbered
@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from firmware.config import DEFAULT_PROFILE
+from hal.virtual.plant.design import BELT_PITCHES, MAX_ENGAGE_DEG, MAX_SPRING_NM_PER_RAD, max_teeth
 from host_tools.studies.spec_values import SpecValues
 from host_tools.studies.sweep_spec import SpecError
 
@@ -199,9 +200,12 @@ def _belts(path: Path, doc: dict[str, Any]) -> tuple[tuple[int, int, float], ...
         for key in BELT_KEYS:
             if key not in b:
                 raise SpecError(f"design spec {path}: [[belt]] {k} has no {key!r}")
-        out.append((_int(path, f"[[belt]] {k} driver_teeth", b["driver_teeth"], 1, 1000),
-                    _int(path, f"[[belt]] {k} driven_teeth", b["driven_teeth"], 1, 1000),
-                    _number(path, f"[[belt]] {k} pitch_mm", b["pitch_mm"], 0.0, 100.0, True)))
+        pitch = b["pitch_mm"]
+        if isinstance(pitch, bool) or pitch not in BELT_PITCHES:  # the teeth's range depends on it
+            raise _err(path, f"[[belt]] {k} pitch_mm", pitch, f"one of {', '.join(f'{p:g}' for p in BELT_PITCHES)}")
+        fewest, most = BELT_PITCHES[pitch][1], max_teeth(pitch)  # the design loader's limits, not looser ones
+        out.append((_int(path, f"[[belt]] {k} driver_teeth", b["driver_teeth"], fewest, most),
+                    _int(path, f"[[belt]] {k} driven_teeth", b["driven_teeth"], fewest, most), float(pitch)))
     if len(set(out)) != len(out):
         raise SpecError(f"design spec {path}: [[belt]] repeats a tooth pair and pitch")
     return tuple(out)
@@ -214,8 +218,9 @@ def _springs(path: Path, doc: dict[str, Any]) -> tuple[tuple[float, float, str],
         if extra:
             raise SpecError(f"design spec {path}: [[spring]] {k} key {extra[0]!r} unknown: one of "
                             f"{', '.join(SPRING_KEYS)}")
-        k_nm = _number(path, f"[[spring]] {k} stiffness_nm_per_rad", s.get("stiffness_nm_per_rad", 0.0), 0.0, 1e5)
-        engage = _number(path, f"[[spring]] {k} engage_deg", s.get("engage_deg", 0.0), -90.0, 90.0)
+        k_nm = _number(path, f"[[spring]] {k} stiffness_nm_per_rad", s.get("stiffness_nm_per_rad", 0.0), 0.0,
+                       MAX_SPRING_NM_PER_RAD)
+        engage = _number(path, f"[[spring]] {k} engage_deg", s.get("engage_deg", 0.0), -MAX_ENGAGE_DEG, MAX_ENGAGE_DEG)
         sided = _SPEC.choice(path, f"[[spring]] {k} sided", s.get("sided", "one"), ("one", "two"))
         out.append((k_nm, engage, sided) if k_nm else (0.0, 0.0, "one"))
     if len(set(out)) != len(out):

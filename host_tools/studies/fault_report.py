@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from hal.virtual.faults import INJECTORS, injector_class
+from host_tools.contract import shell_command
 from host_tools.outdir import write_atomic
 from host_tools.studies.fault_spec import FaultSpec
 from host_tools.studies.sweep_table import status_counts
@@ -96,7 +97,7 @@ def load_criteria(path: Path) -> dict[str, dict[str, float]]:
 
 def rerun_command(spec: FaultSpec, point: int) -> str:
     """The command that re-runs one point with the full outputs of `pafp run`."""
-    return f"pafp faults {spec.path} --point {point} --out runs/{spec.path.stem}-point-{point}"
+    return shell_command("pafp", "faults", spec.path, "--point", point, "--out", f"runs/{spec.path.stem}-point-{point}")
 
 
 def _num(v: object) -> float:

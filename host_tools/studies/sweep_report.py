@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from host_tools.contract import shell_command
 from host_tools.outdir import naming, save_figure, write_atomic
 from host_tools.studies.sweep_spec import SweepSpec
 
@@ -33,7 +34,7 @@ def _slug(key: str) -> str:
 
 def rerun_command(spec: SweepSpec, point: int) -> str:
     """The command that re-runs one point with the full outputs of `pafp run`."""
-    return f"pafp sweep {spec.path} --point {point} --out runs/{spec.path.stem}-point-{point}"
+    return shell_command("pafp", "sweep", spec.path, "--point", point, "--out", f"runs/{spec.path.stem}-point-{point}")
 
 
 def _axis_plot(path: Path, rows: list[dict[str, Any]], key: str, values: tuple[Any, ...]) -> None:
@@ -106,7 +107,8 @@ def write_report(spec: SweepSpec, rows: list[dict[str, Any]], out: Path, *, wall
              + (f" in {wall_time_s:.1f} s" if wall_time_s is not None else "") + (f" ({where})" if where else "")
              + ".", "",
              *([f"**Interrupted** by {interrupted}: {len(rows)} of {spec.n_points} points finished; "
-                f"`pafp sweep {spec.path} --out {out} --resume` runs the rest.", ""] if interrupted else []),
+                f"`{shell_command('pafp', 'sweep', spec.path, '--out', out, '--resume')}` runs the rest.",
+                ""] if interrupted else []),
              "| status | points |", "|---|---|", *(f"| {s} | {n} |" for s, n in status.items()), "",
              "Figures over the points that ran (ok or fault):", "",
              "| figure | median | worst (max) | min |", "|---|---|---|---|"]

@@ -240,4 +240,4 @@ def battery_from_mapping(data: dict[str, Any], path: Path) -> BatteryParams:
 def load_battery(name_or_path: str | Path) -> BatteryParams:
     """Load a packaged battery by name or a battery profile by path, fully checked."""
     path = resolve_profile(name_or_path, BATTERY_DIR, "battery")
-    return battery_from_mapping(read_profile(path), path)
+    return battery_from_mapping(read_profile(path, "battery profile"), path)

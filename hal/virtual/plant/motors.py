@@ -163,13 +163,13 @@ def _check_consistency(v: dict[str, Any], where: str) -> None:
 def load_motor(name_or_path: str | Path) -> MotorSpec:
     """Load a catalogue motor by name (``"ak60_6"``) or a motor profile by path, fully checked."""
     path = resolve_profile(name_or_path, CATALOGUE_DIR, "motor")
-    return motor_from_mapping(read_profile(path), path)
+    return motor_from_mapping(read_profile(path, "motor profile"), path)
 
 
 def source_of(name: str, table: str, key: str) -> str:
     """The cited source of one value of catalogue motor ``name``."""
     path = motor_path(name)
-    data = read_profile(path)
+    data = read_profile(path, "motor profile")
     _, source = sourced_value(data[table][key], key, table, str(path))
     return source
 

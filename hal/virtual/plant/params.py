@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import math
-import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -264,7 +263,8 @@ def plant_params_from_mapping(data: dict[str, Any], where: str = "") -> PlantPar
 def load_plant_params(path: str | Path | None = None) -> PlantParams:
     """Load and validate a plant profile (default: the packaged AK60-6 profile)."""
     profile = Path(path) if path is not None else default_profile_path()
-    with profile.open("rb") as fh:
-        data = tomllib.load(fh)
+    from profiles import read_toml
+
+    data = read_toml(profile, "plant profile")
     logger.debug("loaded plant profile %s", profile)
     return plant_params_from_mapping(data, where=str(profile))

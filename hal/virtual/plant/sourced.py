@@ -16,7 +16,6 @@ ValueError: x.toml: motor.mass_kg = 368.0 is outside the allowed range [0.01, 20
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -38,16 +37,11 @@ def resolve_profile(name_or_path: str | Path, directory: str, what: str) -> Path
     return path
 
 
-def read_profile(path: str | Path) -> dict[str, Any]:
-    """Parse a TOML profile; ValueError names the file on a syntax error or a missing file."""
-    p = Path(path)
-    try:
-        with p.open("rb") as fh:
-            return tomllib.load(fh)
-    except OSError as exc:
-        raise ValueError(f"{p}: cannot read the profile ({exc.strerror or exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{p}: not valid TOML ({exc})") from None
+def read_profile(path: str | Path, what: str = "profile") -> dict[str, Any]:
+    """Parse a TOML profile; ValueError names the file (and the line of a syntax error; profiles.read_toml)."""
+    from profiles import read_toml
+
+    return read_toml(Path(path), what)
 
 
 def sourced_value(entry: object, key: str, table: str, where: str) -> tuple[object, str]:
