@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.design_spec import load_design_spec
     from host_tools.studies.interrupt import Interrupted, interrupting, stopped_line
     from host_tools.studies.sweep_engine import dask_client, run_tasks
-    from host_tools.studies.sweep_table import JOURNAL, check_out, read_rows
+    from host_tools.studies.sweep_table import check_out, kept_rows, read_rows
 
     try:
         workers, where = study_cluster(args)
@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp design: cannot write the design profiles: {e}", file=sys.stderr)
         return 2
     print(f"pafp design: {len(points)} points ({len(spec.designs())} designs) on {where} -> {out}")
-    kept = f"every row finished before it is in {out}/{JOURNAL} (--resume runs the rest)"
+    kept = kept_rows(out)
     try:
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_tasks(points, run_design_point, out, client, columns=columns(), digest=spec.digest,

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.fault_spec import load_fault_spec
     from host_tools.studies.interrupt import Interrupted, interrupting, stopped_line
     from host_tools.studies.sweep_engine import dask_client, run_tasks
-    from host_tools.studies.sweep_table import JOURNAL, check_out, read_rows
+    from host_tools.studies.sweep_table import check_out, kept_rows, read_rows
 
     try:
         workers, where = study_cluster(args)
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp faults: {e}", file=sys.stderr)
         return 2
     points = spec.points()
-    kept = f"every row finished before it is in {out}/{JOURNAL} (--resume runs the rest)"
+    kept = kept_rows(out)
     print(f"pafp faults: {len(points)} points on {where} -> {out}")
     interrupted = None
     try:

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.sweep_engine import check_points, dask_client, run_sweep
     from host_tools.studies.sweep_report import write_report
     from host_tools.studies.sweep_spec import load_spec
-    from host_tools.studies.sweep_table import check_out, read_rows
+    from host_tools.studies.sweep_table import check_out, kept_rows, read_rows
 
     try:
         workers, where = study_cluster(args)
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp sweep: {e}", file=sys.stderr)
         return 2
     print(f"pafp sweep: {spec.n_points} points of {spec.run['strides']} strides on {where} -> {out}")
-    kept = f"every row finished before it is in {out}/rows.jsonl (--resume runs the rest)"
+    kept = kept_rows(out)
     try:
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_sweep(spec, out, client, resume=args.resume, progress=not args.quiet)

@@ -19,7 +19,7 @@ from typing import Any
 
 from host_tools.outdir import naming
 
-__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "read_rows", "status_counts"]
+__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "kept_rows", "read_rows", "status_counts"]
 
 JOURNAL = "rows.jsonl"
 FLUSH_S = 1.0
@@ -29,6 +29,11 @@ TIMING_COLUMNS = ("wall_time_s", "realtime_factor")
 
 def _jsonable(v: Any) -> Any:
     return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def kept_rows(out: Path) -> str:
+    """What a study that failed or stopped keeps: the end of its one-line error."""
+    return f"every row finished before it is in {out / JOURNAL} (--resume runs the rest)"
 
 
 def read_rows(out: Path) -> list[dict[str, Any]]:

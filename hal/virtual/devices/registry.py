@@ -145,8 +145,9 @@ def device_model_for(role: str, name: str, where: str) -> DeviceModel:
     """device_model(name), checked to play ``role`` (``imu``, ``motor``); ValueError naming where otherwise."""
     model = device_model(name, where)
     if model.role != role:
-        raise ValueError(f"{where} {name!r} is a {model.role} device, not an {role.upper()} (a device model of "
-                         f"role {role!r}, e.g. {role})")
+        wanted = {"imu": "an IMU", "motor": "a motor"}.get(role, f"a {role} device")
+        raise ValueError(f"{where} {name!r} is a {model.role} device, not {wanted} (the alias {role!r} names the "
+                         "shipped one)")
     return model
 
 
