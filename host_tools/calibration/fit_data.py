@@ -376,7 +376,6 @@ def load_experiment(run_dir: Path) -> Experiment:
             raise ValueError(f"{f}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
                              "`pafp run --experiment sysid`, or any serial run)")
     read_record_header(record)  # a damaged or foreign header: one line naming the key, not a KeyError
-    check_same_run(run_dir)  # record.bin and telemetry.csv of one run, as its summary.json names them
     w = _wire(record)
     t_cmd, i_cmd = w.t_cmd, w.i_cmd
     cols = ("time_s", "encoder_angle_rad", "imu_pitch_rad", "current_meas_a", "supervisor_state_name")
@@ -406,6 +405,7 @@ def load_experiment(run_dir: Path) -> Experiment:
     if len(a) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
                          "(at least 100; run `pafp run --experiment sysid`)")
+    check_same_run(run_dir)  # record.bin and telemetry.csv of one run, as its summary.json names them
     from_reply = _summary_field(run_dir, "encoder_source") == "motor"
     # a write that reached the motor late (`_late_commands`): its command and its request both later
     late = _late_commands(w)

@@ -112,6 +112,6 @@ def check_same_run(directory: Path) -> None:
     for name, digest in digests.items():
         path = directory / str(name)
         if path.is_file() and _sha256(path) != digest:
-            raise ValueError(f"{path} is not the file of the run {summary} describes (its SHA-256 differs from "
-                             f"files_sha256 {str(digest)[:12]}...): the directory mixes the files of two runs; "
-                             "use a run directory as pafp wrote it")
+            raise ValueError(f"{path} is not the file the run of {summary} wrote (its SHA-256 differs from "
+                             f"files_sha256 {str(digest)[:12]}...): the directory mixes the files of two runs, or the "
+                             "file was changed since; use a run directory as pafp wrote it")
