@@ -77,6 +77,7 @@ class Registry:
         """Entry points of ``group`` skipped because a shipped or registered name already had their name."""
         for name, ref in entries.items():
             self._add(name, ref, replace=False)
+        self._shipped = tuple(self._entries)
 
     # ----------------------------------------------------------------- entries
     def _add(self, name: str, target: object, *, replace: bool) -> None:
@@ -137,9 +138,26 @@ class Registry:
     def __len__(self) -> int:
         return len(self.names())
 
-    def spoken(self, last: str = "or") -> str:
-        """The names as a phrase for help texts: ``"a, b or c"``."""
+    def shipped(self) -> list[str]:
+        """The names of the table the registry was made with (pafp's own), as far as they are still registered."""
         names = self.names()
+        return [n for n in self._shipped if n in names]
+
+    def added(self) -> list[str]:
+        """The names not shipped: entry points of plug-ins and registered ones."""
+        return [n for n in self.names() if n not in self._shipped]
+
+    def by_origin(self) -> str:
+        """The names for a help text, by where they come from: ``"a or b (shipped); x (plug-in)"``."""
+        shipped, added = self.shipped(), self.added()
+        parts = [f"{self.spoken(names=shipped)} (shipped)"] if shipped else []
+        if added:
+            parts.append(f"{self.spoken(names=added)} (plug-in{'s' if len(added) > 1 else ''})")
+        return "; ".join(parts) or "none registered"
+
+    def spoken(self, last: str = "or", names: list[str] | None = None) -> str:
+        """The names (default: all) as a phrase for help texts: ``"a, b or c"``."""
+        names = self.names() if names is None else names
         return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} {last} {names[-1]}"
 
     def check(self, name: object, where: str | None = None) -> str:

@@ -29,7 +29,7 @@ from typing import Any
 from hal.virtual.plant.design import Design, design_from_mapping, plant_params_for
 from hal.virtual.plant.params import PlantParams, load_plant_params
 
-__all__ = ["CONTROL_SHARE_OF_TRIP", "SAFETY_SHARE_OF_PEAK", "derived_sections", "design_profile_text"]
+__all__ = ["CONTROL_SHARE_OF_TRIP", "SAFETY_SHARE_OF_PEAK", "check_ratings", "derived_sections", "design_profile_text"]
 
 SAFETY_SHARE_OF_PEAK = 0.88
 """[safety] current_limit_a = 0.88 x the motor's peak current: the AK60-6 profile's 20 A of 22.7 A. The trip must
@@ -89,6 +89,19 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None) -> d
             "belt_ratio": (round(design.belt_ratio, 6), f"{design.belt_driven_teeth}/{design.belt_driver_teeth} teeth"),
         },
     }
+
+
+def check_ratings(design: Design, ratings: object, source: str) -> None:
+    """ValueError (one line) when a profile's [motor] ratings (firmware.motor_ratings.MotorRatings) are not those of
+    the catalogue motor its [design] names: the firmware would bound the currents of one motor while the bench
+    runs another."""
+    for key, (expected, _) in derived_sections(design)["motor"].items():
+        got = getattr(ratings, key)
+        same = got == expected if isinstance(expected, str) else math.isclose(got, expected, rel_tol=1e-9)
+        if not same:
+            raise ValueError(f"{source}: [motor] {key} = {got!r} is not the catalogue's {expected!r} for the "
+                             f"[design] motor {design.motor!r} (profiles/motors/{design.motor}.toml): write the "
+                             "profile's motor sections with `python -m host_tools.design_profile` (docs/design.md)")
 
 
 def _spring_keys(design: Design) -> dict[str, tuple[Any, str]]:

@@ -138,11 +138,15 @@ class RunConfig:
             raise ValueError(f"speed {self.speed!r} unknown: one of {list(SPEEDS)}")
         if self.scenario not in SCENARIOS:
             raise ValueError(f"scenario {self.scenario!r} unknown: one of {list(SCENARIOS)}")
+        parts: dict[str, str] = {}
         for fault in self.sensor_faults:
             part, _, mode = fault.partition(":")
             if mode not in SENSOR_FAULTS.get(part, ()):
                 raise ValueError(f"sensor fault {fault!r} unknown: PART:MODE, one of "
                                  f"{[f'{p}:{m}' for p, ms in SENSOR_FAULTS.items() for m in ms]}")
+            if part in parts:  # one sensor has one mode: the last would silently win
+                raise ValueError(f"sensor fault {fault!r}: {part} already has {parts[part]!r}: one fault per sensor")
+            parts[part] = fault
         if self.sensor_faults and not self.sensors_fitted():
             raise ValueError("sensor faults need the ground sensors: walk, or fit them (ground_sensors)")
         if self.duration_s is not None and not (isinstance(self.duration_s, (int, float)) and
@@ -168,6 +172,17 @@ class RunConfig:
         m = self.design.motor_spec()
         return {"can_options": {"limits": MitLimits(m.p_max_rad, m.v_max_rad_s, m.t_max_nm)}}
 
+    def _check_supply(self, rated_supply_v: float, motor_config: object) -> None:
+        """ValueError (one line) when the run's battery would trip the motor driver's over-voltage limit at once."""
+        battery = self.battery if self.battery is not None else getattr(self.design, "battery", None)
+        if battery is None:
+            return
+        from hal.virtual.devices.ak60_config import Ak60Config
+
+        pack = load_battery(battery)
+        driver = motor_config if isinstance(motor_config, Ak60Config) else Ak60Config()
+        driver.check_supply(pack.open_circuit_v(1.0), rated_supply_v, f"battery {battery}")
+
     def bench_setup(self) -> tuple[dict, dict]:
         """(VirtualBench arguments of the plant and the imperfections, their record for summary.json).
 
@@ -175,6 +190,12 @@ class RunConfig:
         """
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
         nominal = load_plant_params(self.plant_file)
+        if self.design is not None:
+            from firmware.motor_ratings import MotorRatings
+            from host_tools.design_profile import check_ratings
+
+            ratings = self.firmware.motor if self.firmware is not None else MotorRatings()
+            check_ratings(self.design, ratings, "design profile")
         if self.design is not None and self.plant_file is None:
             nominal = plant_params_for(self.design, nominal)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)
@@ -182,6 +203,7 @@ class RunConfig:
                          **self.design_bench_options(),
                          **self.bench_options}
         params = options["plant_params"]
+        self._check_supply(params.supply_voltage_v, options.get("motor_config"))
         record = {"plant": {"seed": self.plant_seed, "drawn": drawn_values(nominal, params),
                             "file": None if self.plant_file is None else str(self.plant_file),
                             **({} if self.design is None else

@@ -129,7 +129,7 @@ def test_rewrite_frames_touches_whole_frames_only():
     assert not math.isnan(RvcFrame.from_bytes(out[19:]).pitch_rad)
 
 
-@pytest.mark.parametrize("battery", ["molicel_p42a_6s1p", "molicel_p42a_12s1p"])
+@pytest.mark.parametrize("battery", ["molicel_p42a_6s1p"])  # the 12S pack trips the 24 V AK60-6's over-voltage
 def test_supply_sag_acts_on_a_fitted_battery(battery):
     """With a battery the sag caps the pack's EMF in its window: the driver's input falls below its 8 V
     under-voltage trip as on the fixed supply, the supervisor latches MOTOR_FAULT and the safe command leaves

@@ -29,7 +29,7 @@ from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.bno08x import Bno08xConfig
 from hal.virtual.devices.encoder import EncoderMount
 from hal.virtual.devices.plant_view import PlantView
-from hal.virtual.devices.registry import DEVICES, device_model
+from hal.virtual.devices.registry import DEVICES, device_model, device_model_for
 from hal.virtual.devices.sink import ByteSink
 from hal.virtual.devices.world import World
 from hal.virtual.irq import InterruptSourceBase
@@ -126,9 +126,7 @@ class VirtualBench:
         wire: Any = MOTOR_WIRING.load(motor_link, "motor_link")
         self.motor: Ak60 = wire(self, motor_config)
         """The AK60-6 model (plant, meter, faults); on a CAN link the core of ``motor_device``."""
-        imu = device_model(imu_model, "imu_model")
-        if imu.role != "imu":
-            raise ValueError(f"imu_model {imu_model!r} is a {imu.role} device, not an IMU")
+        imu = device_model_for("imu", imu_model, "imu_model")
         self.models = {"motor": "ak60-6", "imu": imu_model, "telemetry": ""}
         """The device model (hal.virtual.devices.registry name) on each UART ('' = not a device model)."""
         self.imu: Any = imu.build(world, self.imu_uart, seed=seed, config=imu_config)

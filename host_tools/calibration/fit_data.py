@@ -18,6 +18,7 @@ import numpy as np
 from hal.record.format import Kind
 from hal.record.reader import RecordReader
 from host_tools.recording import RECORD_NAME, read_record_header
+from host_tools.reports.run_files import check_same_run
 
 __all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "STALL_BOUND_S", "WINDOW_S", "Experiment", "encoder_velocity",
            "load_experiment", "reading_mean"]
@@ -404,6 +405,7 @@ def load_experiment(run_dir: Path) -> Experiment:
     if len(a) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
                          "(at least 100; run `pafp run --experiment sysid`)")
+    check_same_run(run_dir)  # record.bin and telemetry.csv of one run, as its summary.json names them
     from_reply = _summary_field(run_dir, "encoder_source") == "motor"
     # a write that reached the motor late (`_late_commands`): its command and its request both later
     late = _late_commands(w)

@@ -114,6 +114,9 @@ def check_params(names: tuple[str, ...], given: str = "") -> None:
     if FREE_IMU_OFFSET and "imu_bias_deg" in names:
         raise ValueError(f"{where}: imu_bias_deg cannot be fitted: each simulation window takes its own IMU offset "
                          "(the bias drifts), which holds the bias's part")
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ValueError(f"{where}: {repeated[0]} is named {names.count(repeated[0])} times: name each parameter once")
     if not set(names) - {"backlash_deg", "rotor_accel_scale"}:
         raise ValueError(f"{where}: backlash_deg and rotor_accel_scale are profiled with other parameters fitted: "
                          "name at least one more")

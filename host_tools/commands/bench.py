@@ -53,6 +53,29 @@ def _run_one(name: str, seed: int, quick: bool, geometry: str | None = None) -> 
     return result
 
 
+def _is_bench_output(path: Path) -> bool:
+    """Whether path is a file `pafp bench` writes (<test>.png/.csv/.json/.md, readings_table.md) or a geometry's
+    directory holding only such files."""
+    if path.is_dir():
+        return path.name in GEOMETRIES and all(_is_bench_output(p) and p.is_file() for p in path.iterdir())
+    stems = {n.replace("-", "_") for n in TESTS}
+    return path.name == "readings_table.md" or (path.suffix in (".png", ".csv", ".json", ".md")
+                                                 and path.stem in stems)
+
+
+def check_bench_dir(out: Path) -> None:
+    """OutDirError when an existing --out holds anything but `pafp bench` outputs (it would overwrite or mix with
+    a directory of other files): an empty directory, a new one or a previous bench's is taken."""
+    from host_tools.outdir import OutDirError
+
+    if not out.is_dir():
+        return
+    other = sorted(p.name for p in out.iterdir() if not _is_bench_output(p))
+    if other:
+        raise OutDirError(f"--out {out} holds files that are not pafp bench outputs (e.g. {other[0]!r}): name a new "
+                          "directory, an empty one or a previous bench's")
+
+
 def plan(test: str, geometry: str | None) -> list[tuple[str, str | None]]:
     """The (test, geometry) runs a command line asks for: 'all' runs the geometry-dependent tests under both."""
     names = list(TESTS) if test == "all" else [test]
@@ -79,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         try:
             check_writable(args.out)
+            check_bench_dir(args.out)
         except OutDirError as e:
             print(f"pafp bench: {e}", file=sys.stderr)
             return 2

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -58,16 +57,18 @@ def _one_point(points: list, index: int) -> int:
 def run(args: argparse.Namespace) -> int:
     """Check the spec whole (every design's profile built), run the points not yet finished, write the report.
 
-    Exit 2 for a bad spec, option or --out (before any run); 1 when a point gave no figures (error, timeout);
-    128 + N after signal N (design.md holds the points finished so far; --resume runs the rest).
+    Exit 2 for a bad spec, option or --out (before any run, before the cluster starts); 1 when a point gave no
+    figures (error, timeout); 74 when a result cannot be written during the search; 128 + N after signal N
+    (design.md holds the points finished so far; --resume runs the rest).
     """
     from host_tools.command_errors import study_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, check_writable, write_failed
     from host_tools.studies.design_point import design_error_row, run_design_point
     from host_tools.studies.design_report import write_design_report
     from host_tools.studies.design_spec import load_design_spec
-    from host_tools.studies.interrupt import Interrupted, interrupting
+    from host_tools.studies.interrupt import Interrupted, interrupting, stopped_line
     from host_tools.studies.sweep_engine import dask_client, run_tasks
-    from host_tools.studies.sweep_table import JOURNAL, check_out, read_rows
+    from host_tools.studies.sweep_table import check_out, kept_rows, read_rows
 
     try:
         workers, where = study_cluster(args)
@@ -76,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
         points = spec.points(out)
         if args.point is not None:
             return _one_point(points, args.point)
-        check_out(out, spec.digest, args.resume)  # before a cluster starts
+        check_writable(out)  # writable, 1 MiB free: before a cluster starts
+        check_out(out, spec.digest, args.resume)
         _write_profiles(points, out)
     except ValueError as e:
         print(f"pafp design: {e}", file=sys.stderr)
@@ -85,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp design: cannot write the design profiles: {e}", file=sys.stderr)
         return 2
     print(f"pafp design: {len(points)} points ({len(spec.designs())} designs) on {where} -> {out}")
+    kept = kept_rows(out)
     try:
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_tasks(points, run_design_point, out, client, columns=columns(), digest=spec.digest,
@@ -92,17 +95,23 @@ def run(args: argparse.Namespace) -> int:
                                 ok=lambda row: row["status"] in ("ok", "fault"))
     except Interrupted as stop:  # the table was flushed and the cluster closed on the way out
         rows = read_rows(out)
-        print(f"pafp design: stopped by {stop.signal}: {len(rows)} of {len(points)} points finished, kept in {out}; "
-              "`--resume` runs the rest", file=sys.stderr)
-        if rows:
-            write_design_report(spec, points, rows, out, math.nan, f"{where}, stopped by {stop.signal}")
+        print(stopped_line("design", stop, len(rows), len(points), out), file=sys.stderr)
+        try:
+            if rows:
+                write_design_report(spec, points, rows, out, stop.elapsed_s, f"{where}, stopped by {stop.signal}")
+        except OSError as e:
+            print(write_failed("design", e, kept), file=sys.stderr)
+            return EXIT_WRITE_FAILED
         return stop.exit_code
     except (ValueError, OSError) as e:  # --out holds another study, a result file, the scheduler or the cluster
-        line, status = study_error("design", args.scheduler, e, f"every row finished before it is in {out}/{JOURNAL} "
-                                   "(--resume runs the rest)")
+        line, status = study_error("design", args.scheduler, e, kept)
         print(line, file=sys.stderr)
         return status
-    report = write_design_report(spec, points, outcome.rows, out, outcome.wall_time_s, where)
+    try:
+        report = write_design_report(spec, points, outcome.rows, out, outcome.wall_time_s, where)
+    except OSError as e:
+        print(write_failed("design", e, kept), file=sys.stderr)
+        return EXIT_WRITE_FAILED
     errors = [r for r in outcome.rows if r["status"] not in ("ok", "fault")]
     print(f"  {outcome.ran} points run, {outcome.skipped} kept from before, in {outcome.wall_time_s:.1f} s; "
           f"{len(errors)} without figures; outputs: {out}/{report.name}, pareto.png, results.parquet, results.csv")

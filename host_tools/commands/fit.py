@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.calibration.plant_fit import check_params, fit_parts, fit_plant
     from host_tools.command_errors import input_error, output_error
     from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir
+    from host_tools.studies.interrupt import Interrupted, interrupting
     from profiles import profile_path
 
     try:
@@ -54,10 +55,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"pafp fit: {args.run_dir}: {len(exp.t)} samples, {len(exp.t_cmd)} commands, fitting {len(names)} "
           f"parameters -> {run_dir.out}", flush=True)
     try:
-        r = fit_plant(base, exp, names)
-        extra = {"validation": validate(base, r, other)} if other is not None else {}
-        s = write_fit_outputs(run_dir.path, base, base_text, r, exp, extra, plot=not args.no_plot)
-        run_dir.publish()
+        with interrupting():  # a stop signal: nothing published, the staging directory removed
+            r = fit_plant(base, exp, names)
+            extra = {"validation": validate(base, r, other)} if other is not None else {}
+            s = write_fit_outputs(run_dir.path, base, base_text, r, exp, extra, plot=not args.no_plot)
+            run_dir.publish()
+    except Interrupted as stop:
+        run_dir.discard()
+        print(f"pafp fit: stopped by {stop.signal} after {stop.elapsed_s:.1f} s of fitting: nothing written, "
+              f"{run_dir.out} keeps what it held", file=sys.stderr)
+        return stop.exit_code
     except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
         run_dir.discard()
         print(output_error("fit", e, run_dir), file=sys.stderr)

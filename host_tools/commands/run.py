@@ -58,8 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None, help="output directory (default runs/<timestamp>)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--controller", default=None, metavar="NAME|FILE.py:CLASS",
-                        help=f"the control law: {CONTROLLERS.spoken()} (shipped), or a class in a Python file "
+                        help=f"the control law: {CONTROLLERS.by_origin()}, or a class in a Python file "
                              "(docs/controllers.md); default: the profile's [controller], else cascade")
+    parser.add_argument("--imu-model", default=None, metavar="NAME",
+                        help="the IMU device model on the virtual bench: a name of the device registry "
+                             "(hal/virtual/devices/registry.py, plug-ins of the pafp.devices group too; "
+                             "docs/registries.md); default bno08x")
     parser.add_argument("--experiment", choices=("sysid",), default=None,
                         help="run the identification experiment (the shipped controller sysid, its [controller] "
                              "parameters from the profile when it names sysid) for its whole length instead of "
@@ -192,7 +196,12 @@ def run(args: argparse.Namespace) -> int:
                         ground_sensors={"auto": None, "on": True, "off": False}[args.ground_sensors],
                         sensor_faults=tuple(args.sensor_fault), design=_design(args),
                         battery=args.battery,
-                        ambient_c=25.0 if args.ambient_c is None else args.ambient_c)
+                        ambient_c=25.0 if args.ambient_c is None else args.ambient_c,
+                        bench_options={} if args.imu_model is None else {"imu_model": args.imu_model})
+        if args.imu_model is not None:
+            from hal.virtual.devices.registry import device_model_for
+
+            device_model_for("imu", args.imu_model, "--imu-model")  # an unknown name or another role stops here
         if args.battery is not None:
             from hal.virtual.plant.battery import load_battery
 
@@ -236,9 +245,17 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
             if value is not None:
                 return (f"{option} {value} is not allowed in serial mode (--motor/--imu): it sets the virtual "
                         "bench's motor model; a real motor reports its own temperature and supply")
+        if args.imu_model is not None:
+            return (f"--imu-model {args.imu_model} is not allowed in serial mode (--motor/--imu): it picks the "
+                    "virtual bench's IMU model; --imu names the port of the real one (or sim://NAME)")
     elif args.duration is not None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")
+    if getattr(args, "experiment", None) is not None:
+        for option, value in (("--strides", args.strides), ("--controller", args.controller)):
+            if value is not None:
+                return (f"{option} {value} is not allowed with --experiment {args.experiment}: the experiment is "
+                        f"its own controller and sets its own length (its [controller] table; docs/calibration.md)")
     if args.scenario != "walk":
         for option, value in (("--body-mass", args.body_mass), ("--moment", args.moment),
                               ("--population", args.population)):
@@ -292,9 +309,9 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
               f"{t['misses']:>8}")
     t = s.get("thermal")
     if t is not None:  # the winding model and the supply (docs/design.md, "Winding temperature and battery in a run")
-        b = s.get("battery")
-        supply = ("ideal supply" if b is None else f"{b['name']}: {b['energy_per_stride_j']} J/stride, "
-                  f"{b['distance_per_charge_km']} km per charge at {b['speed_m_s']} m/s")
+        from host_tools.reports.thermal import supply_text
+
+        supply = supply_text(s.get("battery"))
         print(f"  winding {t['winding_c_end']} C at the end (max {t['winding_c_max']}, steady state "
               f"{t['steady_state_c']}, emulation only), motor reported max {t['motor_reported_c_max']} C; {supply}")
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
@@ -465,10 +482,12 @@ def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> 
     from host_tools.reports.report import tracking_text
 
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
-    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it tracking in RUN; "
-          f"{s['strides']} whole strides")
+    print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it with the supervisor in "
+          f"RUN; {s['strides']} whole strides")
     for line in tracking_text(s["tracking"]):
         print(line)
+    if "encoder_headline" in s:
+        print(f"  encoder figures {s['encoder_headline']}")
     print(f"  control released {rt['control_releases']} times (ideal {rt['control_releases_expected']}), jitter "
           f"p50 {j['p50_us']} us p99 {j['p99_us']} us max {j['max_us']} us, host {rt['host_time_per_tick_us']} us/tick")
     w = s["host_warnings"]

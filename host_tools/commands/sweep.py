@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.sweep_engine import check_points, dask_client, run_sweep
     from host_tools.studies.sweep_report import write_report
     from host_tools.studies.sweep_spec import load_spec
-    from host_tools.studies.sweep_table import check_out, read_rows
+    from host_tools.studies.sweep_table import check_out, kept_rows, read_rows
 
     try:
         workers, where = study_cluster(args)
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pafp sweep: {e}", file=sys.stderr)
         return 2
     print(f"pafp sweep: {spec.n_points} points of {spec.run['strides']} strides on {where} -> {out}")
-    kept = f"every row finished before it is in {out}/rows.jsonl (--resume runs the rest)"
+    kept = kept_rows(out)
     try:
         with interrupting(), dask_client(workers=workers, scheduler=args.scheduler) as client:
             outcome = run_sweep(spec, out, client, resume=args.resume, progress=not args.quiet)
@@ -101,11 +101,10 @@ def run(args: argparse.Namespace) -> int:
 def _interrupted(spec: object, out: Path, rows: list, stop: object, where: str) -> int:
     """After a stop signal: the report of the rows finished so far, marked interrupted; exit 128 + N."""
     from host_tools.outdir import EXIT_WRITE_FAILED, write_failed
+    from host_tools.studies.interrupt import stopped_line
     from host_tools.studies.sweep_report import write_report
 
-    n = spec.n_points  # type: ignore[attr-defined]
-    print(f"pafp sweep: stopped by {stop.signal}: {len(rows)} of {n} points finished, kept in "  # type: ignore[attr-defined]
-          f"{out}; `--resume` runs the rest", file=sys.stderr)
+    print(stopped_line("sweep", stop, len(rows), spec.n_points, out), file=sys.stderr)  # type: ignore[arg-type,attr-defined]
     if rows:
         try:
             write_report(spec, rows, out, where=where, interrupted=stop.signal)  # type: ignore[arg-type,attr-defined]

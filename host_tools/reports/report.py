@@ -22,6 +22,7 @@ from host_tools.outdir import naming, write_atomic
 from host_tools.reports.gait_latency import event_summary, gait_event_lines
 from host_tools.reports.metrics import TrackingMetrics
 from host_tools.reports.process_clock import process_elapsed_s
+from host_tools.reports.run_files import file_digests
 from host_tools.reports.telemetry_csv import TelemetryCsv
 from host_tools.reports.tracking_stream import PLOT_STRIDES, TRACKING_SIGNALS, TrackingResult, feed_probe, probe_stream
 from host_tools.runner import RunConfig, RunResult
@@ -102,6 +103,22 @@ def measured_headline(imu: dict, encoder: dict) -> dict[str, float | None]:
             for key, src in (("rms_error_deg", "rms_deg"), ("max_error_deg", "max_deg"), ("lag_ms", "lag_ms"))}
 
 
+ENCODER_ZERO_NOTE = ("left out of the headline: the encoder angle is the motor's position feedback zeroed at its "
+                     "first reply, wherever the foot then rested (on a stop, tens of degrees off), so its tracking "
+                     "error carries that pose's offset; tracking.encoder keeps the figure, relative to that zero")
+"""Why a serial run with ``--encoder motor`` has no top-level encoder figures (summary.json ``encoder_headline``)."""
+
+
+def _headline(r: RunResult, imu: dict, encoder: dict) -> dict:
+    """The top-level tracking figures; a serial run whose encoder is the motor's feedback (zero at its first reply,
+    not at a known pose) keeps its encoder figures under tracking only, and says why."""
+    headline: dict = measured_headline(imu, encoder)
+    if getattr(r.config, "encoder", None) == "motor":
+        headline.update({k: None for k in headline if k.startswith("encoder_")})
+        headline["encoder_headline"] = ENCODER_ZERO_NOTE
+    return headline
+
+
 def _us(cycles: int | None, f_cpu: int) -> float | None:
     return None if cycles is None else round(cycles * 1e6 / f_cpu, 3)
 
@@ -165,7 +182,7 @@ def summarise(r: RunResult, tracking: TrackingResult | None = None) -> dict:
         "build": describe(),
         "tracking": tracking_summary(r, tracking),
         **getattr(r, "bench_record", {}),
-        **measured_headline(imu, enc),
+        **_headline(r, imu, enc),
         "deadline_misses": sum(t["misses"] for t in tasks.values()),
         "faults": faults,
         "cpu_utilisation": round(util.total, 5),
@@ -305,6 +322,35 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
+def adc_summary(r: RunResult) -> dict | None:
+    """summary.json's ``adc`` (None without the ADC sensors fitted): every sensor on the ADC, shipped or a plug-in's
+    (hal/virtual/devices/registry.py), with its channels' codes as the MCU's ADC buffer held them at the run's end."""
+    sensors = getattr(getattr(r, "bench", None), "ground_sensors", None)
+    if sensors is None:
+        return None
+    from hal.virtual.devices.registry import DEVICES
+
+    adc = sensors.adc
+    codes = dict(zip(adc.channels, adc.read(), strict=True))
+    shipped = {n.replace("-", "_") for n in DEVICES.shipped()}
+    return {"bits": adc.bits, "vref_v": adc.vref_v, "at_s": round(r.sim_time_s, 6),
+            "sensors": {part: {"origin": "shipped" if part in shipped else "plug-in",
+                               "channels": {ch: codes[ch] for ch in sensor.outputs() if ch in codes}}
+                        for part, sensor in sensors.parts.items()}}
+
+
+def adc_lines(adc: dict) -> list[str]:
+    """report.md's section on the ADC sensors."""
+    lsb = adc["vref_v"] / 2 ** adc["bits"]
+    lines = ["", "## Sensors on the ADC", "",
+             f"The codes the MCU's ADC buffer held at {adc['at_s']:.3f} s ({adc['bits']} bits, {adc['vref_v']:g} V).",
+             "", "| sensor | origin | channel | code | volts |", "|---|---|---|---|---|"]
+    for part, sensor in adc["sensors"].items():
+        for ch, code in sensor["channels"].items():
+            lines.append(f"| {part} | {sensor['origin']} | {ch} | {code} | {code * lsb:.3f} |")
+    return lines
+
+
 def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: list[str] | None = None, *,
                   plot: bool = True, trace: bool = True) -> dict:
     """Write every output file into `out`; return the summary (`extra` merged in; `md_extra` ends report.md).
@@ -356,10 +402,15 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
             from host_tools.reports.thermal import plot_thermal
 
             plot_thermal(out / "thermal.png", s["thermal"], s["battery"])
+    adc = adc_summary(r)
+    if adc is not None:
+        s["adc"] = adc
+        md_extra = [*(md_extra or []), *adc_lines(adc)]
     gait = event_summary(r)
     if gait is not None:
         s["gait_events"] = gait
         md_extra = [*(md_extra or []), *gait_event_lines(gait)]
+    s["files_sha256"] = file_digests(out)  # ties record.bin and telemetry.csv to this run (`pafp fit` checks)
     elapsed = process_elapsed_s()  # all but the two writes below and the exit
     s["process_wall_time_s"] = round(elapsed, 3)
     s["process_realtime_factor"] = round(r.sim_time_s / elapsed, 2) if elapsed > 0 else None

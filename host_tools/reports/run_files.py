@@ -6,10 +6,15 @@ hands what the segment produced to a :class:`RunFiles`: the telemetry UART's byt
 bench probe's samples feed a :class:`~host_tools.reports.tracking_stream.TrackingStream` (the tracking figures).
 The trace is not streamed: it is a ring buffer of the last jobs (``RunConfig.trace_capacity``), written at
 the end.
+
+A run's summary.json holds the SHA-256 of its ``record.bin`` and ``telemetry.csv`` (:func:`file_digests`); a
+tool that reads both back (`pafp fit`) checks that they are still the same run's (:func:`check_same_run`).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -23,7 +28,10 @@ from host_tools.reports.telemetry_csv import TelemetryCsv
 from host_tools.reports.tracking_stream import TrackingResult, TrackingStream, feed_probe
 from protocol.telemetry import TelemetryDecoder
 
-__all__ = ["RunFiles", "take_samples"]
+__all__ = ["DIGESTED", "RunFiles", "check_same_run", "file_digests", "take_samples"]
+
+DIGESTED = ("record.bin", "telemetry.csv")
+"""The files of a run whose SHA-256 its summary.json holds (``files_sha256``)."""
 
 
 def take_samples(probe: Probe) -> dict[str, np.ndarray]:
@@ -76,3 +84,34 @@ class RunFiles:
     def decoder_stats(self) -> dict:
         """The telemetry decoder's counters (for summary.json)."""
         return asdict(self.decoder.stats)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        while chunk := f.read(1 << 20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def file_digests(directory: Path) -> dict[str, str]:
+    """{name: SHA-256} of the files of DIGESTED present in directory (summary.json's ``files_sha256``)."""
+    return {name: _sha256(directory / name) for name in DIGESTED if (directory / name).is_file()}
+
+
+def check_same_run(directory: Path) -> None:
+    """ValueError (one line naming the file) when a file of DIGESTED in directory is not the one its summary.json
+    names: files of two runs put together. A directory without a summary or without digests is not checked."""
+    summary = directory / "summary.json"
+    try:
+        digests = json.loads(summary.read_text(encoding="utf-8")).get("files_sha256") if summary.is_file() else None
+    except (ValueError, AttributeError, OSError):
+        raise ValueError(f"{summary}: not a run summary (not a JSON object)") from None
+    if not isinstance(digests, dict):
+        return
+    for name, digest in digests.items():
+        path = directory / str(name)
+        if path.is_file() and _sha256(path) != digest:
+            raise ValueError(f"{path} is not the file the run of {summary} wrote (its SHA-256 differs from "
+                             f"files_sha256 {str(digest)[:12]}...): the directory mixes the files of two runs, or the "
+                             "file was changed since; use a run directory as pafp wrote it")

@@ -6,7 +6,8 @@ temperature the motor reported in its status replies (the bench figure), the ste
 began derating or latched OVER_TEMPERATURE. ``battery`` (null on the ideal supply): energy per stride at the pack's
 terminals (the motor's, plus the electronics' quiescent load hal/virtual/plant/battery.py QUIESCENT_W x the stride),
 regeneration, the lowest bus voltage and strides and distance per charge at the speed group's walking
-speed.
+speed. The energy figures are a walking run's, over the strides completed before any fault latched; a suspended
+foot, or a walk that completed none, has none (``energy_figures_left_out`` says why).
 
 Walking speed: Schwartz et al. 2008 give each speed group's dimensionless speed v* = v / sqrt(g L)
 (0.17, 0.29, 0.43 free, 0.56, 0.69; /work/shared/data/gait/README.md); v = v* sqrt(g L) with the leg length
@@ -24,7 +25,7 @@ from typing import Any
 from host_tools.reports.heat_log import HeatLog
 from protocol.telemetry import FaultReason
 
-__all__ = ["DIMENSIONLESS_SPEED", "LEG_LENGTH_M", "battery_summary", "plot_thermal", "thermal_lines",
+__all__ = ["DIMENSIONLESS_SPEED", "LEG_LENGTH_M", "battery_summary", "plot_thermal", "supply_text", "thermal_lines",
            "thermal_summary", "walking_speed_m_s"]
 
 DIMENSIONLESS_SPEED = {"very-slow": 0.17, "slow": 0.29, "free": 0.43, "fast": 0.56, "very-fast": 0.69}
@@ -92,6 +93,34 @@ def _pessimistic_steady_c(motor: str, ambient_c: float, rms_a: float) -> float:
     return WindingThermal(params, ambient_c).steady_state_c(rms_a)[0]
 
 
+def _walked_energies(r: Any, log: HeatLog) -> tuple[list[float], str | None]:
+    """(the supply energy of each stride walked, why there is none): only a walking run's strides completed before
+    the supervisor latched a fault count (after it the foot stands in its safe state, spending next to nothing,
+    which would make any distance per charge)."""
+    if getattr(r.config, "scenario", "suspended") != "walk":
+        return [], "the foot was not walking: --scenario walk measures them"
+    tripped = r.firmware.supervisor.tripped_at_s
+    done = [row for row in log.strides if tripped is None or row.end_s <= tripped]
+    if not done:
+        return [], ("no stride completed" + (f" before the fault at {tripped:.3f} s" if tripped is not None else ""))
+    return log.stride_energies_j()[:len(done)], None
+
+
+def supply_text(battery: dict | None) -> str:
+    """One line on the supply for a command's printout: the ideal supply, or the pack with its walking figures.
+
+    >>> supply_text({"name": "p", "energy_per_stride_j": None, "energy_figures_left_out": "no stride completed"})
+    'p: no energy per stride or distance per charge (no stride completed)'
+    """
+    if battery is None:
+        return "ideal supply"
+    if battery["energy_per_stride_j"] is None:
+        return (f"{battery['name']}: no energy per stride or distance per charge "
+                f"({battery.get('energy_figures_left_out') or 'not measured'})")
+    return (f"{battery['name']}: {battery['energy_per_stride_j']} J/stride over {battery.get('energy_strides')} "
+            f"strides, {battery['distance_per_charge_km']} km per charge at {battery['speed_m_s']} m/s")
+
+
 def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
     """summary.json's ``battery`` of a run (None on the ideal supply)."""
     heat: dict = r.heat
@@ -101,7 +130,7 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
     log: HeatLog = heat["log"]
     from hal.virtual.plant.battery import QUIESCENT_W
 
-    energies = log.stride_energies_j()
+    energies, why_not = _walked_energies(r, log)
     motor_per_stride = sum(energies) / len(energies) if energies else math.nan
     per_stride = motor_per_stride + QUIESCENT_W * stride_s  # the electronics draw whatever the motor does
     walked_s = len(energies) * stride_s
@@ -115,6 +144,8 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
         "energy_per_stride_j": _finite(per_stride, 3),
         "motor_energy_per_stride_j": _finite(motor_per_stride, 3),
         "quiescent_w": round(QUIESCENT_W, 3),
+        "energy_strides": len(energies),
+        "energy_figures_left_out": why_not,
         "regenerated_j": round(battery.regenerated_j, 3),
         # regeneration accepted over the whole run (settling, ramp and strides) per stride walked: an upper figure
         "regenerated_per_stride_j": _finite(battery.regenerated_j / len(energies), 3) if energies else None,
@@ -155,9 +186,11 @@ def thermal_lines(thermal: dict, battery: dict | None) -> list[str]:
     if battery is None:
         lines += ["", "Supply: ideal (no battery profile: `--battery NAME`)."]
         return lines
+    why_not = battery["energy_figures_left_out"]
     lines += [f"| battery | {battery['name']}, {battery['capacity_wh']} Wh |",
               f"| energy per stride at the battery | {fig(battery['energy_per_stride_j'], ' J')} (motor "
-              f"{fig(battery['motor_energy_per_stride_j'], ' J')}, electronics {battery['quiescent_w']} W) |",
+              f"{fig(battery['motor_energy_per_stride_j'], ' J')}, electronics {battery['quiescent_w']} W)"
+              f"{'' if why_not is None else f' ({why_not})'} |",
               f"| regenerated per stride | {fig(battery['regenerated_per_stride_j'], ' J')} |",
               f"| regenerated into the battery | {battery['regenerated_j']} J |",
               f"| lowest bus voltage | {fig(battery['min_bus_v'], ' V')} |",

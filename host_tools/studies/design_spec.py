@@ -226,9 +226,7 @@ def _springs(path: Path, doc: dict[str, Any]) -> tuple[tuple[float, float, str],
         k_nm = _number(path, f"[[spring]] {k} stiffness_nm_per_rad", s.get("stiffness_nm_per_rad", 0.0), 0.0,
                        MAX_SPRING_NM_PER_RAD)
         engage = _number(path, f"[[spring]] {k} engage_deg", s.get("engage_deg", 0.0), -MAX_ENGAGE_DEG, MAX_ENGAGE_DEG)
-        sided = s.get("sided", "one")
-        if sided not in ("one", "two"):
-            raise _err(path, f"[[spring]] {k} sided", sided, "one of one, two")
+        sided = _SPEC.choice(path, f"[[spring]] {k} sided", s.get("sided", "one"), ("one", "two"))
         out.append((k_nm, engage, sided) if k_nm else (0.0, 0.0, "one"))
     if len(set(out)) != len(out):
         raise SpecError(f"design spec {path}: [[spring]] repeats a spring (every spring without stiffness is "
@@ -270,9 +268,7 @@ def load_design_spec(path: Path) -> DesignSpec:
     bad = sorted(set(s) - set(SEARCH_KEYS))
     if bad:
         raise SpecError(f"design spec {path}: [search] key {bad[0]!r} unknown: one of {', '.join(SEARCH_KEYS)}")
-    base = (path.parent / s["profile"]).resolve() if "profile" in s else DEFAULT_PROFILE
-    if not Path(base).is_file():
-        raise _err(path, "[search] profile", str(base), "an existing file")
+    base = _SPEC.file(path, "[search] profile", s["profile"]) if "profile" in s else DEFAULT_PROFILE
     from firmware.control.registry import CONTROLLERS
     from hal.virtual.plant.battery import battery_names
     from hal.virtual.plant.motors import catalogue_names
@@ -284,12 +280,9 @@ def load_design_spec(path: Path) -> DesignSpec:
                    for v in _list(path, s, "body_masses_kg", [80.0]))
     speeds = tuple(_list(path, s, "speeds", ["free"]))
     for v in speeds:
-        if v not in SPEEDS:
-            raise _err(path, "[search] speeds", v, f"one of {', '.join(SPEEDS)}")
+        _SPEC.choice(path, "[search] speeds", v, SPEEDS)
     strides = _int(path, "[search] strides", s.get("strides", 20), 1, 10_000)
-    controller = s.get("controller", "impedance")
-    if controller not in CONTROLLERS:
-        raise _err(path, "[search] controller", controller, f"one of {', '.join(CONTROLLERS)}")
+    controller = _SPEC.choice(path, "[search] controller", s.get("controller", "impedance"), CONTROLLERS)
     seed = _int(path, "[search] seed", s.get("seed", 0), 0, 2**32 - 1)
     timeout = _number(path, "[search] timeout_s", s.get("timeout_s", 900.0), 0.0, 86_400.0, True)
     ambient = _number(path, "[search] ambient_c", s.get("ambient_c", 25.0), -40.0, 80.0)

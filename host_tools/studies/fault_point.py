@@ -35,8 +35,8 @@ import numpy as np
 
 from host_tools.studies.fault_spec import FaultPoint
 
-__all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "fault_free_arrays", "faulted_run", "figures", "onset_of",
-           "point_run_config", "run_fault_point"]
+__all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "fault_free_arrays", "faulted_config", "faulted_run",
+           "figures", "onset_of", "point_run_config", "run_fault_point"]
 
 GAIT_START_MAX_S = 1.5  # the fault-free run covers a gait start up to this late (sensors up, start-up ramp)
 IDENTITY = ("design", "safe_state")  # the point's plant and safe state, named in every row (errors too)
@@ -101,13 +101,15 @@ def plant_params_of(p: FaultPoint) -> Any:
     return base if design is None else plant_params_for(design, base)
 
 
-def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, progress_name: str = "") -> Any:
-    """The RunConfig of one of the point's runs: its scenario, controller, link and seed, with `faults` armed."""
+def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, trace: bool = False) -> Any:
+    """The RunConfig of one of the point's runs: its scenario, controller, link and seed, with `faults` armed
+    (``trace``: the scheduler's trace as `pafp run` keeps it)."""
     from host_tools.commands.run import controller_for
     from host_tools.runner import RunConfig
 
     fw = _firmware(p)
-    return RunConfig(strides=1, seed=p.seed, firmware=fw, trace_capacity=0, scenario=p.scenario,
+    traced = {} if trace else {"trace_capacity": 0}
+    return RunConfig(strides=1, seed=p.seed, firmware=fw, **traced, scenario=p.scenario,
                      body_mass_kg=p.body_mass_kg, controller=controller_for(fw, p.scenario, p.body_mass_kg),
                      faults=faults, duration_s=duration_s, design=_design_of(p.profile_text, p.profile_name))
 
@@ -194,15 +196,22 @@ def rated_output_nm(p: FaultPoint) -> float:
     return float(_firmware(p).motor.rated_current_a * plant_params_of(p).output_torque_per_amp_nm)
 
 
-def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, float]:
-    """(RunResult, injector, observer, onset_s) of the point's faulted run."""
+def faulted_config(p: FaultPoint, trace: bool = False) -> tuple[Any, Any, Any, float]:
+    """(RunConfig, injector, observer, onset_s) of the point's faulted run, not yet run."""
     from hal.virtual.faults import make_injector
     from hal.virtual.faults.observer import Observer
-    from host_tools.runner import run_virtual
 
     onset_s, _ = onset_of(p)
     fault, obs = make_injector(p.fault, onset_s, p.duration_s, p.seed, **dict(p.params)), Observer()
-    cfg = point_run_config(p, (obs, fault), onset_s + p.duration_s + p.settle_s)
+    cfg = point_run_config(p, (obs, fault), onset_s + p.duration_s + p.settle_s, trace)
+    return cfg, fault, obs, onset_s
+
+
+def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, float]:
+    """(RunResult, injector, observer, onset_s) of the point's faulted run."""
+    from host_tools.runner import run_virtual
+
+    cfg, fault, obs, onset_s = faulted_config(p)
     return run_virtual(cfg, progress=progress), fault, obs, onset_s
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import logging
 import math
+import shlex
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,10 +86,18 @@ def load_criteria(path: Path) -> dict[str, dict[str, float]]:
         raise ValueError(f"criteria {path}: table {extra[0]!r} unknown: [default] and [fault.<name>]")
     default = table(doc.get("default", {}), "[default]")
     per = doc.get("fault", {})
+    if not isinstance(per, dict):
+        raise ValueError(f"criteria {path}: key 'fault' must be tables [fault.<name>], not {type(per).__name__}")
     for name in per:
         if name not in INJECTORS:
             raise ValueError(f"criteria {path}: [fault.{name}] names no injector: one of {', '.join(INJECTORS)}")
-    return {name: {**default, **table(per.get(name, {}), f"[fault.{name}]")} for name in INJECTORS}
+    out = {name: {**default, **table(per.get(name, {}), f"[fault.{name}]")} for name in INJECTORS}
+    unjudged = [name for name, limits in out.items() if not limits]
+    if unjudged:  # an empty file would pass every campaign without judging anything
+        raise ValueError(f"criteria {path}: no criterion for {', '.join(unjudged[:3])}"
+                         f"{' ...' if len(unjudged) > 3 else ''}: give [default] (or [fault.<name>]) at least one of "
+                         f"{', '.join(CRITERIA)}")
+    return out
 
 
 def rerun_command(spec: FaultSpec, point: int) -> str:
@@ -282,15 +291,20 @@ def _fmt(v: float, digits: str = ".1f") -> str:
 
 def write_fault_report(spec: FaultSpec, rows: list[dict[str, Any]], out: Path, failures: list[Failure],
                        criteria: dict[str, dict[str, float]], wall_time_s: float, where: str,
-                       traces: bool = True) -> Path:
-    """Write report.md, plots/heatmap.png and the traces of the worst points into out; return report.md's path."""
+                       traces: bool = True, interrupted: tuple[str, int] | None = None) -> Path:
+    """Write report.md, plots/heatmap.png and the traces of the worst points into out; return report.md's path.
+
+    ``interrupted``: (the stop signal, the campaign's number of points) when it stopped before its end."""
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    md = [f"# Fault campaign {spec.path.name}", "",
-          f"{len(rows)} points ({status_counts(rows)}) on {where} in "
-          f"{wall_time_s:.1f} s; seed {spec.seed}; faults act from a gait phase of the first whole stride; figures "
-          "against the fault-free run of the same seeds (docs/safety.md). Angles, velocities and torques are the "
-          "plant's truth (emulation only).", ""]
+    md = [f"# Fault campaign {spec.path.name}", ""]
+    if interrupted is not None:
+        md += [f"**Interrupted** by {interrupted[0]}: {len(rows)} of {interrupted[1]} points finished; the criteria "
+               f"below judge those only; `pafp faults {shlex.quote(str(spec.path))} --resume` runs the rest.", ""]
+    md += [f"{len(rows)} points ({status_counts(rows)}) on {where} in "
+           f"{wall_time_s:.1f} s; seed {spec.seed}; faults act from a gait phase of the first whole stride; figures "
+           "against the fault-free run of the same seeds (docs/safety.md). Angles, velocities and torques are the "
+           "plant's truth (emulation only).", ""]
     md += ["## Criteria", ""]
     if failures:
         md += [f"- **not met**: {f.line(spec)}" for f in failures]

@@ -137,12 +137,8 @@ def load_fault_spec(path: Path) -> FaultSpec:
     bad = sorted(set(camp) - set(CAMPAIGN_KEYS))
     if bad:
         raise SpecError(f"fault spec {path}: [campaign] key {bad[0]!r} unknown: one of {', '.join(CAMPAIGN_KEYS)}")
-    base = path.parent
-    profile = (base / camp["profile"]).resolve() if "profile" in camp else DEFAULT_PROFILE
-    criteria = (base / camp["criteria"]).resolve() if "criteria" in camp else DEFAULT_CRITERIA
-    for what, p in (("profile", profile), ("criteria", criteria)):
-        if not Path(p).is_file():
-            raise _err(path, f"[campaign] {what}", str(p), "an existing file")
+    profile = _SPEC.file(path, "[campaign] profile", camp["profile"]) if "profile" in camp else DEFAULT_PROFILE
+    criteria = _SPEC.file(path, "[campaign] criteria", camp["criteria"]) if "criteria" in camp else DEFAULT_CRITERIA
     seed = camp.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
         raise _err(path, "[campaign] seed", seed, f"an int in 0..{2**32 - 1}")
@@ -153,12 +149,10 @@ def load_fault_spec(path: Path) -> FaultSpec:
     from firmware.control.registry import CONTROLLERS
 
     for c in controllers:
-        if c not in CONTROLLERS:
-            raise _err(path, "[campaign] controllers", c, f"one of {', '.join(CONTROLLERS)}")
+        _SPEC.choice(path, "[campaign] controllers", c, CONTROLLERS)
     links = tuple(_list(path, camp, "links", ["uart"]))
     for link in links:
-        if link not in MOTOR_LINKS:
-            raise _err(path, "[campaign] links", link, f"one of {', '.join(MOTOR_LINKS)}")
+        _SPEC.choice(path, "[campaign] links", link, MOTOR_LINKS)
     settle = _number(path, "[campaign] settle_s", camp.get("settle_s", 0.3), 0.0, 5.0, True)
     timeout = _number(path, "[campaign] timeout_s", camp.get("timeout_s", 120.0), 0.0, 86_400.0, True)
     safe_states = tuple(_list(path, camp, "safe_states", [""]))
@@ -168,9 +162,7 @@ def load_fault_spec(path: Path) -> FaultSpec:
     profile_text = Path(profile).read_text(encoding="utf-8")
     scenarios = []
     for k, s in enumerate(doc.get("scenario", [{"name": "suspended"}])):
-        name = s.get("name")
-        if name not in SCENARIOS:
-            raise _err(path, f"[[scenario]] {k} name", name, f"one of {', '.join(SCENARIOS)}")
+        name = _SPEC.choice(path, f"[[scenario]] {k} name", s.get("name"), SCENARIOS)
         extra = sorted(set(s) - {"name", *SCENARIOS[name]})
         if extra:
             raise SpecError(f"fault spec {path}: [[scenario]] {k} ({name}) key {extra[0]!r} unknown")
@@ -184,9 +176,7 @@ def load_fault_spec(path: Path) -> FaultSpec:
         scenarios.append((name, mass, str(prof), text))
     faults = []
     for k, f in enumerate(doc.get("fault", [])):
-        name = f.get("name")
-        if name not in INJECTORS:
-            raise _err(path, f"[[fault]] {k} name", name, f"one of {', '.join(INJECTORS)}")
+        name = _SPEC.choice(path, f"[[fault]] {k} name", f.get("name"), INJECTORS)
         params = tuple(sorted((key, v) for key, v in f.items() if key != "name"))
         try:
             make_injector(name, 0.0, 1.0, seed, **dict(params))

@@ -7,26 +7,35 @@ or a search waits on Dask futures that may take minutes, so here the first SIGIN
 context managers on its way out run: the results table is flushed, the Dask client and its LocalCluster are
 closed (no worker left behind, no leaked semaphore), and the command writes what it has, marked as
 interrupted, and exits 128 + the signal's number.
+
+This is the one interruption path of the long commands that wait on work they cannot pause (`pafp sweep`,
+`design`, `faults`, `tune`, `fit`): each enters :func:`interrupting` around its work, catches
+:class:`Interrupted` and prints :func:`stopped_line`. ``Interrupted.elapsed_s`` is the time from entering to the
+signal (the report's "stopped after"). Their outputs are checked before the work by
+:func:`host_tools.outdir.check_writable` (writable, at least 1 MiB free).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 from host_tools.stop_signals import EXIT_CODES, StopSignals
 
-__all__ = ["Interrupted", "interrupting"]
+__all__ = ["Interrupted", "interrupting", "stopped_line"]
 
 
 class Interrupted(BaseException):
     """A stop signal arrived: ``signal`` is its name, ``exit_code`` 128 + its number."""
 
-    def __init__(self, signal: str) -> None:
-        """The signal's name (SIGINT, SIGTERM, SIGHUP)."""
+    def __init__(self, signal: str, elapsed_s: float = float("nan")) -> None:
+        """The signal's name (SIGINT, SIGTERM, SIGHUP) and the seconds from :func:`interrupting` to it."""
         super().__init__(f"stopped by {signal}")
         self.signal = signal
         self.exit_code = EXIT_CODES.get(signal, 130)
+        self.elapsed_s = elapsed_s
 
 
 @contextmanager
@@ -34,10 +43,21 @@ def interrupting() -> Iterator[StopSignals]:
     """While entered, the first stop signal raises Interrupted where the main thread is (a second one raises
     KeyboardInterrupt, StopSignals' way out)."""
     signals = StopSignals()
+    t0 = time.perf_counter()
 
     def raise_now() -> None:
-        raise Interrupted(signals.name or "SIGINT")
+        raise Interrupted(signals.name or "SIGINT", time.perf_counter() - t0)
 
     signals.on_stop = raise_now
     with signals:
         yield signals
+
+
+def stopped_line(command: str, stop: Interrupted, done: int, total: int, out: Path, what: str = "points") -> str:
+    """The line a study prints after a stop signal: how far it got, where the rows are, how to finish.
+
+    >>> stopped_line("faults", Interrupted("SIGTERM", 12.34), 3, 8, Path("runs/f"))
+    'pafp faults: stopped by SIGTERM after 12.3 s: 3 of 8 points finished, kept in runs/f; `--resume` runs the rest'
+    """
+    return (f"pafp {command}: stopped by {stop.signal} after {stop.elapsed_s:.1f} s: {done} of {total} {what} "
+            f"finished, kept in {out}; `--resume` runs the rest")

@@ -47,6 +47,18 @@ class SpecValues:
             raise self.error(path, where, v, f"an int in {lo}..{hi}")
         return v
 
+    def choice(self, path: Path, where: str, v: object, choices: Any) -> str:
+        """v when it is a string among ``choices`` (a list, a dict or a registry), else the one-line error."""
+        if not isinstance(v, str) or v not in choices:
+            raise self.error(path, where, v, f"one of {', '.join(choices)}")
+        return v
+
+    def file(self, path: Path, where: str, v: object) -> Path:
+        """The existing file v names, relative to the spec's folder (v must be a string)."""
+        if not isinstance(v, str) or not v or not (path.parent / v).is_file():
+            raise self.error(path, where, v, "an existing file, relative to the spec")
+        return (path.parent / v).resolve()
+
     def nonempty_list(self, path: Path, doc: dict[str, Any], key: str, default: list[Any]) -> list[Any]:
         """doc[key] (default if absent) when it is a non-empty list without repeats (doc is the spec's table)."""
         v = doc.get(key, default)
@@ -64,7 +76,33 @@ class SpecValues:
             doc = tomllib.loads(text)
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
             raise SpecError(f"{self.kind} {path}: cannot be read as TOML ({type(e).__name__}: {e})") from None
-        unknown = sorted(set(doc) - {t.strip("[]") for t in tables})
+        shapes = {t.strip("[]"): t for t in tables}
+        unknown = sorted(set(doc) - set(shapes))
         if unknown:
             raise SpecError(f"{self.kind} {path}: table {unknown[0]!r} unknown: {', '.join(tables)}")
+        for key, value in doc.items():
+            self._check_shape(path, shapes[key], value)
         return text, doc
+
+    def _check_shape(self, path: Path, table: str, value: object) -> None:
+        """SpecError unless ``value`` has the shape ``table`` names: a table for ``[x]``, an array of tables for
+        ``[[x]]`` (``x = "..."`` or ``[[x]]`` where ``[x]`` belongs are refused here, not as a TypeError later).
+
+        >>> SpecValues("x spec", "[a]")._check_shape(Path("s.toml"), "[a]", [{}])
+        Traceback (most recent call last):
+        ...
+        host_tools.studies.sweep_spec.SpecError: x spec s.toml: key 'a' is an array of tables ([[a]]): expected \
+a table, written [a]
+        """
+        name = table.strip("[]")
+        many = table.startswith("[[")
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            got = f"an array of tables ([[{name}]])"
+        elif isinstance(value, dict):
+            got = f"a table ([{name}])"
+        else:
+            got = f"a {type(value).__name__} ({name} = {value!r:.40})"
+        if (many and got.startswith("an array")) or (not many and got.startswith("a table")):
+            return
+        want = f"an array of tables, each written [[{name}]]" if many else f"a table, written [{name}]"
+        raise SpecError(f"{self.kind} {path}: key {name!r} is {got}: expected {want}")

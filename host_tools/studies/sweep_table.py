@@ -1,7 +1,8 @@
 """The results of a sweep on disk: a row journal appended as points finish, and results.parquet / results.csv.
 
-Every finished point is appended at once to `rows.jsonl` (one JSON object a line, flushed): a sweep that
-is killed keeps every finished row, and `--resume` reads them back. `results.parquet` and `results.csv`
+Every finished point is appended at once to `rows.jsonl` (one JSON object a line, written whole or not at all: a
+write that fails, a full disk, cuts the journal back to its last whole row): a sweep that is killed keeps every
+finished row, and `--resume` reads them back. `results.parquet` and `results.csv`
 are rewritten from the journal (rows sorted by point) at most every `FLUSH_S` seconds while the sweep
 runs and at its end, each through a temporary file and a rename, so a reader never sees half a file.
 `sweep.json` records the spec's digest: `--resume` refuses a directory written by another spec.
@@ -18,7 +19,7 @@ from typing import Any
 
 from host_tools.outdir import naming
 
-__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "read_rows", "status_counts"]
+__all__ = ["JOURNAL", "ResultsTable", "TIMING_COLUMNS", "check_out", "kept_rows", "read_rows", "status_counts"]
 
 JOURNAL = "rows.jsonl"
 FLUSH_S = 1.0
@@ -28,6 +29,11 @@ TIMING_COLUMNS = ("wall_time_s", "realtime_factor")
 
 def _jsonable(v: Any) -> Any:
     return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def kept_rows(out: Path) -> str:
+    """What a study that failed or stopped keeps: the end of its one-line error."""
+    return f"every row finished before it is in {out / JOURNAL} (--resume runs the rest)"
 
 
 def read_rows(out: Path) -> list[dict[str, Any]]:
@@ -96,15 +102,24 @@ class ResultsTable:
         _atomic(meta, lambda p: p.write_text(json.dumps({"digest": digest, "points": n_points, "columns": columns},
                                                         indent=2) + "\n", encoding="utf-8"))
         with naming(out / JOURNAL):
-            self._journal = open(out / JOURNAL, "a", encoding="utf-8")  # noqa: SIM115 - closed by close()
+            self._journal = os.open(out / JOURNAL, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o666)
+            _cut_torn_line(self._journal)
         self._last_flush = 0.0
 
     def add(self, row: dict[str, Any]) -> None:
-        """Record a finished point: journal now, tables at most every FLUSH_S."""
-        self.rows[int(row["point"])] = row
+        """Record a finished point: journal now (the whole line or, if the write fails, nothing: the journal is cut
+        back to its last whole row before the OSError goes on), tables at most every FLUSH_S."""
+        line = (json.dumps({k: _jsonable(v) for k, v in row.items()}, allow_nan=False) + "\n").encode()
         with naming(self.out / JOURNAL):
-            self._journal.write(json.dumps({k: _jsonable(v) for k, v in row.items()}, allow_nan=False) + "\n")
-            self._journal.flush()
+            size = os.fstat(self._journal).st_size
+            try:
+                view = memoryview(line)
+                while view:
+                    view = view[os.write(self._journal, view):]
+            except BaseException:
+                os.ftruncate(self._journal, size)
+                raise
+        self.rows[int(row["point"])] = row
         if time.monotonic() - self._last_flush >= FLUSH_S:
             self.flush()
 
@@ -129,4 +144,15 @@ class ResultsTable:
         try:
             self.flush()
         finally:
-            self._journal.close()
+            os.close(self._journal)
+
+
+def _cut_torn_line(fd: int) -> None:
+    """Cut a journal opened for appending back to its last whole line (a kill can leave half a row, which the
+    next row would otherwise be glued to)."""
+    size = os.fstat(fd).st_size
+    tail = os.pread(fd, min(size, 1 << 16), max(0, size - (1 << 16)))
+    if tail and not tail.endswith(b"\n"):
+        keep = tail.rfind(b"\n") + 1  # 0: no whole line in the tail
+        if keep or len(tail) == size:
+            os.ftruncate(fd, size - len(tail) + keep)

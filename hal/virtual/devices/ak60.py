@@ -130,7 +130,8 @@ class Ak60(EventDevice):
         self._timeout = world.ticks(cfg.timeout_s)
         self._fault_stop = world.ticks(cfg.fault_stop_time_s)
         # read at every event: copied from the (interpreted, frozen) configuration into native fields
-        self._limits = (cfg.abs_max_current_a, cfg.temp_fet_max_c, cfg.temp_motor_max_c, cfg.min_input_voltage_v)
+        self._limits = (cfg.abs_max_current_a, cfg.temp_fet_max_c, cfg.temp_motor_max_c, cfg.min_input_voltage_v,
+                        cfg.over_voltage_v(p.supply_voltage_v))
         self.mode = DriveMode.RELEASED
         self.fault = 0
         self.timed_out = False
@@ -419,7 +420,7 @@ class Ak60(EventDevice):
 
     def _check_limits(self, t: int) -> None:
         m = self.meter
-        max_current_a, temp_fet_max_c, temp_motor_max_c, min_input_voltage_v = self._limits
+        max_current_a, temp_fet_max_c, temp_motor_max_c, min_input_voltage_v, max_input_voltage_v = self._limits
         if abs(m.current_a) > max_current_a:
             code = vesc.FaultCode.ABS_OVER_CURRENT
         elif m.temp_fet_c > temp_fet_max_c:
@@ -428,6 +429,8 @@ class Ak60(EventDevice):
             code = vesc.FaultCode.OVER_TEMP_MOTOR
         elif m.v_in_v < min_input_voltage_v:
             code = vesc.FaultCode.UNDER_VOLTAGE
+        elif m.v_in_v > max_input_voltage_v:
+            code = vesc.FaultCode.OVER_VOLTAGE
         else:
             return
         self._raise_fault(code, t, self._fault_stop)

@@ -32,6 +32,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "max_duty": (0.0, 1.0),
     "source_resistance_ohm": (0.0, 10.0),
     "min_input_voltage_v": (0.0, 100.0),
+    "max_input_voltage_ratio": (1.0, 10.0),
     "abs_max_current_a": (0.1, 1000.0),
     "fault_stop_time_s": (0.0, 60.0),
     "ambient_c": (-40.0, 100.0),
@@ -95,6 +96,11 @@ class Ak60Config:
     """[I] supply and wiring resistance: v_in sags by R_src x input current."""
     min_input_voltage_v: float = 8.0
     """UNDER_VOLTAGE below this input voltage (VESC ``l_min_vin`` 8 V)."""
+    max_input_voltage_ratio: float = 1.25
+    """[I] OVER_VOLTAGE above this multiple of the motor's rated supply voltage (the VESC trips
+    FAULT_CODE_OVER_VOLTAGE when the input voltage exceeds ``l_max_vin``, mc_interface.c). CubeMars rates the
+    AK60-6 at 24 V and publishes no maximum in the sources held here: 1.25 x 24 V = 30 V, above a full 6S Li-ion
+    pack's 25.2 V (and 60 V for the 48 V motors, above a full 12S pack's 50.4 V); see :meth:`over_voltage_v`."""
     abs_max_current_a: float = 30.0
     """[I] ABS_OVER_CURRENT above this |i_q| (the plant clamps at 22.7 A, so only injection trips it)."""
     fault_stop_time_s: float = 0.5
@@ -123,6 +129,26 @@ class Ak60Config:
             raise ValueError(f"Ak60Config.uuid must be exactly 12 bytes, got {len(self.uuid)}")
         if "\0" in self.hw_name or not self.hw_name.isprintable():
             raise ValueError(f"Ak60Config.hw_name = {self.hw_name!r} must be printable text without NUL")
+
+    def over_voltage_v(self, rated_supply_v: float) -> float:
+        """The input voltage above which the driver of a motor rated for ``rated_supply_v`` trips OVER_VOLTAGE."""
+        return self.max_input_voltage_ratio * rated_supply_v
+
+    def check_supply(self, full_v: float, rated_supply_v: float, what: str) -> None:
+        """ValueError (one line) when a supply of ``full_v`` (``what``: the pack's name) would trip the driver of a
+        motor rated for ``rated_supply_v`` at once: a pack of the wrong voltage for the motor.
+
+        >>> Ak60Config().check_supply(126.0, 24.0, "battery x")
+        Traceback (most recent call last):
+        ...
+        ValueError: battery x: 126 V full is above the driver's over-voltage trip of 30 V (1.25 x the motor's \
+rated 24 V): choose a pack for the motor's supply voltage
+        """
+        limit = self.over_voltage_v(rated_supply_v)
+        if full_v > limit:
+            raise ValueError(f"{what}: {full_v:.4g} V full is above the driver's over-voltage trip of {limit:.4g} V "
+                             f"({self.max_input_voltage_ratio:g} x the motor's rated {rated_supply_v:g} V): choose "
+                             "a pack for the motor's supply voltage")
 
     @property
     def thermal_time_constants_s(self) -> tuple[float, float]:

@@ -21,7 +21,8 @@ from typing import Any
 
 from hal.registry import Registry
 
-__all__ = ["AK60_6", "BNO08X", "DEVICES", "KINDS", "DeviceModel", "adc_sensor_models", "device_model"]
+__all__ = ["AK60_6", "BNO08X", "DEVICES", "KINDS", "DeviceModel", "adc_sensor_models", "device_model",
+           "device_model_for"]
 
 KINDS: dict[str, tuple[str, ...]] = {"uart": ("motor", "imu", "ground"), "adc": ("sensor",)}
 """Peripheral kind a device model may sit on -> the bench roles of that kind that carry a device (a sensor on
@@ -101,6 +102,16 @@ def device_model(name: str, where: str = "device") -> DeviceModel:
     if not isinstance(model, DeviceModel):
         raise ValueError(f"{where} {name!r}: {DEVICES.reference(name)} is a {type(model).__name__}, "
                          "not a hal.virtual.devices.registry.DeviceModel")
+    return model
+
+
+def device_model_for(role: str, name: str, where: str) -> DeviceModel:
+    """device_model(name), checked to play ``role`` (``imu``, ``motor``); ValueError naming where otherwise."""
+    model = device_model(name, where)
+    if model.role != role:
+        wanted = {"imu": "an IMU", "motor": "a motor"}.get(role, f"a {role} device")
+        raise ValueError(f"{where} {name!r} is a {model.role} device, not {wanted} (the alias {role!r} names the "
+                         "shipped one)")
     return model
 
 

@@ -1,0 +1,68 @@
+"""What the summaries say is what was measured (issue 35, case 8): a plug-in's ADC sensor appears in the run's
+summary and report; a serial run's encoder figure zeroed at the first motor reply is not a headline; the serial
+printout does not call the supervisor's RUN time tracking; an interrupted study says after how long.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from hal.virtual.devices.registry import DEVICES, DeviceModel
+from host_tools.cli import main
+from host_tools.studies.interrupt import Interrupted, interrupting, stopped_line
+
+
+class _Thermistor:
+    """A toy sensor a plug-in adds on a spare ADC channel: a fixed 1.1 V."""
+
+    def outputs(self):
+        return {"thermistor": lambda t: 1.1}
+
+    def set_fault(self, mode):
+        raise ValueError(f"thermistor fault {mode!r} unknown")
+
+
+def test_an_adc_sensor_from_a_plug_in_is_in_the_summary_and_the_report(tmp_path, capsys):
+    DEVICES.register("thermistor", DeviceModel("sensor", "adc", 0, lambda ground, f_hz, *, seed=0, config=None:
+                                               _Thermistor(), "toy thermistor"))
+    try:
+        out = tmp_path / "run"
+        assert main(["run", "--ground-sensors", "on", "--strides", "1", "--quiet", "--no-plot", "--no-trace",
+                     "--out", str(out)]) in (0, 1)
+    finally:
+        DEVICES.unregister("thermistor")
+    capsys.readouterr()
+    adc = json.loads((out / "summary.json").read_text())["adc"]
+    sensor = adc["sensors"]["thermistor"]
+    assert sensor["origin"] == "plug-in" and adc["sensors"]["load_cell"]["origin"] == "shipped"
+    lsb = adc["vref_v"] / 2 ** adc["bits"]
+    assert abs(sensor["channels"]["thermistor"] * lsb - 1.1) < 10 * lsb  # the code its 1.1 V gives, with noise
+    assert "| thermistor | plug-in | thermistor |" in (out / "report.md").read_text()
+
+
+def test_a_serial_runs_encoder_zeroed_at_the_first_reply_is_not_a_headline(tmp_path, capsys):
+    out = tmp_path / "run"
+    main(["run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--duration", "1.5", "--quiet",
+          "--out", str(out)])
+    printed = capsys.readouterr().out
+    s = json.loads((out / "summary.json").read_text())
+    assert s["encoder_source"] == "motor"
+    assert s["encoder_rms_error_deg"] is None and s["encoder_max_error_deg"] is None and s["encoder_lag_ms"] is None
+    assert "zeroed at its first reply" in s["encoder_headline"] and "zeroed at its first reply" in printed
+    assert "of it with the supervisor in RUN" in printed and "tracking in RUN" not in printed
+
+
+def test_an_interruption_says_after_how_long_and_how_far_the_study_got():
+    with pytest.raises(Interrupted) as stop, interrupting():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(30)  # the handler raises at once; the sleep never ends
+    assert stop.value.signal == "SIGINT" and stop.value.exit_code == 130 and 0 <= stop.value.elapsed_s < 60
+    line = stopped_line("design", stop.value, 2, 8, Path("runs/d"))
+    assert line.startswith("pafp design: stopped by SIGINT after ") and "n/a" not in line
+    assert line.endswith(" s: 2 of 8 points finished, kept in runs/d; `--resume` runs the rest")
