@@ -17,6 +17,7 @@ import math
 import time
 import tomllib
 from collections.abc import Callable
+from typing import Any
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -92,7 +93,8 @@ class RunConfig:
     firmware: FirmwareConfig | None = None
     reference_csv: Path | None = None
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
-    trace_capacity: int = 100_000  # the trace keeps the last this many jobs (0: no trace)
+    trace_capacity: int = 400_000  # the trace keeps at most this many jobs (0: no trace)
+    trace_window_s: float | None = 30.0  # ... of the last this many seconds of the run (None: the whole run)
     stream_to: Path | None = None  # write telemetry.bin/.csv there as the run goes (see RunFiles)
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
@@ -215,6 +217,7 @@ class RunResult:
     bench_record: dict = field(default_factory=dict)  # the plant drawn and the imperfections (summary.json)
     # the thermal model, battery and heat log of the run (runner.attach_heat; host_tools/reports/thermal.py)
     heat: dict = field(default_factory=dict)
+    timeline: Any = None  # what the trace shows beyond the scheduler's records (host_tools/reports/timeline.py)
 
 
 def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
@@ -250,6 +253,20 @@ def attach_heat(bench: VirtualBench, cfg: RunConfig) -> dict:
     if battery is not None:
         record["battery"] = bench.attach_battery(load_battery(battery))
     return record
+
+
+def _timeline(cfg: RunConfig, sched: Scheduler, fw: Firmware, bench: VirtualBench, rig: Any, f_cpu: int) -> Any:
+    """The trace's timeline of a run, with a watch on the motor's commands from a trip on (on the faults' taps)."""
+    from hal.virtual.faults.base import FaultRig
+    from hal.virtual.faults.observer import Observer
+    from host_tools.reports.timeline import Timeline
+
+    winding = bench.motor.meter.winding
+    timeline = Timeline(sched, fw, f_cpu, cfg.trace_window_s,
+                        winding=None if winding is None else lambda: float(winding.winding_c))
+    timeline.watch = Observer(sample=False, gate=lambda: not fw.supervisor.healthy)
+    timeline.watch.arm(rig if rig is not None else FaultRig(bench, f_cpu))
+    return timeline
 
 
 def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
@@ -317,6 +334,9 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     sched = Scheduler([*tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
     now.bind(sched)
+    timeline = _timeline(cfg, sched, fw, bench, rig, f_cpu) if trace is not None else None
+    if timeline is not None:
+        probe_body.listeners.append(timeline.sample)
     fw.kernel_health = kernel_health(sched, fw)
     if recording is not None:
         fw.kernel_health = recording.health(fw.kernel_health)
@@ -374,4 +394,5 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     heat_record["log"] = heat
     telemetry = bench.telemetry_bytes() if files is None else b""
     return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
-                     files, complete, stopped_by=stopped_by, bench_record=bench_record, heat=heat_record)
+                     files, complete, stopped_by=stopped_by, bench_record=bench_record, heat=heat_record,
+                     timeline=timeline)
