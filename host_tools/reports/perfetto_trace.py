@@ -57,10 +57,9 @@ class PerfettoTrace:
         self._names: dict[str, int] = {}
         self._arg_names: dict[str, int] = {}
         self._next_uuid = 1
-        flags = TracePacket.SEQ_NEEDS_INCREMENTAL_STATE
-        self._slice = self._template(TrackEvent.TYPE_SLICE_BEGIN, flags)
-        self._slice_end = self._template(TrackEvent.TYPE_SLICE_END, flags)
-        self._instant = self._template(TrackEvent.TYPE_INSTANT, flags)
+        self._begins: dict[tuple[str, ...], TracePacket] = {}  # slice begins and instants, by their argument names
+        self._instants: dict[tuple[str, ...], TracePacket] = {}
+        self._slice_end = self._template(TrackEvent.TYPE_SLICE_END, 0)  # refers to no interned name
         self._counter = self._template(TrackEvent.TYPE_COUNTER, 0)
 
     @staticmethod
@@ -103,28 +102,34 @@ class PerfettoTrace:
             iid = table[name] = len(table) + 1
         return iid
 
-    def _annotate(self, event: TrackEvent, args: dict[str, object] | None) -> None:
-        del event.debug_annotations[:]
-        for key, value in (args or {}).items():
-            a = event.debug_annotations.add()
-            a.name_iid = self._iid(self._arg_names, key)
-            if isinstance(value, bool):
-                a.bool_value = value
-            elif isinstance(value, int):
-                a.int_value = value
-            elif isinstance(value, float):
-                a.double_value = value
-            else:
-                a.string_value = str(value)
+    def _with_args(self, templates: dict[tuple[str, ...], TracePacket], kind: int,
+                   args: dict[str, object] | None) -> TracePacket:
+        """The template packet of ``kind`` whose debug annotations are ``args`` (values set, names interned)."""
+        keys = tuple(args) if args else ()
+        p = templates.get(keys)
+        if p is None:
+            p = templates[keys] = self._template(kind, TracePacket.SEQ_NEEDS_INCREMENTAL_STATE)
+            for key in keys:
+                p.track_event.debug_annotations.add().name_iid = self._iid(self._arg_names, key)
+        if args:
+            for a, value in zip(p.track_event.debug_annotations, args.values()):
+                if isinstance(value, bool):
+                    a.bool_value = value
+                elif isinstance(value, int):
+                    a.int_value = value
+                elif isinstance(value, float):
+                    a.double_value = value
+                else:
+                    a.string_value = str(value)
+        return p
 
     def begin(self, track: int, name: str, t_ns: int, args: dict[str, object] | None = None) -> tuple[int, bytes]:
         """A slice's start on ``track`` (ended by :meth:`end` on the same track)."""
-        p = self._slice
+        p = self._with_args(self._begins, TrackEvent.TYPE_SLICE_BEGIN, args)
         p.timestamp = t_ns
         e = p.track_event
         e.track_uuid = track
         e.name_iid = self._iid(self._names, name)
-        self._annotate(e, args)
         return t_ns, p.SerializeToString()
 
     def end(self, track: int, t_ns: int) -> tuple[int, bytes]:
@@ -136,12 +141,11 @@ class PerfettoTrace:
 
     def instant(self, track: int, name: str, t_ns: int, args: dict[str, object] | None = None) -> tuple[int, bytes]:
         """A zero-duration event on ``track``."""
-        p = self._instant
+        p = self._with_args(self._instants, TrackEvent.TYPE_INSTANT, args)
         p.timestamp = t_ns
         e = p.track_event
         e.track_uuid = track
         e.name_iid = self._iid(self._names, name)
-        self._annotate(e, args)
         return t_ns, p.SerializeToString()
 
     def counter(self, track: int, t_ns: int, value: float) -> tuple[int, bytes]:

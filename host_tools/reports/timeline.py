@@ -7,7 +7,7 @@ Tracks, in the order the Perfetto UI shows them (docs/telemetry.md, "The trace")
   the firings the scheduler counted in that job (``rtos.trace.IrqRecord``), each served from its firing time or
   after the previous one's end, for the source's cycles. Firings on an idle CPU are not drawn (they cost no job
   anything; the CPU counter holds them).
-* **kernel**: deadline misses, overrun faults, watchdog kicks and resets; **supervisor**: each fault trip (reason
+* **kernel**: deadline misses, overrun faults, watchdog kicks and resets; **safety**: each fault trip (reason
   and measured value) and the first safe command that reached the motor after it (zero current, then the brake);
   **gait (detector)**: heel strike, foot flat, heel off and toe off as each detector saw them; **fault injector**:
   each time an injector acted (a campaign point, ``pafp run --fault``).
@@ -41,7 +41,6 @@ SLOW = (("motor-reported winding temperature", "C"), ("bus voltage (firmware)", 
         ("winding temperature, model (emulation only)", "C"))
 """The counters the timeline samples itself, in the order of its samples' values."""
 GAIT = ("heel strike", "foot flat", "heel off", "toe off")
-_STATES = {0: "INIT", 1: "RUN", 2: "SAFE"}
 
 
 class Timeline:
@@ -115,12 +114,13 @@ def _job_streams(b: _Builder, trace: Any, cut: int, hidden: set[str]) -> list[St
     tasks = {name: b.child(name) for name in trace.task_names if name not in hidden}
     isr = {k: b.child(f"ISR {name}") for k, (name, _cost) in enumerate(trace.interrupts)}
     jobs: list[tuple[int, bytes]] = []
-    for task, job, release, _ready, start, finish, cost in trace._jobs:
+    for task, job, _release, _ready, start, finish, cost in trace._jobs:
         if task in hidden or start < cut:
             continue
         track = tasks[task]
-        jobs.append(pf.begin(track, task, b.ns(start), {"job": job, "cycles": cost, "response_cycles": finish - release,
-                                                        "interference_cycles": finish - start - cost}))
+        preempted = finish - start - cost
+        jobs.append(pf.begin(track, task, b.ns(start), {"job": job, "cycles": cost, "interference_cycles": preempted}
+                             if preempted else {"job": job}))
         jobs.append(pf.end(track, b.ns(finish)))
     return [jobs, _isr_slices(b, trace, cut, isr)]
 
@@ -207,7 +207,7 @@ def _firmware_instants(b: _Builder, r: Any, timeline: Timeline | None, cut_s: fl
     """Fault trips, the safe commands after them, the gait events and the injectors' acts."""
     pf, fw = b.pf, r.firmware
     ns = lambda t_s: int(round(t_s * 1e9))  # noqa: E731 - the firmware's times are seconds
-    sup = b.child("supervisor")
+    sup = b.child("safety")
     trips = [(t, reason, detail) for t, reason, detail in fw.supervisor.trips]
     events = [pf.instant(sup, f"fault trip: {reason}", ns(t), {"reason": reason, "measured": detail})
               for t, reason, detail in trips if t >= cut_s]
@@ -267,5 +267,3 @@ def write_trace(r: Any, path: Path, telemetry: bytes | Path, board: str = "") ->
     streams += _slow_streams(b, timeline, cut, counters, battery)
     return b.pf.write(path, streams)
 
-
-STATE_NAMES = _STATES
