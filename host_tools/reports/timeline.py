@@ -157,11 +157,11 @@ def _isr_slices(b: _Builder, trace: Any, cut: int, tracks: dict[int, int]) -> li
     return out
 
 
-def _kernel_events(b: _Builder, trace: Any, cut: int, track: int) -> list[tuple[int, bytes]]:
+def _kernel_events(b: _Builder, trace: Any, cut: int, track: int, hidden: set[str]) -> list[tuple[int, bytes]]:
     names = {"deadline_miss": "deadline miss", "fault": "overrun fault", "watchdog_kick": "watchdog kick",
              "watchdog_reset": "watchdog reset"}
     out = [b.pf.instant(track, names.get(kind, kind), b.ns(t), {"task": source, "job": job})
-           for kind, t, source, job in trace._events if t >= cut]
+           for kind, t, source, job in trace._events if t >= cut and source not in hidden]
     out.sort(key=lambda tp: tp[0])
     return out
 
@@ -258,7 +258,7 @@ def write_trace(r: Any, path: Path, telemetry: bytes | Path, board: str = "") ->
     b = _Builder(f, board or getattr(r.config, "board", "") or "MCU")
     hidden = {"bench_probe", "serial_probe"}  # instruments of the bench, not firmware
     streams = _job_streams(b, trace, cut, hidden)
-    streams.append(_kernel_events(b, trace, cut, b.child("kernel")))
+    streams.append(_kernel_events(b, trace, cut, b.child("kernel"), hidden))
     streams += _firmware_instants(b, r, timeline, cut / f)
     counters = b.pf.track("counters", ordered=True, rank=1)
     extra = len(getattr(r.firmware, "published_names", ()))
