@@ -95,6 +95,7 @@ class RunConfig:
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
     trace_capacity: int = 400_000  # the trace keeps at most this many jobs (0: no trace)
     trace_window_s: float | None = 30.0  # ... of the last this many seconds of the run (None: the whole run)
+    trace_wire: bool = False  # the trace shows every UART and CAN frame too (host_tools/reports/wire_trace.py)
     stream_to: Path | None = None  # write telemetry.bin/.csv there as the run goes (see RunFiles)
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
@@ -152,6 +153,9 @@ class RunConfig:
         if isinstance(self.ambient_c, bool) or not isinstance(self.ambient_c, (int, float)) or \
                 not -40.0 <= self.ambient_c <= 80.0:
             raise ValueError(f"ambient temperature {self.ambient_c!r} C out of range: a number in [-40, 80] C")
+        if self.trace_window_s is not None and (isinstance(self.trace_window_s, bool) or not isinstance(
+                self.trace_window_s, (int, float)) or not 0.0 < self.trace_window_s <= 86_400.0):
+            raise ValueError(f"trace window {self.trace_window_s!r} s out of range: a number in (0, 86400] s")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
