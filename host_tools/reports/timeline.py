@@ -97,7 +97,7 @@ class _Builder:
     def __init__(self, f_cpu_hz: int, board: str) -> None:
         self.pf = PerfettoTrace()
         self.f = f_cpu_hz
-        self.fw_track = self.pf.track(f"firmware ({board}, {f_cpu_hz / 1e6:g} MHz)", ordered=True, rank=0)
+        self.fw_track = self.pf.track(f"firmware ({board})", ordered=True, rank=0)
         self.rank = 0
 
     def ns(self, cycles: int) -> int:
@@ -255,7 +255,8 @@ def write_trace(r: Any, path: Path, telemetry: bytes | Path, board: str = "") ->
     timeline: Timeline | None = getattr(r, "timeline", None)
     window = timeline.window_cycles if timeline is not None else None
     cut = 0 if window is None else max(0, r.scheduler.now - window)
-    b = _Builder(f, board or getattr(r.config, "board", "") or "MCU")
+    clock = "wall clock" if r.scheduler.clock.realtime else f"{f / 1e6:g} MHz"
+    b = _Builder(f, f"{board or getattr(r.config, 'board', '') or 'MCU'}, {clock}")
     hidden = {"bench_probe", "serial_probe"}  # instruments of the bench, not firmware
     streams = _job_streams(b, trace, cut, hidden)
     streams.append(_kernel_events(b, trace, cut, b.child("kernel"), hidden))
