@@ -39,7 +39,7 @@ def _one_point(spec: object, index: int, out: Path) -> int:
         return 2
     p = points[index]
     print(f"pafp faults: point {index} ({p.label()}; seed {p.seed}) -> {out}")
-    r, fault, _obs, onset_s = faulted_run(p)
+    r, fault, _obs, onset_s = faulted_run(p, trace=True)
     s = write_outputs(r, out, extra={"fault_point": index, "fault": {"name": p.fault, "onset_s": onset_s,
                                                                       "duration_s": p.duration_s,
                                                                       **fault.record.as_dict()}})

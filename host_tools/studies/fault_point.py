@@ -67,13 +67,16 @@ def _firmware(p: FaultPoint) -> Any:
     return fw.with_changes(**changes) if changes else fw
 
 
-def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, progress_name: str = "") -> Any:
-    """The RunConfig of one of the point's runs: its scenario, controller, link and seed, with `faults` armed."""
+def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, progress_name: str = "",
+                     trace: bool = False) -> Any:
+    """The RunConfig of one of the point's runs: its scenario, controller, link and seed, with `faults` armed
+    (``trace``: with the run's trace, for a worst point's trace.pftrace)."""
     from host_tools.commands.run import controller_for
     from host_tools.runner import RunConfig
 
     fw = _firmware(p)
-    return RunConfig(strides=1, seed=p.seed, firmware=fw, trace_capacity=0, scenario=p.scenario,
+    return RunConfig(strides=1, seed=p.seed, firmware=fw, trace_capacity=RunConfig.trace_capacity if trace else 0,
+                     scenario=p.scenario,
                      body_mass_kg=p.body_mass_kg, controller=controller_for(fw, p.scenario, p.body_mass_kg),
                      faults=faults, duration_s=duration_s)
 
@@ -143,7 +146,7 @@ def figures(onset_s: float, faulted: dict[str, np.ndarray], base: dict[str, np.n
     }
 
 
-def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, float]:
+def faulted_run(p: FaultPoint, progress: Any = None, trace: bool = False) -> tuple[Any, Any, Any, float]:
     """(RunResult, injector, observer, onset_s) of the point's faulted run."""
     from hal.virtual.faults import make_injector
     from hal.virtual.faults.observer import Observer
@@ -151,7 +154,7 @@ def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, flo
 
     onset_s, _ = onset_of(p)
     fault, obs = make_injector(p.fault, onset_s, p.duration_s, p.seed, **dict(p.params)), Observer()
-    cfg = point_run_config(p, (obs, fault), onset_s + p.duration_s + p.settle_s)
+    cfg = point_run_config(p, (obs, fault), onset_s + p.duration_s + p.settle_s, trace=trace)
     return run_virtual(cfg, progress=progress), fault, obs, onset_s
 
 
