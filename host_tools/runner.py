@@ -94,7 +94,7 @@ class RunConfig:
     reference_csv: Path | None = None
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
     trace_capacity: int = 400_000  # the trace keeps at most this many jobs (0: no trace)
-    trace_window_s: float | None = 30.0  # ... of the last this many seconds of the run (None: the whole run)
+    trace_window_s: float | None = 20.0  # ... of the last this many seconds of the run (None: the whole run)
     trace_wire: bool = False  # the trace shows every UART and CAN frame too (host_tools/reports/wire_trace.py)
     stream_to: Path | None = None  # write telemetry.bin/.csv there as the run goes (see RunFiles)
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures

@@ -67,7 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
     parser.add_argument("--no-trace", action="store_true", help="do not write trace.pftrace")
     parser.add_argument("--trace-seconds", type=float, default=None, metavar="S",
-                        help="trace.pftrace keeps the last S simulated seconds (default 30; docs/telemetry.md)")
+                        help="trace.pftrace keeps the last S simulated seconds (default 20; docs/telemetry.md)")
     parser.add_argument("--trace-strides", type=int, default=None, metavar="N",
                         help="trace.pftrace keeps the last N strides instead (N x the stride time)")
     parser.add_argument("--trace-wire", action="store_true",
@@ -365,14 +365,16 @@ def _controller(fw_cfg, args: argparse.Namespace) -> object:  # FirmwareConfig -
 
 
 def _trace_window_s(args, stride_s: float) -> float:
-    """The trace's window in seconds: --trace-strides N strides, else --trace-seconds, else 30 s."""
+    """The trace's window in seconds: --trace-strides N strides, else --trace-seconds, else RunConfig's default."""
+    from host_tools.runner import RunConfig
+
     if args.trace_strides is not None and args.trace_seconds is not None:
         raise ValueError("--trace-seconds and --trace-strides both given: choose one window")
     if args.trace_strides is not None:
         if not 1 <= args.trace_strides <= 10_000:
             raise ValueError(f"--trace-strides {args.trace_strides} out of range: an int in 1..10000")
         return args.trace_strides * stride_s
-    return 30.0 if args.trace_seconds is None else args.trace_seconds
+    return RunConfig.trace_window_s if args.trace_seconds is None else args.trace_seconds
 
 
 def controller_for(fw_cfg, scenario: str, body_mass_kg: float) -> object:  # FirmwareConfig -> the controller
