@@ -189,6 +189,15 @@ class Scheduler:
             interrupt_cycles={s.name: s.busy_cycles for s in self.interrupt_stats()},
         )
 
+    def busy_cycles(self) -> int:
+        """Cycles spent in jobs and interrupt service routines from cycle 0 to now (``utilisation().busy_cycles``)."""
+        busy = 0
+        for st in self._stat_list:
+            busy += st.busy_cycles
+        for j, src in enumerate(self._interrupts):
+            busy += (self._irq_in_job[j] + self._irq_idle[j]) * src.cost_cycles
+        return busy
+
     def interrupt_stats(self) -> list[InterruptStats]:
         """Firings per interrupt source so far, split into in-job and idle."""
         out = []

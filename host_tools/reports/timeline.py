@@ -13,8 +13,8 @@ Tracks, in the order the Perfetto UI shows them (docs/telemetry.md, "The trace")
   each time an injector acted (a campaign point, ``pafp run --fault``).
 * **counters**: the telemetry records' reference, encoder, IMU and fused angles, current command and measurement and
   supervisor state, at each record's own time (the logger's rate); the winding temperature the motor reports and,
-  with a battery, the bus voltage the firmware has, and the CPU utilisation per window (:data:`SAMPLE_EVERY` probe
-  samples); the thermal model's winding temperature (emulation only).
+  with a battery, the bus voltage the firmware has, and the CPU utilisation per window, every :data:`SAMPLE_S`;
+  the thermal model's winding temperature (emulation only).
 
 A run keeps only the last ``window_s`` seconds of it (the scheduler's trace is pruned as the run goes, and the
 rest is cut at the end), so a long walk's memory stays bounded.
@@ -41,6 +41,9 @@ SLOW = (("motor-reported winding temperature", "C"), ("bus voltage (firmware)", 
         ("winding temperature, model (emulation only)", "C"))
 """The counters the timeline samples itself, in the order of its samples' values."""
 GAIT = ("heel strike", "foot flat", "heel off", "toe off")
+SAMPLE_S = 0.1
+"""The slow counters' period, which is also the CPU utilisation's window: the motor reports its temperature and bus
+voltage at about 10 Hz (with the full status reply), and a sample costs the run an interpreted call."""
 
 
 class Timeline:
@@ -60,13 +63,16 @@ class Timeline:
         self.samples: deque[tuple[int, float, float, float, float]] = deque()
         self.watch: Any = None  # an Observer(sample=False, gate=...) of the motor's commands
         self._busy = (0, 0)  # (time, busy cycles) at the previous sample
+        self.sample_cycles = int(SAMPLE_S * f_cpu_hz) - f_cpu_hz // 1000  # a probe period's slack
 
     def sample(self, t_s: float) -> None:
-        """One sample of the slow counters at t_s; forget what left the window."""
+        """Called by the probe (50 Hz): every SAMPLE_S, one sample of the slow counters; forget what left the window."""
         now = self.scheduler.now
-        busy = self.scheduler.utilisation().busy_cycles
         t0, b0 = self._busy
-        cpu = 100.0 * (busy - b0) / (now - t0) if now > t0 else math.nan
+        if now - t0 < self.sample_cycles:
+            return
+        busy = self.scheduler.busy_cycles()
+        cpu = 100.0 * (busy - b0) / (now - t0)
         self._busy = (now, busy)
         fb = self.firmware.motor.feedback
         model = self.winding() if self.winding is not None else math.nan
