@@ -149,3 +149,15 @@ def test_a_window_keeps_the_last_seconds_only(tmp_path):
     times = [s.ts for s in tr.slices] + [s.ts for s in tr.instants] + [t for c in tr.counters.values() for t, _ in c]
     assert min(times) >= end_ns - 0.3e9 - 1 and min(times) < end_ns - 0.29e9
     assert len(r.scheduler.trace) < 0.35 * sum(s.jobs for s in r.scheduler.stats.values())  # pruned as it ran
+
+
+def test_the_figure_draws_every_track_of_a_trace(walked, tmp_path):
+    from host_tools.reports.trace_figure import draw, read_view
+
+    r, _, _, _, tr, out = walked
+    view = read_view(out / TRACE_FILE)
+    assert {view.tracks[u][0] for u in view.rows()} == {tr.tracks[u].name for u in
+                                                         {s.track for s in tr.slices + tr.instants} | set(tr.counters)}
+    trip = r.firmware.supervisor.tripped_at_s
+    draw(view, tmp_path / "t.png", (0.5, 1.6), (trip - 0.005, trip + 0.004))
+    assert (tmp_path / "t.png").stat().st_size > 20_000
