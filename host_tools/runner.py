@@ -268,8 +268,14 @@ def _timeline(cfg: RunConfig, sched: Scheduler, fw: Firmware, bench: VirtualBenc
     winding = bench.motor.meter.winding
     timeline = Timeline(sched, fw, f_cpu, cfg.trace_window_s,
                         winding=None if winding is None else lambda: float(winding.winding_c))
+    rig = rig if rig is not None else FaultRig(bench, f_cpu)
     timeline.watch = Observer(sample=False, gate=lambda: not fw.supervisor.healthy)
-    timeline.watch.arm(rig if rig is not None else FaultRig(bench, f_cpu))
+    timeline.watch.arm(rig)
+    if cfg.trace_wire:
+        from host_tools.reports.wire_trace import WireTrace
+
+        timeline.wire = WireTrace()
+        timeline.wire.arm(rig)
     return timeline
 
 

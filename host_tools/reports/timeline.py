@@ -10,7 +10,8 @@ Tracks, in the order the Perfetto UI shows them (docs/telemetry.md, "The trace")
 * **kernel**: deadline misses, overrun faults, watchdog kicks and resets; **safety**: each fault trip (reason
   and measured value) and the first safe command that reached the motor after it (zero current, then the brake);
   **gait (detector)**: heel strike, foot flat, heel off and toe off as each detector saw them; **fault injector**:
-  each time an injector acted (a campaign point, ``pafp run --fault``).
+  each time an injector acted (a campaign point, ``RunConfig.faults``); with ``--trace-wire`` a track per wire and
+  direction with a slice per frame (host_tools/reports/wire_trace.py).
 * **counters**: the telemetry records' reference, encoder, IMU and fused angles, current command and measurement and
   supervisor state, at each record's own time (the logger's rate); the winding temperature the motor reports and,
   with a battery, the bus voltage the firmware has, and the CPU utilisation per window, every :data:`SAMPLE_S`;
@@ -62,6 +63,7 @@ class Timeline:
         self.winding = winding
         self.samples: deque[tuple[int, float, float, float, float]] = deque()
         self.watch: Any = None  # an Observer(sample=False, gate=...) of the motor's commands
+        self.wire: Any = None  # a WireTrace (host_tools/reports/wire_trace.py) with --trace-wire
         self._busy = (0, 0)  # (time, busy cycles) at the previous sample
         self.sample_cycles = int(SAMPLE_S * f_cpu_hz) - f_cpu_hz // 1000  # a probe period's slack
 
@@ -84,6 +86,8 @@ class Timeline:
             trace = self.scheduler.trace
             if trace is not None:
                 trace.prune_before(cut)
+            if self.wire is not None:
+                self.wire.prune_before(cut)
 
 
 def _telemetry_records(telemetry: bytes | Path, extra: int) -> Iterator[tuple[int | float, ...]]:
@@ -160,6 +164,21 @@ def _isr_slices(b: _Builder, trace: Any, cut: int, tracks: dict[int, int]) -> li
             out.append(pf.begin(tracks[source], names[source], b.ns(begin)))
             out.append(pf.end(tracks[source], b.ns(end)))
     out.sort(key=lambda tp: tp[0])  # by_job keeps the jobs in order; the sort keeps an end before the next begin
+    return out
+
+
+def _wire_streams(b: _Builder, wire: Any, cut: int) -> list[Stream]:
+    """A slice per frame on each wire's track (``--trace-wire``)."""
+    out = []
+    for name, frames in wire.frames.items():
+        if not frames:  # a direction that carried nothing (the MCU sends the IMU nothing)
+            continue
+        track = b.child(name)
+        stream = []
+        for start, end, what in frames:
+            if start >= cut:
+                stream += [b.pf.begin(track, what, b.ns(start)), b.pf.end(track, b.ns(end))]
+        out.append(stream)
     return out
 
 
@@ -267,6 +286,8 @@ def write_trace(r: Any, path: Path, telemetry: bytes | Path, board: str = "") ->
     streams = _job_streams(b, trace, cut, hidden)
     streams.append(_kernel_events(b, trace, cut, b.child("kernel"), hidden))
     streams += _firmware_instants(b, r, timeline, cut / f)
+    if timeline is not None and timeline.wire is not None:
+        streams += _wire_streams(b, timeline.wire, cut)
     counters = b.pf.track("counters", ordered=True, rank=1)
     extra = len(getattr(r.firmware, "published_names", ()))
     streams += _counter_streams(b, _telemetry_records(telemetry, extra), cut, counters)
