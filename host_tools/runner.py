@@ -17,9 +17,9 @@ import math
 import time
 import tomllib
 from collections.abc import Callable
-from typing import Any
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config

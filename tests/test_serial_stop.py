@@ -8,7 +8,6 @@ tests/benchmarks/test_bench_wallclock.py; here only what the code guarantees.
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys

@@ -1,8 +1,8 @@
 """The run's trace (trace.pftrace), read back with the perfetto package's schema alone (tests/trace_reader.py).
 
-One walking run (20 kg, as the shipped fault campaign) with the ground sensors, a battery and a task overrun that trips the supervisor: its interrupt
-slices add up to the scheduler's interference, its counters are the telemetry records, and it has one instant per
-fault trip, safe command on the wire, gait event and injector act.
+One walking run (20 kg, as the shipped fault campaign) with the ground sensors, a battery and a task overrun that
+trips the supervisor: its interrupt slices add up to the scheduler's interference, its counters are the telemetry
+records, and it has one instant per fault trip, safe command on the wire, gait event and injector act.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def test_no_slice_overlaps_another_on_its_track(walked):
     for slices in by_track.values():
         slices.sort(key=lambda s: s.ts)
         assert all(s.depth == 0 for s in slices)
-        assert all(a.ts + a.dur <= b.ts for a, b in zip(slices, slices[1:]))
+        assert all(a.ts + a.dur <= b.ts for a, b in zip(slices, slices[1:], strict=False))
 
 
 def test_counters_are_the_telemetry_records_at_their_instants(walked):
@@ -114,7 +114,7 @@ def test_one_instant_per_trip_safe_command_gait_event_and_injector_act(walked):
     r, fault, obs, summary, tr, _ = walked
     fw = r.firmware
     trips = [i for i in tr.instants_on("safety") if i.name.startswith("fault trip")]
-    assert [(i.args["reason"], i.ts) for i in trips] == [(reason, round(t * 1e9)) for t, reason, _ in fw.supervisor.trips]
+    assert [(i.args["reason"], i.ts) for i in trips] == [(why, round(t * 1e9)) for t, why, _ in fw.supervisor.trips]
     assert summary["faults"] == ["DEADLINE_MISSES"] and trips[0].args["measured"] == fw.supervisor.detail
     safe = [i for i in tr.instants_on("safety") if i.name == "safe command on the wire"]
     assert len(safe) == len(trips) == 1
@@ -137,7 +137,7 @@ def test_one_instant_per_trip_safe_command_gait_event_and_injector_act(walked):
 
 
 def test_the_trace_leaves_the_run_unchanged(walked):
-    traced, plain = walked[0], _walk(trace_capacity=0)[0]
+    plain = _walk(trace_capacity=0)[0]
     assert (walked[5] / "telemetry.bin").read_bytes() == plain.telemetry and plain.telemetry
 
 

@@ -29,7 +29,7 @@ def test_every_uart_frame_is_a_slice_named_by_its_message_and_none_overlap(tmp_p
     byte_ns = 10 * 1e9 / 921600
     for track in names:  # one line: a frame ends before the next begins; 10 bits per byte at the baud rate
         frames = sorted(tr.on(track), key=lambda x: x.ts)
-        assert all(a.ts + a.dur <= b.ts for a, b in zip(frames, frames[1:]))
+        assert all(a.ts + a.dur <= b.ts for a, b in zip(frames, frames[1:], strict=False))
         assert all(x.dur >= byte_ns - 1 for x in frames)
     plain = run_virtual(RunConfig(strides=1, seed=1, duration_s=1.2))
     assert (tmp_path / "telemetry.bin").read_bytes() == plain.telemetry  # the taps change nothing
@@ -41,4 +41,4 @@ def test_frames_to_a_can_motor_are_named_by_their_packet(tmp_path):
     frames = tr.on("wire motor can (to the motor)")
     assert collections.Counter(x.name for x in frames)["SET_CURRENT"] > 500
     frames.sort(key=lambda x: x.ts)
-    assert all(a.ts + a.dur <= b.ts for a, b in zip(frames, frames[1:]))
+    assert all(a.ts + a.dur <= b.ts for a, b in zip(frames, frames[1:], strict=False))

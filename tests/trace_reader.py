@@ -1,4 +1,4 @@
-"""An independent reader of a Perfetto protobuf trace for the tests: the perfetto package's schema and protobuf's parser.
+"""An independent reader of a Perfetto protobuf trace for the tests: the perfetto package's schema, protobuf's parser.
 
 It shares nothing with pafp's writer (host_tools/reports/perfetto_trace.py): it parses the file as a ``Trace``
 message, resolves the interned names of the sequence as trace_processor does (``SEQ_INCREMENTAL_STATE_CLEARED``

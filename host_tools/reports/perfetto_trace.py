@@ -112,7 +112,7 @@ class PerfettoTrace:
             for key in keys:
                 p.track_event.debug_annotations.add().name_iid = self._iid(self._arg_names, key)
         if args:
-            for a, value in zip(p.track_event.debug_annotations, args.values()):
+            for a, value in zip(p.track_event.debug_annotations, args.values(), strict=True):
                 if isinstance(value, bool):
                     a.bool_value = value
                 elif isinstance(value, int):

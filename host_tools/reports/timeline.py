@@ -206,7 +206,7 @@ def _counter_streams(b: _Builder, records: Iterable[tuple[int | float, ...]], cu
         if t < cut:
             continue
         t_ns = b.ns(t)
-        for stream, (k, track, deg) in zip(streams, tracks):
+        for stream, (k, track, deg) in zip(streams, tracks, strict=True):
             v = float(rec[k])
             stream.append(pf.counter(track, t_ns, math.degrees(v) if deg else v))
         if rec[state_at] != last_state:
@@ -258,7 +258,7 @@ def _firmware_instants(b: _Builder, r: Any, timeline: Timeline | None, cut_s: fl
     for label, detector, lists in detectors:
         track = b.child(f"gait ({label})")
         gait = [pf.instant(track, name, ns(t), {"detector": label})
-                for name, attr in zip(GAIT, lists) if attr is not None
+                for name, attr in zip(GAIT, lists, strict=True) if attr is not None
                 for t in getattr(detector, attr) if t >= cut_s]
         streams.append(sorted(gait, key=lambda tp: tp[0]))
     injectors = [f for f in getattr(r.config, "faults", ()) if hasattr(f, "record") and hasattr(f, "describe")]

@@ -116,7 +116,7 @@ def draw(view: TraceView, out: Path, window: tuple[float, float], zoom: tuple[fl
     spans = [window] + ([zoom] if zoom is not None else [])
     fig, axes = plt.subplots(1, len(spans), sharey=True, figsize=(6.5 * len(spans), 0.24 * len(rows) + 1.2),
                              layout="constrained", squeeze=False)
-    for ax, (t0, t1) in zip(axes[0], spans):
+    for ax, (t0, t1) in zip(axes[0], spans, strict=True):
         _draw_span(ax, view, rows, t0, t1)
         ax.invert_yaxis() if ax is axes[0][0] else None
         ax.grid(axis="x", lw=0.3)
