@@ -269,7 +269,7 @@ def _timeline(cfg: RunConfig, sched: Scheduler, fw: Firmware, bench: VirtualBenc
     timeline = Timeline(sched, fw, f_cpu, cfg.trace_window_s,
                         winding=None if winding is None else lambda: float(winding.winding_c))
     rig = rig if rig is not None else FaultRig(bench, f_cpu)
-    timeline.watch = Observer(sample=False, gate=lambda: not fw.supervisor.healthy)
+    timeline.watch = Observer(sample=False, gate=timeline.watching)
     timeline.watch.arm(rig)
     if cfg.trace_wire:
         from host_tools.reports.wire_trace import WireTrace

@@ -8,7 +8,7 @@ Tracks, in the order the Perfetto UI shows them (docs/telemetry.md, "The trace")
   after the previous one's end, for the source's cycles. Firings on an idle CPU are not drawn (they cost no job
   anything; the CPU counter holds them).
 * **kernel**: deadline misses, overrun faults, watchdog kicks and resets; **safety**: each fault trip (reason
-  and measured value) and the first safe command that reached the motor after it (zero current, then the brake);
+  and measured value) and the first safe command that reached the motor after it (zero current or the brake);
   **gait (detector)**: heel strike, foot flat, heel off and toe off as each detector saw them; **fault injector**:
   each time an injector acted (a campaign point, ``RunConfig.faults``); with ``--trace-wire`` a track per wire and
   direction with a slice per frame (host_tools/reports/wire_trace.py).
@@ -51,8 +51,8 @@ class Timeline:
     """What the trace needs beyond the scheduler's records: slow counters, the safe commands on the wire, the window.
 
     :meth:`sample` is the bench probe's listener (``ProbeBody.listeners``): it samples the slow counters and prunes
-    the scheduler's trace to the window. ``watch`` (an observer of the motor's received commands, recording from a
-    trip on) is armed by the runner.
+    the scheduler's trace to the window. ``watch`` (an observer of the motor's received commands, gated by
+    :meth:`watching`) is armed by the runner.
     """
 
     def __init__(self, scheduler: Any, firmware: Any, f_cpu_hz: int, window_s: float | None,
@@ -66,6 +66,15 @@ class Timeline:
         self.wire: Any = None  # a WireTrace (host_tools/reports/wire_trace.py) with --trace-wire
         self._busy = (0, 0)  # (time, busy cycles) at the previous sample
         self.sample_cycles = int(SAMPLE_S * f_cpu_hz) - f_cpu_hz // 1000  # a probe period's slack
+
+    def watching(self) -> bool:
+        """The watch's gate: True from a trip until the first safe command after it reached the motor (so the watch
+        decodes and keeps a handful of commands per trip, however long the run goes on in the safe state)."""
+        trips = self.firmware.supervisor.trips
+        if not trips:
+            return False
+        last = self.watch.commands[-1] if self.watch.commands else None
+        return last is None or not (last[2] and last[0] >= trips[-1][0])
 
     def sample(self, t_s: float) -> None:
         """Called by the probe (50 Hz): every SAMPLE_S, one sample of the slow counters; forget what left the window."""
@@ -113,18 +122,21 @@ class _Builder:
     def ns(self, cycles: int) -> int:
         return cycles * 1_000_000_000 // self.f
 
-    def child(self, name: str, parent: int | None = None, unit: str | None = None) -> int:
+    def child(self, name: str) -> int:
+        """A new track in the firmware group, after the others."""
         self.rank += 1
-        return self.pf.track(name, self.fw_track if parent is None else parent, unit=unit, rank=self.rank)
+        return self.pf.track(name, self.fw_track, rank=self.rank)
 
 
 def _job_streams(b: _Builder, trace: Any, cut: int, hidden: set[str]) -> list[Stream]:
     """The job slices and the interrupt slices inside them."""
     pf = b.pf
     tasks = {name: b.child(name) for name in trace.task_names if name not in hidden}
-    isr = {k: b.child(f"ISR {name}") for k, (name, _cost) in enumerate(trace.interrupts)}
+    irqs = [i for i in trace.irqs() if i.job_start >= cut]
+    fired = {i.source for i in irqs}  # a source that preempted nothing in the window has no track
+    isr = {k: b.child(f"ISR {name}") for k, (name, _cost) in enumerate(trace.interrupts) if k in fired}
     jobs: list[tuple[int, bytes]] = []
-    for task, job, _release, _ready, start, finish, cost in trace._jobs:
+    for task, job, _release, _ready, start, finish, cost in trace.jobs():
         if task in hidden or start < cut:
             continue
         track = tasks[task]
@@ -132,7 +144,7 @@ def _job_streams(b: _Builder, trace: Any, cut: int, hidden: set[str]) -> list[St
         jobs.append(pf.begin(track, task, b.ns(start), {"job": job, "cycles": cost, "interference_cycles": preempted}
                              if preempted else {"job": job}))
         jobs.append(pf.end(track, b.ns(finish)))
-    return [jobs, _isr_slices(b, trace, cut, isr)]
+    return [jobs, _isr_slices(b, trace.interrupts, irqs, isr)]
 
 
 def isr_layout(start: int, firings: Iterable[tuple[int, int, int]]) -> list[tuple[int, int, int]]:
@@ -150,14 +162,14 @@ def isr_layout(start: int, firings: Iterable[tuple[int, int, int]]) -> list[tupl
     return out
 
 
-def _isr_slices(b: _Builder, trace: Any, cut: int, tracks: dict[int, int]) -> list[tuple[int, bytes]]:
-    pf, costs = b.pf, [c for _n, c in trace.interrupts]
-    names = [f"ISR {n}" for n, _c in trace.interrupts]
+def _isr_slices(b: _Builder, sources: list[tuple[str, int]], irqs: list[Any], tracks: dict[int, int]
+                ) -> list[tuple[int, bytes]]:
+    pf, costs = b.pf, [c for _n, c in sources]
+    names = [f"ISR {n}" for n, _c in sources]
     by_job: dict[int, list[tuple[int, int, int]]] = {}
-    for job_start, source, count, times in trace._irqs:
-        if job_start >= cut:
-            fired = times if len(times) == count else (-1,) * count
-            by_job.setdefault(job_start, []).extend((t, source, costs[source]) for t in fired)
+    for job_start, source, count, times in irqs:
+        fired = times if len(times) == count else (-1,) * count
+        by_job.setdefault(job_start, []).extend((t, source, costs[source]) for t in fired)
     out = []
     for start, firings in by_job.items():
         for source, begin, end in isr_layout(start, firings):
@@ -186,7 +198,7 @@ def _kernel_events(b: _Builder, trace: Any, cut: int, track: int, hidden: set[st
     names = {"deadline_miss": "deadline miss", "fault": "overrun fault", "watchdog_kick": "watchdog kick",
              "watchdog_reset": "watchdog reset"}
     out = [b.pf.instant(track, names.get(kind, kind), b.ns(t), {"task": source, "job": job})
-           for kind, t, source, job in trace._events if t >= cut and source not in hidden]
+           for kind, t, source, job in trace.events() if t >= cut and source not in hidden]
     out.sort(key=lambda tp: tp[0])
     return out
 
