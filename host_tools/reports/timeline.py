@@ -259,9 +259,11 @@ def _firmware_instants(b: _Builder, r: Any, timeline: Timeline | None, cut_s: fl
                                           "latency_ms": round((first[0] - t_trip) * 1e3, 3)}))
     stop = getattr(r, "stop", None)  # the serial run's stop path (host_tools/serial_mode/stop_record.py)
     safe = getattr(stop, "safe", None)
-    if safe is not None and getattr(safe, "on_wire", False) and safe.at_s >= cut_s:
-        events.append(pf.instant(sup, "safe command on the wire", ns(safe.at_s),
-                                 {"command": ", ".join(safe.names) or "stop", "after": "stop path"}))
+    if safe is not None and safe.on_wire:  # out of the port latency_ms after the stop began
+        t = stop.at_s + stop.latency_ms / 1e3 if stop.latency_ms is not None else safe.at_s
+        if t >= cut_s:
+            events.append(pf.instant(sup, "safe command on the wire", ns(t),
+                                     {"command": ", ".join(safe.names) or "stop", "after": f"stop ({stop.reason})"}))
     streams: list[Stream] = [sorted(events, key=lambda tp: tp[0])]
     detectors = [("motor load", fw.load_detector, ("heel_strike_s", None, None, "toe_off_s"))]
     if getattr(fw, "ground_events", None) is not None:
