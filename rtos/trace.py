@@ -43,7 +43,7 @@ class IrqRecord(NamedTuple):
 
     job_start: int
     source: int
-    count: int
+    firings: int
     times: tuple[int, ...]
 
 
