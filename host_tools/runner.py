@@ -262,15 +262,13 @@ def attach_heat(bench: VirtualBench, cfg: RunConfig) -> dict:
 def _timeline(cfg: RunConfig, sched: Scheduler, fw: Firmware, bench: VirtualBench, rig: Any, f_cpu: int) -> Any:
     """The trace's timeline of a run, with a watch on the motor's commands from a trip on (on the faults' taps)."""
     from hal.virtual.faults.base import FaultRig
-    from hal.virtual.faults.observer import Observer
     from host_tools.reports.timeline import Timeline
 
     winding = bench.motor.meter.winding
     timeline = Timeline(sched, fw, f_cpu, cfg.trace_window_s,
                         winding=None if winding is None else lambda: float(winding.winding_c))
     rig = rig if rig is not None else FaultRig(bench, f_cpu)
-    timeline.watch = Observer(sample=False, gate=timeline.watching)
-    timeline.watch.arm(rig)
+    timeline.watch_from_trip(rig)
     if cfg.trace_wire:
         from host_tools.reports.wire_trace import WireTrace
 

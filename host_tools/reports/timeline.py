@@ -52,7 +52,7 @@ class Timeline:
 
     :meth:`sample` is the bench probe's listener (``ProbeBody.listeners``): it samples the slow counters and prunes
     the scheduler's trace to the window. ``watch`` (an observer of the motor's received commands, gated by
-    :meth:`watching`) is armed by the runner.
+    :meth:`watching`) is armed at the first trip (:meth:`watch_from_trip`).
     """
 
     def __init__(self, scheduler: Any, firmware: Any, f_cpu_hz: int, window_s: float | None,
@@ -66,6 +66,18 @@ class Timeline:
         self.wire: Any = None  # a WireTrace (host_tools/reports/wire_trace.py) with --trace-wire
         self._busy = (0, 0)  # (time, busy cycles) at the previous sample
         self.sample_cycles = int(SAMPLE_S * f_cpu_hz) - f_cpu_hz // 1000  # a probe period's slack
+
+    def watch_from_trip(self, rig: Any) -> None:
+        """Arm the watch on ``rig``'s taps at the supervisor's first trip (``Supervisor.on_trip``), not before: a tap
+        on the motor's wire costs the run a call per frame (and the UART its horizon), which a run that never trips
+        need not pay."""
+        def on_trip() -> None:
+            if self.watch is None:
+                from hal.virtual.faults.observer import Observer
+
+                self.watch = Observer(sample=False, gate=self.watching)
+                self.watch.arm(rig)
+        self.firmware.supervisor.on_trip = on_trip
 
     def watching(self) -> bool:
         """The watch's gate: True from a trip until the first safe command after it reached the motor (so the watch
