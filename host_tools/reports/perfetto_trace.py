@@ -13,6 +13,7 @@ the whole trace is never in memory as messages. The file is written under a temp
 from __future__ import annotations
 
 import heapq
+import itertools
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -179,16 +180,16 @@ class PerfettoTrace:
         stream must not be a one-pass iterator that the caller needs again. Returns the bytes written.
         """
         path = Path(path)
-        merged = list(heapq.merge(*[list(s) for s in streams], key=lambda tp: tp[0]))
+        made = [s if isinstance(s, list) else list(s) for s in streams]  # every name interned before the head
+        merged = heapq.merge(*made, key=lambda tp: tp[0])
         tmp = path.with_name(f".{path.name}.tmp")
         size = 0
         try:
             with tmp.open("wb") as f:
                 for packet in self._head():
                     size += f.write(_framed(packet))
-                for start in range(0, len(merged), 20_000):
-                    chunk = b"".join([_framed(b) for _, b in merged[start:start + 20_000]])
-                    size += f.write(chunk)
+                while chunk := list(itertools.islice(merged, 20_000)):
+                    size += f.write(b"".join([_framed(b) for _, b in chunk]))
             tmp.replace(path)
         except BaseException:  # a failed write leaves no partial file behind
             tmp.unlink(missing_ok=True)

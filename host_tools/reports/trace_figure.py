@@ -118,7 +118,8 @@ def draw(view: TraceView, out: Path, window: tuple[float, float], zoom: tuple[fl
                              layout="constrained", squeeze=False)
     for ax, (t0, t1) in zip(axes[0], spans, strict=True):
         _draw_span(ax, view, rows, t0, t1)
-        ax.invert_yaxis() if ax is axes[0][0] else None
+        if ax is axes[0][0]:  # the rows share the y axis: the first track on top
+            ax.invert_yaxis()
         ax.grid(axis="x", lw=0.3)
         ax.set_xlabel("time [s]" if t1 - t0 > 0.05 else f"time [s] (a {1e3 * (t1 - t0):.0f} ms zoom)")
         ax.tick_params(labelsize=7)
