@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
@@ -59,6 +60,8 @@ class Supervisor:
         self.reason = FaultReason.NONE
         self.tripped_at_s: float | None = None
         self.detail = ""  # what was measured when it tripped (e.g. "command age 23.4 ms > 20.0 ms")
+        self.trips: list[tuple[float, str, str]] = []  # (time s, reason, detail) of each trip, for the trace
+        self.on_trip: Callable[[], None] | None = None  # told of each trip (the trace's watch of the safe command)
         # On a host's wall clock a late job is the host's stall, not the firmware's defect: a miss streak
         # is then counted as a warning (the command and feedback ages judge whether it endangered anyone).
         self.latch_deadline_misses = True
@@ -77,6 +80,9 @@ class Supervisor:
         self.state = SupervisorState.SAFE
         self.reason = reason
         self.tripped_at_s = now_s
+        self.trips.append((now_s, reason.name, self.detail))
+        if self.on_trip is not None:
+            self.on_trip()
         log.warning("safe state at %.4f s: %s %s", now_s, reason.name, self.detail)
 
     def check(self, x: SafetyInputs) -> SupervisorState:

@@ -19,6 +19,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
@@ -92,7 +93,9 @@ class RunConfig:
     firmware: FirmwareConfig | None = None
     reference_csv: Path | None = None
     settle_s: float = 1.0  # time before the gait starts (sensors boot, start-up ramp)
-    trace_capacity: int = 100_000  # the trace keeps the last this many jobs (0: no trace)
+    trace_capacity: int = 400_000  # the trace keeps at most this many jobs (0: no trace)
+    trace_window_s: float | None = 20.0  # ... of the last this many seconds of the run (None: the whole run)
+    trace_wire: bool = False  # the trace shows every UART and CAN frame too (host_tools/reports/wire_trace.py)
     stream_to: Path | None = None  # write telemetry.bin/.csv there as the run goes (see RunFiles)
     setup: Callable[[VirtualBench, Firmware], None] | None = None  # fault injection, fixtures
     bench_options: dict = field(default_factory=dict)  # extra VirtualBench arguments (e.g. rx_buffer_size)
@@ -155,6 +158,9 @@ class RunConfig:
         if isinstance(self.ambient_c, bool) or not isinstance(self.ambient_c, (int, float)) or \
                 not -40.0 <= self.ambient_c <= 80.0:
             raise ValueError(f"ambient temperature {self.ambient_c!r} C out of range: a number in [-40, 80] C")
+        if self.trace_window_s is not None and (isinstance(self.trace_window_s, bool) or not isinstance(
+                self.trace_window_s, (int, float)) or not 0.0 < self.trace_window_s <= 86_400.0):
+            raise ValueError(f"trace window {self.trace_window_s!r} s out of range: a number in (0, 86400] s")
         if self.plant_seed is not None and (isinstance(self.plant_seed, bool) or not isinstance(self.plant_seed, int)
                                             or not 0 <= self.plant_seed < 2**32):
             raise ValueError(f"plant seed {self.plant_seed!r} out of range: an int in 0..{2**32 - 1}")
@@ -238,6 +244,7 @@ class RunResult:
     bench_record: dict = field(default_factory=dict)  # the plant drawn and the imperfections (summary.json)
     # the thermal model, battery and heat log of the run (runner.attach_heat; host_tools/reports/thermal.py)
     heat: dict = field(default_factory=dict)
+    timeline: Any = None  # what the trace shows beyond the scheduler's records (host_tools/reports/timeline.py)
 
 
 def _analysis_tasks(fw: Firmware, max_bytes: dict[str, int]) -> list[Task]:
@@ -273,6 +280,24 @@ def attach_heat(bench: VirtualBench, cfg: RunConfig) -> dict:
     if battery is not None:
         record["battery"] = bench.attach_battery(load_battery(battery))
     return record
+
+
+def _timeline(cfg: RunConfig, sched: Scheduler, fw: Firmware, bench: VirtualBench, rig: Any, f_cpu: int) -> Any:
+    """The trace's timeline of a run, with a watch on the motor's commands from a trip on (on the faults' taps)."""
+    from hal.virtual.faults.base import FaultRig
+    from host_tools.reports.timeline import Timeline
+
+    winding = bench.motor.meter.winding
+    timeline = Timeline(sched, fw, f_cpu, cfg.trace_window_s,
+                        winding=None if winding is None else lambda: float(winding.winding_c))
+    rig = rig if rig is not None else FaultRig(bench, f_cpu)
+    timeline.watch_from_trip(rig)
+    if cfg.trace_wire:
+        from host_tools.reports.wire_trace import WireTrace
+
+        timeline.wire = WireTrace()
+        timeline.wire.arm(rig)
+    return timeline
 
 
 def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
@@ -341,6 +366,9 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     sched = Scheduler([*tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)
     now.bind(sched)
+    timeline = _timeline(cfg, sched, fw, bench, rig, f_cpu) if trace is not None else None
+    if timeline is not None:
+        probe_body.listeners.append(timeline.sample)
     fw.kernel_health = kernel_health(sched, fw)
     if recording is not None:
         fw.kernel_health = recording.health(fw.kernel_health)
@@ -398,4 +426,5 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     heat_record["log"] = heat
     telemetry = bench.telemetry_bytes() if files is None else b""
     return RunResult(cfg, fw, bench, sched, bounds, probe, telemetry, sched.now / f_cpu, wall, fw.gait_start_s,
-                     files, complete, stopped_by=stopped_by, bench_record=bench_record, heat=heat_record)
+                     files, complete, stopped_by=stopped_by, bench_record=bench_record, heat=heat_record,
+                     timeline=timeline)

@@ -51,6 +51,10 @@ class CountingSource:
         """Number of firings in [t0, t1)."""
         raise NotImplementedError(f"{type(self).__name__} must define count_in(t0, t1)")
 
+    def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
+        """The firing cycles in [t0, t1), right after ``count_in(t0, t1)`` (for the trace); () when unknown."""
+        return ()
+
 
 def _check_cost(name: str, cost: object) -> int:
     """Return ``cost`` if it is an int >= 0, else raise ValueError naming the source."""
@@ -88,6 +92,15 @@ class PeriodicInterrupt(CountingSource):
         if t1 <= t0:
             return 0
         return self._fired_before(t1) - self._fired_before(t0)
+
+    def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
+        """The firing cycles in [t0, t1).
+
+        >>> PeriodicInterrupt("systick", period=1000, cost=80).fired_at(0, 2500)
+        (0, 1000, 2000)
+        """
+        first = self._fired_before(t0)
+        return tuple(self.offset + k * self.period for k in range(first, first + self.count_in(t0, t1)))
 
     def __repr__(self) -> str:
         """Show the firing pattern."""
@@ -139,6 +152,11 @@ class TimestampedInterrupt(CountingSource):
         self._lo = lo
         return bisect.bisect_left(buf, t1, lo) - lo
 
+    def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
+        """The firing cycles in [t0, t1) (after ``count_in(t0, t1)``: the buffer holds them)."""
+        buf = self._buf
+        return tuple(buf[bisect.bisect_left(buf, t0, self._lo):bisect.bisect_left(buf, t1, self._lo)])
+
 
 class _BoundCounter(CountingSource):
     """Any object of the :class:`InterruptSource` shape as a :class:`CountingSource` (its bound count_in)."""
@@ -148,10 +166,15 @@ class _BoundCounter(CountingSource):
         self.name = src.name
         self.cost_cycles = src.cost_cycles
         self._count_in = src.count_in
+        self._fired_at = getattr(src, "fired_at", None)
 
     def count_in(self, t0: int, t1: int) -> int:
         """The wrapped source's firings in [t0, t1)."""
         return self._count_in(t0, t1)
+
+    def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
+        """The wrapped source's firing cycles in [t0, t1) if it tells them, else ()."""
+        return () if self._fired_at is None else tuple(self._fired_at(t0, t1))
 
 
 class BoundSource:

@@ -120,6 +120,7 @@ class Scheduler:
         self.trace = trace
         if trace is not None:
             trace.task_names = [t.name for t in self._tasks]
+            trace.interrupts = [(src.name, src.cost_cycles) for src in self._interrupts]
         self.on_fault = on_fault
         self._rng = random.Random(seed)
         self._now = 0
@@ -151,6 +152,7 @@ class Scheduler:
     def add_watchdog(self, watchdog: Watchdog) -> Watchdog:
         """Attach ``watchdog``: it is armed now and its kicks use this scheduler's ``now``."""
         watchdog.bind(self)
+        watchdog.trace = self.trace
         self._watchdogs.append(watchdog)
         return watchdog
 
@@ -186,6 +188,15 @@ class Scheduler:
             task_cycles={s.name: s.busy_cycles for s in self._stat_list},
             interrupt_cycles={s.name: s.busy_cycles for s in self.interrupt_stats()},
         )
+
+    def busy_cycles(self) -> int:
+        """Cycles spent in jobs and interrupt service routines from cycle 0 to now (``utilisation().busy_cycles``)."""
+        busy = 0
+        for st in self._stat_list:
+            busy += st.busy_cycles
+        for j, src in enumerate(self._interrupts):
+            busy += (self._irq_in_job[j] + self._irq_idle[j]) * src.cost_cycles
+        return busy
 
     def interrupt_stats(self) -> list[InterruptStats]:
         """Firings per interrupt source so far, split into in-job and idle."""
@@ -334,6 +345,7 @@ class Scheduler:
         wd_due = self._wd_due()
         wds = self._watchdogs
         trace_job = trace.job_appender() if trace is not None else None
+        trace_irq = trace.irq_appender() if trace is not None else None
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
         t_begin = now
@@ -411,11 +423,15 @@ class Scheduler:
                     c = f - start
                 elif irqs and c:  # a zero-cost job spans an empty window: nothing can fire in it
                     f = solve_bound(start, c, irqs, irq_in_job)
+                    if trace_irq is not None and f != start + c:  # the firings the solve counted, each source's
+                        for b in irqs:
+                            if b.hits:
+                                trace_irq((start, b.index, b.hits, b.src.fired_at(start, f)))
                 else:
                     f = start + c
                 self._account(slot, r, start, f, c)
                 if trace_job is not None:
-                    trace_job((slot.name, slot.index_of(r), r, slot.ready, start, f))
+                    trace_job((slot.name, slot.index_of(r), r, slot.ready, start, f, c))
                 # the task's next job: releases that came while this one was pending or running overran
                 nxt = slot.nnext
                 fault = None

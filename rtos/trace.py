@@ -1,4 +1,10 @@
-"""Optional job trace in a bounded ring buffer, exported as CSV or Chrome trace-event JSON (Perfetto)."""
+"""Optional job trace in a bounded ring buffer, exported as CSV or Chrome trace-event JSON (Perfetto).
+
+Besides the jobs it keeps, for each job that interrupts preempted, the firings of each interrupt source as the
+scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`), and instant
+events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends plain tuples; formatting
+happens on export. ``prune_before`` drops what ended before a time (a window of the last seconds of a run).
+"""
 
 from __future__ import annotations
 
@@ -11,11 +17,14 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
-JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish")
+JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
 
 
 class JobRecord(NamedTuple):
-    """One job as it ran: nominal release, ready (release + jitter), start and finish, in cycles."""
+    """One job as it ran: nominal release, ready (release + jitter), start, finish and its own cycles.
+
+    ``finish - start - cost`` is the interference of the interrupts that preempted it.
+    """
 
     task: str
     job: int
@@ -23,10 +32,23 @@ class JobRecord(NamedTuple):
     ready: int
     start: int
     finish: int
+    cost: int
+
+
+class IrqRecord(NamedTuple):
+    """The firings of one interrupt source inside one job (the job that started at ``job_start``).
+
+    ``times`` are the firing cycles when the source tells them (:meth:`CountingSource.fired_at`), else empty.
+    """
+
+    job_start: int
+    source: int
+    firings: int
+    times: tuple[int, ...]
 
 
 class TraceEvent(NamedTuple):
-    """An instant: ``kind`` is "watchdog_reset", "fault" or "deadline_miss"; ``source`` names who."""
+    """An instant: ``kind`` is "watchdog_reset", "watchdog_kick", "fault" or "deadline_miss"; ``source`` names who."""
 
     kind: str
     time: int
@@ -44,20 +66,41 @@ class Trace:
     """
 
     def __init__(self, maxlen: int = 100_000) -> None:
-        """Create an empty trace holding at most ``maxlen`` jobs and ``maxlen`` events."""
+        """Create an empty trace holding at most ``maxlen`` jobs, ``maxlen`` interrupt records and ``maxlen`` events."""
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
-        self._jobs: deque[tuple[str, int, int, int, int, int]] = deque(maxlen=maxlen)
+        self._jobs: deque[tuple[str, int, int, int, int, int, int]] = deque(maxlen=maxlen)
+        self._irqs: deque[tuple[int, int, int, tuple[int, ...]]] = deque(maxlen=maxlen)
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
         self.task_names: list[str] = []
+        self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
 
-    def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int) -> None:
-        """Record one job."""
-        self._jobs.append((task, job, release, ready, start, finish))
+    def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int,
+                cost: int | None = None) -> None:
+        """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
+        self._jobs.append((task, job, release, ready, start, finish, finish - start if cost is None else cost))
 
-    def job_appender(self) -> Callable[[tuple[str, int, int, int, int, int]], None]:
-        """``add_job`` for a hot loop: a callable taking the tuple (task, job, release, ready, start, finish)."""
+    def job_appender(self) -> Callable[[tuple[str, int, int, int, int, int, int]], None]:
+        """``add_job`` for a hot loop: a callable taking the tuple (task, job, release, ready, start, finish, cost)."""
         return self._jobs.append
+
+    def irq_appender(self) -> Callable[[tuple[int, int, int, tuple[int, ...]]], None]:
+        """For the hot loop: a callable taking (job start, source index, firings, firing times) (see IrqRecord)."""
+        return self._irqs.append
+
+    def irqs(self) -> list[IrqRecord]:
+        """The recorded interrupt firings inside jobs, oldest first."""
+        return [IrqRecord(*r) for r in self._irqs]
+
+    def prune_before(self, t: int) -> None:
+        """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t."""
+        jobs, irqs, events = self._jobs, self._irqs, self._events
+        while jobs and jobs[0][5] < t:
+            jobs.popleft()
+        while irqs and irqs[0][0] < t:
+            irqs.popleft()
+        while events and events[0][1] < t:
+            events.popleft()
 
     def add_event(self, kind: str, time: int, source: str, job: int = -1) -> None:
         """Record one instant event."""
@@ -74,6 +117,7 @@ class Trace:
     def clear(self) -> None:
         """Forget every record."""
         self._jobs.clear()
+        self._irqs.clear()
         self._events.clear()
 
     def write_csv(self, out: TextIO) -> None:
@@ -103,7 +147,7 @@ class Trace:
         for n in names:
             yield {"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}}
             yield {"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n], "args": {"sort_index": tid[n]}}
-        for task, job, release, ready, start, finish in self._jobs:
+        for task, job, release, ready, start, finish, _cost in self._jobs:
             yield {
                 "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
                 "ts": start * us, "dur": (finish - start) * us,
@@ -140,7 +184,7 @@ class Trace:
                 while batch := list(itertools.islice(jobs, 10_000)):
                     f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
                                                    ready, finish - release)
-                                     for t, j, release, ready, start, finish in batch]))
+                                     for t, j, release, ready, start, finish, _c in batch]))
                 for kind, time, source, j in self._events:
                     f.write(", " + encode({
                         "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",

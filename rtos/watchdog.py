@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
+from rtos.trace import Trace
+
 
 class _TimeSource(Protocol):
     """Anything with a ``now`` in cycles (the scheduler)."""
@@ -40,6 +42,7 @@ class Watchdog:
         self.resets = 0
         self.kicks = 0
         self._time: _TimeSource | None = None
+        self.trace: Trace | None = None  # set by Scheduler.add_watchdog: each kick is an instant there
 
     def bind(self, time_source: _TimeSource) -> None:
         """Use ``time_source.now`` for kicks without an explicit time, and arm at its present."""
@@ -62,6 +65,8 @@ class Watchdog:
             return  # too late: the reset at self.due is still pending and will fire first
         self.kicks += 1
         self.due = now + self.timeout_cycles
+        if self.trace is not None:
+            self.trace.add_event("watchdog_kick", now, "watchdog")
 
     def expire(self) -> int:
         """Fire the pending reset at ``due``: count it, call ``on_reset``, re-arm; return the reset cycle."""

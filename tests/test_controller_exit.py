@@ -54,7 +54,7 @@ def test_virtual_run_latches_controller_error_and_writes_everything(
     assert s["faults"] == ["CONTROLLER_ERROR"] and s["complete"] is True
     assert f"raised {named}" in s["controller"]["error"] and "misbehaving_controllers.py" in s["controller"]["error"]
     assert f"raised {named}" in err and "CONTROLLER_ERROR" in err
-    for name in ("summary.json", "report.md", "telemetry.bin", "telemetry.csv", "trace.json"):
+    for name in ("summary.json", "report.md", "telemetry.bin", "telemetry.csv", "trace.pftrace"):
         assert (out / name).stat().st_size > 0, name
     assert_safe_at_the_end((capture / "motor.tx.bin").read_bytes())
 

@@ -138,7 +138,7 @@ def test_a_failing_controller_run_exits_non_zero_with_every_file_written(user_fi
     assert "controller Raises raised KeyError" in err and str(user_file) in err
     s = json.loads((out / "summary.json").read_text())
     assert s["faults"] == ["CONTROLLER_ERROR"] and "Raises" in s["controller"]["error"]
-    for f in ("telemetry.bin", "telemetry.csv", "trace.json", "report.md"):
+    for f in ("telemetry.bin", "telemetry.csv", "trace.pftrace", "report.md"):
         assert (out / f).stat().st_size > 0, f
 
 

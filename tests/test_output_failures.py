@@ -29,6 +29,7 @@ from host_tools import outdir
 from host_tools.cli import main
 from host_tools.outdir import EXIT_WRITE_FAILED, clean_stale
 from host_tools.studies.sweep_table import JOURNAL
+from tests.trace_reader import read_trace
 
 PAFP = [sys.executable, "-m", "host_tools"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -374,9 +375,9 @@ def test_sweep_point_writes_the_files_docs_sweeps_md_lists(tmp_path, capsys):
     out = tmp_path / "p0"
     assert main(["sweep", str(_spec(tmp_path)), "--point", "0", "--out", str(out)]) == 0
     names = {p.name for p in out.iterdir()}
-    assert {"tracking.png", "summary.json", "report.md", "trace.json", "telemetry.bin", "telemetry.csv"} <= names
-    assert json.loads((out / "trace.json").read_text())["traceEvents"]
-    assert "trace.json" in capsys.readouterr().out
+    assert {"tracking.png", "summary.json", "report.md", "trace.pftrace", "telemetry.bin", "telemetry.csv"} <= names
+    assert read_trace(out / "trace.pftrace").slices
+    assert "trace.pftrace" in capsys.readouterr().out
 
 
 def test_a_table_that_cannot_be_written_leaves_no_temporary(tmp_path, monkeypatch):

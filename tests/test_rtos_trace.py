@@ -32,9 +32,9 @@ def test_ring_buffer_keeps_the_last_jobs_only():
 def test_csv_has_header_and_one_row_per_job():
     s, tr = _traced_run()
     rows = list(csv.reader(io.StringIO(tr.to_csv())))
-    assert rows[0] == ["task", "job", "release", "ready", "start", "finish"]
+    assert rows[0] == ["task", "job", "release", "ready", "start", "finish", "cost"]
     assert len(rows) - 1 == sum(st.jobs for st in s.stats.values())
-    assert rows[1] == ["log", "0", "0", "0", "0", "450"]
+    assert rows[1] == ["log", "0", "0", "0", "0", "450", "450"]
 
 
 def test_chrome_trace_has_complete_events_per_task_and_instants():

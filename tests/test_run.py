@@ -47,7 +47,7 @@ def test_default_run_meets_acceptance(default_run):
     for key in ("strides", "sim_time_s", "wall_time_s", "realtime_factor", "imu_rms_error_deg", "encoder_max_error_deg",
                 "encoder_lag_ms", "deadline_misses", "faults", "cpu_utilisation", "baud", "tasks"):
         assert key in s
-    for f in ("telemetry.bin", "telemetry.csv", "trace.json", "tracking.png", "report.md"):
+    for f in ("telemetry.bin", "telemetry.csv", "trace.pftrace", "tracking.png", "report.md"):
         assert (out / f).stat().st_size > 0, f
 
 

@@ -129,14 +129,14 @@ def test_out_in_a_read_only_directory_is_refused_before_the_run(tmp_path, capsys
 def test_a_previous_run_is_replaced_whole_never_mixed(tmp_path, capsys):
     out = tmp_path / "run"
     code, _, _ = _run(capsys, "--strides", "1", "--out", str(out))
-    assert code == 0 and {"tracking.png", "trace.json", "summary.json"} <= {p.name for p in out.iterdir()}
+    assert code == 0 and {"tracking.png", "trace.pftrace", "summary.json"} <= {p.name for p in out.iterdir()}
     code, stdout, _ = _run(capsys, "--strides", "1", "--seed", "3", "--no-plot", "--no-trace", "--out", str(out))
     assert code == 0
     assert sorted(p.name for p in out.iterdir()) == [".pafp-outputs.json", "report.md", "summary.json", "telemetry.bin",
                                                      "telemetry.csv"]
     assert json.loads((out / "summary.json").read_text())["seed"] == 3
     assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no staging or old directory left behind
-    assert "tracking.png" not in stdout and "trace.json" not in stdout
+    assert "tracking.png" not in stdout and "trace.pftrace" not in stdout
 
 
 def test_summary_is_strict_json_with_null_for_what_a_run_does_not_have(tmp_path):

@@ -18,6 +18,7 @@ import pytest
 from host_tools.cli import main
 from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
 from protocol.vesc import Decoder, SetCurrent, SetDuty
+from tests.trace_reader import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
@@ -137,7 +138,7 @@ def test_e2e_against_emulated_bench_tracks_like_virtual(tmp_path: Path) -> None:
     rt = s["realtime"]
     assert abs(rt["control_releases"] - 3000) <= 1 and rt["control_releases_expected"] == 3000
     assert rt["release_jitter_us"]["p99_us"] is not None
-    for f in ("telemetry.bin", "telemetry.csv", "trace.json", "tracking.png", "report.md"):
+    for f in ("telemetry.bin", "telemetry.csv", "trace.pftrace", "tracking.png", "report.md"):
         assert (out / f).stat().st_size > 0, f
     if s["faults"]:
         return  # the stall that tripped it is checked above; tracking over too short a RUN proves nothing
@@ -183,8 +184,7 @@ def test_unplug_is_attributed_and_files_are_complete(tmp_path: Path, capsys: pyt
     assert records[-1].fault_reason == FaultReason[s["faults"][0]]
     rows = (tmp_path / "telemetry.csv").read_text().splitlines()
     assert len(rows) == len(records) + 1
-    trace = json.loads((tmp_path / "trace.json").read_text())
-    assert trace  # a complete JSON document
+    assert read_trace(tmp_path / "trace.pftrace").slices  # a complete trace
 
 
 def test_sim_urls_run_in_process_with_1000_releases_per_second(tmp_path: Path) -> None:

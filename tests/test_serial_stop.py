@@ -9,7 +9,6 @@ tests/benchmarks/test_bench_wallclock.py; here only what the code guarantees.
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -24,10 +23,11 @@ from test_serial_run import _emulator, _stop, _summary, assert_faults_justified,
 import host_tools.serial_mode.serial_run as serial_run
 from host_tools.cli import main
 from protocol.telemetry import TelemetryDecoder
+from tests.trace_reader import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys, POSIX signals")
-OUTPUTS = ("summary.json", "report.md", "telemetry.bin", "telemetry.csv", "trace.json", "tracking.png")
+OUTPUTS = ("summary.json", "report.md", "telemetry.bin", "telemetry.csv", "trace.pftrace", "tracking.png")
 
 
 def assert_outputs_complete(out: Path) -> dict:
@@ -39,7 +39,7 @@ def assert_outputs_complete(out: Path) -> dict:
     records = dec.feed((out / "telemetry.bin").read_bytes())
     assert len(records) == s["telemetry"]["records_sent"] and dec.pending_bytes == 0
     assert len((out / "telemetry.csv").read_text().splitlines()) == len(records) + 1
-    json.loads((out / "trace.json").read_text())
+    assert read_trace(out / "trace.pftrace").slices  # a complete trace
     return s
 
 

@@ -50,6 +50,8 @@ class GroundEvents:
         self.toe_off_s: list[float] = []
         self.foot_flats = 0
         self.heel_offs = 0
+        self.foot_flat_s: list[float] = []  # when each foot flat and heel off was detected (for the trace)
+        self.heel_off_s: list[float] = []
         self._rail_run = 0
         self._short_run = [0, 0]
         self._stance_max_n = 0.0
@@ -86,9 +88,11 @@ class GroundEvents:
             if self.phase == LOADING and self.heel_on and self.toe_on:
                 self.phase = FLAT
                 self.foot_flats += 1
+                self.foot_flat_s.append(now_s)
             elif self.phase == FLAT and not self.heel_on and self.toe_on:
                 self.phase = PUSH
                 self.heel_offs += 1
+                self.heel_off_s.append(now_s)
             if not self.heel_on and not self.toe_on and force < self.off_n and held_s >= self.min_stance_s:
                 self._end_of_stance(now_s)
                 self.stance = False

@@ -99,3 +99,13 @@ class EventTimesInterrupt(InterruptSourceBase):
         while hi < n and times[hi] < t1:  # a window holds few events: a scan beats a bisect call
             hi += 1
         return hi - lo
+
+    def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
+        """The recorded event times in [t0, t1), right after ``count_in(t0, t1)`` (for the trace)."""
+        times, k, out = self._times, self._lo, []
+        n = len(times)
+        while k < n and times[k] < t1:
+            if times[k] >= t0:
+                out.append(times[k])
+            k += 1
+        return tuple(out)

@@ -173,3 +173,9 @@ class _PeriodicInterrupt(InterruptSourceBase):
         first = -(-t0 // period) or 1
         n = -(-t1 // period) - first
         return n if n > 0 else 0
+
+    def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
+        """The firing cycles k * period in [t0, t1), k >= 1 (for the trace)."""
+        period = self._period
+        first = -(-t0 // period) or 1
+        return tuple(k * period for k in range(first, -(-t1 // period)))

@@ -52,7 +52,7 @@ def _one_point(spec: object, index: int, out: Path) -> int:
         return EXIT_WRITE_FAILED
     print(f"  fault: {fault.describe()}; fired {fault.record.count} times, first at {fault.record.first_s} s "
           f"({fault.record.what}); supervisor: {', '.join(s['faults']) or 'no fault latched'}; outputs: "
-          f"{out}/report.md, summary.json, trace.json, telemetry.bin/.csv")
+          f"{out}/report.md, summary.json, trace.pftrace, telemetry.bin/.csv")
     return 0 if fault.record.fired else 1
 
 

@@ -69,7 +69,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "parameters from the profile when it names sysid) for its whole length instead of "
                              "gait strides; record.bin is written for `pafp fit` (docs/calibration.md)")
     parser.add_argument("--no-plot", action="store_true", help="do not draw tracking.png (saves about 1 s)")
-    parser.add_argument("--no-trace", action="store_true", help="do not write trace.json")
+    parser.add_argument("--no-trace", action="store_true", help="do not write trace.pftrace")
+    parser.add_argument("--trace-seconds", type=float, default=None, metavar="S",
+                        help="trace.pftrace keeps the last S simulated seconds (default 20; docs/telemetry.md)")
+    parser.add_argument("--trace-strides", type=int, default=None, metavar="N",
+                        help="trace.pftrace keeps the last N strides instead (N x the stride time)")
+    parser.add_argument("--trace-wire", action="store_true",
+                        help="virtual bench: add every UART frame and CAN frame to trace.pftrace, a track per port "
+                             "and direction, each named by its decoded message")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes of every port, each direction, with a time index, into DIR "
                              "(docs/serial_mode.md)")
@@ -197,7 +204,8 @@ def run(args: argparse.Namespace) -> int:
                         sensor_faults=tuple(args.sensor_fault), design=_design(args),
                         battery=args.battery,
                         ambient_c=25.0 if args.ambient_c is None else args.ambient_c,
-                        bench_options={} if args.imu_model is None else {"imu_model": args.imu_model})
+                        bench_options={} if args.imu_model is None else {"imu_model": args.imu_model},
+                        trace_window_s=_trace_window_s(args, fw_cfg.stride_s), trace_wire=args.trace_wire)
         if args.imu_model is not None:
             from hal.virtual.devices.registry import device_model_for
 
@@ -248,6 +256,13 @@ def _ignored_option(args: argparse.Namespace) -> str | None:
         if args.imu_model is not None:
             return (f"--imu-model {args.imu_model} is not allowed in serial mode (--motor/--imu): it picks the "
                     "virtual bench's IMU model; --imu names the port of the real one (or sim://NAME)")
+        for option, value in (("--trace-seconds", args.trace_seconds), ("--trace-strides", args.trace_strides)):
+            if value is not None:
+                return (f"{option} {value} is not allowed in serial mode (--motor/--imu): a serial run's trace "
+                        "holds its last jobs (docs/serial_mode.md)")
+        if args.trace_wire:
+            return ("--trace-wire is not allowed in serial mode (--motor/--imu): use --capture DIR for the bytes of "
+                    "real ports")
     elif args.duration is not None:
         return (f"--duration {args.duration:g} is not allowed on the virtual bench: it is serial mode's run time "
                 f"(with --motor and --imu); a virtual run lasts --strides N, an integer in 1..10000")
@@ -269,7 +284,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
     """The virtual run proper, streaming into run_dir, which is published at the end."""
     from dataclasses import replace
 
-    from host_tools.reports.report import readings_text, run_into, tracking_text
+    from host_tools.reports.report import TRACE_FILE, readings_text, run_into, tracking_text
     from host_tools.stop_signals import StopSignals
 
     fw_cfg = cfg.firmware
@@ -316,7 +331,7 @@ def _run_virtual(args: argparse.Namespace, cfg: RunConfig, run_dir: RunDir) -> i
               f"{t['steady_state_c']}, emulation only), motor reported max {t['motor_reported_c_max']} C; {supply}")
     written = ["summary.json", "report.md", *(["tracking.png"] if (out / "tracking.png").exists() else []),
                *(["thermal.png"] if (out / "thermal.png").exists() else []),
-               *([] if args.no_trace else ["trace.json"]), "telemetry.bin/.csv"]
+               *([] if args.no_trace else [TRACE_FILE]), "telemetry.bin/.csv"]
     print(f"  outputs: {out}/{', '.join(written)}")
     _say_controller_error(result.firmware.controller_error)
     if stop.exit_code is not None:
@@ -371,6 +386,19 @@ def _firmware_config(args: argparse.Namespace):  # -> FirmwareConfig
 def _controller(fw_cfg, args: argparse.Namespace) -> object:  # FirmwareConfig -> the built controller
     """Build the configured controller now, so a bad name, file, class or parameter stops before the run."""
     return controller_for(fw_cfg, args.scenario, args.body_mass)
+
+
+def _trace_window_s(args, stride_s: float) -> float:
+    """The trace's window in seconds: --trace-strides N strides, else --trace-seconds, else RunConfig's default."""
+    from host_tools.runner import RunConfig
+
+    if args.trace_strides is not None and args.trace_seconds is not None:
+        raise ValueError("--trace-seconds and --trace-strides both given: choose one window")
+    if args.trace_strides is not None:
+        if not 1 <= args.trace_strides <= 10_000:
+            raise ValueError(f"--trace-strides {args.trace_strides} out of range: an int in 1..10000")
+        return args.trace_strides * stride_s
+    return RunConfig.trace_window_s if args.trace_seconds is None else args.trace_seconds
 
 
 def controller_for(fw_cfg, scenario: str, body_mass_kg: float) -> object:  # FirmwareConfig -> the controller
@@ -479,7 +507,7 @@ def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> 
         print(write_failed("run", result.record_error, f"the motor was stopped first; record.bin was removed, the "
                            f"other files in {out} are complete"), file=sys.stderr)
         return EXIT_WRITE_FAILED
-    from host_tools.reports.report import tracking_text
+    from host_tools.reports.report import TRACE_FILE, tracking_text
 
     rt, j, stop = s["realtime"], s["realtime"]["release_jitter_us"], s["stop"]
     print(f"  ran {s['sim_time_s']:.2f} s on the wall clock, {s['time_in_run_s']:.2f} s of it with the supervisor in "
@@ -498,7 +526,7 @@ def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> 
           f"{', '.join(stop['safe_frames']) or 'nothing sent'}; "
           f"{'on the wire' if stop['safe_on_wire'] else 'NOT confirmed on the wire'} {stop['latency_ms']} ms "
           f"after the stop began (goal {stop['goal_ms']} ms)")
-    print(f"  outputs: {out}/summary.json, report.md, tracking.png, trace.json, telemetry.bin/.csv"
+    print(f"  outputs: {out}/summary.json, report.md, tracking.png, {TRACE_FILE}, telemetry.bin/.csv"
           + (f"; wire capture in {args.capture}" if args.capture else ""))
     link = s["link_lost"]
     if link is not None:

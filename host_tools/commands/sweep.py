@@ -43,7 +43,7 @@ def _one_point(spec: object, index: int, out: Path) -> int:
     truth = s["tracking"]["truth"]
     print(f"  tracking (truth, emulation only): RMS {truth['rms_deg']:.4f} deg, max {truth['max_deg']:.4f} deg; "
           f"IMU RMS {s['imu_rms_error_deg']:.4f} deg; deadline misses {s['deadline_misses']}, faults "
-          f"{s['faults'] or 'none'}; outputs: {out}/summary.json, report.md, tracking.png, trace.json, "
+          f"{s['faults'] or 'none'}; outputs: {out}/summary.json, report.md, tracking.png, trace.pftrace, "
           "telemetry.bin/.csv")
     return 0 if not s["deadline_misses"] and not s["faults"] else 1
 

@@ -32,7 +32,10 @@ if TYPE_CHECKING:
     from host_tools.outdir import RunDir
 
 __all__ = ["TRACKING_SIGNALS", "readings_text", "run_into", "strict_json", "summarise", "tracking_lines",
-           "tracking_of", "tracking_summary", "tracking_text", "write_outputs"]
+           "TRACE_FILE", "tracking_of", "tracking_summary", "tracking_text", "write_outputs"]
+
+TRACE_FILE = "trace.pftrace"
+"""The run's trace in Perfetto's protobuf format (host_tools/reports/timeline.py)."""
 
 
 
@@ -317,8 +320,8 @@ def _report_md(s: dict, md_extra: list[str] | None = None) -> str:
         lines.append(f"| {name} | {t['jobs']} | {t['wcrt_us']} | {t['bound_us']} | {t['deadline_us']} | "
                      f"{t['misses']} | {within} |")
     lines += md_extra or []
-    lines += ["", "Files: `telemetry.bin` (raw telemetry UART), `telemetry.csv`, `trace.json` (Perfetto / "
-              "chrome://tracing), `tracking.png`, `thermal.png`, `summary.json`.", ""]
+    lines += ["", "Files: `telemetry.bin` (raw telemetry UART), `telemetry.csv`, `trace.pftrace` (Perfetto: "
+              "ui.perfetto.dev), `tracking.png`, `thermal.png`, `summary.json`.", ""]
     return "\n".join(lines)
 
 
@@ -355,7 +358,7 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
                   plot: bool = True, trace: bool = True) -> dict:
     """Write every output file into `out`; return the summary (`extra` merged in; `md_extra` ends report.md).
 
-    ``plot=False`` and ``trace=False`` leave out tracking.png and trace.json.
+    ``plot=False`` and ``trace=False`` leave out tracking.png and trace.pftrace.
     """
     out.mkdir(parents=True, exist_ok=True)
     tracking = tracking_of(r)
@@ -368,8 +371,10 @@ def write_outputs(r: RunResult, out: Path, extra: dict | None = None, md_extra: 
                                  else _write_telemetry_csv(r.telemetry, out / "telemetry.csv", r.firmware.f_cpu_hz,
                                                           extra_names=r.firmware.published_names))
     if trace and r.scheduler.trace is not None:
-        with naming(out / "trace.json"):
-            r.scheduler.trace.write_chrome(out / "trace.json", r.firmware.f_cpu_hz)
+        from host_tools.reports.timeline import write_trace  # the perfetto package: only when a trace is written
+
+        with naming(out / TRACE_FILE):
+            write_trace(r, out / TRACE_FILE, (files.directory if files is not None else out) / "telemetry.bin")
     fw = r.firmware
     if plot:  # drawn on every path, also when no stride ran (a run stopped early still shows its currents)
         from host_tools.reports.plots import plot_tracking  # matplotlib: only when a plot is drawn

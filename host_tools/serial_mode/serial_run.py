@@ -25,6 +25,7 @@ from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from firmware.app import Firmware
 from firmware.config import FirmwareConfig, load_firmware_config
@@ -199,6 +200,7 @@ class SerialRunResult:
     telemetry_file_error: OSError | None = None  # writing telemetry.bin failed (a full disk): the run went on
     capture_error: OSError | None = None  # a --capture file could not be written: the capture ended there
     record_error: OSError | None = None  # record.bin could not be written: the incomplete record was removed
+    timeline: Any = None  # the trace's slow counters (host_tools/reports/timeline.py)
 
     @property
     def interrupted(self) -> bool:
@@ -405,6 +407,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                      else fw.out.fused_angle_rad)
         if link.step(t):
             sched.request_stop()
+        if timeline is not None and job.index % 10 == 0:  # the trace's slow counters at 50 Hz, as a virtual run's
+            timeline.sample(t)
         if job.index % GC_EVERY_TICKS == 0:
             section.collect_young()  # young objects only: tens of µs, never a full scan in the loop
 
@@ -414,6 +418,9 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     now.bind(sched)
+    from host_tools.reports.timeline import Timeline
+
+    timeline = Timeline(sched, fw, f_cpu, None) if trace is not None else None
     fw_clock = FirmwareClock(lambda: sched.now, f_cpu)
     follow_firmware((ports.untapped_motor or ports.motor, ports.imu, ports.ground), fw, fw_clock, fw_cfg.stride_s)
     fw.kernel_health = kernel_health(sched, fw)
@@ -486,4 +493,4 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
     return SerialRunResult(cfg, fw, sched, probe, timings, capture.captured(), run_s, wall, fw.gait_start_s,
                            started_unix, "plant" if plant is not None else "fused estimate", stop, warnings,
                            section.granted, link.event, watch, capture.inner_error, seen, time_in_run_s=time_in_run,
-                           record_error=record_error)
+                           record_error=record_error, timeline=timeline)

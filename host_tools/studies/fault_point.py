@@ -207,11 +207,11 @@ def faulted_config(p: FaultPoint, trace: bool = False) -> tuple[Any, Any, Any, f
     return cfg, fault, obs, onset_s
 
 
-def faulted_run(p: FaultPoint, progress: Any = None) -> tuple[Any, Any, Any, float]:
-    """(RunResult, injector, observer, onset_s) of the point's faulted run."""
+def faulted_run(p: FaultPoint, progress: Any = None, trace: bool = False) -> tuple[Any, Any, Any, float]:
+    """(RunResult, injector, observer, onset_s) of the point's faulted run (``trace``: with the run's trace)."""
     from host_tools.runner import run_virtual
 
-    cfg, fault, obs, onset_s = faulted_config(p)
+    cfg, fault, obs, onset_s = faulted_config(p, trace)
     return run_virtual(cfg, progress=progress), fault, obs, onset_s
 
 

@@ -247,17 +247,20 @@ def _heat_map(path: Path, rows: list[dict[str, Any]], spec: FaultSpec) -> None:
 
 
 def _trace(path: Path, spec: FaultSpec, index: int) -> None:
-    """Re-run one point here (its fault-free pair too) and plot angle, torque and commands around the onset."""
+    """Re-run one point here (its fault-free pair too) and plot angle, torque and commands around the onset; its
+    Perfetto trace (with the injector's acts and the safe command) goes beside the plot as .pftrace."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from host_tools.reports.timeline import write_trace
     from host_tools.studies.fault_point import fault_free_arrays, faulted_run
 
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)  # the trip is in the plot, not on the console
     p = spec.points()[index]
-    r, fault, obs, onset_s = faulted_run(p)
+    r, fault, obs, onset_s = faulted_run(p, trace=True)
+    write_trace(r, path.with_suffix(".pftrace"), r.telemetry)
     base = fault_free_arrays(p)
     a = obs.arrays()
     n = min(len(a["t_s"]), len(base["t_s"]))
@@ -347,7 +350,8 @@ def write_fault_report(spec: FaultSpec, rows: list[dict[str, Any]], out: Path, f
             name = f"trace_point_{r['point']}.png"
             _trace(plots / name, spec, int(r["point"]))
             md += [f"- point {r['point']} ({r['fault']}, excursion {_num(r['excursion_deg']):.2f} deg): "
-                   f"`{rerun_command(spec, int(r['point']))}`", f"  ![point {r['point']}](plots/{name})"]
+                   f"`{rerun_command(spec, int(r['point']))}`", f"  ![point {r['point']}](plots/{name}); "
+                   f"Perfetto trace `plots/{Path(name).with_suffix('.pftrace')}` (docs/telemetry.md)"]
         md.append("")
     bad = [r for r in rows if r["status"] != "ok"]
     if bad:

@@ -90,7 +90,7 @@ def _firmware_config(profile_text: str, items: tuple[tuple[str, Any], ...], prof
 def run_config_of(task: PointTask, plant_options: Callable[[int], dict[str, Any]] = plant_seed_run_options,
                   trace: bool = False) -> Any:
     """The RunConfig of a point (the plant draw's options merged in for a Monte Carlo point); ``trace``: keep the
-    RTOS trace (`--point` writes trace.json; the sweep's rows do not need it)."""
+    RTOS trace (`--point` writes trace.pftrace; the sweep's rows do not need it)."""
     from host_tools.runner import RunConfig
 
     params = dict(task.params)

@@ -2,7 +2,8 @@
 
 ``pafp run --scenario walk --strides 1000 --body-mass 20 --battery molicel_p42a_6s1p`` runs once in a
 subprocess (one round: it takes minutes); ``extra_info`` holds its wall time, the child's peak RSS
-(``ru_maxrss``), and the summary's winding temperature after strides 1, 100, 500 and 1000, the steady state,
+(``ru_maxrss``), the size of its trace.pftrace (the last 20 s: the trace's memory is measured in
+test_bench_trace.py), and the summary's winding temperature after strides 1, 100, 500 and 1000, the steady state,
 the energy per stride and the distance per charge (docs/design.md, "Winding temperature and battery in a run").
 The goals:
 memory bounded (peak RSS under 600 MB, a 100-stride walk's plus a margin: the run streams its outputs and
@@ -50,6 +51,7 @@ def test_bench_long_walk(benchmark, tmp_path: Path) -> None:
     info["build"] = describe()
     info["wall_s"] = round(result["wall"], 1)
     info["peak_rss_mb"] = round(peak_mb, 1)
+    info["trace_mb"] = round((tmp_path / "walk" / "trace.pftrace").stat().st_size / 1e6, 2)  # its last 20 s
     info["winding_c_after_strides"] = {n: by_stride[n - 1] for n in (1, 100, 500, STRIDES) if n <= len(by_stride)}
     info["steady_state_c"] = t["steady_state_c"]
     info["time_constants_s"] = t["time_constants_s"]

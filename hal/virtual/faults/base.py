@@ -16,7 +16,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
-__all__ = ["ByteFault", "FaultRecord", "FaultRig", "Injector", "check_param"]
+__all__ = ["ByteFault", "FaultRecord", "FaultRig", "Injector", "TIMES_KEPT", "check_param"]
+
+TIMES_KEPT = 10_000
+"""How many of an injector's acting times its record keeps (the first ones; ``count`` counts them all)."""
 
 
 def check_param(name: str, key: str, value: object, lo: Any, hi: Any = None) -> Any:
@@ -39,6 +42,7 @@ class FaultRecord:
     last_s: float | None = None
     count: int = 0
     what: str = ""
+    times_s: list[float] = field(default_factory=list)  # when it acted, the first TIMES_KEPT times (for the trace)
 
     @property
     def fired(self) -> bool:
@@ -139,6 +143,8 @@ class Injector:
             r.first_s, r.what = t_s, what
         r.last_s = t_s
         r.count += 1
+        if len(r.times_s) < TIMES_KEPT:
+            r.times_s.append(t_s)
 
     def arm(self, rig: FaultRig) -> None:
         """Install the fault on the virtual bench (every subclass)."""

@@ -10,7 +10,7 @@ state left the wire is read from it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -49,17 +49,21 @@ class Observer:
 
     NAME = "observer"
 
-    def __init__(self) -> None:
-        """Nothing recorded yet."""
+    def __init__(self, sample: bool = True, gate: Callable[[], bool] | None = None) -> None:
+        """Nothing recorded yet. ``sample=False``: the commands only (no plant truth); ``gate``: record the commands
+        only while it answers True (the trace's watch of the safe state: decoding nothing before a trip)."""
         self.samples: list[tuple[float, float, float, float]] = []  # t_s, angle_rad, velocity_rad_s, torque_nm
         self.commands: list[tuple[float, float, bool]] = []  # t_s, current_a (brake: its current), safe
         self.f_hz = 1
+        self.sample = sample
+        self.gate = gate
 
     def arm(self, rig: FaultRig) -> None:
         """Start the sampler and listen to the commands on the motor link."""
         bench = rig.bench
         self.f_hz = rig.f_cpu_hz
-        _Sampler(bench.world, bench.plant.raw, rig.f_cpu_hz // SAMPLE_HZ, self.samples)
+        if self.sample:
+            _Sampler(bench.world, bench.plant.raw, rig.f_cpu_hz // SAMPLE_HZ, self.samples)
         if bench.can_bus is not None:
             self.mode = bench.motor_device.mode
             can_tap(rig).listeners.append(self._on_frame)
@@ -68,6 +72,8 @@ class Observer:
             peer_tap(rig).listeners.append(self._on_bytes)
 
     def _on_bytes(self, data: bytes, ends: Sequence[int]) -> None:
+        if self.gate is not None and not self.gate():
+            return
         start = 0
         while start < len(data):
             end = data.find(b"\x03", start)
@@ -83,6 +89,8 @@ class Observer:
             start = end + 1
 
     def _on_frame(self, frame: CanFrame, t: int) -> None:
+        if self.gate is not None and not self.gate():
+            return
         t_s = t / self.f_hz
         if self.mode == "mit":
             if len(frame.data) != 8 or can_mit.special_frame(frame.data):
