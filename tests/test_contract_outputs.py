@@ -110,6 +110,8 @@ def test_rerun_commands_survive_paths_with_spaces(tmp_path):
     faults = where / "my campaign.toml"
     shutil.copy(profile_path("faults/default.toml"), faults)
     shutil.copy(profile_path("faults/criteria.toml"), where / "criteria.toml")
+    (tmp_path / "designs").mkdir()  # the adult scenario's profile, named relative to the spec
+    shutil.copy(profile_path("designs/adult_80kg.toml"), tmp_path / "designs" / "adult_80kg.toml")
     words = shlex.split(fault_rerun(load_fault_spec(faults), 3))
     assert words[:5] == ["pafp", "faults", str(faults), "--point", "3"] and words[6] == "runs/my campaign-point-3"
     design = where / "my design.toml"

@@ -169,9 +169,7 @@ def load_fault_spec(path: Path) -> FaultSpec:
         mass = _number(path, f"[[scenario]] {k} body_mass_kg", s.get("body_mass_kg", 80.0), 1.0, 300.0)
         prof, text = Path(profile), profile_text
         if "profile" in s:
-            prof = (base / str(s["profile"])).resolve()
-            if not prof.is_file():
-                raise _err(path, f"[[scenario]] {k} profile", str(prof), "an existing file")
+            prof = _SPEC.file(path, f"[[scenario]] {k} profile", s["profile"])
             text = prof.read_text(encoding="utf-8")
         scenarios.append((name, mass, str(prof), text))
     faults = []
