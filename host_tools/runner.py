@@ -196,12 +196,10 @@ class RunConfig:
         """
         imp = (self.imperfections or load_imperfections()).without(self.ideal)
         nominal = load_plant_params(self.plant_file)
-        if self.design is not None:
-            from firmware.motor_ratings import MotorRatings
+        if self.design is not None and self.firmware is not None:  # the firmware's ratings against the bench's motor
             from host_tools.design_profile import check_ratings
 
-            ratings = self.firmware.motor if self.firmware is not None else MotorRatings()
-            check_ratings(self.design, ratings, "design profile")
+            check_ratings(self.design, self.firmware.motor, "design profile")
         if self.design is not None and self.plant_file is None:
             nominal = plant_params_for(self.design, nominal)
         params = nominal if self.plant_seed is None else draw_plant(nominal, self.plant_seed)

@@ -54,12 +54,12 @@ def test_a_pack_above_the_drivers_over_voltage_trip_is_refused_before_the_run(tm
 
 def test_a_design_profile_whose_motor_ratings_are_another_motors_is_refused(tmp_path, capsys):
     text = (ROOT / "profiles" / "designs" / "adult_80kg.toml").read_text()
-    assert '\nmotor = "ak70_10"\n' in text
+    assert '\nmotor = "ak80_9"\n' in text
     profile = tmp_path / "design.toml"
-    profile.write_text(text.replace('\nmotor = "ak70_10"\n', '\nmotor = "ak10_9"\n'))
+    profile.write_text(text.replace('\nmotor = "ak80_9"\n', '\nmotor = "ak10_9"\n'))
     assert main(["run", "--profile", str(profile), "--strides", "1", "--quiet", "--out", str(tmp_path / "r")]) == 2
     line = _one_line(capsys.readouterr().err)
-    assert "[motor] model = 'ak70_10'" in line and "[design] motor 'ak10_9'" in line
+    assert "[motor] model = 'ak80_9'" in line and "[design] motor 'ak10_9'" in line
 
 
 def test_a_suspended_foot_has_no_distance_per_charge(tmp_path, capsys):

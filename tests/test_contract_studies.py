@@ -3,7 +3,7 @@
 A spec of the wrong shape is one line naming the file, the key and what was expected (exit 2); an --out that
 cannot take the outputs is refused before a cluster starts; a disk that fills during a campaign is exit 74 with
 a journal of whole rows; a stop signal ends a campaign with a report of what finished, "N of M finished" and the
---resume hint; `--point N` writes the full outputs of `pafp run`, trace.json too; criteria that judge nothing are
+--resume hint; `--point N` writes the full outputs of `pafp run`, trace.pftrace too; criteria that judge nothing are
 refused. Campaigns are one fault at one or two onsets, on a LocalCluster of threads where the command's own
 cluster is not what is tested.
 """
@@ -186,9 +186,10 @@ def test_faults_stopped_by_a_signal_reports_what_finished_and_how_to_resume(tmp_
 def test_faults_point_writes_the_outputs_of_pafp_run_with_its_trace(tmp_path, capsys):
     out = tmp_path / "point"
     assert main(["faults", str(_campaign(tmp_path, [0.25])), "--point", "0", "--out", str(out)]) == 0
-    assert "trace.json" in capsys.readouterr().out
-    trace = json.loads((out / "trace.json").read_text())
-    assert trace["traceEvents"]
+    assert "trace.pftrace" in capsys.readouterr().out
+    from tests.trace_reader import read_trace
+
+    assert read_trace(out / "trace.pftrace").slices
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fault"]["name"] == "motor_replies_lost" and summary["fault"]["count"] > 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["campaign.toml", "point"]  # nothing staged left

@@ -3,7 +3,6 @@ it."""
 
 from __future__ import annotations
 
-import argparse
 import math
 import re
 from pathlib import Path
@@ -12,8 +11,8 @@ import pytest
 
 from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.draw import draw_plant
-from host_tools.commands.emulate import _bench_options
 from host_tools.runner import RunConfig
+from host_tools.serial_mode.served_plant import served_plant
 
 ROOT = Path(__file__).resolve().parents[1]
 HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
@@ -37,7 +36,7 @@ def test_plant_file_sets_the_benchs_backlash(tmp_path):
     assert options["backlash_rad"] == pytest.approx(math.radians(1.5))
     assert record["plant"]["backlash_deg"] == pytest.approx(1.5)
     # the serial-mode emulator builds its bench the same way
-    emu = _bench_options(argparse.Namespace(seed=0, plant=HANDMADE, plant_seed=None, ideal=[]))
+    emu = served_plant(seed=0, plant_file=HANDMADE).options
     assert emu["backlash_rad"] == pytest.approx(math.radians(1.5))
     # switched off, there is none whatever the plant file says
     ideal, _ = RunConfig(plant_file=HANDMADE, ideal=("gearbox_backlash",)).bench_setup()

@@ -48,7 +48,7 @@ def _profile(tmp_path: Path, old: str, new: str) -> Path:
     ("disagreement_deg = 6.0", "disagreement_deg = 1e9", ["[safety] disagreement_deg = 1000000000.0", "(0, 71] deg"]),
     ("command_timeout_s = 0.020", "command_timeout_s = 1e6", ["[safety] command_timeout_s = 1000000.0", "(0, 0.1] s"]),
     ("motor_timeout_s = 0.020", "motor_timeout_s = 0.2", ["[safety] motor_timeout_s = 0.2", "(0, 0.1] s"]),
-    ("imu_timeout_s = 0.050", "imu_timeout_s = 10", ["[safety] imu_timeout_s = 10", "(0, 0.1] s"]),
+    ("imu_timeout_s = 0.040", "imu_timeout_s = 10", ["[safety] imu_timeout_s = 10", "(0, 0.1] s"]),
     ("startup_grace_s = 0.5", "startup_grace_s = 1e9", ["[safety] startup_grace_s = 1000000000.0", "(0, 5] s"]),
     ("brake_delay_s = 0.010", "brake_delay_s = 2", ["[safety] brake_delay_s = 2", "[0, 1] s"]),
     ("deadline_miss_streak = 3", "deadline_miss_streak = 101", ["[safety] deadline_miss_streak = 101", "[1, 100]"]),

@@ -16,8 +16,8 @@ from firmware.control.registry import build_controller
 from firmware.control.sysid import SysidExperiment
 from hal.virtual.plant import load_plant_params
 from host_tools.cli import main
-from host_tools.commands.emulate import _bench_options
 from host_tools.runner import RunConfig
+from host_tools.serial_mode.served_plant import served_plant
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANT = ROOT / "profiles" / "plant_ak60_6.toml"
@@ -113,10 +113,10 @@ def test_bad_plant_file_is_one_line_exit_2(tmp_path, capsys):
 def test_emulate_has_the_bench_imperfections_and_the_plant(tmp_path):
     path = _plant_file(tmp_path, coulomb_friction_nm=0.3)
     args = argparse.Namespace(seed=3, plant=path, plant_seed=None, ideal=[])
-    o = _bench_options(args)
+    o = served_plant(seed=args.seed, plant_file=args.plant).options
     assert o["plant_params"].coulomb_friction_nm == 0.3
     assert o["backlash_rad"] > 0 and o["imu_config"].bias_sigma_rad > 0 and o["initial_angle_rad"] != 0.0
-    ideal = _bench_options(argparse.Namespace(seed=3, plant=None, plant_seed=None, ideal=["all"]))
+    ideal = served_plant(seed=3, ideal=("all",)).options
     assert ideal["backlash_rad"] == 0 and ideal["imu_config"].bias_sigma_rad == 0 and ideal["initial_angle_rad"] == 0
 
 

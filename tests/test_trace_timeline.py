@@ -32,7 +32,7 @@ def _walk(**kw):
     obs = Observer(sample=False)  # the campaign's instrument: every command the motor received
     cfg = RunConfig(strides=1, seed=0, scenario="walk", body_mass_kg=20.0, firmware=fw,
                     controller=controller_for(fw, "walk", 20.0),
-                    faults=(obs, fault), duration_s=1.8, battery="molicel_p42a_12s1p", **kw)
+                    faults=(obs, fault), duration_s=1.8, battery="molicel_p42a_6s1p", **kw)
     return run_virtual(cfg), fault, obs
 
 
