@@ -36,7 +36,7 @@ class SafetyInputs:
     last_imu_poll_s: float | None = None  # when the IMU port was last read (None: take now)
     imu_frozen_s: float = 0.0  # how long the IMU's frames have been bit-identical while the encoder moved (FrozenImu)
     jam_s: float = 0.0  # how long the motor has pushed at its limit without motion against a moving reference
-    loaded: bool = False  # the foot in stance (the controller's stance flag): a jam is judged over jam_stance_time_s
+    loaded: bool = False  # the foot in stance (the controller's stance flag): a jam is judged in swing only
     disagreement_rad: float = 0.0
     motor_fault_code: int = 0
     deadline_miss_streak: int = 0
@@ -114,8 +114,7 @@ class Supervisor:
         if reason is FaultReason.MOTOR_JAM:
             return f"current at {lim.jam_current_share:.0%} of its limit, the encoder within " \
                    f"{math.degrees(lim.jam_still_rad):.2f} deg, the reference moving, for {x.jam_s * 1e3:.1f} ms > " \
-                   f"{(lim.jam_stance_time_s if x.loaded else lim.jam_time_s) * 1e3:.1f} ms " \
-                   f"({'stance' if x.loaded else 'swing'})"
+                   f"{lim.jam_time_s * 1e3:.1f} ms in swing"
         if reason in ages:
             last_s, limit_s, what = ages[reason]
             if last_s is None:
@@ -189,7 +188,7 @@ class Supervisor:
                 return FaultReason.MOTOR_ENCODER_DISAGREEMENT
             if x.imu_frozen_s > lim.imu_timeout_s:
                 return FaultReason.IMU_FROZEN
-            if x.jam_s > (lim.jam_stance_time_s if x.loaded else lim.jam_time_s):
+            if not x.loaded and x.jam_s > lim.jam_time_s:  # judged in swing only (docs/safety.md, "Jam")
                 return FaultReason.MOTOR_JAM
         return _NONE
 

@@ -75,13 +75,13 @@ class SafetyLimits:
     # a frozen IMU: its frames bit-identical for imu_timeout_s while the encoder moved more than this
     imu_frozen_motion_rad: float = math.radians(1.0)
     # a jam: the current command at jam_current_share of its limit, the encoder within jam_still_rad, the
-    # reference's speed above jam_reference_rad_s, all for longer than jam_time_s in swing, jam_stance_time_s in
-    # stance (where a push-off the motor is too weak for looks the same for a while; docs/safety.md, "Jam")
+    # reference's speed above jam_reference_rad_s, all for longer than jam_time_s in swing (judged in swing only: in
+    # stance a push-off the motor is too weak for looks the same; a jam there is caught once swing begins;
+    # docs/safety.md, "Jam")
     jam_current_share: float = 0.95
     jam_still_rad: float = math.radians(0.5)
     jam_reference_rad_s: float = 0.1
     jam_time_s: float = 0.025
-    jam_stance_time_s: float = 0.1
     # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
     # is read as MotorRatings)
     motor: MotorRatings = field(default_factory=MotorRatings)
@@ -127,9 +127,8 @@ class SafetyLimits:
         check_range("jam_still_rad", self.jam_still_rad, 0.0, span, lo_open=True,
                     unit="rad (at most the span of the angle limits)")
         check_range("jam_reference_rad_s", self.jam_reference_rad_s, 0.0, 10.0, unit="rad/s")
-        for name in ("jam_time_s", "jam_stance_time_s"):
-            check_range(name, getattr(self, name), 0.0, TIMEOUT_MAX_S, lo_open=True,
-                        unit="s (a stalled peak-current command crosses any range of motion in 0.1 s once freed)")
+        check_range("jam_time_s", self.jam_time_s, 0.0, TIMEOUT_MAX_S, lo_open=True,
+                    unit="s (a stalled peak-current command crosses any range of motion in 0.1 s once freed)")
         check_range("damping_kd", self.damping_kd, 0.0, DAMPING_KD_MAX, lo_open=True,
                     unit="N m s/rad (MIT mode's kd range on the AK series)")
 

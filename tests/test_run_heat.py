@@ -111,12 +111,12 @@ def test_a_hot_walk_derates_then_latches_over_temperature_and_the_summary_says_w
     assert t["motor_reported_c_max"] > 43.0
     assert t["steady_state_c"] > 43.0  # the strides before the trip (not the safe state after it) tend above it
     # the telemetry says it too: the supervisor in SAFE for OVER_TEMPERATURE from the trip on, the motor told zero
-    # current and then the brake (the shipped 2 A brake current)
+    # current, then the shipped safe state (graded: the phase short or the damper, no current command)
     records = TelemetryDecoder().feed((tmp_path / "out" / "telemetry.bin").read_bytes())
     f_cpu = 168e6
     after = [r for r in records if r.time_cycles / f_cpu > t["over_temperature_at_s"] + 0.002]
     assert after and all(r.fault_reason == FaultReason.OVER_TEMPERATURE for r in after)
-    assert after[0].current_cmd_a == 0.0 and after[-1].current_cmd_a == pytest.approx(2.0)
+    assert all(r.current_cmd_a == 0.0 for r in after)
 
 
 def test_the_same_hot_walk_with_the_shipped_thresholds_neither_derates_nor_latches(tmp_path: Path) -> None:

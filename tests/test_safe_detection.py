@@ -42,15 +42,12 @@ def test_jam_needs_all_three_and_restarts_on_motion() -> None:
     assert j.update(0.06, 6.0, 12.0, math.radians(0.6), 0.05) == 0.0  # the reference stopped
 
 
-def test_a_jam_trips_after_its_time_longer_in_stance() -> None:
+def test_a_jam_trips_after_its_time_in_swing_only() -> None:
     s = started()
     assert s.check(running(jam_s=LIMITS.jam_time_s)) is SupervisorState.RUN
-    assert s.check(running(jam_s=LIMITS.jam_stance_time_s, loaded=True)) is SupervisorState.RUN
+    assert s.check(running(jam_s=1.0, loaded=True)) is SupervisorState.RUN  # stance: a push-off too strong looks alike
     assert s.check(running(jam_s=LIMITS.jam_time_s + 1e-3)) is SupervisorState.SAFE
     assert s.reason is FaultReason.MOTOR_JAM and "swing" in s.detail
-    s = started()
-    assert s.check(running(jam_s=LIMITS.jam_stance_time_s + 1e-3, loaded=True)) is SupervisorState.SAFE
-    assert s.reason is FaultReason.MOTOR_JAM and "stance" in s.detail
 
 
 def test_frozen_imu_counts_identical_frames_only_while_the_encoder_moves() -> None:
