@@ -41,7 +41,8 @@ install: $(STAMP)
 
 # -n 2: the suite on two worker processes (pytest-xdist), one per core of the 2-core machines it is timed on
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --ignore=tests/benchmarks
+	$(PY) -m pytest -q -n 2 -m "not realtime" --ignore=tests/benchmarks
+	$(PY) -m pytest -q -m realtime --ignore=tests/benchmarks
 
 # The property tests under the exploring Hypothesis profile (tests/conftest.py): random seeds, more examples.
 fuzz: $(STAMP)

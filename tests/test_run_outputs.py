@@ -150,7 +150,8 @@ def test_summary_is_strict_json_with_null_for_what_a_run_does_not_have(tmp_path)
     text = (tmp_path / "summary.json").read_text()
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in summary.json"))
     assert doc["imu_rms_error_deg"] is None and doc["encoder_lag_ms"] is None and doc["complete"] is True
-    assert doc["process_wall_time_s"] > 0 and doc["process_realtime_factor"] > 0
+    # the process's own clock: in a long-lived process (an xdist worker) the factor rounds to 0.0, never NaN
+    assert doc["process_wall_time_s"] > 0 and doc["process_realtime_factor"] >= 0
     assert all(doc["tracking"][k]["rms_deg"] is None for k in ("imu", "encoder", "fused", "truth"))
     assert "| imu: IMU pitch as the firmware received it (the report's Figs 4.8-4.10) | n/a | n/a | n/a |" \
         in (tmp_path / "report.md").read_text()
