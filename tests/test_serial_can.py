@@ -36,10 +36,11 @@ def can_url(mode: str, tag: int = 0) -> str:
     return f"can://udp_multicast/239.75.{n >> 8}.{n & 0xFF}?id=1&mode={mode}"
 
 
-def can_bench(url: str, capture: Path, duration_s: float = 30.0) -> tuple[subprocess.Popen, str]:
-    """Start `pafp emulate bench --can URL --capture DIR`; return it and its IMU pty once the foot is at rest."""
+def can_bench(url: str, capture: Path, duration_s: float = 30.0,
+              options: tuple[str, ...] = ()) -> tuple[subprocess.Popen, str]:
+    """Start `pafp emulate bench --can URL --capture DIR [options]`; return it and its IMU pty once the foot rests."""
     proc = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "bench", "--can", url, "--duration",
-                             str(duration_s), "--capture", str(capture)], cwd=ROOT, stdout=subprocess.PIPE,
+                             str(duration_s), "--capture", str(capture), *options], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     assert proc.stdout.readline().strip() == f"motor: {url}", proc.stderr.read() if proc.poll() else ""
