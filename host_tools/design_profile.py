@@ -69,8 +69,6 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None) -> d
             "gear_ratio": (round(n, 6), f"{m.gear_ratio:g}:1 planetary x {design.belt_driven_teeth}/"
                                         f"{design.belt_driver_teeth} belt"),
             "efficiency": (round(plant.efficiency, 6), "gearbox x belt efficiency (base plant)"),
-            "efficiency_backdriven": (round(plant.efficiency_backdriven or plant.efficiency, 6),
-                                      "the planetary's backdriven (transmission.py) x the belt's"),
             **_spring_keys(design),
         },
         "motor": {
