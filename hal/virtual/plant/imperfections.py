@@ -159,13 +159,16 @@ def profile_text(name: str, base: str | Path | None = None) -> str:
         raise ValueError(f"misspecified plant {name!r} unknown: choose from {', '.join(MISSPECIFIED)}")
     lines = Path(base if base is not None else default_profile_path()).read_text(encoding="utf-8").splitlines()
     for table, keys in MISSPECIFIED[name].items():
+        after = None
         for key, value in keys.items():
-            _set_key(lines, table, key, value)
+            after = _set_key(lines, table, key, value, after)
     return "\n".join(lines) + "\n"
 
 
-def _set_key(lines: list[str], table: str, key: str, value: float) -> None:
-    """Set `key = value` in [table] of a TOML profile's lines (tables of scalars, as plant profiles are)."""
+def _set_key(lines: list[str], table: str, key: str, value: float, after: int | None) -> int | None:
+    """Set `key = value` in [table] of a TOML profile's lines (tables of scalars, as plant profiles are): in place, or
+    after line `after` (the previous new key's), or under the table's header, or in a new table at the end. Returns the
+    line of a new key (None when set in place)."""
     entry = f"{key} = {value!r}  # misspecified (hal/virtual/plant/imperfections.py)"
     header = None
     current = ""
@@ -177,8 +180,10 @@ def _set_key(lines: list[str], table: str, key: str, value: float) -> None:
                 header = n
         elif current == table and stripped.split("=")[0].strip() == key:
             lines[n] = entry
-            return
-    if header is None:
-        lines.extend(["", f"[{table}]", entry])
-    else:
-        lines.insert(header + 1, entry)
+            return None
+    if after is None and header is None:
+        lines.extend(["", f"[{table}]"])
+        after = len(lines) - 1
+    at = (after if after is not None else header) + 1  # type: ignore[operator]
+    lines.insert(at, entry)
+    return at
