@@ -192,10 +192,47 @@ def _fit_lag(result: MotorFit, log: BenchLog) -> None:
     half = Z95 * math.sqrt(s2 / max(float(sens @ sens), 1e-300))
     result.values["current_time_constant_s"] = tau
     result.ci95["current_time_constant_s"] = half
-    result.identifiable["current_time_constant_s"] = half <= REL_CI_LIMIT * tau and lo + 0.05 < res.x < hi - 0.05
+    result.identifiable["current_time_constant_s"] = bool(half <= REL_CI_LIMIT * tau and lo + 0.05 < res.x < hi - 0.05)
     result.delay_samples = d
     spread = float(np.linalg.norm(cur[d:] - cur[d:].mean()))
     result.fit_pct["current"] = 100.0 * (1.0 - math.sqrt(res.fun) / max(spread, 1e-300))
     if not result.identifiable["current_time_constant_s"]:
         result.notes["current_time_constant_s"] = (f"at the edge of [{period / 20:.3g}, 0.2] s or interval too wide: "
                                                    "the log's period does not resolve the lag")
+
+
+PROFILE_KEYS = {"kt_nm_per_a": "[motor] kt_nm_per_a", "rotor_inertia_kg_m2": "[motor] rotor_inertia_kg_m2",
+                "current_time_constant_s": "[driver] current_time_constant_s"}
+"""The identified parameters that are a plant profile's keys as they stand (the friction figures there are the
+ankle's, through the transmission: not the rotor's)."""
+
+
+def report(log: BenchLog, r: MotorFit, gear_ratio: float) -> tuple[dict, str]:
+    """(fit.json's content, fit.md's text) of a CSV log's fit."""
+    params = {k: {"value": r.values[k], "ci95_half_width": r.ci95[k], "identifiable": r.identifiable[k],
+                  "unit": r.units.get(k, ""), "profile_key": PROFILE_KEYS.get(k), "note": r.notes.get(k, "")}
+              for k in r.values}
+    missing = {k: v for k, v in r.notes.items() if k not in r.values}
+    doc = {"log": str(log.path), "rows": len(log.t), "period_s": r.period_s,
+           "columns": {c.role: {"header": c.header, "unit": c.unit, "from": c.source} for c in log.columns.values()},
+           "gear_ratio": gear_ratio, "frame": "rotor" if gear_ratio == 1.0 else f"rotor (log's shaft / {gear_ratio:g})",
+           "windows": r.windows, "min_speed_rad_s": r.min_speed_rad_s, "fit_percent": r.fit_pct,
+           "command_delay_samples": r.delay_samples if "current_time_constant_s" in r.values else None,
+           "params": params, "not_in_the_data": missing,
+           "model": "J dw/dt = Kt i - Tc sign(w) - b w - T_load; di/dt = (i_cmd(t - d) - i) / tau (docs/csv_fit.md)"}
+    lines = [f"# Motor fit of {log.path.name}", "",
+             f"{len(log.t)} rows at {r.period_s * 1e3:.3g} ms; {r.windows} windows turning faster than "
+             f"{r.min_speed_rad_s:.3g} rad/s; rotor side" + (f" (the log's shaft x {gear_ratio:g})" if gear_ratio != 1
+                                                              else "") + ".", "",
+             "| parameter | value | 95 % ± | unit | verdict |", "|---|---|---|---|---|"]
+    for k, p in params.items():
+        verdict = "identified" if p["identifiable"] else "NOT IDENTIFIABLE"
+        lines.append(f"| {k} | {p['value']:.5g} | {p['ci95_half_width']:.2g} | {p['unit']} | {verdict}"
+                     + (f": {p['note']}" if p["note"] else "") + " |")
+    for k, why in missing.items():
+        lines.append(f"| {k} | — | — | | {why} |")
+    lines += ["", "Fit % (1 - |residual| / |signal - mean|): " + ", ".join(f"{k} {v:.1f}" for k, v in r.fit_pct.items())
+              + ".", "", "The intervals take the residuals as independent between windows (samples, for the lag) and are "
+              "conditional on the model (docs/csv_fit.md): stiction, cogging, a torque-dependent friction or a load the "
+              "sensor does not see bias them without widening them."]
+    return doc, "\n".join(lines) + "\n"
