@@ -42,6 +42,7 @@ PRESETS: dict[str, dict[str, str]] = {
 }
 # plausibility bounds of the SI values, to catch a unit slip (mA read as A, ms read as s, degrees read as radians)
 MAX_ABS = {"command": 200.0, "current": 200.0, "speed": 5000.0, "torque": 1000.0}
+SI = {"command": "A", "current": "A", "speed": "rad/s", "torque": "N m"}
 PERIOD_RANGE_S = (1e-5, 0.5)
 MIN_ROWS = 200
 
@@ -107,8 +108,9 @@ def _mapping(header: list[str], preset: str | None, given: dict[str, tuple[str, 
     """The columns: the preset's (or the first preset whose required columns the header has), then --columns."""
     if preset is not None and preset not in PRESETS:
         raise ValueError(f"--preset {preset!r} unknown: choose from {', '.join(PRESETS)}")
-    names = [preset] if preset is not None else [p for p in PRESETS if all(
-        _match(header, PRESETS[p][r]) for r in ("time", "current", "position"))][:1]
+    # no preset named: the one whose columns the header has most of (the first of equals)
+    names = [preset] if preset is not None else [max(PRESETS, key=lambda p: sum(
+        _match(header, name) is not None for name in PRESETS[p].values()))]
     cols: dict[str, Column] = {}
     for p in names:
         for role, name in PRESETS[p].items():
@@ -123,11 +125,11 @@ def _mapping(header: list[str], preset: str | None, given: dict[str, tuple[str, 
         cols[role] = Column(role, found, unit or next(iter(UNITS[role])), "--columns")
     missing = [r for r in ("time", "current") if r not in cols]
     if "position" not in cols and "speed" not in cols:
-        missing.append("position or speed")
+        missing.append("position")
     if missing:
-        how = f"preset {names[0]}" if names else "no preset matched the header"
-        raise ValueError(f"{path}: no column for {', '.join(missing)} ({how}; header: {', '.join(header)}): map it "
-                         "with --columns ROLE=HEADER[:unit]")
+        expected = ", ".join(f"{r} ({PRESETS[names[0]][r]!r} in preset {names[0]})" for r in missing)
+        raise ValueError(f"{path}: no column for {expected}; the header has {', '.join(header)}: map it with "
+                         "--columns ROLE=HEADER[:unit]")
     return cols
 
 
@@ -171,7 +173,7 @@ def _check(log: BenchLog) -> None:
     bad = np.flatnonzero(dt <= 0.0)
     if bad.size:
         k = int(bad[0])
-        raise ValueError(f"{log.path} row {k + 3}: time {log.t[k + 1]!r} s is not after row {k + 2}'s {log.t[k]!r} s "
+        raise ValueError(f"{log.path} row {k + 3}: time {log.t[k + 1]:.9g} s is not after row {k + 2}'s {log.t[k]:.9g} s "
                          f"({log.where('time')}): time must increase strictly")
     period = float(np.median(dt))
     lo, hi = PERIOD_RANGE_S
@@ -182,8 +184,8 @@ def _check(log: BenchLog) -> None:
         v = getattr(log, role)
         if v is not None and float(np.max(np.abs(v))) > MAX_ABS[role]:
             k = int(np.argmax(np.abs(v)))
-            raise ValueError(f"{log.path} row {k + 2}: {role} {v[k]:.6g} (SI) from {log.where(role)} outside the "
-                             f"allowed range [-{MAX_ABS[role]:g}, {MAX_ABS[role]:g}]: is the unit right?")
+            raise ValueError(f"{log.path} row {k + 2}: {role} {v[k]:.6g} {SI[role]} from {log.where(role)} outside the "
+                             f"allowed range [-{MAX_ABS[role]:g}, {MAX_ABS[role]:g}] {SI[role]}: is the unit right?")
     if log.position is not None and log.speed is not None:
         _check_speed_against_position(log)
 

@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.signal import savgol_filter
 
 from host_tools.calibration.csv_log import BenchLog
 
@@ -35,7 +34,11 @@ REL_CI_LIMIT = 0.5  # a 95 % half-width above half the value: not identifiable
 COLLINEARITY_LIMIT = 20.0  # a column (nearly) a combination of the others
 MIN_WINDOWS = 20
 MAX_DELAY_SAMPLES = 3
-SG_POINTS = 7  # the Savitzky-Golay speed's points (quadratic): short, so that it follows the fastest motion
+# 7-point quadratic Savitzky-Golay filters (A. Savitzky, M. J. E. Golay, Anal. Chem. 36 (1964) 1627-1639, tables I and
+# III): the first derivative and the smoothed value at the middle point. Short, so that they follow the fastest motion;
+# written out rather than scipy.signal.savgol_filter, whose import costs seconds on a busy machine
+SG_DERIVATIVE = np.arange(-3.0, 4.0) / 28.0
+SG_SMOOTH = np.array([-2.0, 3.0, 6.0, 7.0, 6.0, 3.0, -2.0]) / 21.0
 
 
 @dataclass
@@ -70,11 +73,15 @@ def _uniform(log: BenchLog, gear_ratio: float) -> dict[str, np.ndarray | float |
     return out
 
 
-def _speed(u: dict, window: int) -> np.ndarray:
-    """Shaft speed: the position's Savitzky-Golay derivative, or the speed column smoothed the same way."""
+def _speed(u: dict) -> np.ndarray:
+    """Shaft speed: the position's Savitzky-Golay derivative, or the speed column smoothed the same way (the first and
+    last 3 samples, which the filter does not reach, are marked as a gap)."""
     if u["position"] is not None:
-        return savgol_filter(u["position"], window, 2, deriv=1, delta=u["period"])
-    return savgol_filter(u["speed"], window, 2)
+        w = np.convolve(u["position"], SG_DERIVATIVE[::-1], mode="same") / u["period"]
+    else:
+        w = np.convolve(u["speed"], SG_SMOOTH, mode="same")
+    u["gap"][:3] = u["gap"][-3:] = True
+    return w
 
 
 def _ols(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -107,7 +114,7 @@ def fit_motor(log: BenchLog, *, gear_ratio: float = 1.0, kt_nm_per_a: float | No
     u = _uniform(log, gear_ratio)
     period = float(u["period"])  # type: ignore[arg-type]
     n = max(3, round(window_s / period))
-    w = _speed(u, SG_POINTS)
+    w = _speed(u)
     floor = 0.05 * float(np.percentile(np.abs(w), 95))
     min_speed = floor if min_speed_rad_s is None else min_speed_rad_s
     starts = _windows(w, u["gap"], n, min_speed)  # type: ignore[arg-type]
@@ -155,15 +162,27 @@ def fit_motor(log: BenchLog, *, gear_ratio: float = 1.0, kt_nm_per_a: float | No
     return result
 
 
-def _lagged(cmd: list[float], i0: float, decay: list[float]) -> np.ndarray:
+def _lagged(cmd: np.ndarray, i0: float, decay: np.ndarray) -> np.ndarray:
     """The first-order lag of a held command: i[k+1] = cmd[k] + (i[k] - cmd[k]) decay[k], from i[0] = i0 (decay[k] =
-    exp(-(t[k+1] - t[k]) / tau): the log's own sample times, jitter included)."""
-    out = [i0]
-    i = i0
-    for u, a in zip(cmd, decay):
-        i = u + (i - u) * a
-        out.append(i)
-    return np.asarray(out[:-1])
+    exp(-(t[k+1] - t[k]) / tau): the log's own sample times, jitter included).
+
+    Vectorised in blocks: i[k] = P_k (i[s] + sum_j (1 - decay_j) cmd_j / P_(j+1)) with P the product of the decays since
+    the block's start s, a block ending before P falls below e^-600 (1 / P stays below e^646, no overflow).
+    """
+    n = len(cmd)
+    la = np.log(np.clip(decay[:n - 1], 1e-20, None))  # below 1e-20 the old current is gone to rounding anyway
+    c = (1.0 - np.exp(la)) * cmd[:n - 1]
+    big_l = np.concatenate([[0.0], np.cumsum(la)])  # log of the product of the decays up to each sample
+    starts = np.flatnonzero(np.diff(np.floor(-big_l / 600.0)) != 0) + 1
+    y = np.empty(n)
+    y[0] = i0
+    for s, e in zip(np.concatenate([[0], starts]), np.concatenate([starts, [n]])):
+        rel = big_l[s:e] - big_l[s]
+        acc = np.cumsum(np.exp(-rel[1:]) * c[s:e - 1])
+        y[s + 1:e] = np.exp(rel[1:]) * (y[s] + acc)
+        if e < n:
+            y[e] = y[e - 1] * np.exp(la[e - 1]) + c[e - 1]
+    return y
 
 
 def _fit_lag(result: MotorFit, log: BenchLog) -> None:
@@ -177,14 +196,19 @@ def _fit_lag(result: MotorFit, log: BenchLog) -> None:
 
     def simulate(tau: float, d: int) -> np.ndarray:
         m = len(cur) - d
-        return _lagged(log.command[:m].tolist(), float(cur[d]), np.exp(-dt[d:] / tau).tolist() + [0.0])
+        return _lagged(log.command[:m], float(cur[d]), np.exp(-dt[d:] / tau))
 
     def sse(log_tau: float, d: int) -> float:
         r = cur[d:] - simulate(math.exp(log_tau), d)
         return float(r @ r)
 
-    res, d = min(((minimize_scalar(sse, bounds=(lo, hi), args=(d,), method="bounded", options={"xatol": 1e-3}), d)
-                  for d in range(MAX_DELAY_SAMPLES + 1)), key=lambda rd: rd[0].fun)
+    # the delay from a coarse grid of time constants, then the time constant of the best delay refined between the
+    # grid's neighbours of its best point
+    grid = np.linspace(lo, hi, 9)
+    coarse = {(d, k): sse(g, d) for d in range(MAX_DELAY_SAMPLES + 1) for k, g in enumerate(grid)}
+    d, k = min(coarse, key=coarse.__getitem__)
+    res = minimize_scalar(sse, bounds=(grid[max(0, k - 1)], grid[min(8, k + 1)]), args=(d,), method="bounded",
+                          options={"xatol": 1e-3})
     tau = math.exp(res.x)
     h = 1e-3 * tau  # the sensitivity of the simulated current to tau, for its interval
     sens = (simulate(tau + h, d) - simulate(tau - h, d)) / (2.0 * h)
