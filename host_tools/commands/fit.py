@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     csv.add_argument("--columns", default=None, metavar="ROLE=HEADER[:unit],...",
                      help="map the log's columns: roles time, command, current, position, speed, torque")
     csv.add_argument("--preset", default=None, help="the column names an SDK's logger writes: tmotor-servo, "
-                     "tmotor-mit, opensourceleg (default: the first whose columns the header has)")
+                     "tmotor-mit, opensourceleg (default: the one whose columns the header has most of)")
     csv.add_argument("--gear-ratio", type=float, default=1.0, metavar="N",
                      help="the log's position, speed and torque are at the output of an N:1 gearbox (default 1: "
                      "the rotor's)")
