@@ -180,3 +180,15 @@ def test_install_leaves_coefficients_alone_without_stribeck_or_ripple():
                          kst=c.kst, cst=c.cst, tc=c.tc, tsx=c.tsx, tau=c.tau, ker=c.ker, bscale=c.bscale)
     install(fresh, replace(BASE, efficiency_backdriven=0.9))
     assert fresh.imp_accel is None
+
+
+def test_a_run_on_a_misspecified_profile_carries_it_and_says_so(tmp_path):
+    """`pafp run --plant FILE`'s bench gets the profile's imperfections; summary.json's plant record names them."""
+    from host_tools.runner import RunConfig
+
+    path = tmp_path / "stribeck.toml"
+    path.write_text(profile_text("stribeck"), encoding="utf-8")
+    options, record = RunConfig(plant_file=path).bench_setup()
+    assert options["plant_params"].stribeck_peak_nm == 0.83
+    assert record["plant"]["imperfections"] == ["stribeck"]
+    assert RunConfig().bench_setup()[1]["plant"]["imperfections"] == []
