@@ -29,10 +29,10 @@ from hal.virtual.bench import CAN_RX_CYCLES, VirtualBench
 from hal.virtual.devices.bno08x_config import imu_reading_of
 from hal.virtual.imperfections import Imperfections, load_imperfections
 from hal.virtual.plant import load_plant_params
-from hal.virtual.plant.imperfections import active as active_imperfections
 from hal.virtual.plant.battery import load_battery
 from hal.virtual.plant.design import Design, plant_params_for
 from hal.virtual.plant.draw import draw_plant, drawn_values
+from hal.virtual.plant.imperfections import active as active_imperfections
 from hal.virtual.plant.motors import load_motor
 from hal.virtual.plant.readings import DRIVERS, geometry_of
 from hal.virtual.plant.thermal import ThermalParams

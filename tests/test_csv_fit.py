@@ -97,7 +97,8 @@ def test_an_output_side_log_with_its_gear_ratio_gives_the_rotor_figures(bench_lo
 
 def test_without_torque_sensor_kt_is_reported_not_in_the_data(bench_log, tmp_path):
     path, _ = bench_log
-    code, doc = _fit(_without(path, tmp_path, "torque_sensor"), tmp_path / "fit", "--columns", "command=current_command")
+    slim = _without(path, tmp_path, "torque_sensor")
+    code, doc = _fit(slim, tmp_path / "fit", "--columns", "command=current_command")
     assert code == 0
     assert "kt_nm_per_a" not in doc["params"]
     assert doc["not_in_the_data"]["kt_nm_per_a"].startswith("no torque column")
@@ -114,7 +115,7 @@ def _rows(n=400, dt=1e-3, current=1.0, speed_scale=1.0):
     t = np.arange(n) * dt
     pos = np.sin(2 * np.pi * 2 * t)
     return [(ti, p, speed_scale * 4 * np.pi * np.cos(2 * np.pi * 2 * ti), current * np.sin(9 * ti))
-            for ti, p in zip(t, pos)]
+            for ti, p in zip(t, pos, strict=True)]
 
 
 HEADER = ["pi_time", "motor_position", "motor_speed", "motor_current"]
@@ -167,7 +168,8 @@ def test_opensourceleg_columns_are_matched_by_their_attribute_name(tmp_path):
 
     header = ["time", "TMotor[ankle].motor_position", "TMotor[ankle].motor_velocity", "TMotor[ankle].motor_current"]
     log = read_log(_bad_log(tmp_path, header, _rows()))
-    assert {r: c.header for r, c in log.columns.items()} == dict(zip(("time", "position", "speed", "current"), header))
+    roles = ("time", "position", "speed", "current")
+    assert {r: c.header for r, c in log.columns.items()} == dict(zip(roles, header, strict=True))
     assert log.columns["current"].source == "preset opensourceleg"
 
 

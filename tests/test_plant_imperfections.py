@@ -60,7 +60,7 @@ def test_the_imperfect_integrator_without_imperfections_agrees_with_the_nominal_
             plant.set_current_command(2.5 * math.sin(9.0 * t) + (0.8 if k % 10 < 5 else -0.8), t)
             states.append(plant.state_at(t + 0.004))
         out.append(states)
-    for a, b in zip(*out):
+    for a, b in zip(*out, strict=True):
         assert a.output_angle_rad == pytest.approx(b.output_angle_rad, abs=1e-9)
         assert a.output_velocity_rad_s == pytest.approx(b.output_velocity_rad_s, abs=1e-7)
         assert a.current_q_a == pytest.approx(b.current_q_a, abs=1e-9)

@@ -130,7 +130,8 @@ def _run_csv(args: argparse.Namespace) -> int:
         if not_csv:
             raise ValueError(f"{not_csv[0]} applies to a run directory, not to a CSV log ({args.run_dir})")
         for name, v, lo, hi in (("--gear-ratio", args.gear_ratio, 1.0, 1000.0), ("--kt", args.kt, 1e-3, 10.0),
-                                ("--window-ms", args.window_ms, 0.1, 1000.0), ("--min-speed", args.min_speed, 0.0, 5000.0)):
+                                ("--window-ms", args.window_ms, 0.1, 1000.0),
+                                ("--min-speed", args.min_speed, 0.0, 5000.0)):
             if v is not None and not (math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"{name} {v!r} outside the allowed range [{lo:g}, {hi:g}]")
         log = read_log(args.run_dir, args.columns, args.preset)
@@ -139,7 +140,8 @@ def _run_csv(args: argparse.Namespace) -> int:
         print(input_error("fit", e), file=sys.stderr)
         return 2
     print(f"pafp fit: {args.run_dir}: {len(log.t)} rows, columns "
-          + ", ".join(f"{c.role}={c.header}[{c.unit}]" for c in log.columns.values()) + f" -> {run_dir.out}", flush=True)
+          + ", ".join(f"{c.role}={c.header}[{c.unit}]" for c in log.columns.values()) + f" -> {run_dir.out}",
+          flush=True)
     try:
         r = fit_motor(log, gear_ratio=args.gear_ratio, kt_nm_per_a=args.kt, window_s=args.window_ms * 1e-3,
                       min_speed_rad_s=args.min_speed)
