@@ -180,8 +180,7 @@ def _check(log: BenchLog) -> None:
     lo, hi = PERIOD_RANGE_S
     if not lo <= period <= hi:
         raise ValueError(f"{log.path}: median sample period {period:.6g} s from {log.where('time')} outside the "
-                         "allowed "
-                         f"range [{lo}, {hi}] s: is the time in another unit (time=HEADER:ms or :us)?")
+                         f"allowed range [{lo}, {hi}] s: is the time in another unit (time=HEADER:ms or :us)?")
     for role in ("command", "current", "speed", "torque"):
         v = getattr(log, role)
         if v is not None and float(np.max(np.abs(v))) > MAX_ABS[role]:

@@ -121,9 +121,8 @@ def fit_motor(log: BenchLog, *, gear_ratio: float = 1.0, kt_nm_per_a: float | No
     starts = _windows(w, u["gap"], n, min_speed)  # type: ignore[arg-type]
     if len(starts) < MIN_WINDOWS:
         raise ValueError(f"{log.path}: {len(starts)} windows of {n * period * 1e3:.3g} ms where the shaft turns one "
-                         "way "
-                         f"faster than {min_speed:.4g} rad/s: at least {MIN_WINDOWS} needed (more motion, or a lower "
-                         "--min-speed)")
+                         f"way faster than {min_speed:.4g} rad/s: at least {MIN_WINDOWS} needed (more motion, or a "
+                         "lower --min-speed)")
     idx = np.array(starts)[:, None] + np.arange(n + 1)[None, :]
     wts = np.full(n + 1, period)
     wts[[0, -1]] *= 0.5  # trapezoid weights over a window's samples

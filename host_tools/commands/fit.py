@@ -135,6 +135,9 @@ def _run_csv(args: argparse.Namespace) -> int:
             if v is not None and not (math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"{name} {v!r} outside the allowed range [{lo:g}, {hi:g}]")
         log = read_log(args.run_dir, args.columns, args.preset)
+        if args.kt is not None and log.torque is not None:
+            raise ValueError(f"--kt applies to a log without a torque column: {args.run_dir} has one "
+                             f"({log.where('torque')}), from which Kt is fitted")
         run_dir = RunDir(args.out or args.run_dir.with_name(args.run_dir.stem + "-fit"))
     except (OSError, ValueError) as e:
         print(input_error("fit", e), file=sys.stderr)
