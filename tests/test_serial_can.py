@@ -19,6 +19,8 @@ import pytest
 can = pytest.importorskip("can")
 pytest.importorskip("msgpack")  # udp_multicast needs it
 
+from test_serial_run import _like_a_device  # noqa: E402
+
 import hal.pycan as pycan  # noqa: E402
 from hal.can import CanFrame  # noqa: E402
 from hal.pycan import PythonCanPort, parse_can_url  # noqa: E402
@@ -46,6 +48,7 @@ def can_bench(url: str, capture: Path, duration_s: float = 30.0,
     assert proc.stdout.readline().strip() == f"motor: {url}", proc.stderr.read() if proc.poll() else ""
     role, imu = proc.stdout.readline().strip().split(": ")
     assert role == "imu"
+    _like_a_device(proc.pid)  # as the pty bench: starved, its foot may still be falling when the firmware starts
     time.sleep(SETTLE_S)
     return proc, imu
 
