@@ -9,9 +9,9 @@ from test_ak60_drive import hold_current, values_at
 from hal.virtual.devices.ak60 import DriveMode
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.ak60_meter import Ak60Meter
-from hal.virtual.plant.params import load_plant_params
 from hal.virtual.plant.battery import Battery, load_battery
 from hal.virtual.plant.motors import load_motor
+from hal.virtual.plant.params import load_plant_params
 from hal.virtual.plant.thermal import COPPER_LOSS_FACTOR, ThermalParams, WindingThermal
 from protocol.vesc import FaultCode
 

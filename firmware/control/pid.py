@@ -164,8 +164,8 @@ def backdriven_current_a(current_a: float, velocity_rad_s: float, backdriven_sha
     against the ankle's motion the transmission is backdriven and the same moment takes backdriven_share of it
     (FeedforwardParams.backdriven_share; the plant switches its gain on the same sign).
 
-    >>> backdriven_current_a(2.0, -1.0, 0.75), backdriven_current_a(2.0, 1.0, 0.75), backdriven_current_a(2.0, 0.0, 0.75)
-    (1.5, 2.0, 2.0)
+    >>> [backdriven_current_a(2.0, velocity, 0.75) for velocity in (-1.0, 1.0, 0.0)]
+    [1.5, 2.0, 2.0]
     """
     if current_a * velocity_rad_s < 0.0:
         return current_a * backdriven_share
