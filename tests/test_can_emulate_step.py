@@ -100,3 +100,22 @@ def test_set_pos_spd_moves_at_the_commanded_speed(emu) -> None:
         angles.append(emu(k).device.core.pid_pos_deg())
     speed_deg_s = (angles[199] - angles[99]) / 0.1  # from 101 to 201 ms: cruising, far from the target
     assert speed_deg_s == pytest.approx(1000 / 14 / 60 * 360 / 6, rel=0.05)
+
+
+def test_a_quiet_mit_motor_keeps_its_plant_integrated_so_the_first_reply_is_not_late() -> None:
+    """An MIT-mode motor has no event before its first frame: nothing queried the plant, and the first power-on frame
+    used to integrate the whole quiet spell (seconds of plant: 65 ms of CPU, over 200 ms under load) before its reply
+    went out, longer than TMotorCANControl's start-up check waits (issue 37). Each step now integrates the plant up
+    to its present."""
+    clock = [0]
+    m = WallCanMotor(_Port(), CanUrl("test", "x", 1, "mit"), clock_ns=lambda: clock[0])
+    for ms in (1, 500, 1000, 2000):
+        clock[0] = ms * 1_000_000
+        m.step()
+        assert m.world.plant.latest_time_s == ms / 1000  # integrated up to the world's present, no frame yet
+    clock[0] = 2_000_001_000
+    m.port.waiting.append(CanFrame(1, b"\xff" * 7 + b"\xfc"))  # MIT mode: enter motor mode
+    m.step()
+    clock[0] = 2_000_100_000
+    m.step()
+    assert [f.arbitration_id for f in m.port.sent] == [0] and m.device.motor_mode  # answered 50 us after it

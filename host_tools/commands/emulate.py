@@ -340,6 +340,7 @@ def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], dur
                 written = _give(ep, data)
                 if capture is not None:
                     capture.record(ep.role, "tx", data[:written])
+        devices.world.commit_plant()  # a quiet spell is integrated as it passes, not by the next command's reply
 
 
 def _take(devices: WallDevices, ep: Endpoint, now: int) -> bytes:

@@ -121,7 +121,8 @@ class WallCanMotor:
         their order, at that instant (never before the world's present: not in the past, nor in the future),
         after everything due before it has run. A burst that finds the emulator behind (a busy host) is
         applied in order while the world catches up. At most MAX_FRAMES_PER_STEP frames are taken per step; the
-        rest wait in the bus's receive buffer.
+        rest wait in the bus's receive buffer. The due frames sent, the plant is integrated up to now: a quiet
+        spell is paid for as it passes, not by the reply to the next command.
         """
         world = self.world
         frames = []
@@ -143,6 +144,7 @@ class WallCanMotor:
                 self.frames_out += 1
             else:
                 self.tx_refused += 1
+        world.commit_plant()
 
     def serve(self, stop: list[str], duration_s: float | None) -> None:
         """Step until stop is non-empty or duration_s has passed; sleep in between (at most 1 ms)."""
