@@ -65,11 +65,12 @@ def test_a_loop_command_then_a_late_one_does_not_run_the_plant_backwards(emu) ->
 def test_a_burst_that_finds_the_emulator_behind_is_applied_in_order_at_its_arrival(emu) -> None:
     emu(1, _servo(1, struct.pack(">i", 1000)))
     status_before = len(emu(2).port.sent)
-    # 80 ms of silence, then a burst: the status frames due in between go out first, then the burst acts at 82 ms
+    # 80 ms of silence, then a burst: of the 500 Hz status frames due from 4 ms to 82 ms only the latest goes out (the
+    # others would only go out late, in a burst: superseded), then the burst acts at 82 ms
     m = emu(82, _servo(3, struct.pack(">i", 2000)), _servo(1, struct.pack(">i", -1000)),
             _servo(1, struct.pack(">i", 2500)))
     assert m.world.now == 82_000_000
-    assert len(m.port.sent) - status_before == 40  # 500 Hz status frames from 4 ms to 82 ms
+    assert len(m.port.sent) - status_before == 1 and m.device.status_superseded == 39
     assert m.device.core.mode is DriveMode.CURRENT and m.device.frames_in == 4  # the last of the burst holds
     m = emu(90)
     assert abs(m.device.core.meter.current_a - 2.5) < 0.05
@@ -87,7 +88,9 @@ def test_servo_special_frames_origin_and_status(emu) -> None:
     m = emu(80, _servo(5, b"\x09"))
     assert m.device.ignored_frames == 1
     status = [can_servo.decode_status(f.data) for f in m.port.sent if f.arbitration_id == can_servo.status_id(1)]
-    assert len(status) == 40 and all(s.temperature_c >= 20 and s.error == 0 for s in status)
+    assert len(status) + m.device.status_superseded == 40  # 500 Hz up to 80 ms; the steps at 50, 60, 70 and 80 ms
+    # each send the latest one due
+    assert len(status) == 4 and all(s.temperature_c >= 20 and s.error == 0 for s in status)
 
 
 def test_set_pos_spd_moves_at_the_commanded_speed(emu) -> None:

@@ -319,7 +319,7 @@ def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], dur
             can_motor.step()
         now = devices.now()
         if end_ns is not None and now >= end_ns:
-            return
+            break
         wake = devices.next_event_ns()
         if can_motor is not None:
             wake = min(wake, can_motor.world_next(), can_motor.bus.next_at())
@@ -341,6 +341,8 @@ def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], dur
                 if capture is not None:
                     capture.record(ep.role, "tx", data[:written])
         devices.world.commit_plant()  # a quiet spell is integrated as it passes, not by the next command's reply
+    if can_motor is not None:
+        can_motor.drain()
 
 
 def _take(devices: WallDevices, ep: Endpoint, now: int) -> bytes:

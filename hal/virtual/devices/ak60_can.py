@@ -81,6 +81,11 @@ class Ak60Can(EventDevice):
         self.ignored_frames = 0
         self.unknown_packets = 0  # servo mode: packet ids outside the manual's 0..6 (e.g. opensourceleg's 7)
         self.special_frames = 0  # servo mode: MIT-style power-on/off/zero frames on extended IDs
+        self.late_before = -1
+        """Servo mode, a wall-clock server behind the clock: a status frame whose successor is also due before this
+        tick would only go out late in a burst; it is superseded by the successor (not built, counted in
+        ``status_superseded``). -1 (the virtual bench): every status frame is built."""
+        self.status_superseded = 0
         self.bus: CanBusPort | None = bus
         if bus is not None:
             bus.attach(self)
@@ -125,7 +130,10 @@ class Ak60Can(EventDevice):
         if self._mit_at <= t:
             self._mit_tick(t)
         if self._status_at <= t:
-            self._status(t)
+            if t + self._status_period > self.late_before:
+                self._status(t)
+            else:
+                self.status_superseded += 1
             self._status_at = t + self._status_period
         self.core._update_next()  # a command may have started or stopped the core's loop or timeout
         self._update_next()
