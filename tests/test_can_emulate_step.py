@@ -122,3 +122,29 @@ def test_a_quiet_mit_motor_keeps_its_plant_integrated_so_the_first_reply_is_not_
     clock[0] = 2_000_100_000
     m.step()
     assert [f.arbitration_id for f in m.port.sent] == [0] and m.device.motor_mode  # answered 50 us after it
+
+
+@pytest.mark.parametrize(("convention", "wire_per_plant"), [("catalogue", 1.0), ("rms", 1.5 ** -0.5),
+                                                             ("peak", 2 / 3 ** 0.5)])
+def test_current_convention_scales_the_amps_on_the_wire_only(convention: str, wire_per_plant: float) -> None:
+    """An AK80-9 served as opensourceleg sees it: with the RMS convention, 0.115 N m/A (its Kt_actual) times the amps
+    it commands and reads is the torque the plant's motor makes (the catalogue's 0.095 N m/A x the plant's amps) within
+    5 % (docs/hardware.md, "Current conventions")."""
+    from hal.virtual.devices.ak60_can import Ak60CanConfig
+    from host_tools.serial_mode.served_plant import served_plant
+
+    served = served_plant(motor="ak80_9")
+    clock = [0]
+    m = WallCanMotor(_Port(), CanUrl("test", "x", 1, "servo"), clock_ns=lambda: clock[0], plant_options=served.options,
+                     can_config=Ak60CanConfig(limits=served.limits, current_convention=convention))
+    for ms in range(1, 41):
+        clock[0] = ms * 1_000_000
+        m.port.waiting.append(_servo(1, struct.pack(">i", 2000)))  # SET_CURRENT 2 A, every ms
+        m.step()
+    plant_a = m.world.plant.state_at(m.world.now / 1e9).current_q_a
+    assert plant_a == pytest.approx(2.0 / wire_per_plant, rel=0.01)
+    status = [can_servo.decode_status(f.data) for f in m.port.sent if f.arbitration_id == can_servo.status_id(1)]
+    assert status[-1].current_a == pytest.approx(2.0, abs=0.02)  # the client reads back what it commanded
+    if convention == "rms":
+        sdk_torque = 0.115 * status[-1].current_a  # opensourceleg's AK80-9 Kt_actual (rotor side)
+        assert sdk_torque == pytest.approx(served.motor.kt_nm_per_a * plant_a, rel=0.05)

@@ -95,6 +95,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="serve a design profile's [design] (profiles/designs/): its motor, belt and spring")
     parser.add_argument("--status-hz", type=float, default=500.0, metavar="HZ",
                         help="--can servo mode: the status frame's rate, as set in the drive (1..500, default 500)")
+    parser.add_argument("--current-convention", default="catalogue", choices=("catalogue", "rms", "peak"),
+                        help="--can servo mode: what an amp on the wire is: the catalogue's (torque = the maker's Kt "
+                             "x I, default), the RMS phase current (Kt x sqrt(3/2): opensourceleg's AK80-9 0.115 "
+                             "N m/A) or the peak phase current (Kt x sqrt(3)/2); docs/hardware.md")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default, or inf: run until Ctrl-C or SIGTERM)")
     parser.add_argument("--no-realtime", action="store_true",
@@ -208,7 +212,7 @@ def _run_can(args: argparse.Namespace) -> int:
             port = open_can(url)
             deepen_receive_buffer(port.bus)
             can_config = Ak60CanConfig(driver_id=url.driver_id, mode=url.mode, limits=served.limits,
-                                       status_period_s=1.0 / args.status_hz)
+                                       status_period_s=1.0 / args.status_hz, current_convention=args.current_convention)
             motor = WallCanMotor(capture.tap_can("motor", port, f"can-{url.mode}") if capture else port, url,
                                  args.fixture, clock_ns, world=devices.world if devices is not None else None,
                                  plant_options=served.options, can_config=can_config)

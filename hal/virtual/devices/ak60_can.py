@@ -7,8 +7,9 @@ is a node of a :class:`~hal.virtual.can_bus.VirtualCanBus` that takes frames add
 
 * servo mode: commands on 29-bit IDs ``(packet << 8) | driver_id`` (SET_CURRENT, SET_CURRENT_BRAKE,
   SET_DUTY, SET_RPM, SET_POS, SET_POS_SPD, SET_ORIGIN_HERE, with the manual's scalings: protocol.can_servo)
-  act as their UART counterparts; a status frame (ID ``0x29xx``: output angle x 0.1 deg wrapped to
-  +-3200 deg, ERPM, q current, motor temperature, the manual's error code) goes out every
+  act as their UART counterparts (amps in the config's ``current_convention``); a status frame (ID ``0x29xx``:
+  output angle x 0.1 deg wrapped to +-3200 deg, ERPM, q current, motor temperature, the manual's error code) goes
+  out every
   ``status_period_s`` (1..500 Hz, as the drive is configured) whether or not a command came. Unknown packet
   ids (opensourceleg's packet-7 "mode switch") are counted in ``unknown_packets`` and ignored; the MIT-style
   power-on/off/zero frames clients send on extended IDs are handled by ``_servo_special``;
@@ -31,7 +32,7 @@ from typing import Any, Protocol
 
 from hal.can import CanFrame
 from hal.virtual.devices.ak60 import Ak60
-from hal.virtual.devices.ak60_can_config import MODES, Ak60CanConfig
+from hal.virtual.devices.ak60_can_config import CURRENT_CONVENTIONS, MODES, Ak60CanConfig
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.world import World
 from hal.virtual.events import NEVER, EventDevice
@@ -68,6 +69,7 @@ class Ak60Can(EventDevice):
         p = core.params
         self._nm_per_a = p.kt_nm_per_a * p.gearbox_ratio  # output torque per q amp
         self._gear = p.gearbox_ratio
+        self._wire_a = CURRENT_CONVENTIONS[cc.current_convention]  # servo mode: wire amps per plant amp
         self._pole_pairs = p.pole_pairs
         self._rx: deque[tuple[int, CanFrame]] = deque()
         self._status_period = max(1, world.ticks(cc.status_period_s))
@@ -168,9 +170,9 @@ class Ak60Can(EventDevice):
             return
         self._commanded(t)
         if cmd.packet == P.SET_CURRENT:
-            core._drive_current(cmd.value, t)
+            core._drive_current(cmd.value / self._wire_a, t)
         elif cmd.packet == P.SET_CURRENT_BRAKE:
-            core._drive_brake(cmd.value, t)
+            core._drive_brake(cmd.value / self._wire_a, t)
         elif cmd.packet == P.SET_DUTY:
             core._drive_duty(cmd.value, t)
         elif cmd.packet == P.SET_RPM:
@@ -248,6 +250,6 @@ class Ak60Can(EventDevice):
         core._sample(t)
         deg = (core.pid_pos_deg() + 3200.0) % 6400.0 - 3200.0
         erpm = core._velocity * 60.0 / (2.0 * math.pi) * self._pole_pairs
-        status = can_servo.ServoStatus(deg, erpm, core.meter.current_a, int(round(core.meter.temp_motor_c)),
-                                       can_servo.error_code(core.fault))
+        status = can_servo.ServoStatus(deg, erpm, core.meter.current_a * self._wire_a,
+                                       int(round(core.meter.temp_motor_c)), can_servo.error_code(core.fault))
         self._out(CanFrame(can_servo.status_id(self.driver_id), can_servo.encode_status(status), True), t)
