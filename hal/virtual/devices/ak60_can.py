@@ -9,8 +9,7 @@ is a node of a :class:`~hal.virtual.can_bus.VirtualCanBus` that takes frames add
   SET_DUTY, SET_RPM, SET_POS, SET_POS_SPD, SET_ORIGIN_HERE, with the manual's scalings: protocol.can_servo)
   act as their UART counterparts (amps in the config's ``current_convention``); a status frame (ID ``0x29xx``:
   output angle x 0.1 deg wrapped to +-3200 deg, ERPM, q current, motor temperature, the manual's error code) goes
-  out every
-  ``status_period_s`` (1..500 Hz, as the drive is configured) whether or not a command came. Unknown packet
+  out every ``status_period_s`` (1..500 Hz, as the drive is configured) whether or not a command came. Unknown packet
   ids (opensourceleg's packet-7 "mode switch") are counted in ``unknown_packets`` and ignored; the MIT-style
   power-on/off/zero frames clients send on extended IDs are handled by ``_servo_special``;
 * MIT mode: the special frames enter motor mode, exit it (torque off) and zero the position; a command
