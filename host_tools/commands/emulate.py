@@ -34,12 +34,12 @@ from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
 from host_tools.arguments import seed
 from host_tools.outdir import check_capture_dir
+from host_tools.serial_mode.realtime import RealtimeSection, RealtimeSettings
 from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.wire_capture import WireCapture
 
 if TYPE_CHECKING:
     from host_tools.serial_mode.can_emulate import WallCanMotor
-    from host_tools.serial_mode.realtime import RealtimeSection
     from host_tools.serial_mode.served_plant import ServedPlant
 
 HELP = "serve the virtual AK60-6 / BNO08x on a pty or serial port (wall-clock time)"
@@ -323,8 +323,6 @@ def _realtime(args: argparse.Namespace) -> RealtimeSection:
     """SCHED_FIFO for the serving loop, unless --no-realtime (host_tools/serial_mode/realtime.py; undone after): a
     frame that arrives while a busy process holds the core is then taken, and answered, without waiting for the
     scheduler's next turn. The loop sleeps between events; the kernel's RT throttling bounds it when it catches up."""
-    from host_tools.serial_mode.realtime import RealtimeSection, RealtimeSettings
-
     wanted = RealtimeSettings.none() if args.no_realtime else RealtimeSettings(gc=False, pin=False, mlock=False,
                                                                                  spin_s=0.0)
     return RealtimeSection(wanted)
