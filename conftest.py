@@ -40,11 +40,14 @@ REALTIME: dict[str, tuple[str, ...] | None] = {
     "test_emulate_bursts.py": None,
     "test_controller_exit.py": ("test_serial_run_over_", "test_blocking_controller_"),
     "test_contract_studies.py": ("test_faults_stopped_by_a_signal", "test_fit_stopped_by_sigterm"),
+    "test_safe_serial.py": None,  # serial runs against `pafp emulate bench` in a second process
+    "test_design_serial.py": None,
+    "test_serial_can.py": ("test_serial_run_on_can_",),
 }
 """Tests paced by the wall clock (a second process, a busy core of their own, a host watchdog, signals to a study),
 by file and test-name prefix: `make test` runs them after the rest, alone (``-m realtime``), since a second xdist
 worker beside them starves what they time (measured on this 2-core machine under -n 2: the first two files failed
-in two runs of two, the last two once in a fresh clone's run). The other tests of those files run virtual and stay
+in two runs of two, the last two once in a fresh clone's run, the serial runs against an emulator once each under load). The other tests of those files run virtual and stay
 with the rest."""
 
 

@@ -181,8 +181,10 @@ def test_serial_run_records_and_replays_with_its_stop_path(tmp_path):
     r = replay_record(out / RECORD_NAME)
     assert r.identical, r.first
     assert r.footer["stop"] in ("duration", "link_lost")
-    # the stop path is replayed too: the last two commands are zero current, then the brake
-    assert r.streams["motor"]["replayed_items"] > 100
+    # every command the motor was sent, the stop path's last, is replayed (how many a 0.6 s wall-clock run sends
+    # depends on this host's load: 100 at one busy moment, about 600 idle)
+    motor = r.streams["motor"]
+    assert motor["replayed_items"] == motor["recorded_items"] > 0, motor
     tel = tmp_path / "tel.bin"
     with tel.open("wb") as f:
         replay_record(out / RECORD_NAME, telemetry_out=f)
