@@ -98,9 +98,12 @@ class Supervisor:
             self.state = _RUN
         return self.state
 
-    def safe_command(self, now_s: float, *, loaded: bool = False, drive_fault: bool = False) -> SafeCommand:
-        """In SAFE: the policy's drive command now (``brake``: zero current for `brake_delay_s`, then the brake)."""
-        return self.policy.command(now_s, self.tripped_at_s, loaded=loaded, drive_fault=drive_fault)
+    def safe_command(self, now_s: float, *, loaded: bool = False, drive_fault: bool = False,
+                     position_rad: float | None = None) -> SafeCommand:
+        """In SAFE: the policy's drive command now (``brake``: zero current for `brake_delay_s`, then the brake;
+        ``hold``: at position_rad, the drive's reported position while fresh)."""
+        return self.policy.command(now_s, self.tripped_at_s, loaded=loaded, drive_fault=drive_fault,
+                                   position_rad=position_rad)
 
     def _describe(self, reason: FaultReason, x: SafetyInputs) -> str:
         """The measured value behind a trip and its limit (ages in ms), for the log and the summary."""
