@@ -164,6 +164,7 @@ class FirmwareTasks:
         out = self.out  # the last period's command and reference, against the encoder's angle now
         x.jam_s = self.jam.update(x.now_s, out.current_cmd_a, self._current_limit_a * self.thermal.factor,
                                   self.encoder.angle_rad, self.obs.reference_velocity_rad_s)
+        x.jam_dorsiflexing = self.jam.dorsiflexing
         x.loaded = self.obs.stance
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,

@@ -58,25 +58,27 @@ def test_graded_holds_while_loaded_lets_go_gently_in_swing_and_releases_on_a_dri
     assert p.stop_command() == SafeCommand("release")
 
 
+def _hold(position_rad: float) -> SafeCommand:
+    return SafeCommand("hold", position_rad=position_rad)
+
+
 def test_the_hold_keeps_the_target_it_began_with_and_takes_a_new_one_each_stance() -> None:
     p = _policy("graded")
-    assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.1) == SafeCommand("hold", position_rad=0.1)
-    assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == SafeCommand("hold", position_rad=0.1)
+    assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.1) == _hold(0.1)
+    assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.1)
     assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == SafeCommand("short")
-    assert p.command(1.3, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == SafeCommand("hold",
-                                                                                                 position_rad=0.25)
+    assert p.command(1.3, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == _hold(0.25)
 
 
 def test_without_a_fresh_position_the_short_stands_in_for_the_hold() -> None:
     for state in ("graded", "hold"):
         p = _policy(state)
         assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=None) == SafeCommand("short")
-        assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == SafeCommand("hold",
-                                                                                                    position_rad=0.2)
+        assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.2)
     p = _policy("hold", SERVO)  # the fixed hold holds in swing too; a faulted drive's target is taken afresh
-    assert p.command(1.0, 1.0, loaded=False, drive_fault=False, position_rad=0.1) == SafeCommand("hold", position_rad=0.1)
+    assert p.command(1.0, 1.0, loaded=False, drive_fault=False, position_rad=0.1) == _hold(0.1)
     assert p.command(1.1, 1.0, loaded=False, drive_fault=True, position_rad=0.5) == SafeCommand("short")
-    assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.5) == SafeCommand("hold", position_rad=0.5)
+    assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.5) == _hold(0.5)
 
 
 @pytest.mark.parametrize(("state", "offered", "link"), [
