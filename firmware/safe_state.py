@@ -10,7 +10,8 @@ The behaviours are the drive's own (docs/devices.md, "Safe behaviours"); which o
 * ``hold``: the drive's own position loop (SET_POS) at the position the drive last reported, taken when the
   hold begins (UART, CAN servo): it holds the ankle with up to the drive's current limit, on the drive's own
   rotor sensor; while no fresh report is at hand (older than ``motor_timeout_s``: a target that old would move
-  the foot back) the short stands in;
+  the foot back), and for ``brake_delay_s`` after the trip (the current a fault wound up, a jam's at its limit,
+  decays through the short first), the short stands in;
 * ``graded``: while the foot is loaded (stance: the ground sensors when healthy, else the load the motor
   current shows) the link's strongest hold: ``hold`` where the link offers it (the short, the strongest damper
   the winding makes, yields under the stance moment of a light design: 18 deg at 20 kg on the AK60-6), else its
@@ -106,29 +107,32 @@ class SafePolicy:
         """The drive command now, tripped_at_s after the trip (None: now), the foot loaded or not, the drive faulted;
         position_rad: the drive's last reported position while fresh (None: none fresh)."""
         fixed = self._fixed
+        tripped = now_s if tripped_at_s is None else tripped_at_s
+        settled = now_s - tripped >= self.brake_delay_s
         if fixed is None:  # graded
             if drive_fault:
                 cmd = RELEASE
             elif not loaded:
                 cmd = self._swing
             else:
-                cmd = self._held(position_rad) if self._hold else self._damper
+                cmd = self._held(position_rad, settled) if self._hold else self._damper
         elif fixed is _HOLD:  # a faulted drive ignores commands: the hold is taken afresh once it is back
-            cmd = SHORT if drive_fault else self._held(position_rad)
+            cmd = SHORT if drive_fault else self._held(position_rad, settled)
         elif fixed is self._brake:
-            tripped = now_s if tripped_at_s is None else tripped_at_s
-            cmd = fixed if now_s - tripped >= self.brake_delay_s else RELEASE
+            cmd = fixed if settled else RELEASE
         else:
             cmd = fixed
         self.last = cmd
         return cmd
 
-    def _held(self, position_rad: float | None) -> SafeCommand:
-        """The hold at the target taken when it began; a new one at position_rad; the short while none is known."""
+    def _held(self, position_rad: float | None, settled: bool) -> SafeCommand:
+        """The hold at the target taken when it began; a new one at position_rad; the short while none is known and
+        for ``brake_delay_s`` after the trip (so the hold does not start from a current the fault wound up: the
+        drive's loop may enter at the present current, and a jam leaves it at its limit)."""
         last = self.last
         if last.behaviour == "hold":
             return last
-        return SHORT if position_rad is None else SafeCommand("hold", position_rad=position_rad)
+        return SHORT if position_rad is None or not settled else SafeCommand("hold", position_rad=position_rad)
 
     def stop_command(self) -> SafeCommand:
         """What the stop path leaves on the wire: the safe state's own behaviour (graded, hold: the last one chosen;

@@ -50,8 +50,11 @@ def test_fixed_safe_states_and_the_brakes_delay() -> None:
 def test_graded_holds_while_loaded_lets_go_gently_in_swing_and_releases_on_a_drive_fault(
         offered: tuple[str, ...], stance: SafeCommand, swing: SafeCommand) -> None:
     p = _policy("graded", offered)
-    assert p.stop_command() == (SafeCommand("short") if "short" in offered else stance)  # before any: the damper
-    assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.3) == stance
+    damper = SafeCommand("short") if "short" in offered else stance
+    assert p.stop_command() == damper  # before any: the damper
+    # the short first for brake_delay_s (the current a fault wound up decays), then the hold
+    assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == damper
+    assert p.command(1.01, 1.0, loaded=True, drive_fault=False, position_rad=0.3) == stance
     assert p.stop_command() == stance
     assert p.command(1.1, 1.0, loaded=False, drive_fault=False, position_rad=0.4) == swing
     assert p.command(1.2, 1.0, loaded=True, drive_fault=True, position_rad=0.4) == SafeCommand("release")
@@ -64,7 +67,7 @@ def _hold(position_rad: float) -> SafeCommand:
 
 def test_the_hold_keeps_the_target_it_began_with_and_takes_a_new_one_each_stance() -> None:
     p = _policy("graded")
-    assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.1) == _hold(0.1)
+    assert p.command(1.01, 1.0, loaded=True, drive_fault=False, position_rad=0.1) == _hold(0.1)
     assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.1)
     assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == SafeCommand("short")
     assert p.command(1.3, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == _hold(0.25)
@@ -73,10 +76,11 @@ def test_the_hold_keeps_the_target_it_began_with_and_takes_a_new_one_each_stance
 def test_without_a_fresh_position_the_short_stands_in_for_the_hold() -> None:
     for state in ("graded", "hold"):
         p = _policy(state)
-        assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=None) == SafeCommand("short")
+        assert p.command(1.05, 1.0, loaded=True, drive_fault=False, position_rad=None) == SafeCommand("short")
         assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.2)
     p = _policy("hold", SERVO)  # the fixed hold holds in swing too; a faulted drive's target is taken afresh
-    assert p.command(1.0, 1.0, loaded=False, drive_fault=False, position_rad=0.1) == _hold(0.1)
+    assert p.command(1.0, 1.0, loaded=False, drive_fault=False, position_rad=0.05) == SafeCommand("short")
+    assert p.command(1.01, 1.0, loaded=False, drive_fault=False, position_rad=0.1) == _hold(0.1)
     assert p.command(1.1, 1.0, loaded=False, drive_fault=True, position_rad=0.5) == SafeCommand("short")
     assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.5) == _hold(0.5)
 
