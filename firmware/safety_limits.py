@@ -68,8 +68,8 @@ class SafetyLimits:
     # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
-    # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, hold, damping,
-    # graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
+    # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, hold,
+    # damping, graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
     safe_state: str = "graded"
     damping_kd: float = 1.0
     # a frozen IMU: its frames bit-identical for imu_timeout_s while the encoder moved more than this

@@ -5,8 +5,7 @@ fault-free pair, so the two are instrumented alike. It samples the ankle's true 
 torque (emulation only: a real bench would need a reference goniometer and a torque cell) and records, for
 every current command that reached the motor (its frame's last byte or the CAN frame's end), whether it was a
 safe command (zero current, the brake, duty 0, the handbrake, the position hold, MIT zero torque or damping): the
-time the safe
-state left the wire is read from it.
+time the safe state left the wire is read from it.
 """
 
 from __future__ import annotations
