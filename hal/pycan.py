@@ -10,7 +10,8 @@ the wire (python-can cannot report a frame as sent: each frame is taken to occup
 worst-case length after the previous one, so the wait is at most the wire time of the frames still
 possibly queued, not one frame time per frame since the last flush); a python-can error latches as
 :class:`~hal.errors.HalError`. On interfaces that hand a bus its own frames back (``udp_multicast``:
-multicast loopback) the echoes of what this port sent are dropped and counted (``echoes``), not received;
+multicast loopback) the echoes of what this port sent are dropped and counted (``echoes``, :class:`OwnFrames`), not
+received;
 a ``udp_multicast`` bus hears its own group only (Linux delivers every joined group's datagrams otherwise).
 """
 
@@ -25,12 +26,14 @@ from urllib.parse import parse_qs, urlsplit
 from hal.can import CanFrame, CanPort
 from hal.errors import HalError
 
-__all__ = ["CanUrl", "PythonCanPort", "is_can_url", "open_can", "parse_can_url"]
+__all__ = ["CanUrl", "OwnFrames", "PythonCanPort", "is_can_url", "open_can", "own_group_only", "parse_can_url"]
 
 MODES = ("servo", "mit")
 FRAME_BITS = 160  # a worst-case 8-byte extended data frame with bit stuffing and the interframe space
 ECHOING_INTERFACES = frozenset({"udp_multicast"})  # python-can interfaces whose buses receive their own frames
-MAX_PENDING_ECHOES = 1024
+MAX_PENDING_ECHOES = 1 << 16
+"""Own frames whose echo is awaited, at most. A receive buffer (4 MiB asked, hal.pycan callers; Linux grants up to
+twice net.core.rmem_max) holds far fewer datagrams than this, so an echo still awaited beyond it was dropped."""
 
 
 @dataclass(frozen=True)
@@ -77,6 +80,53 @@ def parse_can_url(text: str, where: str = "--motor") -> CanUrl:
     return CanUrl(u.netloc, u.path.lstrip("/"), driver_id, mode, bitrate)
 
 
+class OwnFrames:
+    """The frames a bus sent whose echo has not come back yet, to tell the echoes from other nodes' frames.
+
+    A multicast loopback hands a socket its own datagrams back in the order they were sent, among the others'. A
+    received frame equal to one awaited is taken for the oldest such echo; the echoes awaited before it were lost
+    (the receive buffer overflowed): forgotten and counted in ``lost``. Every step is O(1) however many are
+    awaited (at most ``limit``; beyond it the oldest is forgotten, counted in ``lost`` too). A frame of another
+    node equal to one of ours still awaited is taken for its echo: nodes on one bus do not send the same ID.
+    """
+
+    def __init__(self, limit: int = MAX_PENDING_ECHOES) -> None:
+        """Nothing awaited."""
+        self.limit = limit
+        self._order: deque[tuple[int, bytes, bool]] = deque()
+        self._awaited: dict[tuple[int, bytes, bool], int] = {}
+        self.echoes = 0  # echoes recognised
+        self.lost = 0  # echoes awaited that never came
+
+    def sent(self, key: tuple[int, bytes, bool]) -> None:
+        """Frame key (id, data, extended) went out: await its echo."""
+        self._order.append(key)
+        self._awaited[key] = self._awaited.get(key, 0) + 1
+        if len(self._order) > self.limit:
+            self._forget(self._order.popleft())
+            self.lost += 1
+
+    def is_echo(self, key: tuple[int, bytes, bool]) -> bool:
+        """Whether a received frame is the echo of one sent (then no longer awaited)."""
+        if not self._awaited.get(key):
+            return False
+        order = self._order
+        while True:
+            oldest = order.popleft()
+            self._forget(oldest)
+            if oldest == key:
+                self.echoes += 1
+                return True
+            self.lost += 1
+
+    def _forget(self, key: tuple[int, bytes, bool]) -> None:
+        n = self._awaited[key] - 1
+        if n:
+            self._awaited[key] = n
+        else:
+            del self._awaited[key]
+
+
 class PythonCanPort(CanPort):
     """A python-can bus as a CanPort (see the module docstring)."""
 
@@ -89,8 +139,7 @@ class PythonCanPort(CanPort):
         self.clock_s = clock_s
         self.frame_s = FRAME_BITS / bitrate
         self._busy_until = 0.0  # when the frames sent so far have left the wire at the latest
-        self._pending: deque[tuple[int, bytes, bool]] | None = deque(maxlen=MAX_PENDING_ECHOES) if echoes else None
-        self.echoes = 0  # own frames the bus handed back, dropped
+        self._own = OwnFrames() if echoes else None
 
     def _send(self, frame: CanFrame) -> bool:
         import can
@@ -106,9 +155,14 @@ class PythonCanPort(CanPort):
             raise HalError(f"{self.name}: {exc}") from exc
         now = self.clock_s()
         self._busy_until = max(now, self._busy_until) + self.frame_s
-        if self._pending is not None:
-            self._pending.append((frame.arbitration_id, frame.data, frame.extended))
+        if self._own is not None:
+            self._own.sent((frame.arbitration_id, frame.data, frame.extended))
         return True
+
+    @property
+    def echoes(self) -> int:
+        """Own frames the bus handed back, dropped."""
+        return self._own.echoes if self._own is not None else 0
 
     def _receive(self) -> CanFrame | None:
         import can
@@ -121,14 +175,10 @@ class PythonCanPort(CanPort):
             if msg is None or msg.is_error_frame or msg.is_remote_frame:
                 return None
             frame = CanFrame(msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
-            pending = self._pending
-            if not pending:
+            own = self._own
+            if own is None or not own.is_echo((frame.arbitration_id, frame.data, frame.extended)):
                 return frame
-            try:
-                pending.remove((frame.arbitration_id, frame.data, frame.extended))  # the oldest equal one we sent
-            except ValueError:
-                return frame
-            self.echoes += 1  # our own frame handed back: dropped, take the next
+            # our own frame handed back: dropped, take the next
 
     def _drain(self, timeout_s: float) -> bool:
         wait = self._busy_until - self.clock_s()
@@ -158,12 +208,12 @@ def open_can(url: CanUrl, *, receive_own_messages: bool = False) -> PythonCanPor
     except Exception as exc:  # noqa: BLE001 (python-can raises many kinds: name the URL)
         raise HalError(f"can://{url.interface}/{url.channel}: cannot open ({type(exc).__name__}: {exc})") from exc
     if url.interface == "udp_multicast":
-        _own_group_only(bus)
+        own_group_only(bus)
     return PythonCanPort(bus, url.bitrate, f"can://{url.interface}/{url.channel}",
                          echoes=url.interface in ECHOING_INTERFACES and not receive_own_messages)
 
 
-def _own_group_only(bus: Any) -> None:
+def own_group_only(bus: Any) -> None:
     """Make a udp_multicast bus hear its own group only.
 
     python-can binds the socket to the port on every address, and Linux then delivers to it the datagrams

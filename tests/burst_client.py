@@ -62,25 +62,38 @@ def vesc_frame(rng):
 MARKER_A = 4.47
 """The last commands: SET_CURRENT +4.47 A, then -4.47 A (outside the bursts' +-3 A). The client waits until the motor
 reports each (held over several status frames), i.e. until the emulator has caught up with every frame before them,
-so that its counts can be compared with what was sent."""
+so that its counts can be compared with what was sent. The marker is sent again while the client waits (every
+:data:`MARKER_PERIOD_S` over CAN, with each GET_VALUES on the pty), as a control loop sends its command: a reversal
+frees the rotor in
+the gearbox's backlash, and the plant's model of it (hal/virtual/plant/gap.py) ends the crossing at the next
+command."""
+MARKER_PERIOD_S = 0.01
 
 
 def wait_can(bus, deadline):
     import can
 
+    sent = 0
     for sign in (1, -1):  # +4.47 A then -4.47 A, each held in 5 status frames in a row: no loop does that
         target = sign * MARKER_A
-        bus.send(can.Message(arbitration_id=(1 << 8) | 1, data=struct.pack(">i", round(target * 1000)),
-                             is_extended_id=True))
-        held = 0
+        marker = can.Message(arbitration_id=(1 << 8) | 1, data=struct.pack(">i", round(target * 1000)),
+                             is_extended_id=True)
+        held, next_send, seen = 0, 0.0, []
         while held < 5:
-            if time.monotonic() > deadline:
-                raise SystemExit("the emulator did not catch up within the deadline")
-            msg = bus.recv(0.1)
+            now = time.monotonic()
+            if now > deadline:
+                raise SystemExit(f"the emulator did not catch up within the deadline: waiting for {target} A, "
+                                 f"{len(seen)} status frames, the last currents {seen[-8:]}")
+            if now >= next_send:
+                bus.send(marker)
+                sent += 1
+                next_send = now + MARKER_PERIOD_S
+            msg = bus.recv(MARKER_PERIOD_S)
             if msg is not None and msg.arbitration_id == (0x29 << 8) | 1 and len(msg.data) == 8:
                 current = struct.unpack(">hhhbB", bytes(msg.data))[2] / 100
                 held = held + 1 if abs(current - target) < 0.05 else 0
-    return 2
+                seen.append(current)
+    return sent
 
 
 def wait_pty(fd, deadline):
@@ -89,11 +102,10 @@ def wait_pty(fd, deadline):
     from protocol import vesc
 
     termios.tcflush(fd, termios.TCIFLUSH)  # the replies to the bursts' GET_VALUES
-    os.write(fd, vesc.SetCurrent(MARKER_A).encode())
-    decoder, sent = vesc.Decoder("from-motor"), 1
+    decoder, sent = vesc.Decoder("from-motor"), 0
     while time.monotonic() < deadline:
-        os.write(fd, vesc.GetValues().encode())
-        sent += 1
+        os.write(fd, vesc.SetCurrent(MARKER_A).encode() + vesc.GetValues().encode())  # as a control loop: see MARKER_A
+        sent += 2
         time.sleep(0.02)
         os.set_blocking(fd, False)
         try:
@@ -115,7 +127,10 @@ def main():
     if kind == "can":
         import can
 
+        from hal.pycan import own_group_only
+
         bus = can.Bus(interface="udp_multicast", channel=target)
+        own_group_only(bus)  # not the frames of other tests' groups on this host
 
         def send():
             nonlocal others, specials, unknown

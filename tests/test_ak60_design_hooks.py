@@ -8,9 +8,11 @@ from test_ak60_drive import hold_current, values_at
 
 from hal.virtual.devices.ak60 import DriveMode
 from hal.virtual.devices.ak60_config import Ak60Config
+from hal.virtual.devices.ak60_meter import Ak60Meter
 from hal.virtual.plant.battery import Battery, load_battery
 from hal.virtual.plant.motors import load_motor
-from hal.virtual.plant.thermal import ThermalParams, WindingThermal
+from hal.virtual.plant.params import load_plant_params
+from hal.virtual.plant.thermal import COPPER_LOSS_FACTOR, ThermalParams, WindingThermal
 from protocol.vesc import FaultCode
 
 
@@ -95,3 +97,29 @@ def test_the_plant_back_emf_limit_follows_the_battery() -> None:
     full = _held(20.0, 0.3)
     values_at(full, 0.3)
     assert full.plant.current_q_a(full.plant.latest_time_s) == pytest.approx(20.0, abs=0.1)
+
+
+def _standing_meter() -> Ak60Meter:
+    """A meter on the packaged plant and an ideal supply: no source resistance, so input power is the loss."""
+    return Ak60Meter(Ak60Config(source_resistance_ohm=0.0), load_plant_params(), 0.0, 0.0)
+
+
+def test_a_held_q_current_costs_three_quarters_of_its_dc_loss() -> None:
+    meter = _standing_meter()
+    meter.target_a = meter.current_a = 10.0
+    meter.sample(2.0, 10.0, 0.0, 0.0)  # no speed: every watt is a loss in the copper and the switches
+    loss_w = COPPER_LOSS_FACTOR * (meter.r_ohm + meter.r_fet_ohm) * 100.0
+    assert meter.watt_seconds == pytest.approx(2.0 * loss_w, rel=1e-9)
+    assert meter.watt_seconds < 0.8 * 2.0 * (meter.r_ohm + meter.r_fet_ohm) * 100.0  # not (R_ll + R_fet) i^2
+
+
+def test_the_copper_loss_the_supply_pays_is_the_heat_of_the_two_node_model() -> None:
+    meter = _standing_meter()
+    winding = WindingThermal(ThermalParams.from_motor(load_motor("ak60_6")), ambient_c=25.0)
+    meter.attach_thermal(winding)
+    meter.target_a = meter.current_a = 20.0
+    for k in range(1, 4001):  # 4 s at 1 kHz: the winding warms, its resistance with it
+        meter.sample(k * 1e-3, 20.0, 0.0, 0.0)
+    copper_j = meter.watt_seconds - COPPER_LOSS_FACTOR * meter.r_fet_ohm * 400.0 * 4.0
+    assert winding.winding_c > 35.0
+    assert copper_j == pytest.approx(winding.copper_energy_j, rel=2e-3)

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from firmware.control.gains import FeedforwardParams
+from firmware.control.impedance import Impedance, ImpedanceParams
+from firmware.control.observation import Observation
+from firmware.control.pid import Feedforward
 from firmware.control.reference import GaitReference
 from hal.virtual.plant import Plant, load_plant_params
 from hal.virtual.plant.design import Design, plant_params_for
@@ -61,3 +65,32 @@ def test_one_gain_for_both_directions_returns_more_than_the_ankle_put_in():
     old = dataclasses.replace(params, efficiency_backdriven=None)
     ankle_in, rotor_in, _ = _walk_stride(old, strides=1)
     assert rotor_in == pytest.approx(ankle_in / old.efficiency, rel=0.02) and rotor_in > ankle_in
+
+
+def _law(share: float) -> Impedance:
+    """The impedance law in swing, weightless (no gravity or inertia term), on the adult design's drive."""
+    params = plant_params_for(Design("ak80_9", 18, 62, 5.0), load_plant_params())
+    return Impedance(ImpedanceParams({}, params.output_torque_per_amp_nm, 0.0, 0.0, 0.0, backdriven_share=share))
+
+
+@pytest.mark.parametrize("velocity", [0.5, -0.5])
+def test_the_law_s_moment_reaches_the_ankle_in_both_power_directions(velocity: float) -> None:
+    """With [feedforward] efficiency_backdriven the firmware asks the current the plant turns into the law's moment,
+    driving or backdriven; with one efficiency both ways a braking moment comes out 1 / (eta_fwd eta_back) too big."""
+    params = plant_params_for(Design("ak80_9", 18, 62, 5.0), load_plant_params())
+    ff = FeedforwardParams(0.05, 1.0, 0.1, params.kt_nm_per_a, params.total_ratio, params.efficiency,
+                           efficiency_backdriven=params.efficiency_backdriven)
+    assert Feedforward(ff).backdriven_share == pytest.approx(params.efficiency * params.efficiency_backdriven)
+    obs = Observation()
+    obs.angle_rad, obs.velocity_rad_s = 0.1, velocity  # 0.1 rad above the reference (0): the law pushes back
+    law = _law(ff.backdriven_share)
+    current = law.update(obs)
+    moment = law.published["torque_nm"]
+    assert moment < 0.0
+    direction = 1 if velocity > 0 else -1
+    assert params.output_torque_nm(current, direction) == pytest.approx(moment, rel=1e-12)
+    one_gain = params.output_torque_nm(_law(1.0).update(obs), direction)
+    if moment * velocity < 0.0:  # backdriven: the old map over-brakes
+        assert one_gain / moment == pytest.approx(1.0 / (params.efficiency * params.efficiency_backdriven))
+    else:
+        assert one_gain == pytest.approx(moment, rel=1e-12)

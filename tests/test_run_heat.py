@@ -163,3 +163,19 @@ def test_the_thermal_model_and_battery_come_from_the_design_and_battery_wins() -
     assert rec["battery"].params.name == "molicel_p42a_6s1p"
     _, rec = fitted(design=None, thermal=False)
     assert rec["motor"] == "ak60_6" and "winding" not in rec and rec["battery"] is None
+
+
+def test_regeneration_is_counted_per_stride_from_the_gait_s_start() -> None:
+    """What the start-up ramp (and any settling) regenerates is no stride's: each stride gets its own."""
+    from types import SimpleNamespace
+
+    from host_tools.reports.heat_log import HeatLog
+
+    meter = SimpleNamespace(battery=None, winding=None, temp_motor_c=25.0, v_in_v=24.0, reset_v_in_min=lambda: 24.0,
+                            watt_seconds=0.0, watt_seconds_charged=0.0)
+    log = HeatLog(meter, SimpleNamespace(temp_motor_c=25.0), lambda: 1.0, stride_s=1.0)
+    for t, drawn, back in [(0.5, 3.0, 5.0), (1.0, 4.0, 5.0), (1.5, 9.0, 6.0), (2.0, 10.0, 7.5), (3.0, 20.0, 9.5)]:
+        meter.watt_seconds, meter.watt_seconds_charged = drawn, back
+        log.sample(t)
+    assert log.stride_regenerations_j() == [2.5, 2.0]  # the 5 J before the gait's start left out
+    assert log.stride_energies_j() == [(10.0 - 7.5) - (4.0 - 5.0), (20.0 - 9.5) - (10.0 - 7.5)]

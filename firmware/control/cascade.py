@@ -33,6 +33,7 @@ class Cascade:
         ref = obs.reference_rad
         ff = 0.0
         if feedforward is not None:  # the foot's model at the reference, less what a parallel spring gives there
-            ff = (feedforward.current_a(ref + self.com_angle_rad, obs.reference_acceleration_rad_s2)
-                  - feedforward.spring_current_a(ref))
+            ff = feedforward.by_direction(feedforward.current_a(ref + self.com_angle_rad,
+                                                                obs.reference_acceleration_rad_s2)
+                                          - feedforward.spring_current_a(ref), obs.reference_velocity_rad_s)
         return self.loops.update(ref, obs.reference_velocity_rad_s, obs.angle_rad, obs.velocity_rad_s, ff)

@@ -45,6 +45,9 @@ class FeedforwardParams:
     parallel_stiffness_nm_per_rad: float = 0.0
     parallel_engage_deg: float = 0.0
     parallel_two_sided: bool = False
+    # the transmission's efficiency when the ankle drives the rotor (a design profile's: the planetary's by its
+    # meshing losses x the belt's, hal/virtual/plant/transmission.py); None: `efficiency` in both directions
+    efficiency_backdriven: float | None = None
 
     def __post_init__(self) -> None:
         """Validate the parameters (positive, efficiency in (0, 1], the spring's stiffness and angle)."""
@@ -57,3 +60,21 @@ class FeedforwardParams:
         for name in ("torque_constant_nm_per_a", "gear_ratio"):
             check_range(name, getattr(self, name), 0.0, math.inf, lo_open=True, hi_open=True)
         check_range("efficiency", self.efficiency, 0.0, 1.0, lo_open=True)
+        if self.efficiency_backdriven is not None:
+            check_range("efficiency_backdriven", self.efficiency_backdriven, 0.0, 1.0, lo_open=True)
+
+    @property
+    def backdriven_share(self) -> float:
+        """The current a moment against the motion takes, as a share of what the driving efficiency would ask.
+
+        Driving, the ankle gets Kt N eta_fwd per ampere; backdriven, holding the rotor's Kt i takes Kt N i / eta_back
+        at the ankle, so a moment M against the motion needs M eta_back / (Kt N) = eta_fwd eta_back of the driving
+        current (the plant's rule, hal/virtual/plant/params.py backdriven_torque_per_amp_nm). 1 without
+        ``efficiency_backdriven``.
+
+        >>> round(FeedforwardParams(0.05, 1.0, 0.1, 0.1, 28.0, 0.855, efficiency_backdriven=0.853).backdriven_share, 6)
+        0.729315
+        """
+        if self.efficiency_backdriven is None:
+            return 1.0
+        return self.efficiency * self.efficiency_backdriven

@@ -42,7 +42,7 @@ import math
 from typing import Any
 
 from firmware.control.observation import Observation
-from firmware.control.pid import parallel_spring_torque_nm
+from firmware.control.pid import backdriven_current_a, parallel_spring_torque_nm
 from firmware.control.validation import check_range
 
 __all__ = ["PHASES", "Impedance", "ImpedanceParams", "impedance_from_config"]
@@ -74,7 +74,8 @@ class ImpedanceParams:
     """The checked parameters (see DEFAULTS) and the drive constants the controller needs."""
 
     def __init__(self, values: dict[str, Any], nm_per_a: float, gravity_moment_nm: float, com_angle_rad: float,
-                 inertia_kg_m2: float, spring: tuple[float, float, bool] = (0.0, 0.0, False)) -> None:
+                 inertia_kg_m2: float, spring: tuple[float, float, bool] = (0.0, 0.0, False),
+                 backdriven_share: float = 1.0) -> None:
         """ValueError naming an unknown key or a value out of its range."""
         unknown = sorted(set(values) - set(DEFAULTS))
         if unknown:
@@ -88,6 +89,7 @@ class ImpedanceParams:
         self.com_angle_rad = com_angle_rad
         self.inertia_kg_m2 = inertia_kg_m2
         self.spring = spring  # the parallel spring: (stiffness N m/rad, engagement rad, two-sided)
+        self.backdriven_share = backdriven_share  # FeedforwardParams.backdriven_share
 
 
 class Impedance:
@@ -112,6 +114,7 @@ class Impedance:
         self.com_angle_rad = p.com_angle_rad
         self.inertia_kg_m2 = p.inertia_kg_m2
         self.spring_k, self.spring_engage_rad, self.spring_two_sided = p.spring
+        self.backdriven_share = p.backdriven_share
         self.phase = SWING
         self.transitions = 0
         self.published: dict[str, float] = {"phase": 0.0, "stiffness_nm_per_rad": 0.0, "equilibrium_deg": 0.0,
@@ -163,7 +166,7 @@ class Impedance:
         if self.spring_k != 0.0:  # a parallel spring gives part of the law's moment: the motor gives the rest
             torque -= parallel_spring_torque_nm(self.spring_k, self.spring_engage_rad, self.spring_two_sided,
                                                 obs.angle_rad)
-        return torque / self.nm_per_a
+        return backdriven_current_a(torque / self.nm_per_a, obs.velocity_rad_s, self.backdriven_share)
 
 
 def impedance_from_config(config: Any, params: dict[str, Any]) -> Impedance:
@@ -172,4 +175,4 @@ def impedance_from_config(config: Any, params: dict[str, Any]) -> Impedance:
     nm_per_a = ff.torque_constant_nm_per_a * ff.gear_ratio * ff.efficiency
     spring = (ff.parallel_stiffness_nm_per_rad, math.radians(ff.parallel_engage_deg), ff.parallel_two_sided)
     return Impedance(ImpedanceParams(params, nm_per_a, ff.mass_kg * ff.gravity_m_s2 * ff.lever_m, config.com_angle_rad,
-                                     ff.inertia_kg_m2, spring))
+                                     ff.inertia_kg_m2, spring, ff.backdriven_share))

@@ -128,7 +128,8 @@ class Pid:
 class Feedforward:
     """The gravity + inertia feed-forward of one :class:`FeedforwardParams`, its constants taken once.
 
-    current_a(theta, a) = (J_total a + m g d sin(theta)) / (Kt N eta): the motor current for the foot model.
+    current_a(theta, a) = (J_total a + m g d sin(theta)) / (Kt N eta): the motor current for the foot model, driving;
+    ``by_direction`` takes a moment against the motion at eta_fwd eta_back of it (``backdriven_share``).
     """
 
     def __init__(self, params: FeedforwardParams) -> None:
@@ -139,6 +140,11 @@ class Feedforward:
         self.spring_k = float(params.parallel_stiffness_nm_per_rad)
         self.spring_engage_rad = math.radians(params.parallel_engage_deg)
         self.spring_two_sided = bool(params.parallel_two_sided)
+        self.backdriven_share = params.backdriven_share
+
+    def by_direction(self, current_a: float, velocity_rad_s: float) -> float:
+        """A current worked out with the driving efficiency, for the ankle moving at velocity_rad_s."""
+        return backdriven_current_a(current_a, velocity_rad_s, self.backdriven_share)
 
     def spring_current_a(self, angle_rad: float) -> float:
         """The motor current the parallel spring's moment at this ankle angle stands for (0 without a spring)."""
@@ -151,6 +157,19 @@ class Feedforward:
         """Motor current [A] for the reference angle [rad] and angular acceleration [rad/s^2]."""
         torque_nm = self.inertia_kg_m2 * ref_accel_rad_s2 + self.gravity_moment_nm * math.sin(ref_angle_rad)
         return torque_nm / self.nm_per_a
+
+
+def backdriven_current_a(current_a: float, velocity_rad_s: float, backdriven_share: float) -> float:
+    """The motor current for a moment, from the current the driving efficiency gives (moment / (Kt N eta_fwd)):
+    against the ankle's motion the transmission is backdriven and the same moment takes backdriven_share of it
+    (FeedforwardParams.backdriven_share; the plant switches its gain on the same sign).
+
+    >>> [backdriven_current_a(2.0, velocity, 0.75) for velocity in (-1.0, 1.0, 0.0)]
+    [1.5, 2.0, 2.0]
+    """
+    if current_a * velocity_rad_s < 0.0:
+        return current_a * backdriven_share
+    return current_a
 
 
 def parallel_spring_torque_nm(k: float, engage_rad: float, two_sided: bool, angle_rad: float) -> float:

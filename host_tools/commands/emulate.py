@@ -34,6 +34,7 @@ from hal.serial.sim_port import WallDevices, arrival_end_times
 from hal.virtual.bench import FIXTURES
 from host_tools.arguments import seed
 from host_tools.outdir import check_capture_dir
+from host_tools.serial_mode.realtime import RealtimeSection, RealtimeSettings
 from host_tools.stop_signals import STOP_SIGNALS
 from host_tools.wire_capture import WireCapture
 
@@ -94,8 +95,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="serve a design profile's [design] (profiles/designs/): its motor, belt and spring")
     parser.add_argument("--status-hz", type=float, default=500.0, metavar="HZ",
                         help="--can servo mode: the status frame's rate, as set in the drive (1..500, default 500)")
+    parser.add_argument("--current-convention", default="catalogue", choices=("catalogue", "rms", "peak"),
+                        help="--can servo mode: what an amp on the wire is: the catalogue's (torque = the maker's Kt "
+                             "x I, default), the RMS phase current (Kt x sqrt(3/2): opensourceleg's AK80-9 0.115 "
+                             "N m/A) or the peak phase current (Kt x sqrt(3)/2); docs/hardware.md")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default, or inf: run until Ctrl-C or SIGTERM)")
+    parser.add_argument("--no-realtime", action="store_true",
+                        help="do not ask the OS for SCHED_FIFO while serving (granted to root, CAP_SYS_NICE or an "
+                             "RLIMIT_RTPRIO: a busy host then delays the replies less; docs/serial_mode.md)")
     parser.add_argument("--capture", type=Path, default=None, metavar="DIR",
                         help="write the raw bytes each device received (<role>.rx.bin) and sent (<role>.tx.bin) "
                              "with a time index into DIR (docs/serial_mode.md)")
@@ -204,7 +212,7 @@ def _run_can(args: argparse.Namespace) -> int:
             port = open_can(url)
             deepen_receive_buffer(port.bus)
             can_config = Ak60CanConfig(driver_id=url.driver_id, mode=url.mode, limits=served.limits,
-                                       status_period_s=1.0 / args.status_hz)
+                                       status_period_s=1.0 / args.status_hz, current_convention=args.current_convention)
             motor = WallCanMotor(capture.tap_can("motor", port, f"can-{url.mode}") if capture else port, url,
                                  args.fixture, clock_ns, world=devices.world if devices is not None else None,
                                  plant_options=served.options, can_config=can_config)
@@ -221,16 +229,17 @@ def _run_can(args: argparse.Namespace) -> int:
         for ep in endpoints:
             print(f"{ep.role}: {ep.path}", flush=True)
         try:
-            if devices is None:
-                motor.serve(stop, args.duration)
-            else:
-                _serve(devices, endpoints, stop, args.duration, capture, motor)
+            with _realtime(args) as rt:
+                if devices is None:
+                    motor.serve(stop, args.duration)
+                else:
+                    _serve(devices, endpoints, stop, args.duration, capture, motor)
         except HalError as exc:
             line = f"pafp emulate: the bus failed ({exc})"
         else:
             why = stop[0] if stop else "duration"
             imu = _summary(devices, endpoints, why) if devices is not None else ""
-            line = motor.summary(why) + imu.removeprefix(f"pafp emulate: stopped ({why})")
+            line = motor.summary(why) + imu.removeprefix(f"pafp emulate: stopped ({why})") + _granted(rt)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
@@ -288,7 +297,8 @@ def run(args: argparse.Namespace) -> int:
 
     previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
-        _serve(devices, endpoints, stop, args.duration, capture)
+        with _realtime(args) as rt:
+            _serve(devices, endpoints, stop, args.duration, capture)
     except OSError as exc:
         if capture is None or capture.error is not exc:
             raise
@@ -305,8 +315,22 @@ def run(args: argparse.Namespace) -> int:
         for ep in endpoints:
             ep.close()
         devices.close()
-    print(_summary(devices, endpoints, stop[0] if stop else "duration"), flush=True)
+    print(_summary(devices, endpoints, stop[0] if stop else "duration") + _granted(rt), flush=True)
     return 0
+
+
+def _realtime(args: argparse.Namespace) -> RealtimeSection:
+    """SCHED_FIFO for the serving loop, unless --no-realtime (host_tools/serial_mode/realtime.py; undone after): a
+    frame that arrives while a busy process holds the core is then taken, and answered, without waiting for the
+    scheduler's next turn. The loop sleeps between events; the kernel's RT throttling bounds it when it catches up."""
+    wanted = RealtimeSettings.none() if args.no_realtime else RealtimeSettings(gc=False, pin=False, mlock=False,
+                                                                                 spin_s=0.0)
+    return RealtimeSection(wanted)
+
+
+def _granted(rt: RealtimeSection) -> str:
+    """The summary's last words: whether the loop ran under SCHED_FIFO."""
+    return f"; real-time: {rt.granted.get('fifo', 'not requested')}"
 
 
 def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], duration_s: float | None,
@@ -319,7 +343,7 @@ def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], dur
             can_motor.step()
         now = devices.now()
         if end_ns is not None and now >= end_ns:
-            return
+            break
         wake = devices.next_event_ns()
         if can_motor is not None:
             wake = min(wake, can_motor.world_next(), can_motor.bus.next_at())
@@ -340,6 +364,21 @@ def _serve(devices: WallDevices, endpoints: list[Endpoint], stop: list[str], dur
                 written = _give(ep, data)
                 if capture is not None:
                     capture.record(ep.role, "tx", data[:written])
+        devices.world.commit_plant()  # a quiet spell is integrated as it passes, not by the next command's reply
+    _drain(devices, endpoints)
+    if can_motor is not None:
+        can_motor.drain()
+
+
+def _drain(devices: WallDevices, endpoints: list[Endpoint], max_reads: int = 64) -> None:
+    """At the stop, hand the devices the bytes that had already arrived (at most max_reads reads of each port): a
+    client's last commands before it stopped the emulator are handled and counted, whatever the signal interrupted."""
+    for ep in endpoints:
+        took = 0
+        while took < max_reads and not ep.failed and _take(devices, ep, devices.now()):
+            took += 1
+        if took:
+            devices.world.advance_to(ep.last_end_ns)  # up to the last byte's end: they are decoded, nothing after
 
 
 def _take(devices: WallDevices, ep: Endpoint, now: int) -> bytes:

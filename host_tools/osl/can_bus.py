@@ -18,13 +18,12 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections import deque
 from collections.abc import Iterator
 from typing import Any
 
 import can
 
-from hal.pycan import ECHOING_INTERFACES, MAX_PENDING_ECHOES, parse_can_url
+from hal.pycan import ECHOING_INTERFACES, OwnFrames, own_group_only, parse_can_url
 
 __all__ = ["NoEchoBus", "redirected_can"]
 
@@ -35,15 +34,19 @@ class NoEchoBus(can.BusABC):
     def __init__(self, bus: can.BusABC, **kwargs: Any) -> None:
         """Wrap an open bus; this one owns it (shutdown shuts it down)."""
         self._bus = bus
-        self._sent: deque[tuple[int, bytes, bool]] = deque(maxlen=MAX_PENDING_ECHOES)
-        self.echoes = 0
+        self._own = OwnFrames()
         super().__init__(channel=getattr(bus, "channel_info", "wrapped"), **kwargs)
         self.channel_info = f"{bus.channel_info} (own frames dropped)"
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Send msg and remember it, so that its echo is dropped."""
-        self._sent.append((msg.arbitration_id, bytes(msg.data), msg.is_extended_id))
+        self._own.sent((msg.arbitration_id, bytes(msg.data), msg.is_extended_id))
         self._bus.send(msg, timeout)
+
+    @property
+    def echoes(self) -> int:
+        """Own frames the bus handed back, dropped."""
+        return self._own.echoes
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         end = None if timeout is None else time.monotonic() + timeout
@@ -52,12 +55,8 @@ class NoEchoBus(can.BusABC):
             msg = self._bus.recv(left)
             if msg is None:
                 return None, False
-            key = (msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
-            try:
-                self._sent.remove(key)
-            except ValueError:
+            if not self._own.is_echo((msg.arbitration_id, bytes(msg.data), msg.is_extended_id)):
                 return msg, False
-            self.echoes += 1
             if end is not None and time.monotonic() >= end:
                 return None, False
 
@@ -83,6 +82,8 @@ def redirected_can(url: str, channel: str = "can0") -> Iterator[list[can.BusABC]
         if asked != channel:
             return original(*args, **kwargs)
         inner = original(interface=interface, channel=target)
+        if interface == "udp_multicast":
+            own_group_only(inner)  # as pafp's own ports: not the frames of the host's other groups
         made = NoEchoBus(inner) if interface in ECHOING_INTERFACES else inner
         opened.append(made)
         return made

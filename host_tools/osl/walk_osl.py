@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -40,7 +41,7 @@ def walk_osl(out: Path, *, strides: int = 10, seed: int = 0, clock: str = "virtu
     rows: list[tuple] = []
     dt = 1.0 / FREQUENCY_HZ
     end_s = GAIT_START_S + strides * leg.stride_s
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     with actuator, encoder, loadcell:
         fsm = AnkleStateMachine(actuator, encoder, loadcell)
         while leg.t_s < end_s:
@@ -52,10 +53,10 @@ def walk_osl(out: Path, *, strides: int = 10, seed: int = 0, clock: str = "virtu
             rows.append((t, phase, encoder.position, leg.joint_angle_rad(),
                          reference.angle_rad(max(0.0, t - GAIT_START_S)), actuator.motor_current,
                          actuator.case_temperature, actuator.winding_temperature, loadcell.fz))
-    wall_s = time.perf_counter() - wall0
+    wall_s, cpu_s = time.perf_counter() - wall0, time.process_time() - cpu0
     out.mkdir(parents=True, exist_ok=True)
     _write_telemetry(out / "telemetry.csv", rows)
-    summary = _summary(rows, leg, fsm, strides, seed, clock, wall_s)
+    summary = _summary(rows, leg, fsm, strides, seed, clock, wall_s, cpu_s)
     tmp = out / "summary.json.tmp"
     tmp.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     tmp.replace(out / "summary.json")
@@ -73,7 +74,7 @@ def _write_telemetry(path: Path, rows: list[tuple]) -> None:
 
 
 def _summary(rows: list[tuple], leg: VirtualLeg, fsm: AnkleStateMachine, strides: int, seed: int, clock: str,
-             wall_s: float) -> dict:
+             wall_s: float, cpu_s: float) -> dict:
     t = np.array([r[0] for r in rows])
     ref = np.array([r[4] for r in rows])
 
@@ -87,6 +88,8 @@ def _summary(rows: list[tuple], leg: VirtualLeg, fsm: AnkleStateMachine, strides
     sim_s = float(t[-1])
     return {"strides": strides, "seed": seed, "clock": clock, "sim_time_s": round(sim_s, 6),
             "wall_time_s": round(wall_s, 3), "realtime_factor": round(sim_s / wall_s, 2) if wall_s > 0 else None,
+            "cpu_time_s": round(cpu_s, 3), "cpu_realtime_factor": round(sim_s / cpu_s, 2) if cpu_s > 0 else None,
+            "load_average_1min": _load_average(),
             "controller": "host_tools/osl/example_controller.py (opensourceleg API only)",
             "design": leg.motor.name, "body_mass_kg": leg.load.body_mass_kg, "phase_transitions": fsm.transitions,
             "tracking": {"encoder": track(2), "truth": {**track(3), "emulation_only": True}},
@@ -95,6 +98,14 @@ def _summary(rows: list[tuple], leg: VirtualLeg, fsm: AnkleStateMachine, strides
             "current_a": {"max_abs": round(max(abs(r[5]) for r in rows), 3), "peak_a": leg.params.peak_current_a},
             "thermal": {"case_max_c": max(r[6] for r in rows), "winding_max_c": round(max(r[7] for r in rows), 3),
                         "winding_emulation_only": True}}
+
+
+def _load_average() -> float | None:
+    """The host's one-minute load average (the wall-clock factor depends on it; None where the OS has none)."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (AttributeError, OSError):
+        return None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"walk_osl: {exc}", file=sys.stderr)
         return 2
     enc = s["tracking"]["encoder"]
-    print(f"{s['strides']} strides in {s['wall_time_s']} s (realtime factor {s['realtime_factor']}); encoder RMS "
+    print(f"{s['strides']} strides in {s['wall_time_s']} s (realtime factor {s['realtime_factor']} at load "
+          f"{s['load_average_1min']}; {s['cpu_realtime_factor']} per CPU second); encoder RMS "
           f"{enc['rms_deg']} deg, max {enc['max_deg']} deg, lag {enc['lag_ms']} ms; faults {s['faults']}; "
           f"winding max {s['thermal']['winding_max_c']} C -> {args.out}")
     return 0

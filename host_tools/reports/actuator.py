@@ -6,8 +6,8 @@ walking load, hal/virtual/plant/walking.py); speed = the gait reference's angula
 torque at an ankle speed w: ``min(I x Kt N eta, (V - Ke w N) / R x Kt N eta)`` for I = the peak
 (22.7 A) or rated (6.5 A, maker) current, or the firmware's control limit -- the current limit or the
 back-EMF limit of the 24 V supply, whichever is lower. Power: mechanical ``|torque w|``, electrical
-``I^2 R + Kt w N I`` for the motor current the torque needs (the rotor's torque times its speed plus the
-copper loss).
+``0.75 I^2 R + Kt w N I`` for the motor current the torque needs (the rotor's torque times its speed plus the
+q current's copper loss, hal/virtual/plant/thermal.py COPPER_LOSS_FACTOR on the line-to-line R).
 
 "Keeps up to": the largest body mass whose demand torque stays within the deliverable torque at every
 torque-bearing instant of the stride whose demanded speed is below the no-load speed. The instants at or above
@@ -25,6 +25,7 @@ import numpy as np
 from firmware.control.reference import GaitReference
 from hal.virtual.plant import PlantParams
 from hal.virtual.plant.design import Design, belt_tension_per_amp_n
+from hal.virtual.plant.thermal import COPPER_LOSS_FACTOR
 from hal.virtual.plant.walking import WalkingLoad
 from host_tools.outdir import save_figure
 
@@ -79,7 +80,7 @@ def _one_mass(drive: Drive, load: WalkingLoad, reference: GaitReference, mass_kg
     need_a = np.abs(torque) / drive.nm_per_a
     w_motor = np.abs(speed) * drive.ratio
     p_mech = np.abs(torque * speed)
-    p_elec = need_a ** 2 * drive.resistance_ohm + drive.kt_nm_per_a * w_motor * need_a
+    p_elec = COPPER_LOSS_FACTOR * need_a ** 2 * drive.resistance_ohm + drive.kt_nm_per_a * w_motor * need_a
     mag = np.abs(torque)
     return {
         "body_mass_kg": mass_kg,

@@ -4,7 +4,8 @@ The bench probe calls :meth:`HeatLog.sample` at every tenth of its samples (50 H
 from the meter's every sample in between). The log keeps running extremes
 and, at each stride boundary of the firmware's gait clock (``gait_start_s + k * stride_s``), one row: the
 winding and housing temperatures of the thermal model (emulation only), the temperature the motor last
-reported to the firmware (the bench figure), the bus voltage and the energy drawn at the supply so far. A
+reported to the firmware (the bench figure), the bus voltage and the energy drawn at, and regenerated into, the
+supply so far. A
 1000-stride walk keeps 1000 rows, whatever its length in samples.
 """
 
@@ -28,6 +29,7 @@ class StrideHeat:
     bus_v: float
     bus_v_min: float  # the lowest bus voltage within the stride (the sag under its peak load)
     supply_energy_j: float  # net energy drawn at the supply since the start (regeneration subtracted)
+    regenerated_j: float  # energy regenerated into the supply since the start (accepted by the pack, with one)
     amp2_s: float  # integral of the q current squared since the start (the two-node model's; NaN without it)
 
 
@@ -45,6 +47,7 @@ class HeatLog:
     bus_v_min: float = math.inf
     _stride_bus_v_min: float = math.inf
     gait_energy_j: float | None = None  # supply energy when the gait started (the start-up ramp is no stride)
+    gait_regenerated_j: float = 0.0  # the regenerated energy then
     gait_amp2_s: float = math.nan  # the current-squared integral then
     gait_t_s: float = math.nan  # the time of that sample
 
@@ -54,6 +57,11 @@ class HeatLog:
         if battery is not None:
             return float(battery.discharged_j - battery.regenerated_j)
         return float(self.meter.watt_seconds - self.meter.watt_seconds_charged)
+
+    def regenerated_j(self) -> float:
+        """Energy regenerated into the supply so far: what the pack accepted with a battery, else the fixed supply's."""
+        battery = self.meter.battery
+        return float(battery.regenerated_j if battery is not None else self.meter.watt_seconds_charged)
 
     def _winding(self) -> tuple[float, float]:
         w = self.meter.winding
@@ -80,11 +88,12 @@ class HeatLog:
             return
         if self.gait_energy_j is None:
             self.gait_energy_j = self.supply_energy_j()
+            self.gait_regenerated_j = self.regenerated_j()
             self.gait_amp2_s = self._amp2_s()
             self.gait_t_s = t_s
         while t_s >= start + (len(self.strides) + 1) * self.stride_s:
             self.strides.append(StrideHeat(t_s, winding_c, housing_c, reported, bus_v, self._stride_bus_v_min,
-                                           self.supply_energy_j(), self._amp2_s()))
+                                           self.supply_energy_j(), self.regenerated_j(), self._amp2_s()))
             self._stride_bus_v_min = bus_v
 
     def _amp2_s(self) -> float:
@@ -106,4 +115,13 @@ class HeatLog:
         for row in self.strides:
             out.append(row.supply_energy_j - before)
             before = row.supply_energy_j
+        return out
+
+    def stride_regenerations_j(self) -> list[float]:
+        """Energy regenerated into the supply in each completed stride (the first counted from the gait's start)."""
+        out: list[float] = []
+        before = self.gait_regenerated_j
+        for row in self.strides:
+            out.append(row.regenerated_j - before)
+            before = row.regenerated_j
         return out

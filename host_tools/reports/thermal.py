@@ -93,17 +93,17 @@ def _pessimistic_steady_c(motor: str, ambient_c: float, rms_a: float) -> float:
     return WindingThermal(params, ambient_c).steady_state_c(rms_a)[0]
 
 
-def _walked_energies(r: Any, log: HeatLog) -> tuple[list[float], str | None]:
-    """(the supply energy of each stride walked, why there is none): only a walking run's strides completed before
-    the supervisor latched a fault count (after it the foot stands in its safe state, spending next to nothing,
-    which would make any distance per charge)."""
+def _walked_strides(r: Any, log: HeatLog) -> tuple[int, str | None]:
+    """(how many strides walked count, why none does): only a walking run's strides completed before the supervisor
+    latched a fault count (after it the foot stands in its safe state, spending next to nothing, which would make
+    any distance per charge)."""
     if getattr(r.config, "scenario", "suspended") != "walk":
-        return [], "the foot was not walking: --scenario walk measures them"
+        return 0, "the foot was not walking: --scenario walk measures them"
     tripped = r.firmware.supervisor.tripped_at_s
     done = [row for row in log.strides if tripped is None or row.end_s <= tripped]
     if not done:
-        return [], ("no stride completed" + (f" before the fault at {tripped:.3f} s" if tripped is not None else ""))
-    return log.stride_energies_j()[:len(done)], None
+        return 0, ("no stride completed" + (f" before the fault at {tripped:.3f} s" if tripped is not None else ""))
+    return len(done), None
 
 
 def supply_text(battery: dict | None) -> str:
@@ -130,7 +130,9 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
     log: HeatLog = heat["log"]
     from hal.virtual.plant.battery import QUIESCENT_W
 
-    energies, why_not = _walked_energies(r, log)
+    walked, why_not = _walked_strides(r, log)
+    energies = log.stride_energies_j()[:walked]
+    regenerated = log.stride_regenerations_j()[:walked]
     motor_per_stride = sum(energies) / len(energies) if energies else math.nan
     per_stride = motor_per_stride + QUIESCENT_W * stride_s  # the electronics draw whatever the motor does
     walked_s = len(energies) * stride_s
@@ -147,8 +149,8 @@ def battery_summary(r: Any, stride_s: float, speed: str | None) -> dict | None:
         "energy_strides": len(energies),
         "energy_figures_left_out": why_not,
         "regenerated_j": round(battery.regenerated_j, 3),
-        # regeneration accepted over the whole run (settling, ramp and strides) per stride walked: an upper figure
-        "regenerated_per_stride_j": _finite(battery.regenerated_j / len(energies), 3) if energies else None,
+        # regeneration the pack accepted within the strides counted (the start-up ramp and the safe state left out)
+        "regenerated_per_stride_j": _finite(sum(regenerated) / walked, 3) if walked else None,
         "walked_s": round(walked_s, 3),
         "rejected_regeneration_j": round(battery.rejected_j, 3),
         "min_bus_v": _finite(log.bus_v_min, 3),

@@ -29,6 +29,7 @@ __all__ = ["WallCanBus", "WallCanMotor", "deepen_receive_buffer"]
 NS_PER_S = 1_000_000_000
 MAX_SLEEP_S = 0.001
 MAX_FRAMES_PER_STEP = 256  # then the due frames go out and a stop request is seen, however fast frames come
+DRAIN_STEPS = 64  # at the stop: at most 64 x 256 frames already received are still taken
 RECEIVE_BUFFER_BYTES = 4 << 20
 """Asked of the bus's socket: a burst that finds the emulator descheduled waits there instead of being dropped
 (Linux books twice the size asked, within net.core.rmem_max; its default, 208 KiB, holds about 200 udp_multicast
@@ -113,17 +114,21 @@ class WallCanMotor:
         self.frames_out = 0
         self.tx_refused = 0
 
-    def step(self) -> None:
+    def step(self) -> int:
         """Take the frames that arrived, against the world advanced to their arrival; run the device up to now;
         send what is due.
 
         The frames waiting in the port arrived by the instant they are taken: they are handed to the device, in
         their order, at that instant (never before the world's present: not in the past, nor in the future),
         after everything due before it has run. A burst that finds the emulator behind (a busy host) is
-        applied in order while the world catches up. At most MAX_FRAMES_PER_STEP frames are taken per step; the
-        rest wait in the bus's receive buffer.
+        applied in order while the world catches up; the status frames that fell due while the emulator was away
+        are not sent in a burst, only the latest of them (the device's ``late_before``: the others are counted as
+        superseded). At most MAX_FRAMES_PER_STEP frames are taken per step; the rest wait in the bus's receive
+        buffer. Returns the number of frames taken. The due frames sent, the plant is integrated up to now: a quiet
+        spell is paid for as it passes, not by the reply to the next command.
         """
         world = self.world
+        self.device.late_before = self.now()
         frames = []
         for _ in range(MAX_FRAMES_PER_STEP):
             frame = self.port.receive()
@@ -143,19 +148,32 @@ class WallCanMotor:
                 self.frames_out += 1
             else:
                 self.tx_refused += 1
+        world.commit_plant()
+        return len(frames)
 
     def serve(self, stop: list[str], duration_s: float | None) -> None:
-        """Step until stop is non-empty or duration_s has passed; sleep in between (at most 1 ms)."""
+        """Step until stop is non-empty or duration_s has passed; sleep in between (at most 1 ms), unless the step
+        took frames (more may be waiting). Then :meth:`drain`."""
         end = None if duration_s is None else self.now() + int(duration_s * NS_PER_S)
         while not stop:
-            self.step()
+            took = self.step()
             now = self.now()
             if end is not None and now >= end:
-                return
+                break
+            if took:
+                continue
             wake = min(self.world_next(), self.bus.next_at())
             pause = min(MAX_SLEEP_S, max(0.0, (wake - now) / NS_PER_S))
             if pause > 0:
                 time.sleep(pause)
+        self.drain()
+
+    def drain(self) -> None:
+        """At the stop, take the frames that had already arrived (at most DRAIN_STEPS steps of them): a client's
+        last commands before it stopped the emulator are handled and counted, whatever the signal interrupted."""
+        for _ in range(DRAIN_STEPS):
+            if not self.step():
+                return
 
     def world_next(self) -> int:
         """The earliest device event."""
@@ -165,8 +183,8 @@ class WallCanMotor:
         """One line: what was served and counted."""
         d = self.device
         echoes = getattr(self.port, "echoes", 0)
-        servo = (f", {d.unknown_packets} unknown packets, {d.special_frames} special frames"
-                 if d.mode == "servo" else "")
+        servo = (f", {d.unknown_packets} unknown packets, {d.special_frames} special frames, "
+                 f"{d.status_superseded} late status frames superseded" if d.mode == "servo" else "")
         return (f"pafp emulate: stopped ({why}); motor over CAN ({d.mode} mode, id {d.driver_id}): "
                 f"{self.frames_in} frames in ({d.frames_in} to this id{servo}), {self.frames_out} out, "
                 f"{d.ignored_frames} ignored, {d.core.stats.timeouts} command timeouts, {self.tx_refused} refused "

@@ -15,7 +15,8 @@ design profile. Its figures (docs/design.md, "Reading the search"):
   nothing after it);
 * ``tracking_rms_deg``: the RMS tracking error the encoder measured over the time in RUN (summary.json);
 * ``peak_current_a``: the largest current the motor reported; ``peak_electrical_w``: the largest
-  ``I² R + Ke w I`` with the reported current and the motor speed from the firmware's ankle velocity;
+  ``0.75 I² R + Kt w I`` (the q current's copper loss and the power the rotor converts) with the reported current
+  and the motor speed from the firmware's ankle velocity;
 * from summary.json's ``thermal`` and ``battery`` (NaN where the run has none): the winding temperature after the
   strides and its steady state (emulation only), the temperature the motor reported, energy per stride at the
   battery and distance per charge; ``thermal_limit_c``: the firmware's over-temperature threshold ([thermal]
@@ -39,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from hal.virtual.plant.thermal import COPPER_LOSS_FACTOR
 from host_tools.contract import shell_command
 from host_tools.reports.actuator import moment_share
 from host_tools.studies.design_spec import DesignPoint
@@ -175,7 +177,8 @@ def figures(p: DesignPoint, r: Any, s: dict[str, Any]) -> dict[str, Any]:
     w_motor = np.abs(np.gradient(a["fused_angle_rad"].astype(float), a["t_s"].astype(float))) * params.total_ratio \
         if len(a["t_s"]) > 1 else np.zeros(len(a["t_s"]))
     i = np.abs(i_meas)
-    power = i ** 2 * params.phase_resistance_ohm + params.kt_nm_per_a * w_motor * i  # the rotor converts Kt i w
+    power = (COPPER_LOSS_FACTOR * i ** 2 * params.phase_resistance_ohm  # the q current's copper loss
+             + params.kt_nm_per_a * w_motor * i)  # the rotor converts Kt i w
     motor = load_motor(p.motor)
     sup = r.firmware.supervisor
     fault = ",".join(s["faults"])

@@ -2,15 +2,10 @@
 position commands (20 s each) with a busy core beside it; no emulator error, every reading the SDK reports is a
 frame of the emulator's capture, and the commands act (tests/test_sdk_clients.py runs the same for 3 s).
 
-With ``--motor ak80_9`` the torque opensourceleg asks for is current x its AK80-9 Kt (0.115 N m/A); the plant feels
-current x the maker's Kt of the AK80-9 V3.0 KV100 (0.095 N m/A, profiles/motors/ak80_9.toml). The current the SDK
-reads is the plant's (status frames, 0.01 A steps), so the two torques differ by exactly the ratio of those
-constants, 0.826: the benchmark measures that ratio and prints it; it does not pass a 5 % band, and says so.
-
-Measured on the 2-core development machine (load 8-14 from other work, pure-Python worktree): opensourceleg 60 s
-with the busy core: 4177 of 4177 readings in the capture, ratio 0.8261. TMotorCANControl 60 s without the busy
-core: 8157 of 8157; with it, its start-up check (ten replies to ten power-on frames within about 1.1 s) failed in 3
-runs of 3 ("Device not connected"), and in one run that got past it the SDK recorded no reply at all.
+The AK80-9 is served with ``--current-convention rms``, the convention in which opensourceleg's Kt (0.115 N m/A)
+is the torque the plant feels per wire ampere (docs/hardware.md, "Current conventions"); that agreement is measured on
+the plant's own current in tests/test_can_emulate_step.py. Both run under pytest-benchmark (one round each), so that
+`make bench` runs them.
 """
 
 from __future__ import annotations
@@ -29,8 +24,6 @@ pytest.importorskip("TMotorCANControl")
 
 from test_sdk_clients import drive  # noqa: E402
 
-from hal.virtual.plant.motors import load_motor  # noqa: E402
-
 SECONDS = 60.0
 
 
@@ -41,31 +34,29 @@ def busy_core():
     proc.kill()
 
 
-def test_osl_servo_60_s_on_the_ak80_9(tmp_path: Path, busy_core) -> None:
-    from opensourceleg.actuators.tmotor import TMOTOR_MODELS, CANManagerServo
+def _once(benchmark, fn):
+    """Run fn once under the benchmark fixture (its wall time is the figure) and return what it returned."""
+    return benchmark.pedantic(fn, rounds=1, iterations=1)
 
-    log, summary, frames = drive("osl", "servo", "AK80-9", tmp_path, SECONDS, ("--motor", "ak80_9"))
+
+def test_osl_servo_60_s_on_the_ak80_9(tmp_path: Path, busy_core, benchmark) -> None:
+    from opensourceleg.actuators.tmotor import CANManagerServo
+
+    log, summary, frames = _once(benchmark, lambda: drive("osl", "servo", "AK80-9", tmp_path, SECONDS,
+                                                          ("--motor", "ak80_9", "--current-convention", "rms")))
     status = [CANManagerServo.parse_servo_message(None, bytes(m.data)) for m in frames  # type: ignore[arg-type]
               if not m.is_rx and m.arbitration_id == 0x2901]
     seen = {(round(s.position, 1), round(s.current, 2), s.temperature, s.error) for s in status}
     rows = [r for rows in log["phases"].values() for r in rows if r[5] > 0]
     agree = sum((round(math.degrees(r[2]), 1), round(r[4], 2), r[5], r[6]) in seen for r in rows)
-    kt_sdk = TMOTOR_MODELS["AK80-9"]["Kt_actual"]
-    kt_plant = load_motor("ak80_9").kt_nm_per_a
-    settled = [r for r in log["phases"]["current"] if (r[0] % 0.5) >= 0.3]
-    plant_torque = sum(abs(r[4]) * kt_plant for r in settled) / len(settled)
-    sdk_torque = sum(abs(r[4]) * kt_sdk for r in settled) / len(settled)
-    print(f"\nosl 60 s: {len(rows)} readings, {agree} in the capture; {summary}\n"
-          f"torque the plant feels / torque the SDK computes = {plant_torque / sdk_torque:.4f} "
-          f"(Kt {kt_plant} / {kt_sdk})")
+    print(f"\nosl 60 s: {len(rows)} readings, {agree} in the capture; {summary}")
     assert agree == len(rows) and len(rows) > 3000
-    assert plant_torque / sdk_torque == pytest.approx(kt_plant / kt_sdk, rel=0.01)
 
 
-def test_tmcc_mit_60_s_on_the_ak60_6(tmp_path: Path, busy_core) -> None:
+def test_tmcc_mit_60_s_on_the_ak60_6(tmp_path: Path, busy_core, benchmark) -> None:
     from TMotorCANControl.mit_can import CAN_Manager
 
-    log, summary, frames = drive("tmcc", "mit", "AK60-6", tmp_path, SECONDS)
+    log, summary, frames = _once(benchmark, lambda: drive("tmcc", "mit", "AK60-6", tmp_path, SECONDS))
     parser = object.__new__(CAN_Manager)
     parser.debug = False
     replies = [parser.parse_MIT_message(bytes(m.data), "AK60-6") for m in frames

@@ -7,9 +7,9 @@ is a node of a :class:`~hal.virtual.can_bus.VirtualCanBus` that takes frames add
 
 * servo mode: commands on 29-bit IDs ``(packet << 8) | driver_id`` (SET_CURRENT, SET_CURRENT_BRAKE,
   SET_DUTY, SET_RPM, SET_POS, SET_POS_SPD, SET_ORIGIN_HERE, with the manual's scalings: protocol.can_servo)
-  act as their UART counterparts; a status frame (ID ``0x29xx``: output angle x 0.1 deg wrapped to
-  +-3200 deg, ERPM, q current, motor temperature, the manual's error code) goes out every
-  ``status_period_s`` (1..500 Hz, as the drive is configured) whether or not a command came. Unknown packet
+  act as their UART counterparts (amps in the config's ``current_convention``); a status frame (ID ``0x29xx``:
+  output angle x 0.1 deg wrapped to +-3200 deg, ERPM, q current, motor temperature, the manual's error code) goes
+  out every ``status_period_s`` (1..500 Hz, as the drive is configured) whether or not a command came. Unknown packet
   ids (opensourceleg's packet-7 "mode switch") are counted in ``unknown_packets`` and ignored; the MIT-style
   power-on/off/zero frames clients send on extended IDs are handled by ``_servo_special``;
 * MIT mode: the special frames enter motor mode, exit it (torque off) and zero the position; a command
@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 from hal.can import CanFrame
 from hal.virtual.devices.ak60 import Ak60
-from hal.virtual.devices.ak60_can_config import MODES, Ak60CanConfig
+from hal.virtual.devices.ak60_can_config import CURRENT_CONVENTIONS, MODES, Ak60CanConfig
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.devices.world import World
 from hal.virtual.events import NEVER, EventDevice
@@ -68,6 +68,7 @@ class Ak60Can(EventDevice):
         p = core.params
         self._nm_per_a = p.kt_nm_per_a * p.gearbox_ratio  # output torque per q amp
         self._gear = p.gearbox_ratio
+        self._wire_a = CURRENT_CONVENTIONS[cc.current_convention]  # servo mode: wire amps per plant amp
         self._pole_pairs = p.pole_pairs
         self._rx: deque[tuple[int, CanFrame]] = deque()
         self._status_period = max(1, world.ticks(cc.status_period_s))
@@ -81,6 +82,11 @@ class Ak60Can(EventDevice):
         self.ignored_frames = 0
         self.unknown_packets = 0  # servo mode: packet ids outside the manual's 0..6 (e.g. opensourceleg's 7)
         self.special_frames = 0  # servo mode: MIT-style power-on/off/zero frames on extended IDs
+        self.late_before = -1
+        """Servo mode, a wall-clock server behind the clock: a status frame whose successor is also due before this
+        tick would only go out late in a burst; it is superseded by the successor (not built, counted in
+        ``status_superseded``). -1 (the virtual bench): every status frame is built."""
+        self.status_superseded = 0
         self.bus: CanBusPort | None = bus
         if bus is not None:
             bus.attach(self)
@@ -125,7 +131,10 @@ class Ak60Can(EventDevice):
         if self._mit_at <= t:
             self._mit_tick(t)
         if self._status_at <= t:
-            self._status(t)
+            if t + self._status_period > self.late_before:
+                self._status(t)
+            else:
+                self.status_superseded += 1
             self._status_at = t + self._status_period
         self.core._update_next()  # a command may have started or stopped the core's loop or timeout
         self._update_next()
@@ -160,9 +169,9 @@ class Ak60Can(EventDevice):
             return
         self._commanded(t)
         if cmd.packet == P.SET_CURRENT:
-            core._drive_current(cmd.value, t)
+            core._drive_current(cmd.value / self._wire_a, t)
         elif cmd.packet == P.SET_CURRENT_BRAKE:
-            core._drive_brake(cmd.value, t)
+            core._drive_brake(cmd.value / self._wire_a, t)
         elif cmd.packet == P.SET_DUTY:
             core._drive_duty(cmd.value, t)
         elif cmd.packet == P.SET_RPM:
@@ -240,6 +249,6 @@ class Ak60Can(EventDevice):
         core._sample(t)
         deg = (core.pid_pos_deg() + 3200.0) % 6400.0 - 3200.0
         erpm = core._velocity * 60.0 / (2.0 * math.pi) * self._pole_pairs
-        status = can_servo.ServoStatus(deg, erpm, core.meter.current_a, int(round(core.meter.temp_motor_c)),
-                                       can_servo.error_code(core.fault))
+        status = can_servo.ServoStatus(deg, erpm, core.meter.current_a * self._wire_a,
+                                       int(round(core.meter.temp_motor_c)), can_servo.error_code(core.fault))
         self._out(CanFrame(can_servo.status_id(self.driver_id), can_servo.encode_status(status), True), t)

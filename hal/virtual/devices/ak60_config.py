@@ -110,13 +110,15 @@ class Ak60Config:
     winding_heat_capacity_j_per_k: float = 25.0
     """[I] winding node: ~65 g of copper x 385 J/(kg K)."""
     winding_thermal_resistance_k_per_w: float = 7.6
-    """[I] winding to ambient: 65 K rise at the rated 6.5 A (8.5 W in 0.202 ohm); tau = 190 s."""
+    """[I] winding to ambient (the single-node estimate without the two-node model): 49 K rise at the rated 6.5 A
+    (6.4 W, the q-axis copper loss 0.75 x 0.202 ohm x 6.5^2; set for 65 K at the DC loss 0.202 x 6.5^2); tau = 190 s."""
     fet_heat_capacity_j_per_k: float = 2.0
     """[I] MOSFETs and their copper pour."""
     fet_thermal_resistance_k_per_w: float = 10.0
     """[I] MOSFETs to ambient (tau = 20 s)."""
     fet_resistance_ohm: float = 0.01
-    """[I] conduction resistance of the bridge in the current path (two 5 mOhm switches)."""
+    """[I] conduction resistance of the bridge in the current path (two 5 mOhm switches); the meter charges
+    0.75 x this x i_q^2, as the copper (ak60_meter.py)."""
     temp_fet_max_c: float = 100.0
     """OVER_TEMP_FET above this (VESC ``l_temp_fet_end`` 100 degC; VESC derates from 85, not modelled)."""
     temp_motor_max_c: float = 100.0

@@ -5,11 +5,15 @@ tick, a streaming tick, the timeout). Between two samples the q-axis current fol
 first-order lag towards the target held over the interval, ``i(s) = g + (i0 - g) e^(-s/tau)``, so its
 integral and the integral of its square are computed exactly; products with the speed use the
 trapezoidal rule. Electrical model: the report's DC equivalent, ``v_q = R i + Ke w_m``, input power
-``(R + R_fet) i^2 + Ke w_m i`` drawn from a supply of ``V_s`` behind ``R_src``. Temperatures: one
-first-order node each for the winding (``R i^2``) and the MOSFETs (``R_fet i^2``), exact for the
-interval's mean power. ``attach_thermal`` and ``attach_battery`` replace the winding node by the two-node
-model of ``hal.virtual.plant.thermal`` and the fixed supply by a ``hal.virtual.plant.battery`` pack (bus
-voltage sagging with its state of charge, regeneration into it); without them nothing changes.
+``k (R + R_fet) i^2 + Kt w_m i`` drawn from a supply of ``V_s`` behind ``R_src``, with k = 0.75 the loss of an
+amplitude-invariant q current per ohm of a line-to-line resistance (``hal.virtual.plant.thermal``
+COPPER_LOSS_FACTOR: three phases of RMS i/sqrt(2) through R/2 each; R_fet, two switches in series, likewise, as
+each phase's current passes one switch of its leg at a time). Temperatures: one first-order node each for the
+winding (``k R i^2``) and the MOSFETs (``k R_fet i^2``), exact for the interval's mean power. ``attach_thermal``
+and ``attach_battery`` replace the winding node by the two-node model of ``hal.virtual.plant.thermal`` (whose
+copper loss, with R at the winding's temperature, is then the input power's too) and the fixed supply by a
+``hal.virtual.plant.battery`` pack (bus voltage sagging with its state of charge, regeneration into it); without
+them nothing changes.
 Averages are read and reset like VESC's ``mc_interface_read_reset_avg_*``: time
 averages over the span since the previous read (VESC averages its 20-30 kHz samples; same thing).
 """
@@ -22,7 +26,7 @@ from typing import Final
 from hal.virtual.devices.ak60_config import Ak60Config
 from hal.virtual.plant import PlantParams
 from hal.virtual.plant.battery import Battery
-from hal.virtual.plant.thermal import WindingThermal
+from hal.virtual.plant.thermal import COPPER_LOSS_FACTOR, WindingThermal
 
 __all__ = ["Ak60Meter", "tach_steps"]
 
@@ -52,6 +56,9 @@ class Ak60Meter:
         """Start at time t_s with the plant's state then; temperatures at ambient, counters at zero."""
         self.r_ohm = params.phase_resistance_ohm
         self.r_fet_ohm = cfg.fet_resistance_ohm
+        self._k_copper = COPPER_LOSS_FACTOR * self.r_ohm
+        """Copper loss per A^2 of q current (k R_ll; the attached winding's at its temperature)."""
+        self._k_fet = COPPER_LOSS_FACTOR * self.r_fet_ohm
         self.ke = params.ke_v_s_per_rad
         # the power the rotor converts is its torque times its speed, Kt i w: energy is conserved whatever the
         # maker's Ke (the voltage constant, kept for the back-EMF in vq); Ke (from Kv, or Table B2's) is below Kt for
@@ -103,6 +110,7 @@ class Ak60Meter:
         """From now on the reported motor temperature is this two-node model's winding temperature."""
         self._winding = winding
         self.temp_motor_c = winding.winding_c
+        self._k_copper = winding.copper_loss_w(1.0)
 
     def attach_battery(self, battery: Battery) -> None:
         """From now on the input power is drawn from (and regenerated into) this pack, not a fixed supply."""
@@ -139,7 +147,7 @@ class Ak60Meter:
             int_wi = 0.5 * dt * (w0 * i0 + w1 * i1)
             int_w = 0.5 * dt * (w0 + w1)
             mean_i2 = int_i2 / dt
-            power_w = ((self.r_ohm + self.r_fet_ohm) * int_i2 + self.kt * int_wi) / dt
+            power_w = ((self._k_copper + self._k_fet) * int_i2 + self.kt * int_wi) / dt
             battery = self._battery
             if battery is None:
                 i_in = self._input_current(power_w)
@@ -162,7 +170,7 @@ class Ak60Meter:
                 self.watt_seconds_charged -= v_in * i_in * dt
             winding = self._winding
             if winding is None:
-                ss_w = self.ambient_c + self.r_ohm * mean_i2 * self._rth_w
+                ss_w = self.ambient_c + self._k_copper * mean_i2 * self._rth_w
                 self.temp_motor_c = ss_w + (self.temp_motor_c - ss_w) * math.exp(-dt / self._tau_w)
             else:
                 self._heat_s += dt
@@ -171,7 +179,8 @@ class Ak60Meter:
                     winding.step(self._heat_s, math.sqrt(self._heat_a2s / self._heat_s))
                     self._heat_s = self._heat_a2s = 0.0
                     self.temp_motor_c = winding.winding_c
-            ss_f = self.ambient_c + self.r_fet_ohm * mean_i2 * self._rth_f
+                    self._k_copper = winding.copper_loss_w(1.0)
+            ss_f = self.ambient_c + self._k_fet * mean_i2 * self._rth_f
             self.temp_fet_c = ss_f + (self.temp_fet_c - ss_f) * math.exp(-dt / self._tau_f)
         self.t_s = max(self.t_s, t_s)
         self.current_a, self.motor_velocity_rad_s = i1, w1

@@ -103,3 +103,14 @@ class World:
                 self._now = t
         finally:
             self._busy = False
+
+    def commit_plant(self) -> None:
+        """Integrate the plant up to the world's present (no device queries it earlier any more).
+
+        The plant is integrated lazily, when a device queries or drives it. A wall-clock server (`pafp
+        emulate`) calls this while it waits, so that the first command after a quiet spell in which nothing
+        queried the plant (an MIT-mode motor before its first frame) does not pay for the whole spell at
+        once: the reply to it would come that much late.
+        """
+        if self._now > 0:
+            self.plant.advance_to(self._now / self.f_hz)

@@ -67,11 +67,15 @@ BELT_WIDTHS_MM: dict[float, tuple[float, ...]] = {
 """Stock widths per pitch (mm), narrowest first [I]; a design's belt is the widest unless it names one (the design
 search checks the belt at its best: a narrower belt only lowers the rating)."""
 BELT_RATED_N_PER_MM: dict[float, float] = {2.0: 20.0, 3.0: 30.0, 5.0: 50.0, 8.0: 90.0}
-"""Rated working tension per mm of belt width, per pitch [I]. Stand-ins of the order of the belt makers' low-speed
-ratings for glass-cord GT2 belts, NOT read from a maker's table (Gates' PowerGrip GT2 Drive Design Manual no. 17195
-and Light Power & Precision manual were not reachable to check): a 6 mm GT2 belt is rated 120 N here against its
-breaking load of about 1 kN (FarmBot's acceptance test of its 6 mm GT2 belt: 100 kg - 20 kg hung weight,
-genesis.farm.bot/v1.6/bom/drivetrain/belt). Replace them with the belt maker's table before building."""
+"""Rated working tension per mm of belt width, per pitch [I]: ASSUMED stand-ins of the order of the belt makers'
+low-speed ratings for glass-cord GT2 belts, NOT read from a maker's table. A 6 mm GT2 belt is rated 120 N here
+against its breaking load of about 1 kN (FarmBot's acceptance test of its 6 mm GT2 belt: 100 kg - 20 kg hung
+weight, genesis.farm.bot/v1.6/bom/drivetrain/belt). The only belt rating held with the project, the report's
+(section 3.2.1: "Gates PowerGrip GT3 charts", 30 N m on its 19.1 mm driver pulley, 9 N m after a length factor of
+0.3), is ~940 N of effective tension for a belt whose pitch and width the report leaves inconsistent (an "HTD
+10 mm" belt of 36 teeth on pulleys of 2 mm pitch): it cannot give a rating per mm of a 5 mm pitch. What replaces
+these: the rated torque (or belt-pull) tables of the Gates PowerGrip GT3 / Poly Chain design manuals for 5MGT
+(or HTD 5M) belts by width, small-pulley teeth and speed, with their length-correction factors."""
 
 
 def belt_width_mm(pitch_mm: float, width_mm: float | None = None) -> float:
