@@ -7,8 +7,15 @@ The behaviours are the drive's own (docs/devices.md, "Safe behaviours"); which o
 * ``short``: duty 0, the phases shorted: a damper whose torque grows with speed (UART, CAN servo);
 * ``handbrake``: the open-loop current vector at ``brake_current_a``, a position hold (UART only);
 * ``damping``: MIT mode's kp = 0, kd = ``damping_kd`` (CAN MIT only);
+* ``hold``: the drive's own position loop (SET_POS) at the position the drive last reported, taken when the
+  hold begins (UART, CAN servo): it holds the ankle with up to the drive's current limit, on the drive's own
+  rotor sensor; while no fresh report is at hand (older than ``motor_timeout_s``: a target that old would move
+  the foot back), and for ``brake_delay_s`` after the trip (the current a fault wound up, a jam's at its limit,
+  decays through the short first), the short stands in;
 * ``graded``: while the foot is loaded (stance: the ground sensors when healthy, else the load the motor
-  current shows) the link's damper (``short``, or ``damping`` at ``damping_kd`` on MIT); unloaded (swing) one
+  current shows) the link's strongest hold: ``hold`` where the link offers it (the short, the strongest damper
+  the winding makes, yields under the stance moment of a light design: 18 deg at 20 kg on the AK60-6), else its
+  damper (``damping`` at ``damping_kd`` on MIT); unloaded (swing) one
   that lets the foot go gently (on MIT ``damping_kd`` / 4; on UART and CAN servo the short still: under the
   swing foot's own weight it lets it sink at a few degrees per second, and a brake capped at
   ``brake_current_a`` would hide the load the next heel strike puts on it from the load detector); and
@@ -26,7 +33,7 @@ from typing import Any, Final
 
 __all__ = ["BEHAVIOURS", "SAFE_STATES", "SWING_KD_SHARE", "SafeCommand", "SafePolicy", "check_offered"]
 
-BEHAVIOURS: Final = ("release", "brake", "short", "handbrake", "damping")
+BEHAVIOURS: Final = ("release", "brake", "short", "handbrake", "damping", "hold")
 """The drive commands a safe state is made of."""
 SAFE_STATES: Final = (*BEHAVIOURS, "graded")
 """The values of ``[safety] safe_state``."""
@@ -36,11 +43,13 @@ SWING_KD_SHARE: Final = 0.25
 
 @dataclass(frozen=True)
 class SafeCommand:
-    """One drive command of the safe state: the behaviour, its current (brake, handbrake) or its kd (damping)."""
+    """One drive command of the safe state: the behaviour, its current (brake, handbrake), its kd (damping) or its
+    target (hold: the drive's reported position, rad)."""
 
     behaviour: str
     current_a: float = 0.0
     kd: float = 0.0
+    position_rad: float = 0.0
 
     @property
     def brake(self) -> bool:
@@ -49,6 +58,8 @@ class SafeCommand:
 
 
 RELEASE: Final = SafeCommand("release")
+SHORT: Final = SafeCommand("short")
+_HOLD: Final = SafeCommand("hold")  # marks the fixed safe state hold (its target is taken in SAFE)
 
 
 def check_offered(safe_state: str, offered: tuple[str, ...], link: str) -> None:
@@ -57,6 +68,8 @@ def check_offered(safe_state: str, offered: tuple[str, ...], link: str) -> None:
         raise ValueError(f"[safety] safe_state = {safe_state!r} is not allowed: one of {', '.join(SAFE_STATES)}")
     if safe_state == "graded":  # release, and a damper: MIT's kd or the short
         ok = "release" in offered and ("damping" in offered or "short" in offered)
+    elif safe_state == "hold":  # the short stands in while no fresh position is at hand
+        ok = "hold" in offered and "short" in offered
     else:
         ok = safe_state in offered
     if not ok:
@@ -75,12 +88,13 @@ class SafePolicy:
         self.brake_delay_s = brake_delay_s
         self._brake = SafeCommand("brake", brake_current_a)
         mit = "damping" in offered
-        self._fixed = {"release": RELEASE, "brake": self._brake, "short": SafeCommand("short"),
+        self._fixed = {"release": RELEASE, "brake": self._brake, "short": SHORT,
                        "handbrake": SafeCommand("handbrake", brake_current_a),
-                       "damping": SafeCommand("damping", kd=damping_kd)}.get(safe_state)
-        self._stance = SafeCommand("damping", kd=damping_kd) if mit else SafeCommand("short")
-        self._swing = SafeCommand("damping", kd=damping_kd * SWING_KD_SHARE) if mit else self._stance
-        self.last = self._stance if self._fixed is None else self._fixed
+                       "damping": SafeCommand("damping", kd=damping_kd), "hold": _HOLD}.get(safe_state)
+        self._hold = "hold" in offered
+        self._damper = SafeCommand("damping", kd=damping_kd) if mit else SHORT
+        self._swing = SafeCommand("damping", kd=damping_kd * SWING_KD_SHARE) if mit else SHORT
+        self.last = self._damper if self._fixed is None or self._fixed is _HOLD else self._fixed
 
     @classmethod
     def of(cls, limits: Any, offered: tuple[str, ...], link: str) -> SafePolicy:
@@ -88,19 +102,39 @@ class SafePolicy:
         return cls(limits.safe_state, offered, link, brake_current_a=limits.brake_current_a,
                    brake_delay_s=limits.brake_delay_s, damping_kd=limits.damping_kd)
 
-    def command(self, now_s: float, tripped_at_s: float | None, *, loaded: bool, drive_fault: bool) -> SafeCommand:
-        """The drive command now, tripped_at_s after the trip (None: now), the foot loaded or not, the drive faulted."""
+    def command(self, now_s: float, tripped_at_s: float | None, *, loaded: bool, drive_fault: bool,
+                position_rad: float | None = None) -> SafeCommand:
+        """The drive command now, tripped_at_s after the trip (None: now), the foot loaded or not, the drive faulted;
+        position_rad: the drive's last reported position while fresh (None: none fresh)."""
         fixed = self._fixed
+        tripped = now_s if tripped_at_s is None else tripped_at_s
+        settled = now_s - tripped >= self.brake_delay_s
         if fixed is None:  # graded
-            cmd = RELEASE if drive_fault else self._stance if loaded else self._swing
+            if drive_fault:
+                cmd = RELEASE
+            elif not loaded:
+                cmd = self._swing
+            else:
+                cmd = self._held(position_rad, settled) if self._hold else self._damper
+        elif fixed is _HOLD:  # a faulted drive ignores commands: the hold is taken afresh once it is back
+            cmd = SHORT if drive_fault else self._held(position_rad, settled)
         elif fixed is self._brake:
-            tripped = now_s if tripped_at_s is None else tripped_at_s
-            cmd = fixed if now_s - tripped >= self.brake_delay_s else RELEASE
+            cmd = fixed if settled else RELEASE
         else:
             cmd = fixed
         self.last = cmd
         return cmd
 
+    def _held(self, position_rad: float | None, settled: bool) -> SafeCommand:
+        """The hold at the target taken when it began; a new one at position_rad; the short while none is known and
+        for ``brake_delay_s`` after the trip (so the hold does not start from a current the fault wound up: the
+        drive's loop may enter at the present current, and a jam leaves it at its limit)."""
+        last = self.last
+        if last.behaviour == "hold":
+            return last
+        return SHORT if position_rad is None or not settled else SafeCommand("hold", position_rad=position_rad)
+
     def stop_command(self) -> SafeCommand:
-        """What the stop path leaves on the wire: the safe state's own behaviour (graded: the last one chosen)."""
+        """What the stop path leaves on the wire: the safe state's own behaviour (graded, hold: the last one chosen;
+        before any, the stance damper)."""
         return self.last

@@ -36,7 +36,8 @@ class SafetyInputs:
     last_imu_poll_s: float | None = None  # when the IMU port was last read (None: take now)
     imu_frozen_s: float = 0.0  # how long the IMU's frames have been bit-identical while the encoder moved (FrozenImu)
     jam_s: float = 0.0  # how long the motor has pushed at its limit without motion against a moving reference
-    loaded: bool = False  # the foot in stance (the controller's stance flag): a jam is judged in swing only
+    jam_dorsiflexing: bool = False  # that push is towards dorsiflexion, with the reference (judged in stance too)
+    loaded: bool = False  # the foot in stance (the controller's stance flag): a plantarflexing jam is judged in swing
     disagreement_rad: float = 0.0
     motor_fault_code: int = 0
     deadline_miss_streak: int = 0
@@ -98,9 +99,12 @@ class Supervisor:
             self.state = _RUN
         return self.state
 
-    def safe_command(self, now_s: float, *, loaded: bool = False, drive_fault: bool = False) -> SafeCommand:
-        """In SAFE: the policy's drive command now (``brake``: zero current for `brake_delay_s`, then the brake)."""
-        return self.policy.command(now_s, self.tripped_at_s, loaded=loaded, drive_fault=drive_fault)
+    def safe_command(self, now_s: float, *, loaded: bool = False, drive_fault: bool = False,
+                     position_rad: float | None = None) -> SafeCommand:
+        """In SAFE: the policy's drive command now (``brake``: zero current for `brake_delay_s`, then the brake;
+        ``hold``: at position_rad, the drive's reported position while fresh)."""
+        return self.policy.command(now_s, self.tripped_at_s, loaded=loaded, drive_fault=drive_fault,
+                                   position_rad=position_rad)
 
     def _describe(self, reason: FaultReason, x: SafetyInputs) -> str:
         """The measured value behind a trip and its limit (ages in ms), for the log and the summary."""
@@ -114,7 +118,8 @@ class Supervisor:
         if reason is FaultReason.MOTOR_JAM:
             return f"current at {lim.jam_current_share:.0%} of its limit, the encoder within " \
                    f"{math.degrees(lim.jam_still_rad):.2f} deg, the reference moving, for {x.jam_s * 1e3:.1f} ms > " \
-                   f"{lim.jam_time_s * 1e3:.1f} ms in swing"
+                   f"{lim.jam_time_s * 1e3:.1f} ms " \
+                   f"({'dorsiflexing' if x.jam_dorsiflexing else 'plantarflexing in swing'})"
         if reason in ages:
             last_s, limit_s, what = ages[reason]
             if last_s is None:
@@ -188,7 +193,9 @@ class Supervisor:
                 return FaultReason.MOTOR_ENCODER_DISAGREEMENT
             if x.imu_frozen_s > lim.imu_timeout_s:
                 return FaultReason.IMU_FROZEN
-            if not x.loaded and x.jam_s > lim.jam_time_s:  # judged in swing only (docs/safety.md, "Jam")
+            # in stance only a dorsiflexing push: the ground's moment helps it, so a still foot is jammed, where a
+            # plantarflexing one may be a push-off the motor is too weak for (docs/safety.md, "Jam")
+            if (x.jam_dorsiflexing or not x.loaded) and x.jam_s > lim.jam_time_s:
                 return FaultReason.MOTOR_JAM
         return _NONE
 
@@ -262,7 +269,7 @@ class JamCheck:
     moves); together they mean the motor pushes against something that does not give. Still is judged on the
     encoder's angle (within ``still_rad`` of where the window began), not its differenced speed, which a
     single count's flicker on a stop's compliance swings by 1.6 rad/s. ``update`` returns how long all three
-    have held (docs/safety.md, "Jam").
+    have held, with the push's direction in ``dorsiflexing`` (docs/safety.md, "Jam").
     """
 
     def __init__(self, current_share: float, still_rad: float, reference_rad_s: float) -> None:
@@ -272,6 +279,7 @@ class JamCheck:
         self.reference_rad_s = reference_rad_s
         self._since: float | None = None
         self._angle0 = 0.0
+        self.dorsiflexing = False  # the window's push: towards dorsiflexion, where the reference goes
 
     def update(self, now_s: float, current_a: float, limit_a: float, angle_rad: float,
                reference_velocity_rad_s: float) -> float:
@@ -279,8 +287,10 @@ class JamCheck:
         if abs(current_a) < self.current_share * limit_a or abs(reference_velocity_rad_s) <= self.reference_rad_s:
             self._since = None
             return 0.0
-        if self._since is None or abs(angle_rad - self._angle0) > self.still_rad:  # (re)start: it moved
-            self._since, self._angle0 = now_s, angle_rad
+        dorsiflexing = current_a > 0.0 and reference_velocity_rad_s > 0.0  # pushing the way the reference goes
+        if self._since is None or abs(angle_rad - self._angle0) > self.still_rad \
+                or dorsiflexing != self.dorsiflexing:  # (re)start: it moved, or the push turned
+            self._since, self._angle0, self.dorsiflexing = now_s, angle_rad, dorsiflexing
         return now_s - self._since
 
 

@@ -68,15 +68,15 @@ class SafetyLimits:
     # the output encoder against the motor's own position through the belt (docs/safety.md, "Mends")
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
-    # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, damping,
-    # graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
+    # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, hold,
+    # damping, graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
     safe_state: str = "graded"
     damping_kd: float = 1.0
     # a frozen IMU: its frames bit-identical for imu_timeout_s while the encoder moved more than this
     imu_frozen_motion_rad: float = math.radians(1.0)
     # a jam: the current command at jam_current_share of its limit, the encoder within jam_still_rad, the
-    # reference's speed above jam_reference_rad_s, all for longer than jam_time_s in swing (judged in swing only: in
-    # stance a push-off the motor is too weak for looks the same; a jam there is caught once swing begins;
+    # reference's speed above jam_reference_rad_s, all for longer than jam_time_s; in stance only when the push is
+    # towards dorsiflexion with the reference (a plantarflexing one looks like a push-off the motor is too weak for;
     # docs/safety.md, "Jam")
     jam_current_share: float = 0.95
     jam_still_rad: float = math.radians(0.5)

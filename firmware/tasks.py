@@ -164,6 +164,7 @@ class FirmwareTasks:
         out = self.out  # the last period's command and reference, against the encoder's angle now
         x.jam_s = self.jam.update(x.now_s, out.current_cmd_a, self._current_limit_a * self.thermal.factor,
                                   self.encoder.angle_rad, self.obs.reference_velocity_rad_s)
+        x.jam_dorsiflexing = self.jam.dorsiflexing
         x.loaded = self.obs.stance
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
@@ -193,7 +194,11 @@ class FirmwareTasks:
             loaded = self.load_detector.update(now_s, fb.current_a, fused, 0.0)
             if ground is not None and ground.healthy:
                 loaded = ground_stance
-            cmd = self.supervisor.safe_command(now_s, loaded=loaded, drive_fault=fb.fault != 0)
+            # the hold's target: the drive's own position report while fresh (an older one would move the foot back)
+            seen = fb.received_s
+            fresh = seen is not None and now_s - seen <= self.config.safety.motor_timeout_s
+            cmd = self.supervisor.safe_command(now_s, loaded=loaded, drive_fault=fb.fault != 0,
+                                               position_rad=fb.position_rad if fresh else None)
             out.current_cmd_a, out.brake, out.safe = cmd.current_a, cmd.brake, cmd
             if self._controller_state is not _SAFE:
                 self._controller_state = _SAFE

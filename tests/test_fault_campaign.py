@@ -119,9 +119,16 @@ def test_a_fault_that_never_fires_is_an_error_not_a_pass(tmp_path):
     assert row["status"] == "not_fired" and "never fired" in row["error"]
 
 
-def test_same_table_on_one_or_two_workers_and_after_a_resume(tmp_path):
+@pytest.fixture(scope="module")
+def one_worker(tmp_path_factory):
+    """The default spec_file's campaign on one worker: (its spec, its rows), shared by the tests that read them."""
+    tmp_path = tmp_path_factory.mktemp("one_worker")
     spec = load_fault_spec(spec_file(tmp_path))
-    a = _run(spec, tmp_path / "a", workers=1).rows
+    return spec, _run(spec, tmp_path / "a", workers=1).rows
+
+
+def test_same_table_on_one_or_two_workers_and_after_a_resume(tmp_path, one_worker):
+    spec, a = one_worker
     b = _run(spec, tmp_path / "b", workers=2).rows
 
     def strip(rows):  # NaN as None, so that equal rows compare equal
@@ -135,9 +142,8 @@ def test_same_table_on_one_or_two_workers_and_after_a_resume(tmp_path):
     assert c.ran == 2 and c.skipped == 2 and strip(c.rows) == strip(a)
 
 
-def test_criteria_and_hazard_table(tmp_path):
-    spec = load_fault_spec(spec_file(tmp_path))
-    rows = _run(spec, tmp_path / "o").rows
+def test_criteria_and_hazard_table(one_worker):
+    spec, rows = one_worker
     strict = {name: {"excursion_deg": 0.5, "time_to_safe_ms": 10.0} for name in load_criteria(spec.criteria)}
     fails = check_criteria(rows, strict)
     assert {(f.fault, f.criterion) for f in fails} == {("motor_replies_lost", "time_to_safe_ms"),

@@ -32,22 +32,31 @@ def started() -> Supervisor:
     return s
 
 
-def test_jam_needs_all_three_and_restarts_on_motion() -> None:
+def test_jam_needs_all_three_and_restarts_on_motion_or_when_the_push_turns() -> None:
     j = JamCheck(current_share=0.5, still_rad=math.radians(0.5), reference_rad_s=0.1)
     assert j.update(0.0, 5.9, 12.0, 0.0, 1.0) == 0.0  # below half the limit
     assert j.update(0.0, 6.0, 12.0, 0.0, 1.0) == 0.0  # all three: the window opens
-    assert j.update(0.02, -6.0, 12.0, math.radians(0.4), 1.0) == pytest.approx(0.02)  # within 0.5 deg: still
+    assert j.dorsiflexing  # pushing towards dorsiflexion, where the reference goes
+    assert j.update(0.02, 6.0, 12.0, math.radians(0.4), 1.0) == pytest.approx(0.02)  # within 0.5 deg: still
     assert j.update(0.03, 6.0, 12.0, math.radians(0.6), 1.0) == 0.0  # it moved: a new window
     assert j.update(0.05, 6.0, 12.0, math.radians(0.6), 1.0) == pytest.approx(0.02)
-    assert j.update(0.06, 6.0, 12.0, math.radians(0.6), 0.05) == 0.0  # the reference stopped
+    assert j.update(0.06, -6.0, 12.0, math.radians(0.6), 1.0) == 0.0  # the push turned: a new window
+    assert not j.dorsiflexing  # against the reference
+    assert j.update(0.08, -6.0, 12.0, math.radians(0.6), -1.0) == pytest.approx(0.02)
+    assert not j.dorsiflexing  # plantarflexing with the reference
+    assert j.update(0.10, 6.0, 12.0, math.radians(0.6), 0.05) == 0.0  # the reference stopped
 
 
-def test_a_jam_trips_after_its_time_in_swing_only() -> None:
+def test_a_jam_trips_after_its_time_in_swing_and_in_stance_only_when_it_dorsiflexes() -> None:
     s = started()
     assert s.check(running(jam_s=LIMITS.jam_time_s)) is SupervisorState.RUN
-    assert s.check(running(jam_s=1.0, loaded=True)) is SupervisorState.RUN  # stance: a push-off too strong looks alike
+    # stance: a plantarflexing push-off the motor is too weak for looks alike
+    assert s.check(running(jam_s=1.0, loaded=True)) is SupervisorState.RUN
     assert s.check(running(jam_s=LIMITS.jam_time_s + 1e-3)) is SupervisorState.SAFE
     assert s.reason is FaultReason.MOTOR_JAM and "swing" in s.detail
+    s = started()
+    assert s.check(running(jam_s=LIMITS.jam_time_s + 1e-3, loaded=True, jam_dorsiflexing=True)) is SupervisorState.SAFE
+    assert s.reason is FaultReason.MOTOR_JAM and "dorsiflexing" in s.detail
 
 
 def test_frozen_imu_counts_identical_frames_only_while_the_encoder_moves() -> None:

@@ -15,6 +15,7 @@ from firmware.safe_state import SAFE_STATES, SafeCommand, SafePolicy, check_offe
 from firmware.safety_limits import SafetyLimits
 from hal.virtual.bench import VirtualBench
 from hal.virtual.devices.ak60 import DriveMode
+from hal.virtual.devices.ak60_loops import LoopMode
 from hal.virtual.faults import make_injector
 from hal.virtual.faults.observer import Observer
 from host_tools.runner import RunConfig, run_virtual
@@ -22,8 +23,8 @@ from host_tools.serial_mode.host_watchdog import stop_frames
 from protocol import can_mit, can_servo
 from protocol.vesc import SetCurrent, SetCurrentBrake, SetDuty, SetHandbrake
 
-UART = ("release", "brake", "short", "handbrake")
-SERVO = ("release", "brake", "short")
+UART = ("release", "brake", "short", "handbrake", "hold")
+SERVO = ("release", "brake", "short", "hold")
 MIT = ("release", "brake", "damping")
 
 
@@ -42,23 +43,51 @@ def test_fixed_safe_states_and_the_brakes_delay() -> None:
 
 
 @pytest.mark.parametrize(("offered", "stance", "swing"), [
-    (UART, SafeCommand("short"), SafeCommand("short")),
-    (SERVO, SafeCommand("short"), SafeCommand("short")),
+    (UART, SafeCommand("hold", position_rad=0.3), SafeCommand("short")),
+    (SERVO, SafeCommand("hold", position_rad=0.3), SafeCommand("short")),
     (MIT, SafeCommand("damping", kd=1.5), SafeCommand("damping", kd=1.5 * 0.25)),
 ])
-def test_graded_damps_while_loaded_lets_go_gently_in_swing_and_releases_on_a_drive_fault(
+def test_graded_holds_while_loaded_lets_go_gently_in_swing_and_releases_on_a_drive_fault(
         offered: tuple[str, ...], stance: SafeCommand, swing: SafeCommand) -> None:
     p = _policy("graded", offered)
-    assert p.command(1.0, 1.0, loaded=True, drive_fault=False) == stance
+    damper = SafeCommand("short") if "short" in offered else stance
+    assert p.stop_command() == damper  # before any: the damper
+    # the short first for brake_delay_s (the current a fault wound up decays), then the hold
+    assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == damper
+    assert p.command(1.01, 1.0, loaded=True, drive_fault=False, position_rad=0.3) == stance
     assert p.stop_command() == stance
-    assert p.command(1.1, 1.0, loaded=False, drive_fault=False) == swing
-    assert p.command(1.2, 1.0, loaded=True, drive_fault=True) == SafeCommand("release")
+    assert p.command(1.1, 1.0, loaded=False, drive_fault=False, position_rad=0.4) == swing
+    assert p.command(1.2, 1.0, loaded=True, drive_fault=True, position_rad=0.4) == SafeCommand("release")
     assert p.stop_command() == SafeCommand("release")
+
+
+def _hold(position_rad: float) -> SafeCommand:
+    return SafeCommand("hold", position_rad=position_rad)
+
+
+def test_the_hold_keeps_the_target_it_began_with_and_takes_a_new_one_each_stance() -> None:
+    p = _policy("graded")
+    assert p.command(1.01, 1.0, loaded=True, drive_fault=False, position_rad=0.1) == _hold(0.1)
+    assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.1)
+    assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == SafeCommand("short")
+    assert p.command(1.3, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == _hold(0.25)
+
+
+def test_without_a_fresh_position_the_short_stands_in_for_the_hold() -> None:
+    for state in ("graded", "hold"):
+        p = _policy(state)
+        assert p.command(1.05, 1.0, loaded=True, drive_fault=False, position_rad=None) == SafeCommand("short")
+        assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.2)
+    p = _policy("hold", SERVO)  # the fixed hold holds in swing too; a faulted drive's target is taken afresh
+    assert p.command(1.0, 1.0, loaded=False, drive_fault=False, position_rad=0.05) == SafeCommand("short")
+    assert p.command(1.01, 1.0, loaded=False, drive_fault=False, position_rad=0.1) == _hold(0.1)
+    assert p.command(1.1, 1.0, loaded=False, drive_fault=True, position_rad=0.5) == SafeCommand("short")
+    assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.5) == _hold(0.5)
 
 
 @pytest.mark.parametrize(("state", "offered", "link"), [
     ("handbrake", SERVO, "can-servo"), ("damping", UART, "uart"), ("short", MIT, "can-mit"),
-    ("handbrake", MIT, "can-mit")])
+    ("handbrake", MIT, "can-mit"), ("hold", MIT, "can-mit")])
 def test_a_safe_state_the_link_lacks_is_refused_naming_it(state: str, offered: tuple[str, ...], link: str) -> None:
     with pytest.raises(ValueError, match=f"safe_state = '{state}' is not offered by the {link} link: it offers"):
         check_offered(state, offered, link)
@@ -75,7 +104,7 @@ def test_the_profile_value_is_checked_with_its_allowed_values() -> None:
         SafetyLimits(safe_state="coast")
     with pytest.raises(ValueError, match="damping_kd"):
         SafetyLimits(damping_kd=6.0)  # beyond MIT mode's kd range
-    assert set(SAFE_STATES) == {"release", "brake", "short", "handbrake", "damping", "graded"}
+    assert set(SAFE_STATES) == {"release", "brake", "short", "handbrake", "damping", "hold", "graded"}
 
 
 def _cfg(link: str, state: str):
@@ -92,6 +121,7 @@ def test_the_firmware_refuses_before_the_run_a_safe_state_its_link_lacks() -> No
 @pytest.mark.parametrize(("state", "expected"), [
     ("short", SetCurrent(0.0).encode() + SetDuty(0.0).encode()),
     ("handbrake", SetCurrent(0.0).encode() + SetHandbrake(2.0).encode()),
+    ("hold", SetCurrent(0.0).encode() + SetDuty(0.0).encode()),  # no position yet: the short stands in
     ("release", SetCurrent(0.0).encode()),
     ("brake", SetCurrent(0.0).encode() + SetCurrentBrake(2.0).encode()),
 ])
@@ -118,7 +148,8 @@ def test_the_stop_path_ends_with_the_safe_behaviour_can() -> None:
 
 @pytest.mark.parametrize(("link", "state", "mode"), [
     ("uart", "short", DriveMode.DUTY), ("uart", "handbrake", DriveMode.HANDBRAKE), ("uart", "brake", DriveMode.BRAKE),
-    ("can-servo", "short", DriveMode.DUTY), ("can-mit", "damping", DriveMode.CURRENT)])
+    ("uart", "hold", DriveMode.LOOP), ("can-servo", "short", DriveMode.DUTY), ("can-servo", "hold", DriveMode.LOOP),
+    ("can-mit", "damping", DriveMode.CURRENT)])
 def test_after_a_fault_the_drive_does_the_safe_behaviour(link: str, state: str, mode: DriveMode) -> None:
     logging.getLogger("firmware.safety").setLevel(logging.ERROR)
     fault, obs = make_injector("imu_silent", 1.6, 0.2, seed=3), Observer()
@@ -129,6 +160,9 @@ def test_after_a_fault_the_drive_does_the_safe_behaviour(link: str, state: str, 
     dev = r.bench.motor_device
     core = getattr(dev, "core", dev)
     assert core.mode is mode
+    if state == "hold":  # the drive's position loop, at the position the drive reported when the hold began
+        assert core.loops.mode is LoopMode.POSITION
+        assert abs(core.position_error_deg()) < 10.0  # pid_pos degrees (2 deg at the ankle): a unit slip would be far
     if link == "can-mit":
         assert dev.mit_command is not None and dev.mit_command.kd == pytest.approx(1.0, abs=0.01)
         assert dev.mit_command.kp == 0.0

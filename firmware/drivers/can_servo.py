@@ -34,7 +34,7 @@ class CanServoDriver(CanLink):
     """Talks to the AK60-6 in servo mode over ``port`` (driver id ``driver_id``); callers pass the time."""
 
     LINK: ClassVar[str] = "can-servo"
-    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "short")
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "short", "hold")
 
     def __init__(self, port: CanPort, driver_id: int = 1) -> None:
         """Prepare the IDs; nothing is sent until ``send``."""
@@ -86,7 +86,8 @@ class CanServoDriver(CanLink):
         return len(data)
 
     def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
-        """Send the safe state's command (SET_CURRENT 0, SET_CURRENT_BRAKE or SET_DUTY 0); return the data bytes."""
+        """Send the safe state's command (SET_CURRENT 0, SET_CURRENT_BRAKE, SET_DUTY 0 or SET_POS); return the data
+        bytes."""
         frame, _ = self._safe_frame(command)
         self.stats.requests += 1
         if not self._put(frame, now_s):
@@ -103,6 +104,9 @@ class CanServoDriver(CanLink):
             name = f"SET_CURRENT_BRAKE({value} A)"
         elif behaviour == "short":
             packet, value, name = P.SET_DUTY, 0.0, "SET_DUTY(0.0)"
+        elif behaviour == "hold":
+            packet, value = P.SET_POS, math.degrees(command.position_rad)
+            name = f"SET_POS({value:.4f} deg)"
         else:
             packet, value, name = P.SET_CURRENT, 0.0, "SET_CURRENT(0.0 A)"
         frame = CanFrame(can_servo.command_id(packet, self.driver_id), can_servo.encode_command(packet, value), True)

@@ -30,6 +30,7 @@ from protocol.vesc import (
     SetCurrentBrake,
     SetDuty,
     SetHandbrake,
+    SetPos,
     Values,
     ValuesSelective,
 )
@@ -56,7 +57,7 @@ _COMMAND_BYTES: Final = len(SetCurrent(0.0).encode())  # SET_CURRENT and SET_CUR
 class MotorDriver(MotorLink):
     """Talks to the AK60-6 over `uart`; owns no timing: callers pass the time in seconds."""
 
-    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "short", "handbrake")
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "short", "handbrake", "hold")
 
     def __init__(self, uart: Uart, *, full_every: int = 100, feedback_mask: int = FEEDBACK_MASK) -> None:
         """Prepare the codec and the constant request frames."""
@@ -150,7 +151,7 @@ class MotorDriver(MotorLink):
         return self._write((self._brake_codec if brake else self._current_codec).frame((current_a,)), now_s, request)
 
     def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
-        """Write the safe state's command (SET_CURRENT 0, SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE), then a
+        """Write the safe state's command (SET_CURRENT 0, SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE, SET_POS), then a
         feedback request (the policy reads the drive's fault and load in SAFE too); return bytes written."""
         return self._write(safe_message(command).encode(), now_s, request)
 
@@ -211,8 +212,11 @@ class MotorDriver(MotorLink):
 
 
 def safe_message(command: SafeCommand) -> Message:
-    """The VESC command of a safe behaviour: SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE or SET_CURRENT 0 (release)."""
+    """The VESC command of a safe behaviour: SET_CURRENT_BRAKE, SET_DUTY 0, SET_HANDBRAKE, SET_POS (hold) or
+    SET_CURRENT 0 (release)."""
     behaviour = command.behaviour
+    if behaviour == "hold":
+        return SetPos(command.position_rad)
     if behaviour == "brake":
         return SetCurrentBrake(command.current_a)
     if behaviour == "short":

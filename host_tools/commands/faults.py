@@ -23,10 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def columns() -> list[str]:
     """The columns of results.parquet."""
-    from host_tools.studies.fault_point import FIGURES
+    from host_tools.studies.fault_point import FIGURES, IDENTITY
 
-    return ["point", "fault", "params", "scenario", "body_mass_kg", "controller", "link", "onset_phase",
-            "duration_s", "seed", "status", "error", *FIGURES]
+    return [*IDENTITY, "status", "error", *FIGURES]
 
 
 def _one_point(spec: object, index: int, out: Path) -> int:

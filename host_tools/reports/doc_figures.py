@@ -16,6 +16,13 @@ The blocks:
   ``hal.virtual.plant.thermal`` and every ``profiles/batteries/`` pack.
 * ``over_temperature_row`` (docs/safety.md): the hazard table's OVER_TEMPERATURE row, from the hot walk and its
   pair (``host_tools.studies.fault_heat``).
+
+``BENCH_BLOCKS`` take minutes: ``make bench`` checks them (tests/benchmarks/test_bench_safe_states.py), ``--bench``
+checks or writes them here too:
+
+* ``safe_states_campaign`` (docs/safety.md): the hazard table and the safe states side by side of
+  ``pafp faults profiles/faults/safe_states.toml --workers 2`` (the campaign's own tables, host_tools/studies/
+  fault_report.py; a campaign's rows do not depend on its workers).
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["BLOCKS", "FILES", "check", "render", "write"]
+__all__ = ["BENCH_BLOCKS", "BLOCKS", "FILES", "campaign_tables", "check", "render", "write"]
 
 ROOT = Path(__file__).resolve().parents[2]
 FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md", "docs/safety.md")
@@ -140,42 +147,84 @@ def over_temperature_row() -> str:
     return hot_walk_table()
 
 
+SAFE_STATES_SPEC = "profiles/faults/safe_states.toml"
+
+
+@functools.lru_cache(maxsize=1)
+def _campaign_rows(spec_rel: str) -> tuple[Any, tuple[dict[str, Any], ...]]:
+    """(the spec, its rows in point order) of a fault campaign run on 2 workers, as `pafp faults` runs it."""
+    import tempfile
+
+    import pyarrow.parquet as pq
+
+    from host_tools.commands.faults import columns
+    from host_tools.studies.fault_point import fault_error_row, run_fault_point
+    from host_tools.studies.fault_spec import load_fault_spec
+    from host_tools.studies.sweep_engine import dask_client, run_tasks
+
+    spec = load_fault_spec(ROOT / spec_rel)
+    with tempfile.TemporaryDirectory() as tmp, dask_client(workers=2) as client:
+        out = Path(tmp) / "out"
+        run_tasks(spec.points(), run_fault_point, out, client, columns=columns(), digest=spec.digest,
+                  error_row=fault_error_row, progress=False)
+        rows = pq.read_table(out / "results.parquet").to_pylist()
+    return spec, tuple(sorted(rows, key=lambda r: r["point"]))
+
+
+def campaign_tables(spec: Any, rows: list[dict[str, Any]] | tuple[dict[str, Any], ...]) -> str:
+    """A campaign's hazard table and its safe states side by side, as report.md has them (worst points by number)."""
+    from host_tools.studies.fault_report import hazard_table, safe_states_table
+    from host_tools.studies.sweep_table import status_counts
+
+    rel = spec.path.resolve().relative_to(ROOT).as_posix()
+    rows = list(rows)
+    return "\n".join([f"{len(rows)} points ({status_counts(rows)}); `pafp faults {rel} --point N --out DIR` re-runs "
+                      "point N with every output of `pafp run`.", "", *hazard_table(spec, rows, rerun=False), "",
+                      *safe_states_table(rows)])
+
+
+def safe_states_campaign() -> str:
+    """The safe states campaign's tables (docs/safety.md, "The hazard analysis")."""
+    return campaign_tables(*_campaign_rows(SAFE_STATES_SPEC))
+
+
 BLOCKS: dict[str, Callable[[], str]] = {"baud_gains": baud_gains, "baud_gains_summary": baud_gains_summary,
                                         "motor_catalogue": motor_catalogue,
                                         "over_temperature_row": over_temperature_row}
+BENCH_BLOCKS: dict[str, Callable[[], str]] = {"safe_states_campaign": safe_states_campaign}
 
 
 def _pattern(name: str) -> re.Pattern[str]:
     return re.compile(rf"(<!-- figures:{re.escape(name)} -->\n)(.*?)(<!-- /figures:{re.escape(name)} -->)", re.S)
 
 
-def render(text: str) -> str:
-    """text with every generated block it holds recomputed."""
-    for name, make in BLOCKS.items():
+def render(text: str, blocks: dict[str, Callable[[], str]] = BLOCKS) -> str:
+    """text with every generated block of ``blocks`` it holds recomputed."""
+    for name, make in blocks.items():
         if _pattern(name).search(text):
             body = make() + "\n"
             text = _pattern(name).sub(lambda m, body=body: m.group(1) + body + m.group(3), text)
     return text
 
 
-def check(root: Path = ROOT) -> list[str]:
+def check(root: Path = ROOT, blocks: dict[str, Callable[[], str]] = BLOCKS) -> list[str]:
     """The blocks that differ from a fresh computation, as 'FILE: block NAME', and those no file holds, as
     'block NAME: in no file' (empty: the docs are current)."""
     stale = []
     seen = set()
     for rel in FILES:
         text = (root / rel).read_text(encoding="utf-8")
-        for name, make in BLOCKS.items():
+        for name, make in blocks.items():
             m = _pattern(name).search(text)
             if m:
                 seen.add(name)
                 if m.group(2) != make() + "\n":
                     stale.append(f"{rel}: block {name}")
-    stale += [f"block {name}: in no file of {', '.join(FILES)}" for name in BLOCKS if name not in seen]
+    stale += [f"block {name}: in no file of {', '.join(FILES)}" for name in blocks if name not in seen]
     return stale
 
 
-def write(root: Path = ROOT) -> list[str]:
+def write(root: Path = ROOT, blocks: dict[str, Callable[[], str]] = BLOCKS) -> list[str]:
     """Rewrite the blocks of every file in FILES; return the files changed."""
     from host_tools.outdir import write_atomic
 
@@ -183,7 +232,7 @@ def write(root: Path = ROOT) -> list[str]:
     for rel in FILES:
         path = root / rel
         text = path.read_text(encoding="utf-8")
-        new = render(text)
+        new = render(text, blocks)
         if new != text:
             write_atomic(path, new)
             changed.append(rel)
@@ -194,14 +243,18 @@ def main(argv: list[str] | None = None) -> int:
     """Check the generated blocks of the docs (exit 1 if one is stale), or rewrite them with --write."""
     parser = argparse.ArgumentParser(prog="python -m host_tools.reports.doc_figures", description=main.__doc__)
     parser.add_argument("--write", action="store_true", help="rewrite the stale blocks in place")
+    parser.add_argument("--bench", action="store_true", help="the blocks make bench checks (minutes: campaigns) "
+                        "instead of those make test checks")
     args = parser.parse_args(argv)
+    blocks = BENCH_BLOCKS if args.bench else BLOCKS
     if args.write:
-        for rel in write():
+        for rel in write(blocks=blocks):
             print(f"rewrote {rel}")
         return 0
-    stale = check()
+    stale = check(blocks=blocks)
+    again = "python -m host_tools.reports.doc_figures --write" + (" --bench" if args.bench else "")
     for s in stale:
-        print(f"stale: {s} (python -m host_tools.reports.doc_figures --write)", file=sys.stderr)
+        print(f"stale: {s} ({again})", file=sys.stderr)
     return 1 if stale else 0
 
 

@@ -130,7 +130,8 @@ def hot_walk_table() -> str:
     load_criteria(path)  # checked as a campaign checks it; heat has no [fault.<name>] table: the defaults apply
     limits = tomllib.loads(path.read_text(encoding="utf-8"))["default"]
     checks = {"excursion_deg": h["excursion_deg"], "velocity_dps": h["velocity_dps"], "torque_nm": h["torque_nm"],
-              "time_to_safe_ms": h["safe_ms"], "impact_dps": h["impact_dps"]}
+              "time_to_safe_ms": h["safe_ms"], "impact_dps": h["impact_dps"],
+              "safe_excursion_deg": h["safe_excursion_deg"], "safe_impact_dps": h["safe_impact_dps"]}
     missed = ", ".join(k for k, v in checks.items() if k in limits and not v <= limits[k]) or "none"
     return "\n".join([
         "| fault | hazard | detection (runs) | risk control | detect [ms] | time to safe [ms] | excursion to safe "
@@ -139,7 +140,7 @@ def hot_walk_table() -> str:
         f"| `OVER_TEMPERATURE` (heat, no injector) | {HAZARD} | {h['reason']} 1/1 (onset {h['onset_s']:.3f} s, "
         f"trip {h['trip_s']:.3f} s, winding {h['winding_at_trip_c']:.2f} °C then) | {CONTROL} | "
         f"{_fmt(h['detect_ms'], '.1f')} | {_fmt(h['safe_ms'], '.1f')} | "
-        f"{_fmt(h['excursion_deg'], '.2f')} | {_fmt(h['settle_excursion_deg'], '.1f')} | "
+        f"{_fmt(h['excursion_deg'], '.2f')} | {_fmt(h['safe_excursion_deg'], '.1f')} | "
         f"{_fmt(h['impact_dps'], '.0f')} | {missed} |"])
 
 

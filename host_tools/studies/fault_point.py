@@ -35,29 +35,31 @@ import numpy as np
 
 from host_tools.studies.fault_spec import FaultPoint
 
-__all__ = ["FIGURES", "GAIT_START_MAX_S", "fault_error_row", "fault_free_arrays", "faulted_config", "faulted_run",
-           "figures", "onset_of", "point_run_config", "run_fault_point"]
+__all__ = ["FIGURES", "GAIT_START_MAX_S", "IDENTITY", "fault_error_row", "fault_free_arrays", "faulted_config",
+           "faulted_run", "figures", "onset_of", "point_run_config", "run_fault_point"]
 
 GAIT_START_MAX_S = 1.5  # the fault-free run covers a gait start up to this late (sensors up, start-up ramp)
-IDENTITY = ("design", "safe_state")  # the point's plant and safe state, named in every row (errors too)
-FIGURES = (*IDENTITY, "onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "detected", "reason",
+#: What names a point in every row (errors too): its axes, and the plant and safe state it ran with.
+IDENTITY = ("point", "fault", "params", "scenario", "body_mass_kg", "design", "safe_state", "controller", "link",
+            "onset_phase", "duration_s", "seed")
+FIGURES = ("onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "detected", "reason",
            "detect_ms", "safe_ms", "excursion_deg", "velocity_dps", "torque_nm", "torque_share", "settle_excursion_deg",
            "safe_excursion_deg", "safe_impact_dps", "stop_hit", "impact_dps", "cmd_peak_a", "cmd_last_a",
            "sim_time_s", "wall_time_s")
 
 
 def _base_row(p: FaultPoint) -> dict[str, Any]:
-    return {"point": p.index, "fault": p.fault, "params": ", ".join(f"{k}={v}" for k, v in p.params),
-            "scenario": p.scenario, "body_mass_kg": p.body_mass_kg, "design": _design_name(p),
-            "safe_state": _firmware(p).safety.safe_state, "controller": p.controller, "link": p.link,
-            "onset_phase": p.onset_phase, "duration_s": p.duration_s, "seed": p.seed}
+    """The point's IDENTITY columns."""
+    return dict(zip(IDENTITY, (p.index, p.fault, ", ".join(f"{k}={v}" for k, v in p.params), p.scenario,
+                               p.body_mass_kg, _design_name(p), _firmware(p).safety.safe_state, p.controller, p.link,
+                               p.onset_phase, p.duration_s, p.seed), strict=True))
 
 
 def fault_error_row(p: FaultPoint, status: str, error: str, wall_time_s: float = math.nan) -> dict[str, Any]:
     """The row of a point without figures (status error, timeout or not_fired)."""
     row = _base_row(p)
     row.update({"status": status, "error": error})
-    row.update({f: math.nan for f in FIGURES if f not in IDENTITY})
+    row.update({f: math.nan for f in FIGURES})
     row.update({"fired": False, "fired_count": 0, "fired_what": "", "detected": False, "reason": "",
                 "stop_hit": False, "wall_time_s": wall_time_s})
     return row

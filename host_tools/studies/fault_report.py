@@ -24,8 +24,8 @@ from host_tools.outdir import write_atomic
 from host_tools.studies.fault_spec import FaultSpec
 from host_tools.studies.sweep_table import status_counts
 
-__all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "load_criteria", "rerun_command",
-           "safe_state_rows", "write_fault_report"]
+__all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "hazard_table", "load_criteria", "rerun_command",
+           "safe_state_rows", "safe_states_table", "write_fault_report"]
 
 #: criterion -> (the row's figure, unit, what it bounds)
 CRITERIA: dict[str, tuple[str, str, str]] = {
@@ -56,7 +56,7 @@ CONTROLS: dict[str, str] = {
     "ESTOP": "the e-stop",
     "OVER_TEMPERATURE": "the motor's reported winding temperature above [thermal] fault_c",
     "IMU_FROZEN": "IMU frames bit-identical for imu_timeout_s while the encoder moved",
-    "MOTOR_JAM": "current near its limit, no motion, the reference moving, for jam_time_s",
+    "MOTOR_JAM": "current near its limit, no motion, the reference moving, for jam_time_s (stance: dorsiflexing)",
 }
 HEAT_FIGURE = "excursion_deg"
 TRACES = 3
@@ -184,6 +184,8 @@ def hazard_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "excursion_deg": ex[0] if ex else math.nan, "worst_point": ex[1] if ex else -1,
             "settle_excursion_deg": max((_num(r["settle_excursion_deg"]) for r in mine
                                          if not math.isnan(_num(r["settle_excursion_deg"]))), default=math.nan),
+            "safe_excursion_deg": (_worst(mine, "safe_excursion_deg") or (math.nan, -1))[0],
+            "safe_impact_dps": (_worst(mine, "safe_impact_dps") or (math.nan, -1))[0],
             "impact_dps": (_worst(mine, "impact_dps") or (math.nan, -1))[0],
             "torque_nm": (_worst(mine, "torque_nm") or (math.nan, -1))[0],
         })
@@ -288,6 +290,38 @@ def _trace(path: Path, spec: FaultSpec, index: int) -> None:
     plt.close(fig)
 
 
+def hazard_table(spec: FaultSpec, rows: list[dict[str, Any]], rerun: bool = True) -> list[str]:
+    """The hazard table's Markdown lines: one row per fault (and safe state, when the spec compares several);
+    ``rerun``: the worst point with the command that re-runs it (else its number only)."""
+    md = ["| fault | hazard | where | detection (points) | risk control | worst detect [ms] | worst time to safe "
+          "[ms] | worst excursion to safe [deg] | excursion after safe [deg] | safe state's own excursion [deg] | "
+          "own stop impact [deg/s] | worst torque [N m] | stop impact [deg/s] | worst point |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for h in hazard_rows(rows):
+        point = h["worst_point"]
+        cmd = f": `{rerun_command(spec, point)}`" if rerun and point >= 0 else ""
+        name = f"{h['fault']} ({h['safe_state']})" if len(spec.safe_states) > 1 else h["fault"]
+        md.append(f"| {name} | {h['hazard']} | {h['where']} | {h['detection']} | {h['control']} | "
+                  f"{_fmt(h['detect_ms'])} | {_fmt(h['safe_ms'])} | {_fmt(h['excursion_deg'], '.2f')} | "
+                  f"{_fmt(h['settle_excursion_deg'], '.2f')} | {_fmt(h['safe_excursion_deg'])} | "
+                  f"{_fmt(h['safe_impact_dps'], '.0f')} | {_fmt(h['torque_nm'], '.2f')} | "
+                  f"{_fmt(h['impact_dps'], '.0f')} | {point}{cmd} |")
+    return md
+
+
+def safe_states_table(rows: list[dict[str, Any]]) -> list[str]:
+    """The safe states side by side (safe_state_rows) as Markdown lines."""
+    md = ["| scenario | design | safe state | points (caught) | own excursion [deg] | own stop impact [deg/s] "
+          "(points) | excursion to safe [deg] | stop impact [deg/s] | torque / rated |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for s in safe_state_rows(rows):
+        md.append(f"| {s['scenario']} | {s['design']} | {s['safe_state']} | {s['points']} ({s['caught']}) | "
+                  f"{_fmt(s['safe_excursion_deg'])} | {_fmt(s['safe_impact_dps'], '.0f')} ({s['stop_entries']}) | "
+                  f"{_fmt(s['excursion_deg'], '.2f')} | {_fmt(s['impact_dps'], '.0f')} | "
+                  f"{_fmt(s['torque_share'], '.2f')} |")
+    return md
+
+
 def _fmt(v: float, digits: str = ".1f") -> str:
     return "–" if math.isnan(v) else ("never" if math.isinf(v) else format(v, digits))
 
@@ -316,29 +350,12 @@ def write_fault_report(spec: FaultSpec, rows: list[dict[str, Any]], out: Path, f
     md += ["", "Limits (criteria " + str(spec.criteria) + "): " + ", ".join(
         f"{k} <= {v:g} {CRITERIA[k][1]}" for k, v in criteria[next(iter(criteria))].items()) + " (defaults; "
         "per-fault overrides in the file).", ""]
-    md += ["## Hazard table", "",
-           "| fault | hazard | where | detection (points) | risk control | worst detect [ms] | worst time to safe "
-           "[ms] | worst excursion [deg] | safe state's own excursion [deg] | worst torque [N m] | stop impact "
-           "[deg/s] | worst point |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for h in hazard_rows(rows):
-        cmd = f"`{rerun_command(spec, h['worst_point'])}`" if h["worst_point"] >= 0 else ""
-        name = f"{h['fault']} ({h['safe_state']})" if len(spec.safe_states) > 1 else h["fault"]
-        md.append(f"| {name} | {h['hazard']} | {h['where']} | {h['detection']} | {h['control']} | "
-                  f"{_fmt(h['detect_ms'])} | {_fmt(h['safe_ms'])} | {_fmt(h['excursion_deg'], '.2f')} | "
-                  f"{_fmt(h['settle_excursion_deg'], '.2f')} | {_fmt(h['torque_nm'], '.2f')} | "
-                  f"{_fmt(h['impact_dps'], '.0f')} | {h['worst_point']}: {cmd} |")
+    md += ["## Hazard table", "", *hazard_table(spec, rows)]
     md += ["", "## Safe states side by side", "",
            "Over every caught point of a scenario: the safe state's own travel from where it took over and its "
            "speed into a stop (with how many caught points entered one), and over every point the worst excursion "
            "to the safe command, stop impact and unintended torque over the design's rated output.", "",
-           "| scenario | design | safe state | points (caught) | own excursion [deg] | own stop impact [deg/s] "
-           "(points) | excursion to safe [deg] | stop impact [deg/s] | torque / rated |",
-           "|---|---|---|---|---|---|---|---|---|"]
-    for s in safe_state_rows(rows):
-        md.append(f"| {s['scenario']} | {s['design']} | {s['safe_state']} | {s['points']} ({s['caught']}) | "
-                  f"{_fmt(s['safe_excursion_deg'])} | {_fmt(s['safe_impact_dps'], '.0f')} ({s['stop_entries']}) | "
-                  f"{_fmt(s['excursion_deg'], '.2f')} | {_fmt(s['impact_dps'], '.0f')} | "
-                  f"{_fmt(s['torque_share'], '.2f')} |")
+           *safe_states_table(rows)]
     ok = [r for r in rows if r["status"] == "ok"]
     md += ["", "## Worst unintended excursion by fault and onset", "", "![heat map](plots/heatmap.png)", ""]
     if ok:

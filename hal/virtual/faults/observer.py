@@ -4,8 +4,8 @@ Not a fault: it is armed like one (on the same taps) in both runs of a campaign 
 fault-free pair, so the two are instrumented alike. It samples the ankle's true angle, velocity and output
 torque (emulation only: a real bench would need a reference goniometer and a torque cell) and records, for
 every current command that reached the motor (its frame's last byte or the CAN frame's end), whether it was a
-safe command (zero current, the brake, duty 0, the handbrake, MIT zero torque or damping): the time the safe
-state left the wire is read from it.
+safe command (zero current, the brake, duty 0, the handbrake, the position hold, MIT zero torque or damping): the
+time the safe state left the wire is read from it.
 """
 
 from __future__ import annotations
@@ -86,6 +86,8 @@ class Observer:
                     self.commands.append((t_s, msg.current_a, True))
                 elif isinstance(msg, vesc.SetDuty):  # duty 0: the phases shorted
                     self.commands.append((t_s, 0.0, msg.duty == 0.0))
+                elif isinstance(msg, vesc.SetPos):  # the drive's position loop: the hold
+                    self.commands.append((t_s, 0.0, True))
             start = end + 1
 
     def _on_frame(self, frame: CanFrame, t: int) -> None:
@@ -109,6 +111,8 @@ class Observer:
             self.commands.append((t_s, c.value, True))
         elif c.packet == can_servo.PacketId.SET_DUTY:  # duty 0: the phases shorted
             self.commands.append((t_s, 0.0, c.value == 0.0))
+        elif c.packet == can_servo.PacketId.SET_POS:  # the drive's position loop: the hold
+            self.commands.append((t_s, 0.0, True))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The samples and commands as arrays."""
