@@ -7,7 +7,8 @@ The firmware never reads [design]; what it needs of the motor is written into it
   (:data:`SAFETY_SHARE_OF_PEAK`, :data:`CONTROL_SHARE_OF_TRIP`), [safety] brake_current_a at most its
   rated current, [control] velocity_limit_rad_s at most its no-load speed at the ankle;
 - [feedforward] the foot of the base plant, the rotor inertia reflected through the design's ratio, Kt,
-  the total ratio and the base plant's transmission efficiency;
+  the total ratio and the transmission's efficiency in both power directions (the plant's: a moment against the
+  motion takes eta_fwd eta_back of the driving current);
 - [feedforward] parallel_* the design's parallel spring, which the cascade's feed-forward and the impedance
   controller take off the moment they ask of the motor;
 - [safety] belt_ratio, the design's;
@@ -16,7 +17,8 @@ The firmware never reads [design]; what it needs of the motor is written into it
 
 The shipped designs in ``profiles/designs/`` are this module's output (a test writes them again and
 compares). ``python -m host_tools.design_profile DESIGN.toml [HEADER.txt]`` prints the profile of a file holding a
-[design] table, with the text of HEADER.txt (how the design was chosen) as comments at the top.
+[design] table (and its [controller] table, if it has one: the controller and gains chosen for the design), with the
+text of HEADER.txt (how the design was chosen) as comments at the top.
 """
 
 from __future__ import annotations
@@ -69,6 +71,8 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None) -> d
             "gear_ratio": (round(n, 6), f"{m.gear_ratio:g}:1 planetary x {design.belt_driven_teeth}/"
                                         f"{design.belt_driver_teeth} belt"),
             "efficiency": (round(plant.efficiency, 6), "gearbox x belt efficiency (base plant)"),
+            "efficiency_backdriven": (round(plant.efficiency_backdriven, 6),
+                                      "backdriven: the planetary's (hal/virtual/plant/transmission.py) x the belt's"),
             **_spring_keys(design),
         },
         "motor": {
@@ -115,8 +119,9 @@ def _spring_keys(design: Design) -> dict[str, tuple[Any, str]]:
 
 
 def design_profile_text(design: Design, base_profile_path: str | Path | None = None, *, header: str = "",
-                        base_plant: PlantParams | None = None) -> str:
-    """A complete, runnable design profile: the base firmware profile with the design's values, and [design]."""
+                        base_plant: PlantParams | None = None, controller: dict[str, Any] | None = None) -> str:
+    """A complete, runnable design profile: the base firmware profile with the design's values, and [design];
+    ``controller``: its [controller] table (the controller and the gains chosen for the design), as given."""
     import tomlkit
 
     from firmware.config import DEFAULT_PROFILE
@@ -133,6 +138,8 @@ def design_profile_text(design: Design, base_profile_path: str | Path | None = N
             item = tomlkit.item(value)
             item.comment(f"design: {why}")
             table[key] = item
+    if controller:
+        doc["controller"] = tomlkit.item(dict(controller))
     table = tomlkit.table()
     for key, value in design.as_table().items():
         if key == "spring":
@@ -170,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    sys.stdout.write(design_profile_text(design, header=header))
+    sys.stdout.write(design_profile_text(design, header=header, controller=doc.get("controller")))
     return 0
 
 

@@ -151,10 +151,14 @@ class Impedance:
             self.transitions += 1
         k, b = self.k[phase], self.b[phase]
         if phase == SWING:
-            eq = obs.reference_rad
-            torque = (-k * (obs.angle_rad - eq) - b * (obs.velocity_rad_s - obs.reference_velocity_rad_s)
+            eq, eq_velocity, eq_acceleration = obs.reference_rad, obs.reference_velocity_rad_s, \
+                obs.reference_acceleration_rad_s2
+            if self.spring_k != 0.0 and not self.spring_two_sided and eq > self.spring_engage_rad:
+                # not into a one-sided spring in swing: the motor would load it and take its energy back
+                eq, eq_velocity, eq_acceleration = self.spring_engage_rad, 0.0, 0.0
+            torque = (-k * (obs.angle_rad - eq) - b * (obs.velocity_rad_s - eq_velocity)
                       + self.gravity_moment_nm * math.sin(eq + self.com_angle_rad)
-                      + self.inertia_kg_m2 * obs.reference_acceleration_rad_s2)
+                      + self.inertia_kg_m2 * eq_acceleration)
         else:
             eq = self.eq[phase]
             torque = -k * (obs.angle_rad - eq) - b * obs.velocity_rad_s
