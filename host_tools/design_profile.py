@@ -21,7 +21,8 @@ The firmware never reads [design]; what it needs of the motor is written into it
 The shipped designs in ``profiles/designs/`` are this module's output (a test writes them again and
 compares). ``python -m host_tools.design_profile DESIGN.toml [HEADER.txt]`` prints the profile of a file holding a
 [design] table (and its [controller] table, if it has one: the controller and gains chosen for the design; and the
-backdriven efficiency if its [feedforward] has efficiency_backdriven), with the text of HEADER.txt (how the design was chosen) as comments at the top.
+backdriven efficiency if its [feedforward] has efficiency_backdriven), with the text of HEADER.txt (how the design was
+chosen) as comments at the top.
 """
 
 from __future__ import annotations

@@ -152,8 +152,9 @@ class Impedance:
             self.transitions += 1
         k, b = self.k[phase], self.b[phase]
         if phase == SWING:
-            eq, eq_velocity, eq_acceleration = obs.reference_rad, obs.reference_velocity_rad_s, \
-                obs.reference_acceleration_rad_s2
+            eq = obs.reference_rad
+            eq_velocity = obs.reference_velocity_rad_s
+            eq_acceleration = obs.reference_acceleration_rad_s2
             if self.spring_k != 0.0 and not self.spring_two_sided and eq > self.spring_engage_rad:
                 # not into a one-sided spring in swing: the motor would load it and take its energy back
                 eq, eq_velocity, eq_acceleration = self.spring_engage_rad, 0.0, 0.0
