@@ -191,7 +191,7 @@ class FirmwareTasks:
         if state is _SAFE:
             # loaded: the ground sensors while healthy, else the load the motor current shows (quasi-static)
             fb = self.motor.feedback
-            loaded = self.load_detector.update(now_s, fb.current_a, fused, 0.0)
+            loaded = self.load_detector.update(now_s, fb.current_a, fused, 0.0, self.encoder.velocity_rad_s)
             if ground is not None and ground.healthy:
                 loaded = ground_stance
             # the hold's target: the drive's own position report while fresh (an older one would move the foot back)
@@ -229,7 +229,7 @@ class FirmwareTasks:
         obs.imu_pitch_rad = self.imu_pitch_rad
         obs.motor_current_a = current_meas_a
         obs.gait_phase = (gait_t / self._stride_s) % 1.0 if gait_t >= 0 else 0.0
-        obs.stance = detector.update(now_s, current_meas_a, fused, ref[2])
+        obs.stance = detector.update(now_s, current_meas_a, fused, ref[2], obs.velocity_rad_s)
         obs.load_torque_nm = detector.load_torque_nm
         if ground is not None:
             if ground.healthy:

@@ -7,7 +7,11 @@ The firmware never reads [design]; what it needs of the motor is written into it
   (:data:`SAFETY_SHARE_OF_PEAK`, :data:`CONTROL_SHARE_OF_TRIP`), [safety] brake_current_a at most its
   rated current, [control] velocity_limit_rad_s at most its no-load speed at the ankle;
 - [feedforward] the foot of the base plant, the rotor inertia reflected through the design's ratio, Kt,
-  the total ratio and the base plant's transmission efficiency;
+  the total ratio and the base plant's transmission efficiency; on request (a design file whose [feedforward] has
+  efficiency_backdriven) also the backdriven efficiency of the design's plant, with which the controllers ask
+  eta_fwd eta_back of the current for a moment against the motion (off by default: the impedance controller's
+  default gains were chosen with one efficiency both ways, and with it an AK10-9 at 5:1 walking 80 kg latches
+  ANGLE_LIMIT);
 - [feedforward] parallel_* the design's parallel spring, which the cascade's feed-forward and the impedance
   controller take off the moment they ask of the motor;
 - [safety] belt_ratio, the design's;
@@ -16,7 +20,9 @@ The firmware never reads [design]; what it needs of the motor is written into it
 
 The shipped designs in ``profiles/designs/`` are this module's output (a test writes them again and
 compares). ``python -m host_tools.design_profile DESIGN.toml [HEADER.txt]`` prints the profile of a file holding a
-[design] table, with the text of HEADER.txt (how the design was chosen) as comments at the top.
+[design] table (and its [controller] table, if it has one: the controller and gains chosen for the design; and the
+backdriven efficiency if its [feedforward] has efficiency_backdriven), with the text of HEADER.txt (how the design was
+chosen) as comments at the top.
 """
 
 from __future__ import annotations
@@ -45,8 +51,10 @@ def _round_down(x: float, digits: int) -> float:
     return math.floor(x * scale) / scale
 
 
-def derived_sections(design: Design, base_plant: PlantParams | None = None) -> dict[str, dict[str, tuple[Any, str]]]:
-    """section -> key -> (value, why) of every firmware value the design decides."""
+def derived_sections(design: Design, base_plant: PlantParams | None = None,
+                     backdriven_current: bool = False) -> dict[str, dict[str, tuple[Any, str]]]:
+    """section -> key -> (value, why) of every firmware value the design decides; ``backdriven_current``: also
+    [feedforward] efficiency_backdriven (the controllers ask eta_fwd eta_back of the current against the motion)."""
     plant = plant_params_for(design, base_plant if base_plant is not None else load_plant_params())
     m = design.motor_spec()
     trip = round(SAFETY_SHARE_OF_PEAK * m.peak_current_a, 1)
@@ -70,6 +78,9 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None) -> d
                                         f"{design.belt_driver_teeth} belt"),
             "efficiency": (round(plant.efficiency, 6), "gearbox x belt efficiency (base plant)"),
             **_spring_keys(design),
+            **({"efficiency_backdriven": (round(plant.efficiency_backdriven, 6), "backdriven: the planetary's "
+                                          "(hal/virtual/plant/transmission.py) x the belt's")}
+               if backdriven_current else {}),
         },
         "motor": {
             "model": (m.name, f"{m.model} (profiles/motors/{m.name}.toml): the ratings below are its"),
@@ -115,8 +126,11 @@ def _spring_keys(design: Design) -> dict[str, tuple[Any, str]]:
 
 
 def design_profile_text(design: Design, base_profile_path: str | Path | None = None, *, header: str = "",
-                        base_plant: PlantParams | None = None) -> str:
-    """A complete, runnable design profile: the base firmware profile with the design's values, and [design]."""
+                        base_plant: PlantParams | None = None, controller: dict[str, Any] | None = None,
+                        backdriven_current: bool = False) -> str:
+    """A complete, runnable design profile: the base firmware profile with the design's values, and [design];
+    ``controller``: its [controller] table (the controller and the gains chosen for the design), as given;
+    ``backdriven_current``: see :func:`derived_sections`."""
     import tomlkit
 
     from firmware.config import DEFAULT_PROFILE
@@ -125,7 +139,7 @@ def design_profile_text(design: Design, base_profile_path: str | Path | None = N
     doc = tomlkit.parse(base.read_text(encoding="utf-8"))
     if "design" in doc:
         del doc["design"]
-    for section, values in derived_sections(design, base_plant).items():
+    for section, values in derived_sections(design, base_plant, backdriven_current).items():
         if section not in doc:
             doc[section] = tomlkit.table()
         table: Any = doc[section]
@@ -133,6 +147,8 @@ def design_profile_text(design: Design, base_profile_path: str | Path | None = N
             item = tomlkit.item(value)
             item.comment(f"design: {why}")
             table[key] = item
+    if controller:
+        doc["controller"] = tomlkit.item(dict(controller))
     table = tomlkit.table()
     for key, value in design.as_table().items():
         if key == "spring":
@@ -170,7 +186,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    sys.stdout.write(design_profile_text(design, header=header))
+    backdriven = "efficiency_backdriven" in doc.get("feedforward", {})
+    sys.stdout.write(design_profile_text(design, header=header, controller=doc.get("controller"),
+                                         backdriven_current=backdriven))
     return 0
 
 

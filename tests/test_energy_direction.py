@@ -94,3 +94,39 @@ def test_the_law_s_moment_reaches_the_ankle_in_both_power_directions(velocity: f
         assert one_gain / moment == pytest.approx(1.0 / (params.efficiency * params.efficiency_backdriven))
     else:
         assert one_gain == pytest.approx(moment, rel=1e-12)
+
+
+def _adult_walk(tmp_path, speed: str, strides: int = 3) -> tuple[dict, float]:
+    """The shipped adult design walking 80 kg (its own profile, [feedforward] efficiency_backdriven on): summary.json
+    and the issue's bound, the curve's negative ankle work / the design's backdriven efficiency (J per stride)."""
+    import json
+    import tomllib
+
+    from host_tools.cli import main
+    from profiles import profile_path
+
+    profile = profile_path("designs/adult_80kg.toml")
+    fw = tomllib.loads(profile.read_text(encoding="utf-8"))
+    eta_back = fw["feedforward"]["efficiency_backdriven"]
+    out = tmp_path / speed
+    main(["run", "--quiet", "--no-plot", "--no-trace", "--scenario", "walk", "--body-mass", "80", "--controller",
+          "impedance", "--speed", speed, "--strides", str(strides), "--profile", str(profile), "--out", str(out)])
+    summary = json.loads((out / "summary.json").read_text())
+    return summary, curve_negative_work_j(80.0, fw["control"]["stride_s"], speed, "adult") / eta_back
+
+
+def test_the_adult_design_regenerates_at_most_the_curves_negative_work_over_eta_back_at_free_speed(tmp_path):
+    """Issue 38's bound on a short walk of the shipped adult design at free speed (docs/design.md has 20 strides)."""
+    summary, bound = _adult_walk(tmp_path, "free")
+    assert not summary["faults"] and summary["complete"]
+    regenerated = summary["battery"]["regenerated_per_stride_j"]
+    assert 0.0 < regenerated <= bound, (regenerated, bound)
+
+
+def test_the_adult_design_regenerates_at_most_the_bound_over_its_first_three_strides_at_fast_speed(tmp_path):
+    """The same at fast speed, over the first 3 strides only (6.4 J against 6.6 J): over 20 strides the design
+    regenerates 8.4 J per stride, above the bound (docs/design.md: from the 10th stride on its stance moves more)."""
+    summary, bound = _adult_walk(tmp_path, "fast")
+    assert not summary["faults"] and summary["complete"]
+    regenerated = summary["battery"]["regenerated_per_stride_j"]
+    assert 0.0 < regenerated <= bound, (regenerated, bound)

@@ -138,3 +138,37 @@ def test_a_walk_with_a_spring_needs_less_current(tmp_path: Path) -> None:
             current = [float(r["current_meas_a"]) for r in csv.DictReader(fh) if r["supervisor_state_name"] == "RUN"]
         rms[name] = math.sqrt(sum(c * c for c in current) / len(current))
     assert rms["spring"] < 0.8 * rms["plain"], rms
+
+
+def test_the_swing_law_does_not_push_the_foot_into_a_one_sided_spring() -> None:
+    """In swing, with the reference beyond a one-sided spring's engagement, the impedance law's equilibrium is the
+    engagement (the motor neither loads the spring nor takes its energy back); below it, and with a two-sided spring,
+    the reference."""
+    def swing(sided_two: bool, ref_deg: float) -> tuple[float, float]:
+        law = Impedance(ImpedanceParams({}, 10.0, 0.0, 0.0, 0.05, (400.0, math.radians(2.0), sided_two)))
+        obs = Observation()
+        obs.reference_rad = math.radians(ref_deg)
+        obs.reference_velocity_rad_s, obs.reference_acceleration_rad_s2 = 1.0, 5.0
+        law.update(obs)
+        return law.published["equilibrium_deg"], law.published["torque_nm"]
+
+    eq, torque = swing(False, 8.0)
+    assert eq == pytest.approx(2.0) and torque == pytest.approx(100.0 * math.radians(2.0))  # no reference motion
+    assert swing(False, -5.0)[0] == pytest.approx(-5.0)
+    assert swing(True, 8.0)[0] == pytest.approx(8.0)
+
+
+def test_the_load_detector_counts_a_braking_current_by_the_backdriven_gain() -> None:
+    """With [feedforward] efficiency_backdriven, a current against the motion delivers 1 / (eta_fwd eta_back) of the
+    driving moment per ampere, and the detector's external moment says so; along the motion, the driving gain."""
+    ff = Feedforward(FeedforwardParams(0.05, 1.176, 0.15, 0.095, 31.0, 0.855, efficiency_backdriven=0.85))
+    share = ff.backdriven_share
+
+    def external(velocity: float) -> float:
+        det = LoadDetector(0.001, ff.nm_per_a, 0.0, 0.0, math.pi / 2, cutoff_hz=499.0, feedforward=ff)
+        for k in range(50):
+            det.update(k * 0.001, -2.0, 0.0, 0.0, velocity)
+        return det.load_torque_nm
+
+    assert external(0.5) == pytest.approx(2.0 * ff.nm_per_a / share, rel=1e-6)  # braking: more moment per ampere
+    assert external(-0.5) == pytest.approx(2.0 * ff.nm_per_a, rel=1e-6)

@@ -1,8 +1,9 @@
 """Stance detection from the firmware's own sensors: the external moment the motor is seen to carry.
 
 The ankle's foot model (the feed-forward's J, m g d) says what torque the foot alone needs; the motor's
-measured current says what it delivers (with a parallel spring, the spring's moment at the angle too). The
-difference is the moment from outside: the ground's in
+measured current says what it delivers (with a parallel spring, the spring's moment at the angle too; with
+[feedforward] efficiency_backdriven, a current against the ankle's motion gives 1 / (eta_fwd eta_back) times the
+driving moment, as the plant's transmission does). The difference is the moment from outside: the ground's in
 stance. Heel strike is that moment rising above ``on_nm``, toe off it falling below ``off_nm``
 (hysteresis); a stance lasts at least ``min_stance_s`` and a swing at least ``min_swing_s`` (a push-off
 that unloads the sensed moment early is not yet toe off). Compiled (setup.py): it runs every control period.
@@ -48,11 +49,15 @@ class LoadDetector:
         self.heel_strike_s: list[float] = []  # when each was detected (for the detection latency)
         self.toe_off_s: list[float] = []
 
-    def update(self, now_s: float, current_meas_a: float, angle_rad: float, accel_rad_s2: float) -> bool:
+    def update(self, now_s: float, current_meas_a: float, angle_rad: float, accel_rad_s2: float,
+               velocity_rad_s: float = 0.0) -> bool:
         """Take one period's measurements; return True while in stance."""
         model_nm = self.inertia_kg_m2 * accel_rad_s2 + self.gravity_moment_nm * math.sin(angle_rad + self.com_angle_rad)
-        external_nm = model_nm - self.nm_per_a * current_meas_a
         ff = self.feedforward
+        motor_nm = self.nm_per_a * current_meas_a
+        if ff is not None and current_meas_a * velocity_rad_s < 0.0:  # backdriven: more moment per ampere
+            motor_nm /= ff.backdriven_share
+        external_nm = model_nm - motor_nm
         if ff is not None and ff.spring_k != 0.0:  # the parallel spring's moment: the motor's share is the rest
             external_nm -= ff.spring_current_a(angle_rad) * self.nm_per_a
         load = self.load_torque_nm + self.alpha * (external_nm - self.load_torque_nm)

@@ -31,9 +31,10 @@ Stance parameters are per kg of body mass, from the quasi-stiffness of the norma
 (firmware/data/ankle_normative.csv, the moment-angle slope of each sub-phase): early stance
 2 N m/rad/kg about -2 deg; mid stance 5.2 N m/rad/kg about -1 deg; late stance 2.65 N m/rad/kg about
 -15 deg. In swing the equilibrium is the gait reference (a moving equilibrium, with the foot's weight
-compensated), so the suspended foot follows the gait as with the cascade. With a parallel spring in the
-profile's [feedforward], the spring's moment at the measured angle is taken off the law's moment: the motor
-gives the rest. Compiled (setup.py).
+compensated), so the suspended foot follows the gait as with the cascade; with a one-sided parallel spring the swing
+equilibrium stops at the spring's engagement (the motor does not load the spring in swing only to take its energy
+back). With a parallel spring in the profile's [feedforward], the spring's moment at the measured angle is taken off
+the law's moment: the motor gives the rest. Compiled (setup.py).
 """
 
 from __future__ import annotations
@@ -152,9 +153,14 @@ class Impedance:
         k, b = self.k[phase], self.b[phase]
         if phase == SWING:
             eq = obs.reference_rad
-            torque = (-k * (obs.angle_rad - eq) - b * (obs.velocity_rad_s - obs.reference_velocity_rad_s)
+            eq_velocity = obs.reference_velocity_rad_s
+            eq_acceleration = obs.reference_acceleration_rad_s2
+            if self.spring_k != 0.0 and not self.spring_two_sided and eq > self.spring_engage_rad:
+                # not into a one-sided spring in swing: the motor would load it and take its energy back
+                eq, eq_velocity, eq_acceleration = self.spring_engage_rad, 0.0, 0.0
+            torque = (-k * (obs.angle_rad - eq) - b * (obs.velocity_rad_s - eq_velocity)
                       + self.gravity_moment_nm * math.sin(eq + self.com_angle_rad)
-                      + self.inertia_kg_m2 * obs.reference_acceleration_rad_s2)
+                      + self.inertia_kg_m2 * eq_acceleration)
         else:
             eq = self.eq[phase]
             torque = -k * (obs.angle_rad - eq) - b * obs.velocity_rad_s
