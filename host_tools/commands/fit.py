@@ -1,4 +1,5 @@
-"""`pafp fit RUN_DIR`: identify the plant from a recorded run (commands sent, encoder, IMU, motor current).
+"""`pafp fit RUN_DIR`: identify the plant from a recorded run (commands sent, encoder, IMU, motor current); `pafp fit
+LOG.csv`: a motor's own parameters from a bench log another tool wrote (docs/csv_fit.md).
 
 Writes into --out (default RUN_DIR/fit): plant_fitted.toml (`pafp run --plant` takes it), fit.json, fit.md,
 fit.png and correlations.png. ``--validate OTHER_RUN`` adds the fitted plant's fit percentages on another
@@ -17,7 +18,8 @@ HELP = "identify the plant (grey-box least squares) from a recorded run; writes 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `pafp fit`."""
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR",
-                        help="a run directory with record.bin and telemetry.csv (pafp run --experiment sysid)")
+                        help="a run directory with record.bin and telemetry.csv (pafp run --experiment sysid), or a "
+                        "CSV bench log (a file ending .csv: docs/csv_fit.md)")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default RUN_DIR/fit)")
     parser.add_argument("--params", default=None, metavar="NAME,...",
                         help="the parameters to fit (default: all but torque_constant_scale; see docs/calibration.md)")
@@ -26,6 +28,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--validate", type=Path, default=None, metavar="RUN_DIR",
                         help="another recording: report the fitted plant's fit percentages on it")
     parser.add_argument("--no-plot", action="store_true", help="do not draw fit.png and correlations.png")
+    csv = parser.add_argument_group("a CSV bench log (docs/csv_fit.md)")
+    csv.add_argument("--columns", default=None, metavar="ROLE=HEADER[:unit],...",
+                     help="map the log's columns: roles time, command, current, position, speed, torque")
+    csv.add_argument("--preset", default=None, help="the column names an SDK's logger writes: tmotor-servo, "
+                     "tmotor-mit, opensourceleg (default: the first whose columns the header has)")
+    csv.add_argument("--gear-ratio", type=float, default=1.0, metavar="N",
+                     help="the log's position, speed and torque are at the output of an N:1 gearbox (default 1: "
+                     "the rotor's)")
+    csv.add_argument("--kt", type=float, default=None, metavar="NM_PER_A",
+                     help="without a torque column: the Kt that turns the per-ampere figures into N m")
+    csv.add_argument("--window-ms", type=float, default=10.0, help="integration window (default 10 ms)")
+    csv.add_argument("--min-speed", type=float, default=None, metavar="RAD_S",
+                     help="windows slower than this are left out (default 5 %% of the 95th percentile speed)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -40,6 +55,14 @@ def run(args: argparse.Namespace) -> int:
     from host_tools.studies.interrupt import Interrupted, interrupting
     from profiles import profile_path
 
+    if args.run_dir.suffix.lower() == ".csv":
+        return _run_csv(args)
+    csv_only = [o for o, v in (("--columns", args.columns), ("--preset", args.preset), ("--kt", args.kt),
+                               ("--min-speed", args.min_speed)) if v is not None]
+    if csv_only or args.gear_ratio != 1.0 or args.window_ms != 10.0:
+        print(f"pafp fit: {(csv_only or ['--gear-ratio/--window-ms'])[0]} applies to a CSV log (a file ending .csv), "
+              f"not to the run directory {args.run_dir}", file=sys.stderr)
+        return 2
     try:
         names = DEFAULT_FIT if args.params is None else tuple(n.strip() for n in args.params.split(",") if n.strip())
         check_params(names, args.params or "")
@@ -88,4 +111,62 @@ def run(args: argparse.Namespace) -> int:
         v = s["validation"]["fit_percent"]
         print(f"  fit % on {args.validate}: angle {_g(v['angle'], '.1f')}, current {_g(v['current'], '.1f')}, "
               f"IMU {_g(v['imu'], '.1f')}")
+    return 0
+
+
+def _run_csv(args: argparse.Namespace) -> int:
+    """`pafp fit LOG.csv`: check the log and options, fit the motor, write fit.json and fit.md."""
+    import json
+    import math
+
+    from host_tools.calibration.csv_log import read_log
+    from host_tools.calibration.motor_fit import fit_motor, report
+    from host_tools.command_errors import input_error, output_error
+    from host_tools.outdir import EXIT_WRITE_FAILED, OutDirError, RunDir, write_atomic
+
+    try:
+        not_csv = [o for o, v in (("--params", args.params), ("--base", args.base), ("--validate", args.validate))
+                   if v is not None]
+        if not_csv:
+            raise ValueError(f"{not_csv[0]} applies to a run directory, not to a CSV log ({args.run_dir})")
+        for name, v, lo, hi in (("--gear-ratio", args.gear_ratio, 1.0, 1000.0), ("--kt", args.kt, 1e-3, 10.0),
+                                ("--window-ms", args.window_ms, 0.1, 1000.0), ("--min-speed", args.min_speed, 0.0, 5000.0)):
+            if v is not None and not (math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"{name} {v!r} outside the allowed range [{lo:g}, {hi:g}]")
+        log = read_log(args.run_dir, args.columns, args.preset)
+        run_dir = RunDir(args.out or args.run_dir.with_name(args.run_dir.stem + "-fit"))
+    except (OSError, ValueError) as e:
+        print(input_error("fit", e), file=sys.stderr)
+        return 2
+    print(f"pafp fit: {args.run_dir}: {len(log.t)} rows, columns "
+          + ", ".join(f"{c.role}={c.header}[{c.unit}]" for c in log.columns.values()) + f" -> {run_dir.out}", flush=True)
+    try:
+        r = fit_motor(log, gear_ratio=args.gear_ratio, kt_nm_per_a=args.kt, window_s=args.window_ms * 1e-3,
+                      min_speed_rad_s=args.min_speed)
+    except ValueError as e:  # too little motion: said before anything is written
+        run_dir.discard()
+        print(input_error("fit", e), file=sys.stderr)
+        return 2
+    except BaseException:
+        run_dir.discard()
+        raise
+    try:
+        doc, md = report(log, r, args.gear_ratio)
+        write_atomic(run_dir.path / "fit.json", json.dumps(doc, indent=2) + "\n")
+        write_atomic(run_dir.path / "fit.md", md)
+        run_dir.publish()
+    except (OSError, OutDirError) as e:
+        run_dir.discard()
+        print(output_error("fit", e, run_dir), file=sys.stderr)
+        return EXIT_WRITE_FAILED
+    except BaseException:
+        run_dir.discard()
+        raise
+    print(f"  {'parameter':<32}{'value':>12}{'95 % ±':>12}  unit / verdict")
+    for k, p in doc["params"].items():
+        verdict = "" if p["identifiable"] else "  NOT IDENTIFIABLE"
+        print(f"  {k:<32}{p['value']:>12.5g}{p['ci95_half_width']:>12.2g}  {p['unit']}{verdict}")
+    for k, why in doc["not_in_the_data"].items():
+        print(f"  {k:<32}{'—':>12}{'':>12}  {why}")
+    print("  fit %: " + ", ".join(f"{k} {v:.1f}" for k, v in r.fit_pct.items()))
     return 0

@@ -44,6 +44,10 @@ class Coefficients:
         self.kp = kp  # parallel spring stiffness / J; 0 without one
         self.pe = pe  # its engagement angle [rad]
         self.p2 = p2  # two-sided (else only theta > pe, the dorsiflexion side)
+        # the opt-in imperfections' dynamics (hal/virtual/plant/imperfections.py), installed by the plant when one is
+        # on; None (the default): the nominal functions below run unchanged
+        self.imp_accel: Callable[[float, float, float, float, int], float] | None = None
+        self.imp_integrate: Callable[..., tuple[float, float, float, int]] | None = None
 
 
 def parallel_spring(kp: float, pe: float, two: bool, th: float) -> float:
@@ -88,6 +92,13 @@ def static_accel(c: Coefficients, th: float, i: float, ext: float) -> float:
 
 def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) -> float:
     """Acceleration of the ankle for angle, velocity, current, external torque and friction mode."""
+    if c.imp_accel is not None:
+        return c.imp_accel(th, w, i, ext, s)
+    return nominal_accel(c, th, w, i, ext, s)
+
+
+def nominal_accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) -> float:
+    """`accel` without the opt-in imperfections."""
     if s == 0:
         a = static_accel(c, th, i, ext)
         if -c.tsx <= a <= c.tsx:
@@ -121,7 +132,10 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
     state = (theta, omega, i_q, s) with s the friction mode: +1/-1 sliding that way, 0 stuck.
     External torque is ea + eb * t, or fn(t) at the stage times when fn is given. exps is
     (exp(-h/2/tau), exp(-h/tau)) for this h, from :func:`lag_factors` (computed once for the grid step).
+    With an opt-in imperfection on, its own integrator takes the steps (`Coefficients.imp_integrate`).
     """
+    if c.imp_integrate is not None:
+        return c.imp_integrate(d, state, t_base, k_first, n, h, ea, eb, fn, exps)
     th, w, i, s = state
     inv_j, kto, kbo, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.kbo, c.ks, c.c0, c.kd, c.mg, c.psi0
     lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk

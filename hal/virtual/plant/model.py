@@ -12,6 +12,7 @@ from mypy_extensions import mypyc_attr
 
 from hal.virtual.plant.fixtures import Fixture, Load, TorqueProfile, check_load, suspended
 from hal.virtual.plant.gap import Gap
+from hal.virtual.plant.imperfections import install as install_imperfections
 from hal.virtual.plant.integrator import (
     Coefficients,
     Drive,
@@ -149,6 +150,7 @@ class Plant:
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
             bscale=p.total_ratio / p.brake_speed_scale_rad_s, ipk=p.peak_current_a,
             kp=p.parallel_stiffness_nm_per_rad * inv_j, pe=p.parallel_engage_rad, p2=p.parallel_two_sided)
+        install_imperfections(self._c, p)  # the opt-in ones the fit lacks (Stribeck, ripple); none by default
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
         self._grid_lag = lag_factors(step_s, self._c.tau)  # current-lag factors of one grid step
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input

@@ -58,12 +58,19 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "parallel_stiffness_nm_per_rad": ("spring", 0.0, 2000.0),
     "parallel_engage_rad": ("spring", -math.pi / 6, math.pi / 6),
     "parallel_two_sided": ("spring", 0, 1),
+    # opt-in imperfections the fit's model lacks (hal/virtual/plant/imperfections.py): 0 = off
+    "stribeck_peak_nm": ("friction", 0.0, 100.0),
+    "stribeck_speed_rad_s": ("friction", 1e-4, 100.0),
+    "ripple_amplitude_nm": ("ripple", 0.0, 100.0),
+    "ripple_periods_per_rev": ("ripple", 1.0, 10000.0),
 }
 OPTIONAL = {"parallel_stiffness_nm_per_rad": 0.0, "parallel_engage_rad": 0.0, "parallel_two_sided": False,
-            "backlash_deg": None, "efficiency_backdriven": None}
+            "backlash_deg": None, "efficiency_backdriven": None, "stribeck_peak_nm": 0.0,
+            "stribeck_speed_rad_s": 0.02, "ripple_amplitude_nm": 0.0, "ripple_periods_per_rev": 140.0}
 """Keys a plant profile may leave out, with their values then: [spring] (no parallel spring); backlash_deg None =
 the bench imperfection's figure (profiles/bench_imperfections.toml [gearbox_backlash]); efficiency_backdriven None =
-one efficiency as a torque gain in both power directions (see PlantParams.backdriven_torque_per_amp_nm)."""
+one efficiency as a torque gain in both power directions (see PlantParams.backdriven_torque_per_amp_nm); the
+Stribeck friction's and the torque ripple's amplitudes 0 = none (hal/virtual/plant/imperfections.py)."""
 _BOOLS = ("parallel_two_sided",)
 
 #: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
@@ -121,6 +128,13 @@ class PlantParams:
     # the transmission's (gearbox x belt) efficiency when the ankle drives the rotor (power into the motor);
     # None: `efficiency` applied as the same torque gain in both directions (docs/plant.md, "Efficiency")
     efficiency_backdriven: float | None = None
+    # opt-in imperfections (hal/virtual/plant/imperfections.py, docs/plant.md "Imperfections the fit does not
+    # model"): friction above the Coulomb friction at zero speed, decaying as exp(-(w / speed)^2) (ankle side);
+    # a torque ripple of this amplitude at the ankle, sinusoidal in the rotor angle; amplitudes 0 = off
+    stribeck_peak_nm: float = 0.0
+    stribeck_speed_rad_s: float = 0.02
+    ripple_amplitude_nm: float = 0.0
+    ripple_periods_per_rev: float = 140.0
 
     def __post_init__(self) -> None:
         """Check every value against its allowed range and the cross-field rules."""
