@@ -332,3 +332,30 @@ def test_a_column_made_of_a_switching_step_is_not_a_slope():
     x2 = np.array([1.0, 2.0])
     jac2, r2 = _secant_jacobian(fun, x2, steps, hi)
     assert _switching_columns(fun, x2, steps, lo, hi, jac2, r2, [0, 1]) == []
+
+
+def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
+    """The fit's model is the bench's plant here: its residuals are independent of the command (fit.json's adequacy
+    verdict, the same in fit.md). The same recording against a model that is clearly wrong, the fitted plant with three
+    times its Coulomb friction and half its damping: the check says the model misses something and names the signals
+    and lags (the rates over plants with and without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py)."""
+    from host_tools.calibration.fit_adequacy import MISSES, adequacy
+    from host_tools.calibration.fit_data import load_experiment
+    from host_tools.calibration.fit_model import base_values
+    from host_tools.calibration.plant_fit import fit_parts
+
+    _, run, out, _ = experiment
+    s = json.loads((out / "fit.json").read_text())
+    a = s["adequacy"]
+    assert a["verdict"] == "adequate" and not a["failing"], a["failing"]
+    assert set(a["tests"]) == {"fit", "held_out"} and all(set(d) == {"angle", "current", "imu"}
+                                                           for d in a["tests"].values())
+    assert "Model adequacy: adequate" in (out / "fit.md").read_text()
+    exp = load_experiment(run)
+    fit_part, held, _ = fit_parts(exp)
+    values = {**base_values(load_plant_params()), **{n: p["value"] for n, p in s["params"].items()}}
+    wrong = {**values, "coulomb_friction_nm": 3.0 * values["coulomb_friction_nm"],
+             "foot_damping_nm_s_per_rad": 0.5 * values["foot_damping_nm_s_per_rad"]}
+    bad = adequacy(load_plant_params(), wrong, {"fit": fit_part, "held_out": held})
+    assert bad["verdict"] == MISSES and bad["failing"], bad
+    assert all(" at lags " in f and " ms (|z| up to " in f for f in bad["failing"])
