@@ -32,6 +32,7 @@ from hal.virtual.plant import load_plant_params
 from hal.virtual.plant.battery import load_battery
 from hal.virtual.plant.design import Design, plant_params_for
 from hal.virtual.plant.draw import draw_plant, drawn_values
+from hal.virtual.plant.imperfections import active as active_imperfections
 from hal.virtual.plant.motors import load_motor
 from hal.virtual.plant.readings import DRIVERS, geometry_of
 from hal.virtual.plant.thermal import ThermalParams
@@ -214,7 +215,9 @@ class RunConfig:
                                {"design": self.design.as_table(), "design_used": self.plant_file is None}),
                             "output_inertia_kg_m2": params.output_inertia_kg_m2,
                             "output_torque_per_amp_nm": params.output_torque_per_amp_nm,
-                            "backlash_deg": round(math.degrees(options.get("backlash_rad", 0.0)), 9)},
+                            "backlash_deg": round(math.degrees(options.get("backlash_rad", 0.0)), 9),
+                            # the opt-in imperfections of its profile (hal/virtual/plant/imperfections.py)
+                            "imperfections": list(active_imperfections(params))},
                   # the readings of the report the bench ran under (hal.virtual.plant.readings, docs/bench.md)
                   "readings": {"geometry": geometry_of(params), "driver": DRIVERS[0],
                                "imu": imu_reading_of(options["imu_config"])},

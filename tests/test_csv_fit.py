@@ -78,9 +78,27 @@ def test_a_log_with_speed_but_no_position_is_fitted_too(bench_log, tmp_path):
         assert doc["params"][key]["value"] == pytest.approx(truth[key], rel=0.10), key
 
 
+def test_an_output_side_log_with_its_gear_ratio_gives_the_rotor_figures(bench_log, tmp_path):
+    """TMotorCANControl's MIT-mode columns are the output's (after the 9:1 gearbox): --gear-ratio 9 brings the fit
+    back to the rotor (the gearbox taken lossless here, so the figures are the rotor's own)."""
+    path, truth = bench_log
+    d = np.genfromtxt(path, delimiter=",", names=True)
+    mit = tmp_path / "mit.csv"
+    cols = {"pi_time": d["pi_time"], "output_angle": d["motor_position"] / 9, "output_velocity": d["motor_speed"] / 9,
+            "current": d["motor_current"], "output_torque": 9 * 0.115 * d["motor_current"],
+            "i_cmd": d["current_command"], "sensor": 9 * d["torque_sensor"]}
+    np.savetxt(mit, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="")
+    code, doc = _fit(mit, tmp_path / "fit", "--columns", "command=i_cmd,torque=sensor", "--gear-ratio", "9")
+    assert code == 0 and doc["columns"]["position"]["from"] == "preset tmotor-mit"
+    assert doc["columns"]["torque"]["header"] == "sensor"  # never the MIT log's computed output_torque
+    for key in ("kt_nm_per_a", "coulomb_friction_nm", "viscous_friction_nm_s_per_rad"):
+        assert doc["params"][key]["value"] == pytest.approx(truth[key], rel=0.10), key
+
+
 def test_without_torque_sensor_kt_is_reported_not_in_the_data(bench_log, tmp_path):
     path, _ = bench_log
-    code, doc = _fit(_without(path, tmp_path, "torque_sensor"), tmp_path / "fit", "--columns", "command=current_command")
+    slim = _without(path, tmp_path, "torque_sensor")
+    code, doc = _fit(slim, tmp_path / "fit", "--columns", "command=current_command")
     assert code == 0
     assert "kt_nm_per_a" not in doc["params"]
     assert doc["not_in_the_data"]["kt_nm_per_a"].startswith("no torque column")
@@ -97,7 +115,7 @@ def _rows(n=400, dt=1e-3, current=1.0, speed_scale=1.0):
     t = np.arange(n) * dt
     pos = np.sin(2 * np.pi * 2 * t)
     return [(ti, p, speed_scale * 4 * np.pi * np.cos(2 * np.pi * 2 * ti), current * np.sin(9 * ti))
-            for ti, p in zip(t, pos)]
+            for ti, p in zip(t, pos, strict=True)]
 
 
 HEADER = ["pi_time", "motor_position", "motor_speed", "motor_current"]
@@ -150,7 +168,8 @@ def test_opensourceleg_columns_are_matched_by_their_attribute_name(tmp_path):
 
     header = ["time", "TMotor[ankle].motor_position", "TMotor[ankle].motor_velocity", "TMotor[ankle].motor_current"]
     log = read_log(_bad_log(tmp_path, header, _rows()))
-    assert {r: c.header for r, c in log.columns.items()} == dict(zip(("time", "position", "speed", "current"), header))
+    roles = ("time", "position", "speed", "current")
+    assert {r: c.header for r, c in log.columns.items()} == dict(zip(roles, header, strict=True))
     assert log.columns["current"].source == "preset opensourceleg"
 
 

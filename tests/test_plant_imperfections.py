@@ -60,7 +60,7 @@ def test_the_imperfect_integrator_without_imperfections_agrees_with_the_nominal_
             plant.set_current_command(2.5 * math.sin(9.0 * t) + (0.8 if k % 10 < 5 else -0.8), t)
             states.append(plant.state_at(t + 0.004))
         out.append(states)
-    for a, b in zip(*out):
+    for a, b in zip(*out, strict=True):
         assert a.output_angle_rad == pytest.approx(b.output_angle_rad, abs=1e-9)
         assert a.output_velocity_rad_s == pytest.approx(b.output_velocity_rad_s, abs=1e-7)
         assert a.current_q_a == pytest.approx(b.current_q_a, abs=1e-9)
@@ -180,3 +180,15 @@ def test_install_leaves_coefficients_alone_without_stribeck_or_ripple():
                          kst=c.kst, cst=c.cst, tc=c.tc, tsx=c.tsx, tau=c.tau, ker=c.ker, bscale=c.bscale)
     install(fresh, replace(BASE, efficiency_backdriven=0.9))
     assert fresh.imp_accel is None
+
+
+def test_a_run_on_a_misspecified_profile_carries_it_and_says_so(tmp_path):
+    """`pafp run --plant FILE`'s bench gets the profile's imperfections; summary.json's plant record names them."""
+    from host_tools.runner import RunConfig
+
+    path = tmp_path / "stribeck.toml"
+    path.write_text(profile_text("stribeck"), encoding="utf-8")
+    options, record = RunConfig(plant_file=path).bench_setup()
+    assert options["plant_params"].stribeck_peak_nm == 0.83
+    assert record["plant"]["imperfections"] == ["stribeck"]
+    assert RunConfig().bench_setup()[1]["plant"]["imperfections"] == []

@@ -173,13 +173,14 @@ def _check(log: BenchLog) -> None:
     bad = np.flatnonzero(dt <= 0.0)
     if bad.size:
         k = int(bad[0])
-        raise ValueError(f"{log.path} row {k + 3}: time {log.t[k + 1]:.9g} s is not after row {k + 2}'s {log.t[k]:.9g} s "
+        raise ValueError(f"{log.path} row {k + 3}: time {log.t[k + 1]:.9g} s is not after row {k + 2}'s "
+                         f"{log.t[k]:.9g} s "
                          f"({log.where('time')}): time must increase strictly")
     period = float(np.median(dt))
     lo, hi = PERIOD_RANGE_S
     if not lo <= period <= hi:
-        raise ValueError(f"{log.path}: median sample period {period:.6g} s from {log.where('time')} outside the allowed "
-                         f"range [{lo}, {hi}] s: is the time in another unit (time=HEADER:ms or :us)?")
+        raise ValueError(f"{log.path}: median sample period {period:.6g} s from {log.where('time')} outside the "
+                         f"allowed range [{lo}, {hi}] s: is the time in another unit (time=HEADER:ms or :us)?")
     for role in ("command", "current", "speed", "torque"):
         v = getattr(log, role)
         if v is not None and float(np.max(np.abs(v))) > MAX_ABS[role]:

@@ -64,7 +64,8 @@ def _uniform(log: BenchLog, gear_ratio: float) -> dict[str, np.ndarray | float |
     period = float(np.median(np.diff(t)))
     grid = t[0] + period * np.arange(int((t[-1] - t[0]) / period) + 1)
     out: dict[str, np.ndarray | float | None] = {"period": period}
-    for role, scale in (("current", 1.0), ("position", gear_ratio), ("speed", gear_ratio), ("torque", 1.0 / gear_ratio)):
+    scales = (("current", 1.0), ("position", gear_ratio), ("speed", gear_ratio), ("torque", 1.0 / gear_ratio))
+    for role, scale in scales:
         v = getattr(log, role)
         out[role] = None if v is None else np.interp(grid, t, v) * scale
     k = np.searchsorted(t, grid, side="right")
@@ -119,9 +120,9 @@ def fit_motor(log: BenchLog, *, gear_ratio: float = 1.0, kt_nm_per_a: float | No
     min_speed = floor if min_speed_rad_s is None else min_speed_rad_s
     starts = _windows(w, u["gap"], n, min_speed)  # type: ignore[arg-type]
     if len(starts) < MIN_WINDOWS:
-        raise ValueError(f"{log.path}: {len(starts)} windows of {n * period * 1e3:.3g} ms where the shaft turns one way "
-                         f"faster than {min_speed:.4g} rad/s: at least {MIN_WINDOWS} needed (more motion, or a lower "
-                         "--min-speed)")
+        raise ValueError(f"{log.path}: {len(starts)} windows of {n * period * 1e3:.3g} ms where the shaft turns one "
+                         f"way faster than {min_speed:.4g} rad/s: at least {MIN_WINDOWS} needed (more motion, or a "
+                         "lower --min-speed)")
     idx = np.array(starts)[:, None] + np.arange(n + 1)[None, :]
     wts = np.full(n + 1, period)
     wts[[0, -1]] *= 0.5  # trapezoid weights over a window's samples
@@ -150,8 +151,8 @@ def fit_motor(log: BenchLog, *, gear_ratio: float = 1.0, kt_nm_per_a: float | No
         if kt_nm_per_a is None:
             units.update(rotor_inertia_kg_m2="A s^2/rad (J/Kt)", coulomb_friction_nm="A (Tc/Kt)",
                          viscous_friction_nm_s_per_rad="A s/rad (b/Kt)")
-    values = {k: float(v) for k, v in zip(names, c)}
-    half = {k: float(v) for k, v in zip(names, ci)}
+    values = {k: float(v) for k, v in zip(names, c, strict=True)}
+    half = {k: float(v) for k, v in zip(names, ci, strict=True)}
     ok = {k: bool(abs(half[k]) <= REL_CI_LIMIT * abs(values[k]) and col[j] <= COLLINEARITY_LIMIT)
           for j, k in enumerate(names)}
     result = MotorFit(values, half, ok, units, notes, len(starts), min_speed, period, {"mechanics": fit})
@@ -176,7 +177,7 @@ def _lagged(cmd: np.ndarray, i0: float, decay: np.ndarray) -> np.ndarray:
     starts = np.flatnonzero(np.diff(np.floor(-big_l / 600.0)) != 0) + 1
     y = np.empty(n)
     y[0] = i0
-    for s, e in zip(np.concatenate([[0], starts]), np.concatenate([starts, [n]])):
+    for s, e in zip(np.concatenate([[0], starts]), np.concatenate([starts, [n]]), strict=True):
         rel = big_l[s:e] - big_l[s]
         acc = np.cumsum(np.exp(-rel[1:]) * c[s:e - 1])
         y[s + 1:e] = np.exp(rel[1:]) * (y[s] + acc)
@@ -256,7 +257,7 @@ def report(log: BenchLog, r: MotorFit, gear_ratio: float) -> tuple[dict, str]:
     for k, why in missing.items():
         lines.append(f"| {k} | — | — | | {why} |")
     lines += ["", "Fit % (1 - |residual| / |signal - mean|): " + ", ".join(f"{k} {v:.1f}" for k, v in r.fit_pct.items())
-              + ".", "", "The intervals take the residuals as independent between windows (samples, for the lag) and are "
-              "conditional on the model (docs/csv_fit.md): stiction, cogging, a torque-dependent friction or a load the "
-              "sensor does not see bias them without widening them."]
+              + ".", "", "The intervals take the residuals as independent between windows (samples, for the lag) and "
+              "are conditional on the model (docs/csv_fit.md): stiction, cogging, a torque-dependent friction or a "
+              "load the sensor does not see bias them without widening them."]
     return doc, "\n".join(lines) + "\n"

@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     csv.add_argument("--columns", default=None, metavar="ROLE=HEADER[:unit],...",
                      help="map the log's columns: roles time, command, current, position, speed, torque")
     csv.add_argument("--preset", default=None, help="the column names an SDK's logger writes: tmotor-servo, "
-                     "tmotor-mit, opensourceleg (default: the first whose columns the header has)")
+                     "tmotor-mit, opensourceleg (default: the one whose columns the header has most of)")
     csv.add_argument("--gear-ratio", type=float, default=1.0, metavar="N",
                      help="the log's position, speed and torque are at the output of an N:1 gearbox (default 1: "
                      "the rotor's)")
@@ -132,16 +132,21 @@ def _run_csv(args: argparse.Namespace) -> int:
         if not_csv:
             raise ValueError(f"{not_csv[0]} applies to a run directory, not to a CSV log ({args.run_dir})")
         for name, v, lo, hi in (("--gear-ratio", args.gear_ratio, 1.0, 1000.0), ("--kt", args.kt, 1e-3, 10.0),
-                                ("--window-ms", args.window_ms, 0.1, 1000.0), ("--min-speed", args.min_speed, 0.0, 5000.0)):
+                                ("--window-ms", args.window_ms, 0.1, 1000.0),
+                                ("--min-speed", args.min_speed, 0.0, 5000.0)):
             if v is not None and not (math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"{name} {v!r} outside the allowed range [{lo:g}, {hi:g}]")
         log = read_log(args.run_dir, args.columns, args.preset)
+        if args.kt is not None and log.torque is not None:
+            raise ValueError(f"--kt applies to a log without a torque column: {args.run_dir} has one "
+                             f"({log.where('torque')}), from which Kt is fitted")
         run_dir = RunDir(args.out or args.run_dir.with_name(args.run_dir.stem + "-fit"))
     except (OSError, ValueError) as e:
         print(input_error("fit", e), file=sys.stderr)
         return 2
     print(f"pafp fit: {args.run_dir}: {len(log.t)} rows, columns "
-          + ", ".join(f"{c.role}={c.header}[{c.unit}]" for c in log.columns.values()) + f" -> {run_dir.out}", flush=True)
+          + ", ".join(f"{c.role}={c.header}[{c.unit}]" for c in log.columns.values()) + f" -> {run_dir.out}",
+          flush=True)
     try:
         r = fit_motor(log, gear_ratio=args.gear_ratio, kt_nm_per_a=args.kt, window_s=args.window_ms * 1e-3,
                       min_speed_rad_s=args.min_speed)

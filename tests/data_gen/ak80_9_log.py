@@ -36,7 +36,8 @@ LOG_HZ, SUBSTEPS, DURATION_S = 1000, 10, 16.0
 
 
 def command(n: int, rng: np.random.Generator) -> np.ndarray:
-    """The current command at each log sample [A]: a chirp 0.5 -> 25 Hz, a PRBS of 25 ms bits, a 0.3 Hz square (1.2, 0.6, 1.2 A)."""
+    """The current command at each log sample [A]: a chirp 0.5 -> 25 Hz, a PRBS of 25 ms bits, a 0.3 Hz square
+    (1.2, 0.6, 1.2 A)."""
     t = np.arange(n) / LOG_HZ
     f0, f1 = 0.5, 25.0
     phase = 2 * np.pi * (f0 * t + (f1 - f0) * t ** 2 / (2 * DURATION_S))
@@ -61,7 +62,7 @@ def simulate(i_cmd: np.ndarray, jitter: np.ndarray, load_nm: np.ndarray
     th = w = i = 0.0
     at = SUBSTEPS * np.arange(len(i_cmd)) + jitter
     out = np.empty((len(i_cmd), 4))
-    for k, (u, m) in enumerate(zip(i_cmd, load_nm)):
+    for k, (u, m) in enumerate(zip(i_cmd, load_nm, strict=True)):
         out[k] = at[k] * h, th, w, i
         for _ in range(at[k + 1] - at[k] if k + 1 < len(at) else SUBSTEPS):
             a1, d1 = deriv(w, i, u, m)

@@ -7,7 +7,8 @@ byte). Torques are at the ankle, speeds the ankle's, like the profile's other fr
 - **stribeck** ([friction] ``stribeck_peak_nm``, ``stribeck_speed_rad_s``): sliding friction
   T_c + peak exp(-(w / w_s)^2) instead of T_c from the first instant of motion, the Gaussian Stribeck curve
   (B. Armstrong-Helouvry, P. Dupont, C. Canudas de Wit, "A survey of models, analysis tools and compensation
-  methods for the control of machines with friction", Automatica 30(7) (1994) 1083-1138, eq. 3 with delta = 2).
+  methods for the control of machines with friction", Automatica 30(7) (1994) 1083-1138: its Stribeck curve with
+  the exponent 2).
   Breakaway takes max(T_s, T_c + peak): the stuck foot needs the friction's zero-speed value to start. The
   issue's review figures, 0.83 N m at 0.02 rad/s, are this profile's static minus Coulomb friction
   (0.93 - 0.10 N m): the nominal plant's drop from breakaway to sliding friction spread over 0.02 rad/s.
