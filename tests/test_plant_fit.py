@@ -338,7 +338,8 @@ def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
     """The fit's model is the bench's plant here: its residuals are independent of the command (fit.json's adequacy
     verdict, the same in fit.md). The same recording against a model that is clearly wrong, the fitted plant with three
     times its Coulomb friction and half its damping: the check says the model misses something and names the signals
-    and lags (the rates over plants with and without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py)."""
+    and lags. (The rates over plants with and without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py.)
+    """
     from host_tools.calibration.fit_adequacy import MISSES, adequacy
     from host_tools.calibration.fit_data import load_experiment
     from host_tools.calibration.fit_model import base_values
