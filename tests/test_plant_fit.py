@@ -115,7 +115,9 @@ def test_too_little_excitation_is_not_identifiable(tmp_path):
     assert not lag["identifiable"] or abs(lag["value"] - true_lag) <= lag["ci95_half_width"], lag
     text = (run / "fit" / "plant_fitted.toml").read_text()
     assert "output_inertia_kg_m2 not identifiable (kept)" in text
-    assert main(["fit", str(run), "--no-plot"]) == 0  # a second fit replaces the first one's directory
+    # a second fit (one parameter: quick) replaces the first one's directory
+    assert main(["fit", str(run), "--no-plot", "--params", "current_time_constant_s"]) == 0
+    assert set(json.loads((run / "fit" / "fit.json").read_text())["params"]) == {"current_time_constant_s"}
 
 
 def test_fit_reports_its_noise_scales_and_the_samples_left_out(experiment):
