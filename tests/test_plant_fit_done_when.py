@@ -4,7 +4,7 @@ three half-widths of its 95 % interval and inertia, damping, Coulomb friction an
 the same under another BLAS kernel and thread count with the data nudged by 1e-12; the fitted twin
 predicts a different run (10 strides of gait tracking on the same plant, `pafp fit --validate`) with at least 90 %
 fit on the encoder angle and 75 % on the current. A 10 s experiment keeps the test short (the default 29 s one's
-figures are in docs/calibration.md, from the command it names)."""
+figures: tests/benchmarks/test_bench_fit_coverage.py)."""
 
 from __future__ import annotations
 
