@@ -24,8 +24,9 @@ from hal.virtual.plant.gap import Gap
 
 __all__ = ["GAP_BLEND", "GapShare", "reach_time"]
 
-# the blend's half-width as a share of the command period: wide enough that the cost's slope across it is that of a
-# quarter period of torque, narrow enough that three crossings in four are the plant's own
+# the blend's half-width as a share of the command period: a crossing that ends within it of a command is blended (half
+# of them: a quarter period either side of each command), the others are the plant's own; the cost's step of a whole
+# period's torque becomes a ramp half a period wide
 GAP_BLEND = 0.25
 
 
