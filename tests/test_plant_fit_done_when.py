@@ -97,11 +97,11 @@ def test_residual_bias_is_within_three_half_widths(fitted):
     assert all(e <= 3.0 for e in errors.values()), errors
 
 
-@pytest.mark.xfail(reason="not yet measured on the full fit: the cost is now continuous where a backlash crossing ends "
-                          "(fit_gap.py), and on a reduced fit of the hand-made recording (4 parameters, 3 s) the values "
-                          "agreed within 1e-9 half-widths under Sandybridge with one thread and a 1e-12 nudge; the "
-                          "session that made it could not run a full fit (a pure-Python fit at load 14-18). Remove "
-                          "this mark when it passes (issue 34)", strict=False)
+@pytest.mark.xfail(reason="not yet measured on the full fit: the cost is now continuous where a backlash crossing "
+                          "ends (fit_gap.py); a reduced fit of the hand-made recording (4 parameters, 3 s) agreed "
+                          "within 1e-9 half-widths under Sandybridge with one thread and a 1e-12 nudge, but so did the "
+                          "former code there (it does not reproduce the failure), and a full pure-Python fit did not "
+                          "finish at load 14-18. Remove this mark when it passes (issue 34)", strict=False)
 def test_the_fit_does_not_hang_on_rounding(fitted):
     """The same recording fitted in a process of its own under another BLAS kernel and one thread (`_other_kernel`),
     its data nudged by 1e-12 (`NUDGED`), gives every identified value within 0.05 of its half-width of this process's
