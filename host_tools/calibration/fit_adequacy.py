@@ -15,10 +15,12 @@ IMU's noise are colored); this one does not need white residuals. (Ljung's joint
 tried first: the command is smooth, so its lags' covariance is nearly singular, and on the hand-made plant at its
 true values it read 621 against a bound of 52.)
 
-A lag fails when |c(l)| / sd exceeds ``Z_BOUND``: FAMILY_ALPHA shared over every lag of the six tests, so a
-correct model fails about one fit in a hundred or fewer. When one does, the fit's 95 % intervals hold only for the
-model: they bound the noise's part of the error, not a bias from what the model lacks; the failing signals and
-lags are listed.
+A lag fails when |c(l)| / sd exceeds ``Z_BOUND``: FAMILY_ALPHA shared over every lag of the six tests, so that, were
+the bound exact, a correct model would fail one fit in a hundred or fewer. It is not exact: the experiment is closed
+loop (the PD hold's part of the command follows the measured angle), and the rates on correct and on misspecified
+models are what tests/benchmarks/test_bench_fit_coverage.py measures. When one fails, the fit's 95 % intervals hold
+only for the model: they bound the noise's part of the error, not a bias from what the model lacks; the failing
+signals and lags are listed.
 """
 
 from __future__ import annotations
