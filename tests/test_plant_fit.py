@@ -115,7 +115,9 @@ def test_too_little_excitation_is_not_identifiable(tmp_path):
     assert not lag["identifiable"] or abs(lag["value"] - true_lag) <= lag["ci95_half_width"], lag
     text = (run / "fit" / "plant_fitted.toml").read_text()
     assert "output_inertia_kg_m2 not identifiable (kept)" in text
-    assert main(["fit", str(run), "--no-plot"]) == 0  # a second fit replaces the first one's directory
+    # a second fit (one parameter: quick) replaces the first one's directory
+    assert main(["fit", str(run), "--no-plot", "--params", "current_time_constant_s"]) == 0
+    assert set(json.loads((run / "fit" / "fit.json").read_text())["params"]) == {"current_time_constant_s"}
 
 
 def test_fit_reports_its_noise_scales_and_the_samples_left_out(experiment):
@@ -332,3 +334,41 @@ def test_a_column_made_of_a_switching_step_is_not_a_slope():
     x2 = np.array([1.0, 2.0])
     jac2, r2 = _secant_jacobian(fun, x2, steps, hi)
     assert _switching_columns(fun, x2, steps, lo, hi, jac2, r2, [0, 1]) == []
+
+
+def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
+    """Every fit reports the adequacy check (fit.json's adequacy: each segment's three signals; its verdict in fit.md).
+    The same recording against a model that is clearly wrong, the fitted plant with three times its Coulomb friction
+    and half its damping: the check says the model misses something and names the signals and lags. (The rates over
+    plants with and without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py.)"""
+    from host_tools.calibration.fit_adequacy import MISSES, adequacy
+    from host_tools.calibration.fit_data import load_experiment
+    from host_tools.calibration.fit_model import base_values
+    from host_tools.calibration.plant_fit import fit_parts
+
+    _, run, out, _ = experiment
+    s = json.loads((out / "fit.json").read_text())
+    a = s["adequacy"]
+    assert a["verdict"] in ("adequate", MISSES) and bool(a["failing"]) == (a["verdict"] == MISSES), a
+    assert set(a["tests"]) == {"fit", "held_out"} and all(set(d) == {"angle", "current", "imu"}
+                                                           for d in a["tests"].values())
+    assert f"Model adequacy: {a['verdict']}" in (out / "fit.md").read_text()
+    exp = load_experiment(run)
+    fit_part, held, _ = fit_parts(exp)
+    values = {**base_values(load_plant_params()), **{n: p["value"] for n, p in s["params"].items()}}
+    wrong = {**values, "coulomb_friction_nm": 3.0 * values["coulomb_friction_nm"],
+             "foot_damping_nm_s_per_rad": 0.5 * values["foot_damping_nm_s_per_rad"]}
+    bad = adequacy(load_plant_params(), wrong, {"fit": fit_part, "held_out": held})
+    assert bad["verdict"] == MISSES and bad["failing"], bad
+    assert all(" at lags " in f and " ms (|z| up to " in f for f in bad["failing"])
+
+
+@pytest.mark.xfail(reason="not yet: the check's bound is not exact in closed loop (the PD hold's command follows the "
+                          "encoder). On the packaged plant's 10 s recording (noise seed 0), six parameters refitted "
+                          "from the truth, it flagged the encoder angle at lag 0 (|z| 6.4) and the current at 24-36 ms "
+                          "(4.7) against a bound of 4.0 (issue 34)", strict=False)
+def test_the_check_passes_the_correct_model(experiment):
+    """The fit's model is the bench's plant here: the check finds its residuals independent of the command."""
+    _, _, out, _ = experiment
+    a = json.loads((out / "fit.json").read_text())["adequacy"]
+    assert a["verdict"] == "adequate" and not a["failing"], a["failing"]

@@ -1,10 +1,10 @@
 """Issue 21's done-when, end to end on the virtual bench: on a plant that is not the nominal one (--plant-seed 7, and
 the hand-made plant file), `pafp run --experiment sysid` then `pafp fit` recovers every identified parameter within
 three half-widths of its 95 % interval and inertia, damping, Coulomb friction and the gravity moment within 10 %,
-the same under another BLAS kernel and thread count; the fitted twin
+the same under another BLAS kernel and thread count with the data nudged by 1e-12; the fitted twin
 predicts a different run (10 strides of gait tracking on the same plant, `pafp fit --validate`) with at least 90 %
 fit on the encoder angle and 75 % on the current. A 10 s experiment keeps the test short (the default 29 s one's
-figures are in docs/calibration.md, from the command it names)."""
+figures: tests/benchmarks/test_bench_fit_coverage.py)."""
 
 from __future__ import annotations
 
@@ -28,17 +28,17 @@ QUIET = ["--quiet", "--no-plot", "--no-trace"]
 
 @pytest.fixture(scope="module", params=[["--plant-seed", "7"], ["--plant", str(HANDMADE)]], ids=["seed7", "handmade"])
 def fitted(request, tmp_path_factory):
-    """(fit.json of `pafp fit` here, the truth, fit.json of the same fit in a process of its own under another BLAS
-    kernel and one thread: `_other_kernel`), the two fits side by side (two cores: about one fit's time)."""
+    """(fit.json of `pafp fit` here, the truth, the same recording fitted in a process of its own under another BLAS
+    kernel and one thread (`_other_kernel`) with its data nudged by 1e-12 (`NUDGED`)), the two fits side by side (two
+    cores: about one fit's time)."""
     d = tmp_path_factory.mktemp("done")
     (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
     plant = request.param
     assert main(["run", "--experiment", "sysid", "--profile", str(d / "fw.toml"), *plant, *QUIET,
                  "--capture", str(d / "capture"), "--out", str(d / "sysid")]) == 0
     env = {**os.environ, **_other_kernel(), "PYTHONPATH": str(ROOT)}
-    other = subprocess.Popen([sys.executable, "-m", "host_tools", "fit", str(d / "sysid"), "--no-plot", "--out",
-                              str(d / "other")], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                             text=True)
+    other = subprocess.Popen([sys.executable, "-c", NUDGED, str(d / "sysid"), str(d / "other.json")], cwd=ROOT,
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         # a different run: 10 strides of gait tracking on the same plant (another seed: other noise, other offsets)
         gait = d / "gait"
@@ -49,7 +49,21 @@ def fitted(request, tmp_path_factory):
         other.kill()
     assert other.returncode == 0, err
     return (json.loads((d / "fit" / "fit.json").read_text()), truth_of(plant),
-            json.loads((d / "other" / "fit.json").read_text()))
+            json.loads((d / "other.json").read_text()))
+
+
+# the fit of argv[1] with its encoder angle, IMU pitch, current and velocity multiplied by 1 + 1e-12: {name: value}
+# into argv[2]
+NUDGED = """
+import json, sys
+from pathlib import Path
+from host_tools.calibration.fit_data import load_experiment
+from host_tools.calibration.fit_model import load_base
+from host_tools.calibration.plant_fit import fit_plant
+exp = load_experiment(Path(sys.argv[1]))
+exp.angle, exp.imu, exp.current, exp.vel = (x * (1.0 + 1e-12) for x in (exp.angle, exp.imu, exp.current, exp.vel))
+Path(sys.argv[2]).write_text(json.dumps(fit_plant(load_base(None), exp).values))
+"""
 
 
 def _other_kernel() -> dict[str, str]:
@@ -83,18 +97,18 @@ def test_residual_bias_is_within_three_half_widths(fitted):
     assert all(e <= 3.0 for e in errors.values()), errors
 
 
-@pytest.mark.xfail(reason="not yet: on the hand-made plant the current lag came 0.37 half-widths apart (inertia "
-                          "0.07) under Sandybridge with one thread, seed 7 within 0.05. The model's backlash crossing "
-                          "ends on a whole command period, so a parameter moved by a millionth can move one reply's "
-                          "mean current by 0.1 A: a cliff of ~200 chi-square units that the solver ends on one side "
-                          "of or the other as rounding takes it (issue 34)", strict=False)
-def test_the_fit_does_not_hang_on_the_blas_kernel(fitted):
-    """The same recording fitted by `pafp fit` in a process of its own under another BLAS kernel and one thread
-    (`_other_kernel`) gives every identified value within 0.05 of its half-width of this process's fit. Before the
-    solver worked in each parameter's own scale (host_tools/calibration/fit_solver.py) the answer moved by up to
-    0.16 half-widths between Haswell's and Sandybridge's kernels on seed 7, and by 0.3 on another machine."""
+@pytest.mark.xfail(reason="not yet: with the cost continuous where a backlash crossing ends (fit_gap.py) the "
+                          "hand-made plant's current lag came 0.036 half-widths apart (0.37 before), but the Coulomb "
+                          "friction 0.144 and the damping 0.13 (Sandybridge, one thread, the data nudged by 1e-12; 34 "
+                          "against 45 simulations: the solver's path still differs) (issue 34)", strict=False)
+def test_the_fit_does_not_hang_on_rounding(fitted):
+    """The same recording fitted in a process of its own under another BLAS kernel and one thread (`_other_kernel`),
+    its data nudged by 1e-12 (`NUDGED`), gives every identified value within 0.05 of its half-width of this process's
+    fit. The fit's cost is continuous in the parameters where a backlash crossing ends (host_tools/calibration/
+    fit_gap.py) and its solver works in each parameter's own scale (fit_solver.py): without the first, the hand-made
+    plant's current lag came 0.37 half-widths apart under Sandybridge with one thread."""
     s, _, other = fitted
-    apart = {n: abs(p["value"] - other["params"][n]["value"]) / p["ci95_half_width"] for n, p in s["params"].items()
+    apart = {n: abs(p["value"] - other[n]) / p["ci95_half_width"] for n, p in s["params"].items()
              if p["identifiable"] and p["ci95_half_width"]}
     assert len(apart) >= 5 and max(apart.values()) <= 0.05, apart
 

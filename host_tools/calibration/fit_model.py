@@ -22,6 +22,7 @@ import numpy as np
 
 from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
 from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment
+from host_tools.calibration.fit_gap import GAP_BLEND, GapShare
 
 __all__ = ["DEFAULT_FIT", "IMU_FRAME_AGE_S", "PARAMS", "SIGMA", "FitParam", "base_values", "encoder_step",
            "fit_percentage", "fit_percentages", "noise_scales", "plant_with", "residuals", "rotor_side_sd", "simulate",
@@ -167,6 +168,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     tau = params.current_time_constant_s
     peak = params.peak_current_a
     ratio = params.total_ratio
+    band = GAP_BLEND * float(np.median(np.diff(t_cmd))) if n_cmd > 1 else 1e-3
 
     def run_window(k: int, end: int, t0: float, v_start: float, project: bool = False) -> None:
         """Simulate window [k, end) from the measured angle at t0, at v_start (0: stuck), into the arrays; with
@@ -179,10 +181,20 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
             start -= 0.5 * backlash / params.belt_ratio * float(np.sign(i_cmd[c]))
         start_angle = min(hi, max(lo, start))
         i0 = float(exp.current[k])
+        # the backlash is the fit's (`fit_gap`): the plant runs without it and is given the share of each command
+        # that reaches the output
         plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v_start,
-                      start_time_s=t0, backlash_rad=backlash, initial_current_a=i0)
+                      start_time_s=t0, initial_current_a=i0)
+        gap = GapShare(params, backlash, t0, band) if backlash > 0.0 else None
+
+        def command(amps: float, te: float) -> None:
+            if gap is not None:
+                amps = max(-peak, min(peak, amps))
+                amps *= gap.share(te, amps, plant.output_accel_rad_s2(te))
+            plant.set_current_command(amps, te)
+
         if c >= 0:
-            plant.set_current_command(float(i_cmd[c]), t0)
+            command(float(i_cmd[c]), t0)
         target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
         c += 1
         r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
@@ -210,11 +222,11 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                     i_last, t_last = plant.current_q_a(te), te
                 if tr <= ta:
                     means[r] = acc / (te - t_mark) if te > t_mark else i_last
-                    positions[r] = plant.motor_angle_rad(te)
+                    positions[r] = plant.motor_angle_rad(te) + (0.0 if gap is None else gap.angle(te))
                     acc, t_mark = 0.0, te
                     r += 1
                 else:
-                    plant.set_current_command(float(i_cmd[c]), te)
+                    command(float(i_cmd[c]), te)
                     target = max(-peak, min(peak, float(i_cmd[c])))
                     c += 1
             th = plant.output_angle_rad(tj)

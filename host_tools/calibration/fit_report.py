@@ -20,7 +20,7 @@ from host_tools.calibration.fit_model import PARAMS, fit_percentages, plant_with
 from host_tools.calibration.plant_fit import HELD_OUT_EVERY, FitResult
 from host_tools.outdir import write_atomic
 
-__all__ = ["figure", "fit_figure", "fit_json", "validate", "verdict", "write_fit_outputs"]
+__all__ = ["adequacy_lines", "figure", "fit_figure", "fit_json", "validate", "verdict", "write_fit_outputs"]
 
 # fit parameter -> the profile keys it sets
 _KEYS = {"output_inertia_kg_m2": ("foot_inertia_kg_m2",), "foot_damping_nm_s_per_rad": ("foot_damping_nm_s_per_rad",),
@@ -105,7 +105,7 @@ def fit_json(r: FitResult, exp: Experiment, extra: dict | None = None) -> dict:
             # used samples in windows of a stall (their writes' arrival windows over stall_bound_ms on average):
             # out of the fit and of the fit percentages (serial mode; 0 when the timing is exact)
             "stalled_samples_left_out": dict(r.stalled), "stall_bound_ms": num(r.stall_bound_ms),
-            **(extra or {})}
+            "adequacy": r.adequacy, **(extra or {})}
 
 
 def validate(base: PlantParams, r: FitResult, other: Experiment) -> dict:
@@ -226,6 +226,7 @@ def _markdown(s: dict) -> str:
                  "The timing's column is 0: the virtual bench's writes arrive when the fit takes them to.")
               + " The stuck starts' column: a window that starts stuck starts at its encoder reading, which places "
               "the foot only to its count; the shift of the fit over starts drawn within the count is added likewise."]
+    lines += ["", *adequacy_lines(s["adequacy"])]
     lines += ["", "Fit percentage, 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (MATLAB `compare`), windowed simulation:", "",
               "| segment | angle | current | IMU |", "|---|---|---|---|"]
     for seg, d in s["fit_percent"].items():
@@ -252,6 +253,25 @@ def _markdown(s: dict) -> str:
               "windows shaded, left out), "
               "`correlations.png`. The fitted profile is `plant_fitted.toml`: `pafp run --plant` takes it."]
     return "\n".join(lines) + "\n"
+
+
+def adequacy_lines(a: dict) -> list[str]:
+    """fit.md's paragraph on the model-adequacy check (fit.json's ``adequacy``)."""
+    if not a:
+        return []
+    if not a["tests"]:
+        return [f"**Model adequacy: {a['verdict']}.** The intervals hold only for the model."]
+    head = (f"**Model adequacy: {a['verdict']}.** The residuals of angle, current and IMU pitch against the command "
+            f"at lags 0-{a['max_lag_ms']:g} ms (cross-correlation, its bound corrected for colored residuals; "
+            f"|z| bound {a['z_bound']:g}, set so that an open-loop experiment's correct model would fail "
+            f"{100 * a['family_alpha']:g} % of fits; the closed loop can flag a correct one: docs/calibration.md, "
+            "Limits)")
+    if not a["failing"]:
+        return [head + ": independent of it on both segments. The intervals hold for this model; an effect it "
+                "lacks that leaves no trace in the command's direction is not excluded."]
+    return [head + ": they follow the command, so the model likely lacks an effect the bench has. **The 95 % intervals "
+            "above are conditional on the model**: they bound the noise's part of the error, not the bias from what "
+            "it lacks. Failing:", "", *(f"- {f}" for f in a["failing"])]
 
 
 def write_fit_outputs(out: Path, base: PlantParams, base_text: str, r: FitResult, exp: Experiment,

@@ -9,7 +9,8 @@ Jacobian at the solution gives 95 % intervals (with the rotor side's interval, a
 arrival the record leaves unknown, carried into them: `fit_profiles`, `fit_consider`) and the identifiability verdict:
 a parameter whose column is
 (nearly) a combination of the others' (variance inflation, from the normalised Jacobian's conditioning) is reported
-"not identifiable", not given a confident number.
+"not identifiable", not given a confident number. Every fit ends with the model-adequacy check (`fit_adequacy`):
+whether its residuals are independent of the command, without which the intervals hold only for the model.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 
 from hal.virtual.plant import PlantParams
 from host_tools.calibration import fit_solver as solver
+from host_tools.calibration.fit_adequacy import adequacy
 from host_tools.calibration.fit_consider import Solution, stuck_starts_term, timing_term
 from host_tools.calibration.fit_data import STALL_BOUND_S, Experiment
 from host_tools.calibration.fit_model import (
@@ -79,6 +81,8 @@ class FitResult:
     stall_bound_ms: float = 0.0
     # the part of each 95 % half-width that is the encoder's count at the windows that start stuck (`stuck_starts_term`)
     stuck_ci95: dict[str, float] = field(default_factory=dict)
+    # the model-adequacy check (`fit_adequacy.adequacy`): the residuals' independence of the command, and the verdict
+    adequacy: dict = field(default_factory=dict)
 
 
 COLLINEARITY_LIMIT = 20.0  # above this the parameter's column is nearly a combination of the others
@@ -284,7 +288,8 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
                      cost, time.perf_counter() - wall0, (t0, t1), message,
                      fixed_checks, tuple(names), scales, unheard, rotor_ci95, rotor_side_sd(base), timing_ci95,
                      0.0 if exp.bounds is None else 1e3 * float(np.median(exp.bounds[:, 1] - exp.bounds[:, 0])),
-                     left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S, stuck_ci95)
+                     left_out, 0.0 if exp.bounds is None else 1e3 * STALL_BOUND_S, stuck_ci95,
+                     adequacy(base, v, {"fit": fit_part, "held_out": held}))
 
 
 def _covariance(jac: np.ndarray, r: np.ndarray, clusters: np.ndarray) -> np.ndarray:

@@ -107,6 +107,9 @@ def run(args: argparse.Namespace) -> int:
     for seg, d in s["fit_percent"].items():
         print(f"  fit % on the {seg.replace('_', '-')} part: angle {_g(d['angle'], '.1f')}, current "
               f"{_g(d['current'], '.1f')}, IMU {_g(d['imu'], '.1f')}")
+    adequacy = s["adequacy"]
+    print(f"  model adequacy: {adequacy['verdict']}" + ("" if not adequacy["failing"] else
+          " (the intervals are conditional on the model: " + "; ".join(adequacy["failing"]) + ")"))
     if other is not None:
         v = s["validation"]["fit_percent"]
         print(f"  fit % on {args.validate}: angle {_g(v['angle'], '.1f')}, current {_g(v['current'], '.1f')}, "
