@@ -36,13 +36,27 @@ class StopSignals:
         self.at_ns: int | None = None
         self.installed = False
         self._previous: dict[int, object] = {}
+        self._again = False  # redeliver(): the next delivery is the first signal again, not a second one
 
     @property
     def exit_code(self) -> int | None:
         """128 + the signal's number, or None when no signal came."""
         return EXIT_CODES[self.name] if self.name is not None else None
 
+    def redeliver(self) -> None:
+        """Deliver the first signal again while the handlers are installed: its ``on_stop`` raised where Python
+        swallows exceptions (a garbage-collector callback, a ``__del__``: sys.unraisablehook)."""
+        if self.name is not None and self._previous:
+            self._again = True
+            main = threading.main_thread().ident  # to the main thread: a sleep or a wait there ends at once
+            signal.pthread_kill(main if main is not None else threading.get_ident(), signal.Signals[self.name])
+
     def _handle(self, signum: int, frame: FrameType | None) -> None:
+        if self._again:
+            self._again = False
+            if self.on_stop is not None:
+                self.on_stop()
+            return
         if self.name is not None:
             raise KeyboardInterrupt(f"second signal {signal.Signals(signum).name} during the stop path")
         self.at_ns = self.clock_ns()

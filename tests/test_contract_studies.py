@@ -157,10 +157,14 @@ def test_a_journal_torn_by_a_kill_is_cut_to_its_whole_rows_before_the_next_row(t
 
 # ---- a stop signal -----------------------------------------------------------------------------------------
 
+POINTS = 48
+
+
 def test_faults_stopped_by_a_signal_reports_what_finished_and_how_to_resume(tmp_path, sig=signal.SIGTERM):
     """SIGTERM (SIGINT and SIGHUP take the same path: host_tools/studies/interrupt.py; the sweep's test sends a
     Ctrl-C to the whole process group)."""
-    spec, out = _campaign(tmp_path, [round(k / 12, 4) for k in range(12)]), tmp_path / "out"
+    # 48 points: on the compiled build 12 had all finished between the first journal row and the signal
+    spec, out = _campaign(tmp_path, [round(k / POINTS, 4) for k in range(POINTS)]), tmp_path / "out"
     proc = subprocess.Popen([*PAFP, "faults", str(spec), "--out", str(out), "--workers", "1", "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
                             start_new_session=True)
@@ -174,11 +178,12 @@ def test_faults_stopped_by_a_signal_reports_what_finished_and_how_to_resume(tmp_
     assert proc.returncode == 128 + sig, err
     assert "leaked semaphore" not in err and "Traceback" not in err, err
     n = len(journal.read_text().splitlines())
-    assert 1 <= n < 12
-    assert f"pafp faults: stopped by {sig.name} after " in err and f"{n} of 12 points finished, kept in {out}" in err
+    assert 1 <= n < POINTS
+    assert f"pafp faults: stopped by {sig.name} after " in err and f"{n} of {POINTS} points finished, kept in {out}" \
+        in err
     assert "`--resume` runs the rest" in err
     report = (out / "report.md").read_text()
-    assert f"**Interrupted** by {sig.name}: {n} of 12 points finished" in report and "--resume" in report
+    assert f"**Interrupted** by {sig.name}: {n} of {POINTS} points finished" in report and "--resume" in report
 
 
 # ---- one point with the full outputs; criteria ------------------------------------------------------------

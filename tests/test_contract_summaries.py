@@ -5,6 +5,7 @@ printout does not call the supervisor's RUN time tracking; an interrupted study 
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import signal
@@ -66,3 +67,25 @@ def test_an_interruption_says_after_how_long_and_how_far_the_study_got():
     line = stopped_line("design", stop.value, 2, 8, Path("runs/d"))
     assert line.startswith("pafp design: stopped by SIGINT after ") and "n/a" not in line
     assert line.endswith(" s: 2 of 8 points finished, kept in runs/d; `--resume` runs the rest")
+
+
+def test_a_stop_signal_that_lands_in_a_gc_callback_still_interrupts(capsys):
+    """distributed's GCDiagnosis runs Python in gc callbacks, where a raised exception is printed and dropped: a
+    SIGTERM handled there once let a whole campaign run on and exit 0 (tests/test_contract_studies.py)."""
+    fired: list[int] = []
+
+    def callback(phase: str, info: dict) -> None:
+        if phase == "start" and not fired:
+            fired.append(1)
+            signal.raise_signal(signal.SIGTERM)
+            sum(range(1000))  # Python code in the callback: the handler runs, and raises, here
+
+    gc.callbacks.append(callback)
+    try:
+        with pytest.raises(Interrupted) as stop, interrupting():
+            gc.collect()
+            time.sleep(30)  # the signal delivered again lands here
+    finally:
+        gc.callbacks.remove(callback)
+    assert fired and stop.value.signal == "SIGTERM" and stop.value.exit_code == 143
+    assert "Exception ignored" not in capsys.readouterr().err

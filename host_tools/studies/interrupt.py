@@ -17,6 +17,8 @@ signal (the report's "stopped after"). Their outputs are checked before the work
 
 from __future__ import annotations
 
+import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -25,6 +27,10 @@ from pathlib import Path
 from host_tools.stop_signals import EXIT_CODES, StopSignals
 
 __all__ = ["Interrupted", "interrupting", "stopped_line"]
+
+REDELIVER_AFTER_S = 0.02
+"""How long after Python dropped the Interrupted (raised in a gc callback) its signal comes again: long enough for
+the callback to return, so that the handler runs in the job's own code (if not, it is dropped and comes again)."""
 
 
 class Interrupted(BaseException):
@@ -41,16 +47,32 @@ class Interrupted(BaseException):
 @contextmanager
 def interrupting() -> Iterator[StopSignals]:
     """While entered, the first stop signal raises Interrupted where the main thread is (a second one raises
-    KeyboardInterrupt, StopSignals' way out)."""
+    KeyboardInterrupt, StopSignals' way out). Where Python drops that exception (the signal landed in a
+    garbage-collector callback), the signal is delivered again, so the stop is never lost."""
     signals = StopSignals()
     t0 = time.perf_counter()
 
     def raise_now() -> None:
         raise Interrupted(signals.name or "SIGINT", time.perf_counter() - t0)
 
+    def again() -> None:  # once the hook and the callback that dropped it have returned
+        time.sleep(REDELIVER_AFTER_S)
+        signals.redeliver()
+
+    def swallowed(unraisable: sys.UnraisableHookArgs) -> None:  # raised inside a gc callback (distributed's
+        if isinstance(unraisable.exc_value, Interrupted):   # GCDiagnosis) and dropped: delivered again
+            threading.Thread(target=again, daemon=True).start()
+        else:
+            previous_hook(unraisable)
+
     signals.on_stop = raise_now
-    with signals:
-        yield signals
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = swallowed
+    try:
+        with signals:
+            yield signals
+    finally:
+        sys.unraisablehook = previous_hook
 
 
 def stopped_line(command: str, stop: Interrupted, done: int, total: int, out: Path, what: str = "points") -> str:
