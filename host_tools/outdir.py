@@ -267,6 +267,17 @@ class RunDir:
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
 
+    @contextmanager
+    def filling(self) -> Iterator[Path]:
+        """Yield the staging directory to write into and publish it when the block ends; on any exception
+        (BaseException too: a stop signal, a failed write) the staging directory is removed and the exception
+        goes on, so ``out`` keeps what it held."""
+        try:
+            yield self.path
+            self.publish()
+        finally:
+            self.discard()
+
     def discard(self) -> None:
         """Remove the staging directory and what it holds (a run that will not be published), unless
         :meth:`publish` kept it."""

@@ -78,23 +78,17 @@ def run(args: argparse.Namespace) -> int:
     print(f"pafp fit: {args.run_dir}: {len(exp.t)} samples, {len(exp.t_cmd)} commands, fitting {len(names)} "
           f"parameters -> {run_dir.out}", flush=True)
     try:
-        with interrupting():  # a stop signal: nothing published, the staging directory removed
+        with interrupting(), run_dir.filling() as staged:  # a stop signal: nothing published
             r = fit_plant(base, exp, names)
             extra = {"validation": validate(base, r, other)} if other is not None else {}
-            s = write_fit_outputs(run_dir.path, base, base_text, r, exp, extra, plot=not args.no_plot)
-            run_dir.publish()
+            s = write_fit_outputs(staged, base, base_text, r, exp, extra, plot=not args.no_plot)
     except Interrupted as stop:
-        run_dir.discard()
         print(f"pafp fit: stopped by {stop.signal} after {stop.elapsed_s:.1f} s of fitting: nothing written, "
               f"{run_dir.out} keeps what it held", file=sys.stderr)
         return stop.exit_code
     except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
-        run_dir.discard()
         print(output_error("fit", e, run_dir), file=sys.stderr)
         return EXIT_WRITE_FAILED
-    except BaseException:
-        run_dir.discard()
-        raise
     print(f"  {r.nfev} simulations in {r.wall_s:.1f} s ({r.message})")
     print(f"  {'parameter':<28}{'value':>12}{'95 % ±':>12}{'rotor side':>12}{'timing':>10}{'stuck':>10}  verdict")
     for n, p in s["params"].items():
@@ -149,27 +143,18 @@ def _run_csv(args: argparse.Namespace) -> int:
           + ", ".join(f"{c.role}={c.header}[{c.unit}]" for c in log.columns.values()) + f" -> {run_dir.out}",
           flush=True)
     try:
-        r = fit_motor(log, gear_ratio=args.gear_ratio, kt_nm_per_a=args.kt, window_s=args.window_ms * 1e-3,
-                      min_speed_rad_s=args.min_speed)
-    except ValueError as e:  # too little motion: said before anything is written
-        run_dir.discard()
-        print(input_error("fit", e), file=sys.stderr)
-        return 2
-    except BaseException:
-        run_dir.discard()
-        raise
-    try:
-        doc, md = report(log, r, args.gear_ratio)
-        write_atomic(run_dir.path / "fit.json", json.dumps(doc, indent=2) + "\n")
-        write_atomic(run_dir.path / "fit.md", md)
-        run_dir.publish()
-    except (OSError, OutDirError) as e:
-        run_dir.discard()
+        with run_dir.filling() as staged:
+            r = fit_motor(log, gear_ratio=args.gear_ratio, kt_nm_per_a=args.kt, window_s=args.window_ms * 1e-3,
+                          min_speed_rad_s=args.min_speed)
+            doc, md = report(log, r, args.gear_ratio)
+            write_atomic(staged / "fit.json", json.dumps(doc, indent=2) + "\n")
+            write_atomic(staged / "fit.md", md)
+    except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
         print(output_error("fit", e, run_dir), file=sys.stderr)
         return EXIT_WRITE_FAILED
-    except BaseException:
-        run_dir.discard()
-        raise
+    except ValueError as e:  # too little motion: said before anything is written
+        print(input_error("fit", e), file=sys.stderr)
+        return 2
     print(f"  {'parameter':<32}{'value':>12}{'95 % ±':>12}  unit / verdict")
     for k, p in doc["params"].items():
         verdict = "" if p["identifiable"] else "  NOT IDENTIFIABLE"

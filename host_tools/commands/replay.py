@@ -67,37 +67,32 @@ def run(args: argparse.Namespace) -> int:
         return 2
     print(f"pafp replay: {path} ({header.get('mode')} run)"
           + (" with a changed configuration" if changed else "") + f" -> {out}")
-    try:
-        with (run_dir.path / "telemetry.bin").open("wb") as tel:
-            try:
-                r = replay_record(path, fw_cfg if changed else None, controller, tel)
-            except RecordError as e:
-                print(f"pafp replay: {e}", file=sys.stderr)
-                run_dir.discard()
-                return 2
-        from host_tools.reports.report import _write_telemetry_csv
+    from host_tools.reports.report import _write_telemetry_csv
 
-        data = (run_dir.path / "telemetry.bin").read_bytes()
-        decoder = _write_telemetry_csv(data, run_dir.path / "telemetry.csv", r.firmware.f_cpu_hz,
-                                       extra_names=r.firmware.published_names)
-        s = {"record": str(path), "mode": r.header.get("mode"), "identical": r.identical, "jobs": r.jobs,
-             "diverging_jobs": r.diverging_jobs, "first_divergence": r.first.as_dict() if r.first else None,
-             "ports": r.streams, "starved_calls": r.starved, "unused_inputs": r.unused,
-             "changed": r.changed, "sim_time_s": round(r.sim_time_s, 6), "wall_time_s": round(r.wall_time_s, 3),
-             "realtime_factor": round(r.sim_time_s / r.wall_time_s, 2) if r.wall_time_s > 0 else None,
-             "recorded_run": r.footer, "telemetry_decoder": decoder}
-        write_atomic(run_dir.path / "summary.json", json.dumps(s, indent=2) + "\n")
-        write_atomic(run_dir.path / "divergence.json",
-                     json.dumps(r.first.as_dict() if r.first else None, indent=2) + "\n")
-        write_atomic(run_dir.path / "replay.md", _report(s))
-        run_dir.publish()
+    try:
+        with run_dir.filling() as staged:
+            with (staged / "telemetry.bin").open("wb") as tel:
+                r = replay_record(path, fw_cfg if changed else None, controller, tel)
+            data = (staged / "telemetry.bin").read_bytes()
+            decoder = _write_telemetry_csv(data, staged / "telemetry.csv", r.firmware.f_cpu_hz,
+                                           extra_names=r.firmware.published_names)
+            s = {"record": str(path), "mode": r.header.get("mode"), "identical": r.identical, "jobs": r.jobs,
+                 "diverging_jobs": r.diverging_jobs, "first_divergence": r.first.as_dict() if r.first else None,
+                 "ports": r.streams, "starved_calls": r.starved, "unused_inputs": r.unused,
+                 "changed": r.changed, "sim_time_s": round(r.sim_time_s, 6),
+                 "wall_time_s": round(r.wall_time_s, 3),
+                 "realtime_factor": round(r.sim_time_s / r.wall_time_s, 2) if r.wall_time_s > 0 else None,
+                 "recorded_run": r.footer, "telemetry_decoder": decoder}
+            write_atomic(staged / "summary.json", json.dumps(s, indent=2) + "\n")
+            first = r.first.as_dict() if r.first else None
+            write_atomic(staged / "divergence.json", json.dumps(first, indent=2) + "\n")
+            write_atomic(staged / "replay.md", _report(s))
+    except RecordError as e:  # a record that ends or breaks mid-way: nothing published
+        print(f"pafp replay: {e}", file=sys.stderr)
+        return 2
     except (OSError, OutDirError) as e:  # a write failed (nothing published) or --out was taken meanwhile
-        run_dir.discard()
         print(output_error("replay", e, run_dir), file=sys.stderr)
         return EXIT_WRITE_FAILED
-    except BaseException:
-        run_dir.discard()
-        raise
     print(f"  replayed {r.jobs} jobs, {r.sim_time_s:.3f} s of firmware time in {r.wall_time_s:.2f} s "
           f"(realtime factor {s['realtime_factor']})")
     for name, p in r.streams.items():

@@ -437,14 +437,10 @@ def run_into(cfg: RunConfig, run_dir: RunDir, *, extra: dict | None = None, plot
 
     from host_tools.runner import run_virtual
 
-    try:
-        cfg = replace(cfg, stream_to=run_dir.path, trace_capacity=cfg.trace_capacity if trace else 0)
+    with run_dir.filling() as staged:
+        cfg = replace(cfg, stream_to=staged, trace_capacity=cfg.trace_capacity if trace else 0)
         result = run_virtual(cfg, progress=progress, should_stop=should_stop)
         if on_run is not None:
             on_run()
-        s = write_outputs(result, run_dir.path, extra, plot=plot, trace=trace)
-        run_dir.publish()
-    except BaseException:
-        run_dir.discard()
-        raise
+        s = write_outputs(result, staged, extra, plot=plot, trace=trace)
     return result, s
