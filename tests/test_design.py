@@ -277,6 +277,7 @@ body_masses_kg = [80]
 speeds = ["free"]
 strides = 3
 controller = "impedance"
+ground_sensors = "{design.ground_sensors}"
 
 [[belt]]
 driver_teeth = {design.belt_driver_teeth}

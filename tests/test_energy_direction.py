@@ -96,9 +96,6 @@ def test_the_law_s_moment_reaches_the_ankle_in_both_power_directions(velocity: f
         assert one_gain == pytest.approx(moment, rel=1e-12)
 
 
-ADULT_80KG = "profiles/designs/adult_80kg.toml"
-
-
 @pytest.mark.parametrize("speed", ["free", "fast"])
 def test_the_adult_design_regenerates_no_more_than_eta_back_of_the_walks_negative_ankle_work(speed: str) -> None:
     """Issue 38's bound on the shipped adult design's walk (3 strides; tests/benchmarks/test_bench_design_energy.py
@@ -107,9 +104,10 @@ def test_the_adult_design_regenerates_no_more_than_eta_back_of_the_walks_negativ
     negative ankle work (the ground's moment against the ankle's motion: what a bench measures with the pylon load
     cell and the encoder). Stricter than the issue's "/ eta_back"; the curve's negative work is not the bound of this
     walk (its ankle yields past the curve's angle in stance: docs/design.md)."""
-    from host_tools.studies.design_energy import walk_energy
+    from host_tools.studies.design_energy import ADULT_PROFILE, walk_energy
+    from profiles import profile_path
 
-    walk = walk_energy(ADULT_80KG, speed, strides=3)
+    walk = walk_energy(profile_path(ADULT_PROFILE), speed, strides=3)
     assert not walk.faults and walk.complete and len(walk.strides) == 3
     for stride in walk.strides:
         assert 0.0 < stride.regenerated_j <= stride.rotor_absorbed_j

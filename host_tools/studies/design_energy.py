@@ -27,7 +27,8 @@ from typing import Any
 
 from hal.virtual.events import EventDevice
 
-__all__ = ["SAMPLE_HZ", "StrideEnergy", "WalkEnergy", "docs_block", "energy_table", "stride_energies", "walk_energy"]
+__all__ = ["ADULT_PROFILE", "SAMPLE_HZ", "SPEEDS", "TABLE_STRIDES", "StrideEnergy", "WalkEnergy", "energy_table",
+           "stride_energies", "walk_energy"]
 
 SAMPLE_HZ = 2000
 """The sampler's rate: 20 samples a period of the fastest stance ringing seen (about 100 Hz would be needed for the
@@ -140,9 +141,8 @@ def walk_energy(profile: str | Path, speed: str | None, strides: int, body_mass_
 
 
 SPEEDS = ("free", "fast")
-ADULT_PROFILE = "profiles/designs/adult_80kg.toml"
+ADULT_PROFILE = "designs/adult_80kg.toml"  # profiles/ (profile_path)
 TABLE_STRIDES = 20
-MARK = "design_energy"  # docs/design.md's block: <!-- bench:design_energy --> ... <!-- /bench:design_energy -->
 
 
 def energy_table(walks: dict[str, WalkEnergy]) -> str:
@@ -158,40 +158,3 @@ def energy_table(walks: dict[str, WalkEnergy]) -> str:
             f"{m['rotor_absorbed_j']:.2f} | {m['regenerated_j']:.2f} | {w.curve_negative_j / w.eta_back:.2f} | "
             f"{w.eta_back * m['joint_negative_j']:.2f} |")
     return "\n".join(lines) + "\n"
-
-
-def docs_block(text: str) -> str | None:
-    """The table between docs/design.md's design_energy marks (None without them)."""
-    start, end = f"<!-- bench:{MARK} -->\n", f"<!-- /bench:{MARK} -->"
-    if start not in text or end not in text:
-        return None
-    return text.split(start, 1)[1].split(end, 1)[0]
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python -m host_tools.studies.design_energy [--write]`: the adult design's 20-stride ledgers at free and fast
-    speed; print the table, or with --write put it into docs/design.md (tests/benchmarks checks it is current)."""
-    import argparse
-    import sys
-
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("--write", action="store_true", help="replace docs/design.md's table")
-    args = parser.parse_args(argv)
-    table = energy_table({s: walk_energy(ADULT_PROFILE, s, TABLE_STRIDES) for s in SPEEDS})
-    if not args.write:
-        print(table, end="")
-        return 0
-    docs = Path(__file__).resolve().parents[2] / "docs" / "design.md"
-    text = docs.read_text(encoding="utf-8")
-    old = docs_block(text)
-    if old is None:
-        print(f"design_energy: {docs} has no <!-- bench:{MARK} --> block", file=sys.stderr)
-        return 1
-    tmp = docs.with_suffix(".md.tmp")
-    tmp.write_text(text.replace(f"<!-- bench:{MARK} -->\n{old}", f"<!-- bench:{MARK} -->\n{table}"), encoding="utf-8")
-    tmp.replace(docs)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
