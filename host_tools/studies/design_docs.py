@@ -54,11 +54,11 @@ def main(argv: list[str] | None = None) -> int:
         if len(args) == 2 and args[0] == "search":
             write_block("design_search", (Path(args[1]) / "docs_table.md").read_text(encoding="utf-8"))
         elif args == ["energy"]:
-            from host_tools.studies.design_energy import ADULT_PROFILE, SPEEDS, TABLE_STRIDES, energy_table, walk_energy
+            from host_tools.studies.design_energy import ADULT_PROFILE, SPEEDS, TABLE_STRIDES, walk_energy, walk_tables
             from profiles import profile_path
 
             walks = {s: walk_energy(profile_path(ADULT_PROFILE), s, TABLE_STRIDES) for s in SPEEDS}
-            write_block("design_energy", energy_table(walks))
+            write_block("design_energy", walk_tables(walks))
         else:
             print("usage: python -m host_tools.studies.design_docs search OUT | energy", file=sys.stderr)
             return 2

@@ -28,7 +28,7 @@ from typing import Any
 from hal.virtual.events import EventDevice
 
 __all__ = ["ADULT_PROFILE", "SAMPLE_HZ", "SPEEDS", "TABLE_STRIDES", "StrideEnergy", "WalkEnergy", "energy_table",
-           "stride_energies", "walk_energy"]
+           "run_table", "stride_energies", "walk_energy", "walk_tables"]
 
 SAMPLE_HZ = 2000
 """The sampler's rate: 20 samples a period of the fastest stance ringing seen (about 100 Hz would be needed for the
@@ -55,6 +55,7 @@ class WalkEnergy:
     complete: bool
     eta_back: float
     curve_negative_j: float  # the packaged curve's negative ankle work per stride (host_tools/walk.py)
+    run: dict[str, Any]  # the run's summary.json figures (host_tools/reports): encoder RMS, thermal, battery, events
 
     def mean(self, name: str) -> float:
         """The mean over the strides of one StrideEnergy field."""
@@ -137,7 +138,20 @@ def walk_energy(profile: str | Path, speed: str | None, strides: int, body_mass_
     reason = result.firmware.supervisor.reason
     faults = [] if reason.value == 0 else [reason.name]
     return WalkEnergy(ledger, faults, result.complete, eta_back,
-                      curve_negative_work_j(body_mass_kg, fw.stride_s, speed, "adult"))
+                      curve_negative_work_j(body_mass_kg, fw.stride_s, speed, "adult"), _run_figures(result, speed))
+
+
+def _run_figures(result: Any, speed: str | None) -> dict[str, Any]:
+    """What `pafp run` writes into summary.json of the figures docs/design.md quotes, from the same functions."""
+    from host_tools.reports.gait_latency import event_summary
+    from host_tools.reports.report import summarise
+    from host_tools.reports.thermal import battery_summary, thermal_summary
+
+    fw = result.firmware.config
+    events = event_summary(result) or {}
+    return {"encoder_rms_error_deg": summarise(result)["encoder_rms_error_deg"], "thermal": thermal_summary(result),
+            "battery": battery_summary(result, fw.stride_s, speed), "detector": events.get("detector"),
+            "derate_start_c": fw.thermal.derate_start_c}
 
 
 SPEEDS = ("free", "fast")
@@ -158,3 +172,25 @@ def energy_table(walks: dict[str, WalkEnergy]) -> str:
             f"{m['rotor_absorbed_j']:.2f} | {m['regenerated_j']:.2f} | {w.curve_negative_j / w.eta_back:.2f} | "
             f"{w.eta_back * m['joint_negative_j']:.2f} |")
     return "\n".join(lines) + "\n"
+
+
+def run_table(walks: dict[str, WalkEnergy]) -> str:
+    """The markdown table of the walks' summary.json figures (`pafp run`'s, from the same run)."""
+    head = ("| speed | strides | faults | gait events from | encoder RMS ° | steady °C nominal / pessimistic R_ha "
+            "(margin to derating) | J/stride (motor alone) | regenerated J/stride | km/charge |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for speed, w in walks.items():
+        run, th, b = w.run, w.run["thermal"], w.run["battery"]
+        hot = th["steady_state_pessimistic_c"]
+        lines.append(
+            f"| {speed} | {len(w.strides)} | {', '.join(w.faults) or 'none'} | {run['detector']} | "
+            f"{run['encoder_rms_error_deg']:.2f} | {th['steady_state_c']:.1f} / {hot:.1f} "
+            f"({run['derate_start_c'] - hot:.1f}) | {b['energy_per_stride_j']:.2f} "
+            f"({b['motor_energy_per_stride_j']:.2f}) | {b['regenerated_per_stride_j']:.2f} | "
+            f"{b['distance_per_charge_km']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def walk_tables(walks: dict[str, WalkEnergy]) -> str:
+    """docs/design.md's design_energy block: the runs' figures, then their energy ledgers."""
+    return run_table(walks) + "\n" + energy_table(walks)

@@ -14,8 +14,8 @@ from host_tools.studies.design_energy import (
     TABLE_STRIDES,
     StrideEnergy,
     WalkEnergy,
-    energy_table,
     walk_energy,
+    walk_tables,
 )
 from profiles import profile_path
 
@@ -42,6 +42,6 @@ def test_bench_adult_design_regeneration_bound(benchmark) -> None:
         # why the curve's negative work is not this walk's bound: the ankle yields past the curve's angle in stance
         assert walk.mean("joint_negative_j") > 2.0 * walk.curve_negative_j, speed
         benchmark.extra_info[speed] = {k: round(v, 3) for k, v in walk.means().items()}
-    table = energy_table(walks)
+    table = walk_tables(walks)
     assert block("design_energy") == table, (
         "docs/design.md's design_energy table is stale: python -m host_tools.studies.design_docs energy\n" + table)
