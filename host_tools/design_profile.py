@@ -94,6 +94,7 @@ def derived_sections(design: Design, base_plant: PlantParams | None = None,
             "mit_v_max_rad_s": (m.v_max_rad_s, "CAN MIT velocity range"),
             "mit_t_max_nm": (m.t_max_nm, "CAN MIT torque range"),
         },
+        **_ground_sensor_keys(design),
         "safety": {
             "current_limit_a": (trip, f"{SAFETY_SHARE_OF_PEAK:g} x the {m.peak_current_a:g} A peak ({m.name})"),
             "brake_current_a": (min(2.0, m.rated_current_a), f"2 A, at most the {m.rated_current_a:g} A rated"),
@@ -113,6 +114,24 @@ def check_ratings(design: Design, ratings: object, source: str) -> None:
             raise ValueError(f"{source}: [motor] {key} = {got!r} is not the catalogue's {expected!r} for the "
                              f"[design] motor {design.motor!r} (profiles/motors/{design.motor}.toml): write the "
                              "profile's motor sections with `python -m host_tools.design_profile` (docs/design.md)")
+
+
+def _ground_sensor_keys(design: Design) -> dict[str, dict[str, tuple[Any, str]]]:
+    """[ground_sensors] calibration for a design that fits its own ground sensor profile (none: the base profile's,
+    which is the packaged cell's): the inverse of the cell's bridge sensitivity (crosstalk included) times the gains,
+    as its calibration certificate gives it (6 significant digits, as the base profile's)."""
+    path = design.ground_profile
+    if path is None:
+        return {}
+    import numpy as np
+
+    from hal.virtual.ground_sensors import load_ground_profile
+
+    cell = load_ground_profile(path)[0]
+    inverse = np.linalg.inv(np.diag([cell.force_gain, cell.moment_gain]) @ np.array(cell.sensitivity()))
+    matrix = [[float(f"{x:.6g}") for x in row] for row in inverse.tolist()]
+    return {"ground_sensors": {"calibration": (matrix, f"the inverse of the {path.stem} cell's sensitivity x gains "
+                                                       f"({cell.rated_moment_nm:g} N m rated)")}}
 
 
 def _spring_keys(design: Design) -> dict[str, tuple[Any, str]]:

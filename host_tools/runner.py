@@ -322,7 +322,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     if cfg.sensors_fitted():
         from hal.virtual.ground_sensors import AdcSettings  # numpy and the sensor models: only when fitted
 
-        bench_options.update(ground_sensors=True, adc=AdcSettings.from_board(board_cfg))
+        bench_options.update(ground_sensors=True, adc=AdcSettings.from_board(board_cfg),
+                             ground_profile=None if cfg.design is None else cfg.design.ground_profile)
     bench = VirtualBench(now, f_cpu, motor_baud=cfg.baud, seed=cfg.seed,
                          systick_hz=int(board_cfg.get("systick_hz", 1000)), motor_link=fw_cfg.motor_link,
                          can_id=fw_cfg.motor_can_id, **bench_options)

@@ -60,6 +60,8 @@ def test_the_report_design_reads_back_with_its_belt() -> None:
     ({"belt_pitch_mm": 2.5}, "belt_pitch_mm = 2.5 is not allowed"),
     ({"motor": "ak99"}, "motor 'ak99' is not in profiles/motors/"),
     ({"battery": "lead_acid"}, "battery 'lead_acid' is not in profiles/batteries/"),
+    ({"ground_sensors": "strain"}, "ground sensors 'strain' is not in profiles/ground_sensors/"),
+    ({"ground_sensors": "nowhere/cell.toml"}, "ground_sensors = 'nowhere/cell.toml': no such file"),
     ({"spring": {"stiffness_nm_per_rad": -1.0}}, "spring.stiffness_nm_per_rad = -1.0 is outside"),
     ({"spring": {"stiffness_nm_per_rad": 50.0, "sided": "both"}}, "spring.sided = 'both' is not allowed"),
     ({"spring": {"engage_deg": 45.0}}, "spring.engage_deg = 45.0 is outside the allowed range [-30, 30]"),
@@ -275,6 +277,7 @@ body_masses_kg = [80]
 speeds = ["free"]
 strides = 3
 controller = "impedance"
+ground_sensors = "{design.ground_sensors}"
 
 [[belt]]
 driver_teeth = {design.belt_driver_teeth}

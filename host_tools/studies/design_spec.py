@@ -11,6 +11,8 @@ speeds, each point a walking run of the firmware on its design profile; checked 
     speeds = ["free", "fast"]          # speed groups of the normative data (host_tools/walk.py SPEEDS)
     strides = 20                       # per point, 1..10000
     controller = "impedance"           # a shipped controller (firmware/control/registry.py)
+    ground_sensors = "pylon_300nm"     # every design's ground sensors: a profiles/ground_sensors/ name (default:
+                                       # the packaged profiles/ground_sensors.toml)
     seed = 0                           # run seed, 0..2^32-1
     timeout_s = 900                    # wall seconds per point
     ambient_c = 25.0                   # the motor's surroundings, -40..80 C (pafp run --ambient-c)
@@ -52,7 +54,7 @@ from host_tools.studies.sweep_spec import SpecError
 __all__ = ["DesignPoint", "DesignSpec", "SEARCH_KEYS", "WalkCriteria", "load_design_spec", "pick_battery"]
 
 SEARCH_KEYS = ("profile", "motors", "batteries", "body_masses_kg", "speeds", "strides", "controller", "seed",
-               "timeout_s", "ambient_c", "min_moment_share",
+               "ground_sensors", "timeout_s", "ambient_c", "min_moment_share",
                "max_tracking_rms_deg", "min_thermal_margin_c", "belt_within_rating")
 BELT_KEYS = ("driver_teeth", "driven_teeth", "pitch_mm")
 SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
@@ -111,7 +113,7 @@ class DesignPoint:
 
 
 def design_table(motor: str, belt: tuple[int, int, float], spring: tuple[float, float, str],
-                 battery: str) -> dict[str, Any]:
+                 battery: str, ground_sensors: str = "") -> dict[str, Any]:
     """The [design] table of one design (the shared contract of issue 23)."""
     table: dict[str, Any] = {"motor": motor, "belt_driver_teeth": belt[0], "belt_driven_teeth": belt[1],
                              "belt_pitch_mm": belt[2]}
@@ -119,6 +121,8 @@ def design_table(motor: str, belt: tuple[int, int, float], spring: tuple[float, 
         table["spring"] = {"stiffness_nm_per_rad": spring[0], "engage_deg": spring[1], "sided": spring[2]}
     if battery:
         table["battery"] = battery
+    if ground_sensors:
+        table["ground_sensors"] = ground_sensors
     return table
 
 
@@ -142,6 +146,7 @@ class DesignSpec:
     criteria: WalkCriteria
     profiles: dict[tuple[Any, ...], str]
     digest: str
+    ground_sensors: str = ""  # a profiles/ground_sensors/ name for every design ("": the packaged profile)
 
     def designs(self) -> list[tuple[str, tuple[int, int, float], tuple[float, float, str], str]]:
         """(motor, belt, spring, battery) of every design, in point order (batteries resolved per motor)."""
@@ -234,7 +239,7 @@ def _springs(path: Path, doc: dict[str, Any]) -> tuple[tuple[float, float, str],
     return tuple(out)
 
 
-def _profile_of(path: Path, base: Path, design: tuple[Any, ...]) -> str:
+def _profile_of(path: Path, base: Path, design: tuple[Any, ...], ground: str = "") -> str:
     """The design's profile text (host_tools/design_profile.py), checked by the design and firmware loaders."""
     import tempfile
 
@@ -246,7 +251,7 @@ def _profile_of(path: Path, base: Path, design: tuple[Any, ...]) -> str:
     where = f"design spec {path}: design ({', '.join(map(str, design))})"
     tmp_path = ""
     try:
-        d = design_from_mapping(design_table(motor, belt, spring, battery), f"{path} [design]")
+        d = design_from_mapping(design_table(motor, belt, spring, battery, ground), f"{path} [design]")
         text = design_profile_text(d, base)
         with tempfile.TemporaryDirectory(prefix="pafp-design-") as tmp:
             p = Path(tmp) / "design.toml"
@@ -299,9 +304,12 @@ def load_design_spec(path: Path) -> DesignSpec:
     n = len(motors) * len(belts) * len(springs) * len(batteries) * len(masses) * len(speeds)
     if not 1 <= n <= MAX_POINTS:
         raise SpecError(f"design spec {path}: {n} points out of range: 1..{MAX_POINTS}")
+    ground = s.get("ground_sensors", "")
+    if not isinstance(ground, str):
+        raise _err(path, "[search] ground_sensors", ground, "a profiles/ground_sensors/ name")
     spec = DesignSpec(path, Path(base), motors, batteries, masses, speeds, belts, springs, strides, controller,
-                      seed, timeout, ambient, criteria, {}, "")
-    profiles = {d: _profile_of(path, Path(base), d) for d in spec.designs()}
+                      seed, timeout, ambient, criteria, {}, "", ground)
+    profiles = {d: _profile_of(path, Path(base), d, ground) for d in spec.designs()}
     digest = hashlib.sha256("\0".join([text, *(f"{d!r}\0{t}" for d, t in profiles.items())]).encode()).hexdigest()
     return DesignSpec(path, Path(base), motors, batteries, masses, speeds, belts, springs, strides, controller,
-                      seed, timeout, ambient, criteria, profiles, digest)
+                      seed, timeout, ambient, criteria, profiles, digest, ground)

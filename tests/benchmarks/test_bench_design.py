@@ -7,7 +7,7 @@ start-up, the total, the time per point and the median point's own time, and che
 (ok or a fault, none an error). Issue 38: the shipped adult design (profiles/designs/adult_80kg.toml) is a point
 that walks 80 kg at free and at fast speed by the spec's criteria (belt within its rating, the steady winding with
 the pessimistic housing resistance 20 C below the derating start); design.md and results.csv are kept in
-runs/bench/design-adult/ (docs/design.md quotes them).
+runs/bench/design-adult/, and docs/design.md's table of the search must be the one these rows give.
 """
 
 from __future__ import annotations
@@ -21,8 +21,9 @@ import pyarrow.parquet as pq
 
 from hal.virtual.plant.design import load_design
 from host_tools.commands.design import _write_profiles, columns
+from host_tools.studies.design_docs import block
 from host_tools.studies.design_point import design_error_row, run_design_point
-from host_tools.studies.design_report import walks, write_design_report
+from host_tools.studies.design_report import docs_search_table, walks, write_design_report
 from host_tools.studies.design_spec import load_design_spec
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 
@@ -60,7 +61,7 @@ def test_bench_adult_design_search(benchmark, tmp_path: Path):
     assert all(r["status"] in ("ok", "fault") for r in rows), [r["error"] for r in rows if r["error"]][:3]
     kept = Path("runs/bench/design-adult")
     kept.mkdir(parents=True, exist_ok=True)
-    for name in ("design.md",):
+    for name in ("design.md", "docs_table.md"):
         if (tmp_path / "out" / name).is_file():
             shutil.copyfile(tmp_path / "out" / name, kept / name)
     design = load_design(ADULT.parent / "adult_80kg.toml")
@@ -73,4 +74,7 @@ def test_bench_adult_design_search(benchmark, tmp_path: Path):
     assert all(walks(r, spec.criteria) for r in mine), mine
     info["adult_80kg"] = {r["speed"]: {k: r[k] for k in ("moment_share", "tracking_rms_deg", "belt_tension_n",
                                                           "belt_rated_n", "steady_state_pessimistic_c")} for r in mine}
+    assert block("design_search") == docs_search_table(spec, rows), (
+        "docs/design.md's design_search table is stale: python -m host_tools.studies.design_docs search "
+        "runs/bench/design-adult")
     assert result["total_s"] < GOAL_S

@@ -10,6 +10,7 @@ A design profile is a firmware profile (``profiles/firmware.toml``'s sections, c
     belt_pitch_mm = 2.0         # a standard pitch (BELT_PITCHES)
     belt_width_mm = 12.0        # optional: a stock width of the pitch (transmission.BELT_WIDTHS_MM; default its widest)
     battery = "molicel_p42a_12s1p"   # optional: a profiles/batteries/ name
+    ground_sensors = "pylon_300nm"   # optional: a profiles/ground_sensors/ name (default profiles/ground_sensors.toml)
     [design.spring]             # optional; absent or stiffness 0: no spring
     stiffness_nm_per_rad = 100.0
     engage_deg = 0.0
@@ -63,7 +64,8 @@ shell above the keel, so a ratio that needs one is refused."""
 BELT_RATIO_TOLERANCE = 0.01
 """A ratio asked of :func:`belt_for_ratio` must be met by a whole tooth pair within 1 %."""
 SPRING_SIDES = ("one", "two")
-_KEYS = ("motor", "belt_driver_teeth", "belt_driven_teeth", "belt_pitch_mm", "spring", "battery", "belt_width_mm")
+_KEYS = ("motor", "belt_driver_teeth", "belt_driven_teeth", "belt_pitch_mm", "spring", "battery", "belt_width_mm",
+         "ground_sensors")
 _SPRING_KEYS = ("stiffness_nm_per_rad", "engage_deg", "sided")
 MOTOR_KEYS = ("supply_voltage_v", "kv_rpm_per_v", "kt_nm_per_a", "phase_resistance_ohm", "phase_inductance_h",
               "pole_pairs", "rotor_inertia_kg_m2", "peak_current_a")
@@ -100,6 +102,15 @@ class Design:
     spring: DesignSpring | None = None
     battery: str | None = None
     belt_width_mm: float | None = None  # None: the pitch's widest stock width
+    ground_sensors: str | None = None  # a profiles/ground_sensors/ name or path; None: profiles/ground_sensors.toml
+
+    @property
+    def ground_profile(self) -> Path | None:
+        """The ground sensor profile the virtual bench fits (None: the packaged profiles/ground_sensors.toml)."""
+        from hal.virtual.plant.sourced import resolve_profile
+
+        return None if self.ground_sensors is None else resolve_profile(self.ground_sensors, "ground_sensors",
+                                                                         "ground sensor profile")
 
     @property
     def width_mm(self) -> float:
@@ -143,6 +154,8 @@ class Design:
             table["battery"] = self.battery
         if self.belt_width_mm is not None:
             table["belt_width_mm"] = self.belt_width_mm
+        if self.ground_sensors is not None:
+            table["ground_sensors"] = self.ground_sensors
         if self.spring is not None:
             table["spring"] = {"stiffness_nm_per_rad": self.spring.stiffness_nm_per_rad,
                                "engage_deg": self.spring.engage_deg, "sided": self.spring.sided}
@@ -197,18 +210,8 @@ def design_from_mapping(table: dict[str, Any], source: str) -> Design:
     most = max_teeth(pitch)
     driver = _teeth(table["belt_driver_teeth"], "belt_driver_teeth", pitch, source, most)
     driven = _teeth(table["belt_driven_teeth"], "belt_driven_teeth", pitch, source, most)
-    battery = table.get("battery")
-    if battery is not None:
-        if not isinstance(battery, str) or not battery:
-            raise ValueError(f"{source}: [design] battery = {battery!r} must be a profiles/batteries/ name or a path")
-        from hal.virtual.plant.sourced import resolve_profile
-
-        try:
-            path = resolve_profile(battery, "batteries", "battery")
-        except ValueError as e:
-            raise ValueError(f"{source}: [design] {e}") from None
-        if not path.is_file():
-            raise ValueError(f"{source}: [design] battery = {battery!r}: no such file")
+    battery = _named_profile(table, "battery", "batteries", source)
+    ground = _named_profile(table, "ground_sensors", "ground_sensors", source)
     spring = None
     if "spring" in table:
         spring = _spring(table["spring"], source)
@@ -220,7 +223,25 @@ def design_from_mapping(table: dict[str, Any], source: str) -> Design:
         except ValueError as e:
             raise ValueError(f"{source}: [design] {e}") from None
     return Design(motor=motor, belt_driver_teeth=driver, belt_driven_teeth=driven, belt_pitch_mm=pitch,
-                  spring=spring, battery=battery, belt_width_mm=width)
+                  spring=spring, battery=battery, belt_width_mm=width, ground_sensors=ground)
+
+
+def _named_profile(table: dict[str, Any], key: str, directory: str, source: str) -> str | None:
+    """The [design] key naming a profiles/<directory>/ profile (or a path), checked that it exists; None if absent."""
+    name = table.get(key)
+    if name is None:
+        return None
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{source}: [design] {key} = {name!r} must be a profiles/{directory}/ name or a path")
+    from hal.virtual.plant.sourced import resolve_profile
+
+    try:
+        path = resolve_profile(name, directory, key.replace("_", " "))
+    except ValueError as e:
+        raise ValueError(f"{source}: [design] {e}") from None
+    if not path.is_file():
+        raise ValueError(f"{source}: [design] {key} = {name!r}: no such file")
+    return name
 
 
 

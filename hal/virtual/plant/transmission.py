@@ -74,8 +74,9 @@ weight, genesis.farm.bot/v1.6/bom/drivetrain/belt). The only belt rating held wi
 (section 3.2.1: "Gates PowerGrip GT3 charts", 30 N m on its 19.1 mm driver pulley, 9 N m after a length factor of
 0.3), is ~940 N of effective tension for a belt whose pitch and width the report leaves inconsistent (an "HTD
 10 mm" belt of 36 teeth on pulleys of 2 mm pitch): it cannot give a rating per mm of a 5 mm pitch. What replaces
-these: the rated torque (or belt-pull) tables of the Gates PowerGrip GT3 / Poly Chain design manuals for 5MGT
-(or HTD 5M) belts by width, small-pulley teeth and speed, with their length-correction factors."""
+these: the rated torque tables of the Gates PowerGrip GT3 Drive Design Manual (2014, "Power Rating Tables": 5 mm
+pitch pp. 46-47, 8 mm pp. 48-50; the 2 and 3 mm pitches in the PowerGrip GT2 manual no. 17195) by small-sprocket
+grooves and rpm, with their width and length-correction factors, over the small sprocket's pitch radius."""
 
 
 def belt_width_mm(pitch_mm: float, width_mm: float | None = None) -> float:
