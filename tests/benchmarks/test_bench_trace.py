@@ -3,7 +3,7 @@
 - ``test_bench_trace_realtime_factor``: the realtime factor of 2 strides with the trace and without it, side by
   side (the two alternate, best of ROUNDS each); goal: with it within 10 % of without. The same factors on the
   process's CPU time go beside them: on a machine shared with other work the wall-clock pair can differ by more
-  than the trace costs, the CPU-time pair much less.
+  than the trace costs; CPU time leaves out the time the run waited for a core (not a shared cache's slowing).
 - ``test_bench_trace_size``: a 20-stride run whose window holds all of it (``--trace-strides 20``): the file's
   size (goal under 10 MB), the time to write it, and the same events as Chrome trace-event JSON (the format the
   run wrote before: a slice as an "X" event, a counter sample as a "C" event, an instant as an "i" event), the
