@@ -19,6 +19,7 @@ from host_tools.studies.fault_spec import load_fault_spec
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 from host_tools.studies.sweep_spec import SpecError
 from host_tools.studies.sweep_table import TIMING_COLUMNS
+from tests.trace_reader import read_trace
 
 SPEC = """
 [campaign]
@@ -167,6 +168,14 @@ def test_the_command_writes_the_table_and_report_and_exits_1_per_failed_criterio
     assert "## Hazard table" in report and "| motor_stall |" in report
     assert (out / "plots" / "heatmap.png").stat().st_size > 1000 and (out / "results.parquet").is_file()
     assert len(list((out / "plots").glob("trace_point_*.png"))) == 3
+    tripped = 0
+    for png in (out / "plots").glob("trace_point_*.png"):  # each worst point's Perfetto trace beside its plot
+        tr = read_trace(png.with_suffix(".pftrace"))
+        safety = [i.name for i in tr.instants_on("safety")]
+        trips = [n for n in safety if n.startswith("fault trip")]
+        assert tr.instants_on("fault injector") and safety.count("safe command on the wire") == len(trips)
+        tripped += len(trips)
+    assert tripped >= 1  # of 2 stalls and 2 lost replies, 3 are plotted: a lost reply's MOTOR_TIMEOUT among them
     assert main(["faults", str(spec), "--out", str(out), "--workers", "1", "--quiet"]) == 2  # rows, no --resume
     (tmp_path / "criteria.toml").write_text("[default]\nexcursion_deg = 90\n", encoding="utf-8")
     assert main(["faults", str(spec), "--out", str(tmp_path / "ok"), "--workers", "1", "--quiet",

@@ -134,6 +134,32 @@ def test_one_instant_per_trip_safe_command_gait_event_and_injector_act(walked):
                                                                     fw.load_detector.toe_offs)
     acts = tr.instants_on("fault injector")
     assert len(acts) == fault.record.count > 0 and acts[0].ts == round(fault.record.first_s * 1e9)
+    for track, detector, lists in (("gait (ground sensors)", fw.ground_events, ("heel_strike_s", "foot_flat_s",
+                                                                               "heel_off_s", "toe_off_s")),
+                                   ("gait (motor load)", fw.load_detector, ("heel_strike_s", "toe_off_s"))):
+        got = sorted((i.ts, i.name) for i in tr.instants_on(track))  # each at the time its detector saw it
+        want = sorted((round(t * 1e9), attr[:-2].replace("_", " ")) for attr in lists for t in getattr(detector, attr))
+        assert got == want, track
+
+
+def test_a_watchdog_reset_is_an_instant_at_the_reset(tmp_path):
+    """Two higher-priority tasks overrunning together starve the control task and the watchdog's kicks: the IWDG
+    resets the MCU every 50 ms; each reset the firmware counted is a kernel instant at the scheduler's time."""
+    logging.getLogger("firmware.safety").setLevel(logging.ERROR)
+    faults = tuple(make_injector("task_overrun", 0.3, 0.15, seed=0, factor=1000.0, task=task)
+                   for task in ("encoder", "supervisor"))
+    r = run_virtual(RunConfig(strides=1, seed=0, duration_s=0.6, faults=faults))
+    write_outputs(r, tmp_path, plot=False)
+    tr = read_trace(tmp_path / TRACE_FILE)
+    f = r.firmware.f_cpu_hz
+    resets = [i for i in tr.instants_on("kernel") if i.name == "watchdog reset"]
+    times = [e.time for e in r.scheduler.trace.events() if e.kind == "watchdog_reset"]
+    assert len(resets) == r.firmware.watchdog_resets == len(times) >= 2
+    assert [i.ts for i in resets] == [t * 10**9 // f for t in times]
+    assert all(0.3e9 < i.ts < (0.3 + 0.15 + 0.05) * 1e9 for i in resets)  # while starved, and its 50 ms timeout
+    acts = tr.instants_on("fault injector")
+    assert {a.args["fault"] for a in acts} == {x.describe() for x in faults} and len(acts) == sum(
+        x.record.count for x in faults)
 
 
 def test_the_trace_leaves_the_run_unchanged(walked):

@@ -6,8 +6,8 @@ so the file is a ``Trace`` message that ui.perfetto.dev and trace_processor open
 interned once (``InternedData`` in the first packet); timestamps are nanoseconds on the trace's default clock.
 
 Each stream of events handed to :meth:`PerfettoTrace.write` is an iterable of ``(t_ns, packet bytes)`` in time
-order (see :meth:`begin`, :meth:`end`, :meth:`instant`, :meth:`counter`); the streams are merged by time, so
-the whole trace is never in memory as messages. The file is written under a temporary name and renamed.
+order (see :meth:`slice`, :meth:`begin`, :meth:`end`, :meth:`instant`, :meth:`counter`); the streams are merged by
+time, so the whole trace is never in memory as messages. The file is written under a temporary name and renamed.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class PerfettoTrace:
 
     >>> tr = PerfettoTrace()
     >>> cpu = tr.track("control")
-    >>> stream = [tr.begin(cpu, "control", 1000), tr.end(cpu, 2500)]
+    >>> stream = tr.slice(cpu, "control", 1000, 2500)
     >>> [t for t, _ in stream]
     [1000, 2500]
     """
@@ -124,14 +124,24 @@ class PerfettoTrace:
                     a.string_value = str(value)
         return p
 
-    def begin(self, track: int, name: str, t_ns: int, args: dict[str, object] | None = None) -> tuple[int, bytes]:
-        """A slice's start on ``track`` (ended by :meth:`end` on the same track)."""
-        p = self._with_args(self._begins, TrackEvent.TYPE_SLICE_BEGIN, args)
+    def _named(self, templates: dict[tuple[str, ...], TracePacket], kind: int, track: int, name: str, t_ns: int,
+               args: dict[str, object] | None) -> tuple[int, bytes]:
+        """An event of ``kind`` that carries a name and arguments (a slice's begin or an instant)."""
+        p = self._with_args(templates, kind, args)
         p.timestamp = t_ns
         e = p.track_event
         e.track_uuid = track
         e.name_iid = self._iid(self._names, name)
         return t_ns, p.SerializeToString()
+
+    def begin(self, track: int, name: str, t_ns: int, args: dict[str, object] | None = None) -> tuple[int, bytes]:
+        """A slice's start on ``track`` (ended by :meth:`end` on the same track)."""
+        return self._named(self._begins, TrackEvent.TYPE_SLICE_BEGIN, track, name, t_ns, args)
+
+    def slice(self, track: int, name: str, begin_ns: int, end_ns: int, args: dict[str, object] | None = None
+              ) -> list[tuple[int, bytes]]:
+        """A whole slice on ``track``: its begin and its end."""
+        return [self.begin(track, name, begin_ns, args), self.end(track, end_ns)]
 
     def end(self, track: int, t_ns: int) -> tuple[int, bytes]:
         """The end of the innermost open slice on ``track``."""
@@ -142,12 +152,7 @@ class PerfettoTrace:
 
     def instant(self, track: int, name: str, t_ns: int, args: dict[str, object] | None = None) -> tuple[int, bytes]:
         """A zero-duration event on ``track``."""
-        p = self._with_args(self._instants, TrackEvent.TYPE_INSTANT, args)
-        p.timestamp = t_ns
-        e = p.track_event
-        e.track_uuid = track
-        e.name_iid = self._iid(self._names, name)
-        return t_ns, p.SerializeToString()
+        return self._named(self._instants, TrackEvent.TYPE_INSTANT, track, name, t_ns, args)
 
     def counter(self, track: int, t_ns: int, value: float) -> tuple[int, bytes]:
         """A counter track's value from ``t_ns`` on."""

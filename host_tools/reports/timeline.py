@@ -153,9 +153,8 @@ def _job_streams(b: _Builder, trace: Any, cut: int, hidden: set[str]) -> list[St
             continue
         track = tasks[task]
         preempted = finish - start - cost
-        jobs.append(pf.begin(track, task, b.ns(start), {"job": job, "cycles": cost, "interference_cycles": preempted}
-                             if preempted else {"job": job}))
-        jobs.append(pf.end(track, b.ns(finish)))
+        jobs += pf.slice(track, task, b.ns(start), b.ns(finish),
+                         {"job": job, "cycles": cost, "interference_cycles": preempted} if preempted else {"job": job})
     return [jobs, _isr_slices(b, trace.interrupts, irqs, isr)]
 
 
@@ -185,8 +184,7 @@ def _isr_slices(b: _Builder, sources: list[tuple[str, int]], irqs: list[Any], tr
     out = []
     for start, firings in by_job.items():
         for source, begin, end in isr_layout(start, firings):
-            out.append(pf.begin(tracks[source], names[source], b.ns(begin)))
-            out.append(pf.end(tracks[source], b.ns(end)))
+            out += pf.slice(tracks[source], names[source], b.ns(begin), b.ns(end))
     out.sort(key=lambda tp: tp[0])  # by_job keeps the jobs in order; the sort keeps an end before the next begin
     return out
 
@@ -201,7 +199,7 @@ def _wire_streams(b: _Builder, wire: Any, cut: int) -> list[Stream]:
         stream = []
         for start, end, what in frames:
             if start >= cut:
-                stream += [b.pf.begin(track, what, b.ns(start)), b.pf.end(track, b.ns(end))]
+                stream += b.pf.slice(track, what, b.ns(start), b.ns(end))
         out.append(stream)
     return out
 
