@@ -47,8 +47,8 @@ REALTIME: dict[str, tuple[str, ...] | None] = {
 """Tests paced by the wall clock (a second process, a busy core of their own, a host watchdog, signals to a study),
 by file and test-name prefix: `make test` runs them after the rest, alone (``-m realtime``), since a second xdist
 worker beside them starves what they time (measured on this 2-core machine under -n 2: the first two files failed
-in two runs of two, the last two once in a fresh clone's run, the serial runs against an emulator once each under load). The other tests of those files run virtual and stay
-with the rest."""
+in two runs of two, the last two once in a fresh clone's run, the serial runs against an emulator once each under
+load). The other tests of those files run virtual and stay with the rest."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
