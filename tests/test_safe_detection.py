@@ -196,3 +196,17 @@ def test_a_silent_imu_reaches_the_safe_command_within_50_ms() -> None:
     sup, obs = _run("imu_silent")
     safe_s = obs.safe_on_wire_s(sup.tripped_at_s)
     assert sup.reason is FaultReason.IMU_TIMEOUT and safe_s is not None and safe_s - 1.6 <= 0.050
+
+
+def test_a_jam_at_push_off_is_caught_by_the_torque_balance() -> None:
+    """Walking at 20 kg, the output jams at push-off (phase 0.5 of the first stride, as the campaign's point): the
+    first rule cannot tell it from a push-off the motor is too weak for; the torque balance can."""
+    logging.getLogger("firmware.safety").setLevel(logging.ERROR)
+    onset_s = 1.063  # the campaign's push-off onset walking 20 kg (gait start + 0.5 stride)
+    fault, obs = make_injector("motor_stall", onset_s, 0.2, seed=0), Observer()
+    r = run_virtual(RunConfig(strides=1, trace_capacity=0, scenario="walk", body_mass_kg=20.0, faults=(obs, fault),
+                              duration_s=onset_s + 0.1))
+    sup = r.firmware.supervisor
+    assert fault.record.fired
+    assert sup.reason is FaultReason.MOTOR_JAM and "torque balance" in sup.detail
+    assert onset_s < sup.tripped_at_s < onset_s + 0.08
