@@ -20,8 +20,8 @@ from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FaultReason", "FrozenImu", "JamCheck", "JamObserver", "MotorEncoderGap", "SafetyInputs", "SafetyLimits", "SafeCommand",
-           "Supervisor", "SupervisorState", "ThermalGuard", "ThermalLimits"]
+__all__ = ["FaultReason", "FrozenImu", "JamCheck", "JamObserver", "MotorEncoderGap", "SafetyInputs", "SafetyLimits",
+           "SafeCommand", "Supervisor", "SupervisorState", "ThermalGuard", "ThermalLimits"]
 
 
 @dataclass

@@ -9,8 +9,8 @@ import math
 
 import pytest
 
-from firmware.drivers.imu import ImuDriver
 from firmware.control.pid import parallel_spring_torque_nm
+from firmware.drivers.imu import ImuDriver
 from firmware.safety import (
     FaultReason,
     FrozenImu,
