@@ -16,6 +16,7 @@ from typing import Final
 from firmware.control.pid import parallel_spring_torque_nm
 from firmware.safe_state import BEHAVIOURS, SafeCommand, SafePolicy
 from firmware.safety_limits import SafetyLimits, ThermalLimits
+from protocol.rvc import RVC_RATE_HZ
 from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
@@ -117,7 +118,8 @@ class Supervisor:
                 FaultReason.MOTOR_TIMEOUT: (x.last_motor_reply_s, lim.motor_timeout_s, "motor feedback"),
                 FaultReason.IMU_TIMEOUT: (x.last_imu_frame_s, lim.imu_timeout_s, "IMU frame")}
         if reason is FaultReason.IMU_FROZEN:
-            return f"IMU frames bit-identical for {x.imu_frozen_s * 1e3:.1f} ms > {lim.imu_timeout_s * 1e3:.1f} ms " \
+            return f"IMU frames bit-identical for {x.imu_frozen_s * 1e3:.1f} ms, {lim.imu_timeout_s * 1e3:.1f} ms " \
+                   f"of frames at {RVC_RATE_HZ} Hz " \
                    f"while the encoder moved more than {math.degrees(lim.imu_frozen_motion_rad):.2f} deg"
         if reason is FaultReason.MOTOR_JAM and x.jam_torque_s > lim.jam_torque_time_s:
             return f"torque balance: {x.jam_residual_nm:+.1f} N m unexplained > {x.jam_bound_nm:.1f} N m for " \
@@ -199,7 +201,9 @@ class Supervisor:
                 return FaultReason.SENSOR_DISAGREEMENT
             if x.motor_encoder_gap_rad > lim.motor_encoder_gap_rad:
                 return FaultReason.MOTOR_ENCODER_DISAGREEMENT
-            if x.imu_frozen_s > lim.imu_timeout_s:
+            # identical frames come at the IMU's rate, so the frozen time grows in frame periods: imu_timeout_s of
+            # them is reached at the frame that ends it, give or take its arrival's jitter (half a period)
+            if x.imu_frozen_s > lim.imu_timeout_s - _HALF_FRAME_S:
                 return FaultReason.IMU_FROZEN
             # in stance only a dorsiflexing push: the ground's moment helps it, so a still foot is jammed, where a
             # plantarflexing one may be a push-off the motor is too weak for (docs/safety.md, "Jam")
@@ -423,3 +427,4 @@ _INIT: Final = SupervisorState.INIT
 _RUN: Final = SupervisorState.RUN
 _SAFE: Final = SupervisorState.SAFE
 _NONE: Final = FaultReason.NONE
+_HALF_FRAME_S: Final = 0.5 / RVC_RATE_HZ  # half the IMU's frame period (FrozenImu's time grows in whole periods)

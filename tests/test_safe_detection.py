@@ -187,9 +187,21 @@ def _run(name: str, onset_s: float = 1.6, duration_s: float = 0.2):
     return r.firmware.supervisor, obs
 
 
-def test_a_frozen_imu_is_caught_while_the_foot_moves() -> None:
+def test_a_frozen_imu_trips_at_the_frame_that_completes_its_time() -> None:
+    # identical frames at 100 Hz: the frozen time grows 10 ms a frame; the 4th repeat (40 ms) ends it, whatever its
+    # arrival's jitter, where the 3rd (30 ms) does not
+    for frozen_s, state in ((0.030, SupervisorState.RUN), (0.0399, SupervisorState.SAFE),
+                            (0.040, SupervisorState.SAFE)):
+        s = started()
+        assert s.check(running(imu_frozen_s=frozen_s)) is state
+    assert s.reason is FaultReason.IMU_FROZEN and "bit-identical for 40.0 ms" in s.detail
+
+
+def test_a_frozen_imu_is_caught_while_the_foot_moves_and_reaches_the_safe_command_within_50_ms() -> None:
     sup, obs = _run("imu_frozen")
+    safe_s = obs.safe_on_wire_s(sup.tripped_at_s)
     assert sup.reason is FaultReason.IMU_FROZEN and 1.6 < sup.tripped_at_s < 1.6 + 0.05
+    assert safe_s is not None and safe_s - 1.6 <= 0.050
 
 
 def test_a_silent_imu_reaches_the_safe_command_within_50_ms() -> None:
