@@ -84,10 +84,11 @@ class SafetyLimits:
     jam_time_s: float = 0.025
     # a jam by the torque balance (firmware.safety.JamObserver; docs/safety.md, "Jam"), judged with a healthy load
     # cell: the moment the foot's model does not explain, followed with time constant jam_observer_s, beyond
-    # jam_residual_nm + jam_residual_share x the measured moments + jam_residual_m x the axial force, while the
-    # encoder is slower than jam_slow_rad_s, for longer than jam_torque_time_s
+    # jam_residual_peak_share x the design's peak output torque (Kt N eta x the current limit) + jam_residual_share x
+    # the measured moments + jam_residual_m x the axial force, while the encoder is slower than jam_slow_rad_s, for
+    # longer than jam_torque_time_s
     jam_observer_s: float = 0.02
-    jam_residual_nm: float = 3.0
+    jam_residual_peak_share: float = 0.135
     jam_residual_share: float = 0.05
     jam_residual_m: float = 0.01
     jam_slow_rad_s: float = 0.87
@@ -141,7 +142,8 @@ class SafetyLimits:
                     unit="s (a stalled peak-current command crosses any range of motion in 0.1 s once freed)")
         check_range("jam_observer_s", self.jam_observer_s, 0.0, TIMEOUT_MAX_S, lo_open=True,
                     unit="s (the observer's time constant: at most the longest age limit)")
-        check_range("jam_residual_nm", self.jam_residual_nm, 0.0, 100.0, lo_open=True, unit="N m")
+        check_range("jam_residual_peak_share", self.jam_residual_peak_share, 0.0, 1.0, lo_open=True,
+                    unit="(of the design's peak output torque)")
         check_range("jam_residual_share", self.jam_residual_share, 0.0, 1.0, unit="(of the measured moments)")
         check_range("jam_residual_m", self.jam_residual_m, 0.0, 0.5, unit="m (N m per N of axial force)")
         check_range("jam_slow_rad_s", self.jam_slow_rad_s, 0.0, 10.0, lo_open=True, unit="rad/s")

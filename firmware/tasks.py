@@ -116,7 +116,8 @@ class FirmwareTasks:
         self.jam_observer = JamObserver(feedforward.inertia_kg_m2, feedforward.nm_per_a, feedforward.backdriven_share,
                                         feedforward.gravity_moment_nm, c.com_angle_rad,
                                         (feedforward.spring_k, feedforward.spring_engage_rad,
-                                         feedforward.spring_two_sided), lim.jam_observer_s, lim.jam_residual_nm,
+                                         feedforward.spring_two_sided), lim.jam_observer_s,
+                                        lim.jam_residual_peak_share * feedforward.nm_per_a * c.current_limit_a,
                                         lim.jam_residual_share, lim.jam_residual_m, lim.jam_slow_rad_s)
         self.load_detector = LoadDetector(self.ts_s, feedforward.nm_per_a, feedforward.inertia_kg_m2,
                                           feedforward.gravity_moment_nm, c.com_angle_rad, feedforward=feedforward)

@@ -75,9 +75,12 @@ FOOT = dict(inertia_kg_m2=0.0887, nm_per_a=2.52, backdriven_share=0.73, gravity_
             com_angle_rad=math.pi / 2, spring=(400.0, 0.0, False))
 
 
+RESIDUAL_NM = LIMITS.jam_residual_peak_share * 2.52 * 14.8  # of the peak output torque: 14.8 A at 2.52 N m/A
+
+
 def observer() -> JamObserver:
     lim = LIMITS
-    return JamObserver(**FOOT, time_constant_s=lim.jam_observer_s, residual_nm=lim.jam_residual_nm,  # type: ignore
+    return JamObserver(**FOOT, time_constant_s=lim.jam_observer_s, residual_nm=RESIDUAL_NM,  # type: ignore
                        share=lim.jam_residual_share, per_n_m=lim.jam_residual_m, slow_rad_s=lim.jam_slow_rad_s)
 
 
@@ -98,7 +101,7 @@ def test_the_torque_balance_explains_a_free_foot_and_finds_a_jams_reaction() -> 
         worst = max(worst, abs(o.residual))
         w += _moment(current, w, angle, ground) / FOOT["inertia_kg_m2"] * dt
         angle += w * dt
-    assert worst < 0.5  # the integration's own error; the bound starts at jam_residual_nm (3 N m)
+    assert worst < 0.5  # the integration's own error; the bound starts at RESIDUAL_NM (5 N m)
     o.reset()
     held = [o.update(1.0 + k * dt, 0.0, -0.1, 10.0, 0.0, 0.0) for k in range(120)]  # the motor pushes, nothing moves
     # the residual follows the jam's reaction (-(motor + weight)) with the observer's time constant (20 ms)
@@ -113,9 +116,9 @@ def test_the_torque_balance_explains_a_free_foot_and_finds_a_jams_reaction() -> 
 def test_the_torque_balances_bound_grows_with_the_measured_moments_and_the_axial_force() -> None:
     o = observer()
     o.update(0.0, 0.0, -0.1, 0.0, 0.0, 0.0)
-    assert o.bound == pytest.approx(LIMITS.jam_residual_nm)
+    assert o.bound == pytest.approx(RESIDUAL_NM)
     o.update(0.001, 0.0, -0.1, 10.0, 50.0, 800.0)
-    assert o.bound == pytest.approx(LIMITS.jam_residual_nm + LIMITS.jam_residual_share * (25.2 + 50.0)
+    assert o.bound == pytest.approx(RESIDUAL_NM + LIMITS.jam_residual_share * (25.2 + 50.0)
                                     + LIMITS.jam_residual_m * 800.0)
 
 
