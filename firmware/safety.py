@@ -13,14 +13,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
+from firmware.control.pid import parallel_spring_torque_nm
 from firmware.safe_state import BEHAVIOURS, SafeCommand, SafePolicy
 from firmware.safety_limits import SafetyLimits, ThermalLimits
+from protocol.rvc import RVC_RATE_HZ
 from protocol.telemetry import FaultReason, SupervisorState
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FaultReason", "FrozenImu", "JamCheck", "MotorEncoderGap", "SafetyInputs", "SafetyLimits", "SafeCommand",
-           "Supervisor", "SupervisorState", "ThermalGuard", "ThermalLimits"]
+__all__ = ["FaultReason", "FrozenImu", "JamCheck", "JamObserver", "MotorEncoderGap", "SafetyInputs", "SafetyLimits",
+           "SafeCommand", "Supervisor", "SupervisorState", "ThermalGuard", "ThermalLimits"]
 
 
 @dataclass
@@ -38,6 +40,9 @@ class SafetyInputs:
     jam_s: float = 0.0  # how long the motor has pushed at its limit without motion against a moving reference
     jam_dorsiflexing: bool = False  # that push is towards dorsiflexion, with the reference (judged in stance too)
     loaded: bool = False  # the foot in stance (the controller's stance flag): a plantarflexing jam is judged in swing
+    jam_torque_s: float = 0.0  # how long the torque balance has missed a moment on a slow foot (JamObserver)
+    jam_residual_nm: float = 0.0  # that missing moment, and the bound it exceeded
+    jam_bound_nm: float = 0.0
     disagreement_rad: float = 0.0
     motor_fault_code: int = 0
     deadline_miss_streak: int = 0
@@ -113,8 +118,13 @@ class Supervisor:
                 FaultReason.MOTOR_TIMEOUT: (x.last_motor_reply_s, lim.motor_timeout_s, "motor feedback"),
                 FaultReason.IMU_TIMEOUT: (x.last_imu_frame_s, lim.imu_timeout_s, "IMU frame")}
         if reason is FaultReason.IMU_FROZEN:
-            return f"IMU frames bit-identical for {x.imu_frozen_s * 1e3:.1f} ms > {lim.imu_timeout_s * 1e3:.1f} ms " \
+            return f"IMU frames bit-identical for {x.imu_frozen_s * 1e3:.1f} ms, {lim.imu_timeout_s * 1e3:.1f} ms " \
+                   f"of frames at {RVC_RATE_HZ} Hz " \
                    f"while the encoder moved more than {math.degrees(lim.imu_frozen_motion_rad):.2f} deg"
+        if reason is FaultReason.MOTOR_JAM and x.jam_torque_s > lim.jam_torque_time_s:
+            return f"torque balance: {x.jam_residual_nm:+.1f} N m unexplained > {x.jam_bound_nm:.1f} N m for " \
+                   f"{x.jam_torque_s * 1e3:.1f} ms > {lim.jam_torque_time_s * 1e3:.1f} ms on a foot slower than " \
+                   f"{lim.jam_slow_rad_s:.2f} rad/s"
         if reason is FaultReason.MOTOR_JAM:
             return f"current at {lim.jam_current_share:.0%} of its limit, the encoder within " \
                    f"{math.degrees(lim.jam_still_rad):.2f} deg, the reference moving, for {x.jam_s * 1e3:.1f} ms > " \
@@ -191,11 +201,15 @@ class Supervisor:
                 return FaultReason.SENSOR_DISAGREEMENT
             if x.motor_encoder_gap_rad > lim.motor_encoder_gap_rad:
                 return FaultReason.MOTOR_ENCODER_DISAGREEMENT
-            if x.imu_frozen_s > lim.imu_timeout_s:
+            # identical frames come at the IMU's rate, so the frozen time grows in frame periods: imu_timeout_s of
+            # them is reached at the frame that ends it, give or take its arrival's jitter (half a period)
+            if x.imu_frozen_s > lim.imu_timeout_s - _HALF_FRAME_S:
                 return FaultReason.IMU_FROZEN
             # in stance only a dorsiflexing push: the ground's moment helps it, so a still foot is jammed, where a
             # plantarflexing one may be a push-off the motor is too weak for (docs/safety.md, "Jam")
             if (x.jam_dorsiflexing or not x.loaded) and x.jam_s > lim.jam_time_s:
+                return FaultReason.MOTOR_JAM
+            if x.jam_torque_s > lim.jam_torque_time_s:  # the torque balance (JamObserver), in stance and swing
                 return FaultReason.MOTOR_JAM
         return _NONE
 
@@ -294,6 +308,82 @@ class JamCheck:
         return now_s - self._since
 
 
+class JamObserver:
+    """A jammed output by the ankle's torque balance: a moment the foot's model does not explain, on a slow foot.
+
+    The moments the firmware can measure act on the foot: the motor's (the measured current times Kt N eta, or
+    divided by the backdriven share when it opposes the motion, as the feedforward takes it), the parallel spring's
+    at the encoder's angle, the foot's weight and the ground's (the pylon load cell's moment). Their sum changes the
+    foot's angular momentum J w, with w the encoder's speed. A momentum observer (De Luca and Mattone, ICRA 2003;
+    Haddadin et al., IEEE T-RO 33(6) 2017) compares the two without differentiating the encoder twice:
+
+        r = K (J w - J w0 - integral(moments + r) dt)
+
+    follows, with time constant 1/K, the moment nothing measured applies: a jam's reaction. It is judged against a
+    bound for what the model misses: ``residual_nm`` (friction, the filtered speed's lag), ``share`` of the measured
+    moments (Kt, efficiency, the spring's rate and the load cell's calibration within a few per cent) and
+    ``per_n_m`` times the axial force (the ground's shear force acts on the ankle below the load cell: its moment
+    there is the shear times the cell's height above the ankle, which the cell does not report). ``update`` returns
+    how long the residual has stayed beyond that bound while the encoder was slower than ``slow_rad_s``
+    (docs/safety.md, "Jam").
+    """
+
+    def __init__(self, inertia_kg_m2: float, nm_per_a: float, backdriven_share: float, gravity_moment_nm: float,
+                 com_angle_rad: float, spring: tuple[float, float, bool], time_constant_s: float,
+                 residual_nm: float, share: float, per_n_m: float, slow_rad_s: float) -> None:
+        """The foot's model (the feedforward's), the observer's time constant and the bound's terms."""
+        self.inertia_kg_m2 = inertia_kg_m2
+        self.nm_per_a = nm_per_a
+        self.backdriven_share = backdriven_share
+        self.gravity_moment_nm = gravity_moment_nm
+        self.com_angle_rad = com_angle_rad
+        self.spring_k, self.spring_engage_rad, self.spring_two_sided = spring
+        self.gain = 1.0 / time_constant_s
+        self.residual_nm = residual_nm
+        self.share = share
+        self.per_n_m = per_n_m
+        self.slow_rad_s = slow_rad_s
+        self.residual = 0.0  # the unexplained moment now (N m)
+        self.bound = 0.0  # the bound it was judged against
+        self._last_s = -1.0  # no sample yet
+        self._momentum0 = 0.0
+        self._integral = 0.0
+        self._known = 0.0  # the measured moments at the last sample
+        self._since = -1.0  # when the residual went beyond its bound (-1: it is within)
+
+    def reset(self) -> None:
+        """Start again at the next sample (the foot's momentum then is the observer's origin)."""
+        self._last_s = -1.0
+        self._since = -1.0
+        self.residual = 0.0
+
+    def update(self, now_s: float, velocity_rad_s: float, angle_rad: float, current_a: float, moment_nm: float,
+               force_n: float) -> float:
+        """Seconds the residual has been beyond its bound on a slow foot up to now_s (0.0 when it is not)."""
+        motor = self.nm_per_a * current_a
+        if current_a * velocity_rad_s < 0.0 and self.backdriven_share != 1.0:  # against the motion: backdriven
+            motor /= self.backdriven_share
+        spring = parallel_spring_torque_nm(self.spring_k, self.spring_engage_rad, self.spring_two_sided, angle_rad) \
+            if self.spring_k != 0.0 else 0.0
+        known = motor + spring + moment_nm - self.gravity_moment_nm * math.sin(angle_rad + self.com_angle_rad)
+        momentum = self.inertia_kg_m2 * velocity_rad_s
+        if self._last_s < 0.0:
+            self._momentum0, self._integral, self.residual = momentum, 0.0, 0.0
+        else:  # the moments of the last sample acted over the interval since (held, as the drive holds its current)
+            self._integral += (self._known + self.residual) * (now_s - self._last_s)
+            self.residual = self.gain * (momentum - self._momentum0 - self._integral)
+        self._last_s = now_s
+        self._known = known
+        self.bound = self.residual_nm + self.share * (abs(motor) + abs(spring) + abs(moment_nm)) \
+            + self.per_n_m * abs(force_n)
+        if abs(self.residual) <= self.bound or abs(velocity_rad_s) > self.slow_rad_s:
+            self._since = -1.0
+            return 0.0
+        if self._since < 0.0:
+            self._since = now_s
+        return now_s - self._since
+
+
 class ThermalGuard:
     """The motor's reported winding temperature, taken only while fresh, and the current limit it allows.
 
@@ -337,3 +427,4 @@ _INIT: Final = SupervisorState.INIT
 _RUN: Final = SupervisorState.RUN
 _SAFE: Final = SupervisorState.SAFE
 _NONE: Final = FaultReason.NONE
+_HALF_FRAME_S: Final = 0.5 / RVC_RATE_HZ  # half the IMU's frame period (FrozenImu's time grows in whole periods)

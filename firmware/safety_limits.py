@@ -82,6 +82,17 @@ class SafetyLimits:
     jam_still_rad: float = math.radians(0.5)
     jam_reference_rad_s: float = 0.1
     jam_time_s: float = 0.025
+    # a jam by the torque balance (firmware.safety.JamObserver; docs/safety.md, "Jam"), judged with a healthy load
+    # cell: the moment the foot's model does not explain, followed with time constant jam_observer_s, beyond
+    # jam_residual_peak_share x the design's peak output torque (Kt N eta x the current limit) + jam_residual_share x
+    # the measured moments + jam_residual_m x the axial force, while the encoder is slower than jam_slow_rad_s, for
+    # longer than jam_torque_time_s
+    jam_observer_s: float = 0.02
+    jam_residual_peak_share: float = 0.135
+    jam_residual_share: float = 0.05
+    jam_residual_m: float = 0.01
+    jam_slow_rad_s: float = 0.87
+    jam_torque_time_s: float = 0.005
     # the motor the current limits are bounded by ([motor] of the profile; a mapping, as a record's header holds it,
     # is read as MotorRatings)
     motor: MotorRatings = field(default_factory=MotorRatings)
@@ -129,6 +140,15 @@ class SafetyLimits:
         check_range("jam_reference_rad_s", self.jam_reference_rad_s, 0.0, 10.0, unit="rad/s")
         check_range("jam_time_s", self.jam_time_s, 0.0, TIMEOUT_MAX_S, lo_open=True,
                     unit="s (a stalled peak-current command crosses any range of motion in 0.1 s once freed)")
+        check_range("jam_observer_s", self.jam_observer_s, 0.0, TIMEOUT_MAX_S, lo_open=True,
+                    unit="s (the observer's time constant: at most the longest age limit)")
+        check_range("jam_residual_peak_share", self.jam_residual_peak_share, 0.0, 1.0, lo_open=True,
+                    unit="(of the design's peak output torque)")
+        check_range("jam_residual_share", self.jam_residual_share, 0.0, 1.0, unit="(of the measured moments)")
+        check_range("jam_residual_m", self.jam_residual_m, 0.0, 0.5, unit="m (N m per N of axial force)")
+        check_range("jam_slow_rad_s", self.jam_slow_rad_s, 0.0, 10.0, lo_open=True, unit="rad/s")
+        check_range("jam_torque_time_s", self.jam_torque_time_s, 0.0, TIMEOUT_MAX_S,
+                    unit="s (a jam released after it frees a stalled command)")
         check_range("damping_kd", self.damping_kd, 0.0, DAMPING_KD_MAX, lo_open=True,
                     unit="N m s/rad (MIT mode's kd range on the AK series)")
 

@@ -34,6 +34,7 @@ from firmware.safety import (
     FaultReason,
     FrozenImu,
     JamCheck,
+    JamObserver,
     MotorEncoderGap,
     SafetyInputs,
     Supervisor,
@@ -112,6 +113,12 @@ class FirmwareTasks:
         self._stride_s = c.stride_s
         feedforward = Feedforward(c.feedforward_params)
         self._nm_per_a = feedforward.nm_per_a  # output torque per motor amp
+        self.jam_observer = JamObserver(feedforward.inertia_kg_m2, feedforward.nm_per_a, feedforward.backdriven_share,
+                                        feedforward.gravity_moment_nm, c.com_angle_rad,
+                                        (feedforward.spring_k, feedforward.spring_engage_rad,
+                                         feedforward.spring_two_sided), lim.jam_observer_s,
+                                        lim.jam_residual_peak_share * feedforward.nm_per_a * c.current_limit_a,
+                                        lim.jam_residual_share, lim.jam_residual_m, lim.jam_slow_rad_s)
         self.load_detector = LoadDetector(self.ts_s, feedforward.nm_per_a, feedforward.inertia_kg_m2,
                                           feedforward.gravity_moment_nm, c.com_angle_rad, feedforward=feedforward)
         # gait events from the load cell and FSRs, on boards with the ADC; the load detector is the fallback
@@ -165,6 +172,8 @@ class FirmwareTasks:
         x.jam_s = self.jam.update(x.now_s, out.current_cmd_a, self._current_limit_a * self.thermal.factor,
                                   self.encoder.angle_rad, self.obs.reference_velocity_rad_s)
         x.jam_dorsiflexing = self.jam.dorsiflexing
+        x.jam_torque_s = self._jam_torque_s(x.now_s, feedback.received_s, feedback.current_a)
+        x.jam_residual_nm, x.jam_bound_nm = self.jam_observer.residual, self.jam_observer.bound
         x.loaded = self.obs.stance
         x.disagreement_rad = estimator.disagreement_rad  # 0.0 until the first IMU sample seeds it
         x.motor_encoder_gap_rad = self.motor_encoder_gap.update(self.encoder.angle_rad, feedback.position_rad,
@@ -176,6 +185,17 @@ class FirmwareTasks:
         if link_lost and self.link_lost_seen_s is None:
             self.link_lost_seen_s = x.now_s  # whatever the state: the latency of seeing it is never negative
         self.supervisor.check(x)
+
+    def _jam_torque_s(self, now_s: float, reply_s: float | None, current_a: float) -> float:
+        """The torque balance's jam time (JamObserver) while it can be judged: in RUN, with a healthy load cell (the
+        ground's moment measured) and the motor's current fresh; else the observer starts again."""
+        ground, observer = self.ground_events, self.jam_observer
+        if self.supervisor.state is not _RUN or ground is None or not ground.healthy or reply_s is None \
+                or now_s - reply_s > self.config.safety.motor_timeout_s:
+            observer.reset()
+            return 0.0
+        d, encoder = ground.driver, self.encoder
+        return observer.update(now_s, encoder.velocity_rad_s, encoder.angle_rad, current_a, d.moment_nm, d.force_n)
 
     def control_task(self, job: Job) -> None:
         now_s = job.start / self.f_cpu_hz

@@ -1,5 +1,6 @@
-"""What the supervisor detects beyond silence (firmware/safety.py): a jammed output, a frozen IMU, an IMU silence
-judged up to the port's last read (a host's stall of the IMU task is not the IMU's silence)."""
+"""What the supervisor detects beyond silence (firmware/safety.py): a jammed output (by its current, motion and
+reference, and by the ankle's torque balance), a frozen IMU, an IMU silence judged up to the port's last read (a
+host's stall of the IMU task is not the IMU's silence)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,18 @@ import math
 
 import pytest
 
+from firmware.control.pid import parallel_spring_torque_nm
 from firmware.drivers.imu import ImuDriver
-from firmware.safety import FaultReason, FrozenImu, JamCheck, SafetyInputs, SafetyLimits, Supervisor, SupervisorState
+from firmware.safety import (
+    FaultReason,
+    FrozenImu,
+    JamCheck,
+    JamObserver,
+    SafetyInputs,
+    SafetyLimits,
+    Supervisor,
+    SupervisorState,
+)
 from hal.interfaces import Uart
 from hal.virtual.faults import make_injector
 from hal.virtual.faults.observer import Observer
@@ -57,6 +68,67 @@ def test_a_jam_trips_after_its_time_in_swing_and_in_stance_only_when_it_dorsifle
     s = started()
     assert s.check(running(jam_s=LIMITS.jam_time_s + 1e-3, loaded=True, jam_dorsiflexing=True)) is SupervisorState.SAFE
     assert s.reason is FaultReason.MOTOR_JAM and "dorsiflexing" in s.detail
+
+
+# a foot model as the adult design's feedforward gives it: J, Kt N eta, backdriven share, m g d, a one-sided spring
+FOOT = dict(inertia_kg_m2=0.0887, nm_per_a=2.52, backdriven_share=0.73, gravity_moment_nm=1.73,
+            com_angle_rad=math.pi / 2, spring=(400.0, 0.0, False))
+
+
+RESIDUAL_NM = LIMITS.jam_residual_peak_share * 2.52 * 14.8  # of the peak output torque: 14.8 A at 2.52 N m/A
+
+
+def observer() -> JamObserver:
+    lim = LIMITS
+    return JamObserver(**FOOT, time_constant_s=lim.jam_observer_s, residual_nm=RESIDUAL_NM,  # type: ignore
+                       share=lim.jam_residual_share, per_n_m=lim.jam_residual_m, slow_rad_s=lim.jam_slow_rad_s)
+
+
+def _moment(current_a: float, velocity: float, angle: float, ground_nm: float) -> float:
+    """The moments on the model's foot (what the observer's model says), for the free foot's integration."""
+    motor = FOOT["nm_per_a"] * current_a / (FOOT["backdriven_share"] if current_a * velocity < 0 else 1.0)
+    return motor + parallel_spring_torque_nm(400.0, 0.0, False, angle) + ground_nm \
+        - FOOT["gravity_moment_nm"] * math.cos(angle)
+
+
+def test_the_torque_balance_explains_a_free_foot_and_finds_a_jams_reaction() -> None:
+    o, dt, w, angle = observer(), 1e-3, 0.0, 0.05
+    worst = 0.0
+    for k in range(400):  # a free foot under a swinging current and a ground moment: all of it explained
+        t = k * dt
+        current, ground = 8.0 * math.sin(2 * math.pi * 2.0 * t), 60.0 * math.sin(2 * math.pi * 1.0 * t)
+        assert o.update(t, w, angle, current, ground, 600.0) == 0.0
+        worst = max(worst, abs(o.residual))
+        w += _moment(current, w, angle, ground) / FOOT["inertia_kg_m2"] * dt
+        angle += w * dt
+    assert worst < 0.5  # the integration's own error; the bound starts at RESIDUAL_NM (5 N m)
+    o.reset()
+    held = [o.update(1.0 + k * dt, 0.0, -0.1, 10.0, 0.0, 0.0) for k in range(120)]  # the motor pushes, nothing moves
+    # the residual follows the jam's reaction (-(motor + weight)) with the observer's time constant (20 ms)
+    assert o.residual == pytest.approx(-_moment(10.0, 0.0, -0.1, 0.0), rel=0.01)
+    first = next(k for k, h in enumerate(held) if h > 0.0) - 1  # the sample it went beyond its bound
+    assert abs(o.residual) > o.bound and 0 < first < 20
+    assert held[-1] == pytest.approx((len(held) - 1 - first) * dt)
+    # the same residual on a foot faster than jam_slow_rad_s is not judged (a jam holds the foot)
+    assert o.update(1.2, 2 * LIMITS.jam_slow_rad_s, -0.1, 10.0, 0.0, 0.0) == 0.0
+
+
+def test_the_torque_balances_bound_grows_with_the_measured_moments_and_the_axial_force() -> None:
+    o = observer()
+    o.update(0.0, 0.0, -0.1, 0.0, 0.0, 0.0)
+    assert o.bound == pytest.approx(RESIDUAL_NM)
+    o.update(0.001, 0.0, -0.1, 10.0, 50.0, 800.0)
+    assert o.bound == pytest.approx(RESIDUAL_NM + LIMITS.jam_residual_share * (25.2 + 50.0)
+                                    + LIMITS.jam_residual_m * 800.0)
+
+
+def test_the_torque_balance_trips_in_stance_and_swing_after_its_time() -> None:
+    for loaded in (False, True):
+        s = started()
+        assert s.check(running(jam_torque_s=LIMITS.jam_torque_time_s, loaded=loaded)) is SupervisorState.RUN
+        assert s.check(running(jam_torque_s=LIMITS.jam_torque_time_s + 1e-3, loaded=loaded, jam_residual_nm=-20.0,
+                               jam_bound_nm=8.0)) is SupervisorState.SAFE
+        assert s.reason is FaultReason.MOTOR_JAM and "torque balance: -20.0 N m unexplained > 8.0 N m" in s.detail
 
 
 def test_frozen_imu_counts_identical_frames_only_while_the_encoder_moves() -> None:
@@ -118,12 +190,38 @@ def _run(name: str, onset_s: float = 1.6, duration_s: float = 0.2):
     return r.firmware.supervisor, obs
 
 
-def test_a_frozen_imu_is_caught_while_the_foot_moves() -> None:
+def test_a_frozen_imu_trips_at_the_frame_that_completes_its_time() -> None:
+    # identical frames at 100 Hz: the frozen time grows 10 ms a frame; the 4th repeat (40 ms) ends it, whatever its
+    # arrival's jitter, where the 3rd (30 ms) does not
+    for frozen_s, state in ((0.030, SupervisorState.RUN), (0.0399, SupervisorState.SAFE),
+                            (0.040, SupervisorState.SAFE)):
+        s = started()
+        assert s.check(running(imu_frozen_s=frozen_s)) is state
+    assert s.reason is FaultReason.IMU_FROZEN and "bit-identical for 40.0 ms" in s.detail
+
+
+def test_a_frozen_imu_is_caught_while_the_foot_moves_and_reaches_the_safe_command_within_50_ms() -> None:
     sup, obs = _run("imu_frozen")
+    safe_s = obs.safe_on_wire_s(sup.tripped_at_s)
     assert sup.reason is FaultReason.IMU_FROZEN and 1.6 < sup.tripped_at_s < 1.6 + 0.05
+    assert safe_s is not None and safe_s - 1.6 <= 0.050
 
 
 def test_a_silent_imu_reaches_the_safe_command_within_50_ms() -> None:
     sup, obs = _run("imu_silent")
     safe_s = obs.safe_on_wire_s(sup.tripped_at_s)
     assert sup.reason is FaultReason.IMU_TIMEOUT and safe_s is not None and safe_s - 1.6 <= 0.050
+
+
+def test_a_jam_at_push_off_is_caught_by_the_torque_balance() -> None:
+    """Walking at 20 kg, the output jams at push-off (phase 0.5 of the first stride, as the campaign's point): the
+    first rule cannot tell it from a push-off the motor is too weak for; the torque balance can."""
+    logging.getLogger("firmware.safety").setLevel(logging.ERROR)
+    onset_s = 1.063  # the campaign's push-off onset walking 20 kg (gait start + 0.5 stride)
+    fault, obs = make_injector("motor_stall", onset_s, 0.2, seed=0), Observer()
+    r = run_virtual(RunConfig(strides=1, trace_capacity=0, scenario="walk", body_mass_kg=20.0, faults=(obs, fault),
+                              duration_s=onset_s + 0.1))
+    sup = r.firmware.supervisor
+    assert fault.record.fired
+    assert sup.reason is FaultReason.MOTOR_JAM and "torque balance" in sup.detail
+    assert onset_s < sup.tripped_at_s < onset_s + 0.08

@@ -56,7 +56,8 @@ CONTROLS: dict[str, str] = {
     "ESTOP": "the e-stop",
     "OVER_TEMPERATURE": "the motor's reported winding temperature above [thermal] fault_c",
     "IMU_FROZEN": "IMU frames bit-identical for imu_timeout_s while the encoder moved",
-    "MOTOR_JAM": "current near its limit, no motion, the reference moving, for jam_time_s (stance: dorsiflexing)",
+    "MOTOR_JAM": "current near its limit, no motion, the reference moving, for jam_time_s (stance: dorsiflexing); "
+                 "or a moment the torque balance does not explain on a slow foot (with the load cell healthy)",
 }
 HEAT_FIGURE = "excursion_deg"
 TRACES = 3
