@@ -1,4 +1,5 @@
-"""pafp fit: a plant that is not the nominal one is recovered from a recorded identification experiment."""
+"""pafp fit: a plant that is not the nominal one (the hand-made plant file) is recovered from a recorded identification
+experiment."""
 
 from __future__ import annotations
 
@@ -13,37 +14,24 @@ import pytest
 from hal.virtual.plant import load_plant_params
 from host_tools.calibration.fit_model import fit_percentage
 from host_tools.cli import main
+from tests.fit_shared import HANDMADE
 
 ROOT = Path(__file__).resolve().parents[1]
-SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
-         'prbs_s = 2.0\n')
 
 
 @pytest.fixture(scope="module")
-def experiment(tmp_path_factory):
-    """A 10 s identification experiment on a plant with 30 % more inertia and 2.5 times the Coulomb friction."""
-    d = tmp_path_factory.mktemp("fit")
-    text = (ROOT / "profiles" / "plant_ak60_6.toml").read_text()
-    nominal = load_plant_params()
-    extra = 0.3 * nominal.output_inertia_kg_m2
-    text = re.sub(r"^foot_inertia_kg_m2\s*=[^#\n]*", f"foot_inertia_kg_m2 = {nominal.foot_inertia_kg_m2 + extra!r} ",
-                  text, count=1, flags=re.M)
-    text = re.sub(r"^coulomb_friction_nm\s*=[^#\n]*", "coulomb_friction_nm = 0.25 ", text, count=1, flags=re.M)
-    (d / "plant.toml").write_text(text)
-    (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
-    run = d / "run"
-    assert main(["run", "--experiment", "sysid", "--profile", str(d / "fw.toml"), "--plant", str(d / "plant.toml"),
-                 "--quiet", "--no-plot", "--no-trace", "--out", str(run)]) == 0
-    out = d / "fit"
-    assert main(["fit", str(run), "--out", str(out), "--no-plot"]) == 0
-    return d, run, out, load_plant_params(d / "plant.toml")
+def experiment(handmade_fit):
+    """The hand-made plant's 10 s identification experiment and its `pafp fit` (tests/fit_shared.py, shared with
+    tests/test_plant_fit_done_when.py): (its plant file, the recording, the fit's directory, the plant's truth)."""
+    return HANDMADE, handmade_fit["run"], handmade_fit["fit"], load_plant_params(HANDMADE)
 
 
 def test_fit_recovers_the_plant_within_ten_percent(experiment):
     _, _, out, truth = experiment
     s = json.loads((out / "fit.json").read_text())
     p = s["params"]
-    for name, true in (("output_inertia_kg_m2", truth.output_inertia_kg_m2), ("coulomb_friction_nm", 0.25),
+    for name, true in (("output_inertia_kg_m2", truth.output_inertia_kg_m2),
+                       ("coulomb_friction_nm", truth.coulomb_friction_nm),
                        ("gravity_moment_nm", truth.gravity_moment_nm),
                        ("foot_damping_nm_s_per_rad", truth.foot_damping_nm_s_per_rad)):
         assert p[name]["identifiable"], name
@@ -305,9 +293,9 @@ def test_the_reply_current_is_the_middle_of_its_truncated_reading(experiment):
     from host_tools.calibration.fit_model import base_values, simulate
     from host_tools.calibration.plant_truth import truth_of
 
-    d, run, _, _ = experiment
+    plant, run, _, _ = experiment
     base = load_plant_params()
-    v = {**base_values(base), **truth_of(["--plant", str(d / "plant.toml")], 0), "imu_lag_s": 0.0195}
+    v = {**base_values(base), **truth_of(["--plant", str(plant)], 0), "imu_lag_s": 0.0195}
     exp = load_experiment(run)
     heard = np.zeros(len(exp.t), dtype=bool)
     _, current, _, mask = simulate(base, v, exp, heard_out=heard)

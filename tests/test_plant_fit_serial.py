@@ -9,19 +9,15 @@ import math
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from host_tools.calibration.fit_data import load_experiment
 from host_tools.cli import main
+from tests.fit_shared import HANDMADE, ROOT, SHORT
 from tests.test_serial_run import SETTLE_S, STALL_FAULTS, _stop, _summary
 
-ROOT = Path(__file__).resolve().parents[1]
-HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
-SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
-         'prbs_s = 2.0\n')
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 # a host stall of 100 ms also fires the host watchdog (WATCHDOG: once in seven attempts here, at 0.04 s, load 3.3)
 RETRIED = (*STALL_FAULTS, "WATCHDOG")

@@ -2,8 +2,10 @@
 interval, the truth the emulator's (`host_tools.calibration.plant_truth`, emulation only).
 
 - ``test_fit_interval_coverage`` ("Limits"): the tests' 10 s identification experiment
-  (tests/test_plant_fit_done_when.py's `[controller]` table) on `--plant-seed` 3, 7, 11, 21, 42 and the hand-made
-  plant file. A few minutes.
+  (tests/fit_shared.py's `[controller]` table) on `--plant-seed` 3, 7, 11, 21, 42 and the hand-made
+  plant file. A few minutes. Asserted on `--plant-seed 7` (issue 21's done-when, the hand-made plant's being
+  tests/test_plant_fit_done_when.py's): every identified parameter within three half-widths of the truth, inertia,
+  damping, gravity and Coulomb friction within 10 %.
 - ``test_default_experiment_coverage`` ("What the tests measure"): the default 29 s experiment on `--plant-seed 7`
   with the noise seeds 0-7 and on the hand-made plant with 0 and 1, as `pafp run --experiment sysid --seed N` then
   `pafp fit` make them. About ten minutes.
@@ -38,16 +40,15 @@ from host_tools.calibration.fit_model import load_base
 from host_tools.calibration.plant_fit import fit_plant
 from host_tools.calibration.plant_truth import truth_of
 from host_tools.cli import main
+from tests.fit_shared import HANDMADE, SHORT
 
 ROOT = Path(__file__).resolve().parents[2]
-HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
-SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
-         'prbs_s = 2.0\n')
 PLANTS = [["--plant-seed", "3"], ["--plant-seed", "7"], ["--plant-seed", "11"], ["--plant-seed", "21"],
           ["--plant-seed", "42"], ["--plant", str(HANDMADE)]]
 COVERAGE_GOAL = 0.90
 NUDGE_GOAL = 0.05
 ADEQUACY_FALSE_GOAL = 0.1  # correct-model recordings the adequacy check may flag
+DYNAMICS = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "gravity_moment_nm", "coulomb_friction_nm")
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -66,7 +67,7 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 
 def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: Path) -> dict:
     """Record, fit and score each (label, plant options, noise seed) run: the counts and each run's half-widths off."""
-    rows, inside, total, walls, flagged = {}, 0, 0, [], {}
+    rows, inside, total, walls, flagged, dynamics = {}, 0, 0, [], {}, {}
     for label, plant, seed in runs:
         run = out / f"{label.replace('/', '_')}_{seed}"
         assert main(["run", "--experiment", "sysid", *profile, *plant, "--seed", str(seed), "--quiet", "--no-plot",
@@ -78,6 +79,7 @@ def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: P
         errors = {n: abs(r.values[n] - truth[n]) / r.ci95[n] for n in r.names
                   if r.identifiable.get(n) and n in truth and r.ci95.get(n)}
         rows[label] = {n: round(e, 2) for n, e in errors.items()}
+        dynamics[label] = {n: round(r.values[n] / truth[n] - 1, 4) for n in DYNAMICS if r.identifiable.get(n)}
         if r.adequacy.get("failing"):
             flagged[label] = r.adequacy["failing"]
         inside += sum(e <= 1.0 for e in errors.values())
@@ -85,7 +87,7 @@ def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: P
     lo, hi = clopper_pearson(inside, total)
     return {"inside": inside, "identified": total, "coverage": round(inside / max(total, 1), 3),
             "coverage_ci95": [round(lo, 3), round(hi, 3)],
-            "half_widths_off": rows, "fit_wall_s_max": round(max(walls), 1),
+            "half_widths_off": rows, "dynamics_relative_error": dynamics, "fit_wall_s_max": round(max(walls), 1),
             "adequacy_flagged": flagged, "recordings": len(runs),
             "load_average_1min": round(os.getloadavg()[0], 2)}
 
@@ -116,6 +118,12 @@ def test_fit_interval_coverage(benchmark, tmp_path: Path) -> None:  # type: igno
     figures = benchmark.pedantic(_coverage, args=(runs, ["--profile", str(tmp_path / "fw.toml")], tmp_path),
                                  rounds=1, iterations=1)
     _report(benchmark, figures, f"10 s experiment, {len(PLANTS)} plants", len(runs))
+    # issue 21's done-when on `--plant-seed 7` (the hand-made plant's: tests/test_plant_fit_done_when.py): a bias
+    # bound, not a coverage claim (a calibrated interval misses by three half-widths about 4 times in a billion)
+    seed7 = figures["half_widths_off"]["7"]
+    assert len(seed7) >= 5 and max(seed7.values()) <= 3.0, seed7
+    dynamics = figures["dynamics_relative_error"]["7"]
+    assert len(dynamics) == len(DYNAMICS) and max(map(abs, dynamics.values())) < 0.10, dynamics
 
 
 def test_default_experiment_coverage(benchmark, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
