@@ -41,7 +41,9 @@ def _emulator(*options: str) -> tuple[subprocess.Popen, str, str]:
     return proc, paths["motor"], paths["imu"]
 
 
-@pytest.fixture(scope="module")
+# session-scoped: under xdist a module fixture is made again each time a worker comes back to the module (measured: the
+# fit made twice in one run, 248 s and 120 s)
+@pytest.fixture(scope="session")
 def serial_fit(tmp_path_factory):
     d = tmp_path_factory.mktemp("serial_fit")
     (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
