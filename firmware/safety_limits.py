@@ -87,7 +87,7 @@ class SafetyLimits:
     # jam_residual_peak_share x the design's peak output torque (Kt N eta x the current limit) + jam_residual_share x
     # the measured moments + jam_residual_m x the axial force, while the encoder is slower than jam_slow_rad_s, for
     # longer than jam_torque_time_s
-    jam_observer_s: float = 0.02
+    jam_observer_s: float = 0.015
     jam_residual_peak_share: float = 0.135
     jam_residual_share: float = 0.05
     jam_residual_m: float = 0.01
