@@ -25,7 +25,7 @@ from protocol.vesc import SetCurrent, SetCurrentBrake, SetDuty, SetHandbrake
 
 UART = ("release", "brake", "short", "handbrake", "hold")
 SERVO = ("release", "brake", "short", "hold")
-MIT = ("release", "brake", "damping")
+MIT = ("release", "brake", "damping", "hold")  # CanMitDriver.SAFE_BEHAVIOURS
 
 
 def _policy(state: str, offered: tuple[str, ...] = UART) -> SafePolicy:
@@ -87,7 +87,7 @@ def test_without_a_fresh_position_the_short_stands_in_for_the_hold() -> None:
 
 @pytest.mark.parametrize(("state", "offered", "link"), [
     ("handbrake", SERVO, "can-servo"), ("damping", UART, "uart"), ("short", MIT, "can-mit"),
-    ("handbrake", MIT, "can-mit"), ("hold", MIT, "can-mit")])
+    ("handbrake", MIT, "can-mit"), ("hold", ("release", "hold"), "test")])  # the hold needs a damper to stand in
 def test_a_safe_state_the_link_lacks_is_refused_naming_it(state: str, offered: tuple[str, ...], link: str) -> None:
     with pytest.raises(ValueError, match=f"safe_state = '{state}' is not offered by the {link} link: it offers"):
         check_offered(state, offered, link)
