@@ -18,8 +18,10 @@ The behaviours are the drive's own (docs/devices.md, "Safe behaviours"); which o
   current shows) the link's strongest hold: ``hold`` on UART and CAN servo (the short, the strongest damper
   the winding makes, yields under the stance moment of a light design: 18 deg at 20 kg on the AK60-6), on MIT
   its damper (``damping`` at ``damping_kd``: the MIT hold is the firmware's gains, not the drive's tuned position
-  loop, and the campaign has not judged it in graded); unloaded (swing) one
-  that lets the foot go gently (on MIT ``damping_kd`` / 4; on UART and CAN servo the short still: under the
+  loop, and the campaign has not judged it in graded); once the hold has taken the loaded foot it keeps it
+  through swing (let go at toe-off, a parallel spring wound in late stance throws the foot back: 20-34 deg on
+  the adult design at push-off, 8-10 deg held); a foot the safe state meets unloaded (swing) gets one
+  that lets it go gently (on MIT ``damping_kd`` / 4; on UART and CAN servo the short still: under the
   swing foot's own weight it lets it sink at a few degrees per second, and a brake capped at
   ``brake_current_a`` would hide the load the next heel strike puts on it from the load detector); and
   ``release`` once the drive reports its own fault (it has released the motor and ignores commands; releasing
@@ -86,7 +88,8 @@ class SafePolicy:
 
     def __init__(self, safe_state: str, offered: tuple[str, ...], link: str, *, brake_current_a: float,
                  brake_delay_s: float, damping_kd: float, hold_kp: float = 0.0) -> None:
-        """Check the link offers the safe state; keep the currents, the brake's delay and the damper's kd."""
+        """Check the link offers the safe state; keep the currents, the brake's delay, the damper's kd and the MIT
+        hold's kp (used on MIT only)."""
         check_offered(safe_state, offered, link)
         self.safe_state = safe_state
         self.brake_delay_s = brake_delay_s
@@ -117,7 +120,7 @@ class SafePolicy:
         if fixed is None:  # graded
             if drive_fault:
                 cmd = RELEASE
-            elif not loaded:
+            elif not loaded and self.last.behaviour != "hold":  # a hold taken in stance stays through swing
                 cmd = self._swing
             else:
                 cmd = self._held(position_rad, settled) if self._hold else self._damper
