@@ -14,7 +14,7 @@ from firmware.control.validation import check_int_range, check_range
 from firmware.motor_ratings import MotorRatings
 from firmware.safe_state import SAFE_STATES
 
-__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "MISS_STREAK_MAX",
+__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "HOLD_KP_MAX", "MISS_STREAK_MAX",
            "PEAK_CURRENT_A", "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S",
            "SafetyLimits", "ThermalLimits"]
 
@@ -45,6 +45,9 @@ BRAKE_DELAY_MAX_S = 1.0
 DAMPING_KD_MAX = 5.0
 """Largest MIT damping kd: the AK series' MIT field range for kd, 0..5 N*m*s/rad (PROTOCOLS.md G); the law's torque
 is further clamped to the motor's MIT torque range, which is within its peak (firmware/motor_ratings.py)."""
+HOLD_KP_MAX = 500.0
+"""Largest MIT hold kp: the AK series' MIT field range for kp, 0..500 N*m/rad (PROTOCOLS.md G); the law's torque is
+clamped to the motor's MIT torque range as the damper's is."""
 MISS_STREAK_MAX = 1000
 """Longest deadline-miss streak: TIMEOUT_MAX_S at the fastest control rate a profile may set (10 kHz); the
 firmware configuration also holds it to TIMEOUT_MAX_S at its own control rate."""
@@ -69,9 +72,11 @@ class SafetyLimits:
     motor_encoder_gap_rad: float = math.radians(3.0)
     belt_ratio: float = 89.127 / 19.1
     # what the motor is told in the safe state (firmware/safe_state.py: release, brake, short, handbrake, hold,
-    # damping, graded) and the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units)
+    # damping, graded), the MIT damper's kd (N m s/rad at the actuator's output, the MIT law's units) and the MIT
+    # hold's kp (N m/rad there; its kd is damping_kd)
     safe_state: str = "graded"
     damping_kd: float = 1.0
+    hold_kp: float = 20.0
     # a frozen IMU: its frames bit-identical for imu_timeout_s while the encoder moved more than this
     imu_frozen_motion_rad: float = math.radians(1.0)
     # a jam: the current command at jam_current_share of its limit, the encoder within jam_still_rad, the
@@ -87,7 +92,7 @@ class SafetyLimits:
     # jam_residual_peak_share x the design's peak output torque (Kt N eta x the current limit) + jam_residual_share x
     # the measured moments + jam_residual_m x the axial force, while the encoder is slower than jam_slow_rad_s, for
     # longer than jam_torque_time_s
-    jam_observer_s: float = 0.02
+    jam_observer_s: float = 0.015
     jam_residual_peak_share: float = 0.135
     jam_residual_share: float = 0.05
     jam_residual_m: float = 0.01
@@ -151,6 +156,8 @@ class SafetyLimits:
                     unit="s (a jam released after it frees a stalled command)")
         check_range("damping_kd", self.damping_kd, 0.0, DAMPING_KD_MAX, lo_open=True,
                     unit="N m s/rad (MIT mode's kd range on the AK series)")
+        check_range("hold_kp", self.hold_kp, 0.0, HOLD_KP_MAX, lo_open=True,
+                    unit="N m/rad (MIT mode's kp range on the AK series)")
 
 
 TEMPERATURE_RANGE_C = (40.0, 180.0)

@@ -1,5 +1,5 @@
 """The AK drive's safe behaviours on the plant: torque against speed (phase short, regenerative brake, MIT damping)
-and against angle (handbrake), and the drive's own command timeout (hal/virtual/devices/ak60_winding.py)."""
+and against angle (handbrake, the MIT hold), and the drive's own command timeout (hal/virtual/devices/ak60_winding.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import math
 import pytest
 from test_ak60 import F, Rig
 
-from hal.can import CanFrame
+from firmware.drivers.can_mit import CanMitDriver
+from firmware.safe_state import SafeCommand, SafePolicy
+from hal.can import CanFrame, CanPort
 from hal.virtual.devices.ak60 import DriveMode
 from hal.virtual.devices.ak60_can import Ak60Can, Ak60CanConfig
 from hal.virtual.devices.ak60_config import Ak60Config
@@ -145,3 +147,54 @@ def test_can_servo_duty_and_brake_take_the_winding_laws() -> None:
         dev.on_frame(CanFrame(can_servo.command_id(packet, 1), can_servo.encode_command(packet, value), True), t)
         world.advance_to(t + 10)
         assert dev.core.mode is mode
+
+
+class _Port(CanPort):
+    """Keeps what the firmware's driver sends."""
+
+    def __init__(self) -> None:
+        super().__init__(1_000_000)
+        self.sent: list[CanFrame] = []
+
+    def _send(self, frame: CanFrame) -> bool:
+        self.sent.append(frame)
+        return True
+
+    def _receive(self) -> CanFrame | None:
+        return None
+
+
+def _mit_hold(kp: float, load_nm: float, until_s: float = 0.5) -> tuple[float, float, float]:
+    """The firmware's MIT hold (safe_state = "hold" on CAN MIT, taken at the reported position 0) on an AK60-6 under
+    a constant ankle load: (output position, output speed, the law's torque at the planetary's output) at the end."""
+    policy = SafePolicy("hold", CanMitDriver.SAFE_BEHAVIOURS, "can-mit", brake_current_a=2.0, brake_delay_s=0.01,
+                        damping_kd=1.0, hold_kp=kp)
+    # the damper stands in for brake_delay_s after the trip, then the hold about the position reported then
+    assert policy.command(0.005, 0.0, loaded=True, drive_fault=False, position_rad=0.0) == \
+        SafeCommand("damping", kd=1.0)
+    hold = policy.command(0.011, 0.0, loaded=True, drive_fault=False, position_rad=0.0)
+    assert hold == SafeCommand("hold", kd=1.0, position_rad=0.0, kp=kp)
+    port = _Port()
+    driver = CanMitDriver(port)
+    driver.send_safe(hold, 0.011)
+    assert [f.data for f in port.sent] == [can_mit.ENTER_MOTOR_MODE,
+                                           can_mit.encode_command(can_mit.MitCommand(kp=kp, kd=1.0), can_mit.AK60_6)]
+    plant = Plant()
+    world = World(plant, F)
+    dev = Ak60Can(world, None, Ak60CanConfig(mode="mit"))
+    plant.set_external_torque(load_nm, 0.0)
+    for k, frame in enumerate(port.sent):
+        dev.on_frame(frame, 1000 * (k + 1))
+    end = round(until_s * F)
+    world.advance_to(end)
+    st = plant.state_at(end / F)
+    gear = plant.params.gearbox_ratio
+    return st.motor_angle_rad / gear, st.motor_velocity_rad_s / gear, st.current_q_a * plant.params.kt_nm_per_a * gear
+
+
+def test_the_mit_hold_is_a_spring_and_damper_about_the_reported_position() -> None:
+    p, v, torque = _mit_hold(kp=20.0, load_nm=6.0)
+    assert abs(v) < 1e-3 and abs(p) > 0.01  # settled, displaced by the load: a spring, not a lock
+    assert torque == pytest.approx(-20.0 * p, rel=0.05)  # kp (p_des - p), p_des = 0, at rest
+    p_stiff, _, _ = _mit_hold(kp=40.0, load_nm=6.0)
+    assert p_stiff == pytest.approx(p / 2.0, rel=0.1)  # twice the kp, half the give under the same load

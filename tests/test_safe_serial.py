@@ -55,6 +55,23 @@ def test_uart_a_fault_ends_with_the_phase_short_on_the_motors_wire(tmp_path: Pat
 ])
 def test_can_a_fault_ends_with_the_safe_behaviour_on_the_motors_wire(
         tmp_path: Path, mode: str, safe_state: str, last: tuple[int, bytes]) -> None:
+    got = _can_fault_run(tmp_path, mode, safe_state)
+    assert got[-1] == last, got[-3:]
+    assert got.count(last) > 2  # the safe state's own periodic frames before the stop path's
+
+
+def test_can_mit_a_fault_ends_with_the_mit_hold_on_the_motors_wire(tmp_path: Path) -> None:
+    got = _can_fault_run(tmp_path, "mit", "hold")
+    ident, data = got[-1]
+    hold = can_mit.decode_command(data, can_mit.AK60_6)
+    # kp = hold_kp, kd = damping_kd (profiles/firmware.toml) about the reported position, nothing else
+    assert ident == 1 and hold.kp == pytest.approx(20.0, abs=0.2) and hold.kd == pytest.approx(1.0, abs=0.01)
+    assert hold.v_des == pytest.approx(0.0, abs=0.05) and hold.t_ff == pytest.approx(0.0, abs=0.01)
+    assert got.count(got[-1]) > 2  # the same target every period since the hold began: taken once
+
+
+def _can_fault_run(tmp_path: Path, mode: str, safe_state: str) -> list[tuple[int, bytes]]:
+    """A 2-s run against the CAN bench whose IMU falls silent; the frames the motor received, in order."""
     pytest.importorskip("can")
     pytest.importorskip("msgpack")
     from test_serial_can import can_bench, can_url, received, stop_bench
@@ -68,6 +85,4 @@ def test_can_a_fault_ends_with_the_safe_behaviour_on_the_motors_wire(
     finally:
         stop_bench(bench)
     _assert_safe_after_imu_silence(out)
-    got = [(m.arbitration_id, bytes(m.data)) for m in received(tmp_path / "device" / "motor.can.log")]
-    assert got[-1] == last, got[-3:]
-    assert got.count(last) > 2  # the safe state's own periodic frames before the stop path's
+    return [(m.arbitration_id, bytes(m.data)) for m in received(tmp_path / "device" / "motor.can.log")]

@@ -25,7 +25,7 @@ from protocol.vesc import SetCurrent, SetCurrentBrake, SetDuty, SetHandbrake
 
 UART = ("release", "brake", "short", "handbrake", "hold")
 SERVO = ("release", "brake", "short", "hold")
-MIT = ("release", "brake", "damping")
+MIT = ("release", "brake", "damping", "hold")  # CanMitDriver.SAFE_BEHAVIOURS
 
 
 def _policy(state: str, offered: tuple[str, ...] = UART) -> SafePolicy:
@@ -47,7 +47,7 @@ def test_fixed_safe_states_and_the_brakes_delay() -> None:
     (SERVO, SafeCommand("hold", position_rad=0.3), SafeCommand("short")),
     (MIT, SafeCommand("damping", kd=1.5), SafeCommand("damping", kd=1.5 * 0.25)),
 ])
-def test_graded_holds_while_loaded_lets_go_gently_in_swing_and_releases_on_a_drive_fault(
+def test_graded_holds_while_loaded_keeps_that_hold_in_swing_lets_a_swing_foot_go_and_releases_on_a_drive_fault(
         offered: tuple[str, ...], stance: SafeCommand, swing: SafeCommand) -> None:
     p = _policy("graded", offered)
     damper = SafeCommand("short") if "short" in offered else stance
@@ -56,21 +56,30 @@ def test_graded_holds_while_loaded_lets_go_gently_in_swing_and_releases_on_a_dri
     assert p.command(1.0, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == damper
     assert p.command(1.01, 1.0, loaded=True, drive_fault=False, position_rad=0.3) == stance
     assert p.stop_command() == stance
-    assert p.command(1.1, 1.0, loaded=False, drive_fault=False, position_rad=0.4) == swing
+    # a hold taken in stance stays through swing, at its target (a wound parallel spring would throw the foot); a
+    # stance damper gives way to the swing's
+    assert p.command(1.1, 1.0, loaded=False, drive_fault=False, position_rad=0.4) == \
+        (stance if stance.behaviour == "hold" else swing)
     assert p.command(1.2, 1.0, loaded=True, drive_fault=True, position_rad=0.4) == SafeCommand("release")
     assert p.stop_command() == SafeCommand("release")
+    q = _policy("graded", offered)  # met in swing: let go gently, before and after the brake's delay
+    assert q.command(1.0, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == swing
+    assert q.command(1.05, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == swing
 
 
 def _hold(position_rad: float) -> SafeCommand:
     return SafeCommand("hold", position_rad=position_rad)
 
 
-def test_the_hold_keeps_the_target_it_began_with_and_takes_a_new_one_each_stance() -> None:
+def test_the_hold_keeps_the_target_it_began_with_through_swing_and_the_next_stance() -> None:
     p = _policy("graded")
     assert p.command(1.01, 1.0, loaded=True, drive_fault=False, position_rad=0.1) == _hold(0.1)
     assert p.command(1.1, 1.0, loaded=True, drive_fault=False, position_rad=0.2) == _hold(0.1)
-    assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == SafeCommand("short")
-    assert p.command(1.3, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == _hold(0.25)
+    assert p.command(1.2, 1.0, loaded=False, drive_fault=False, position_rad=0.2) == _hold(0.1)
+    assert p.command(1.3, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == _hold(0.1)
+    p = _policy("graded")  # met in swing: the short, then a hold from the first stance on, where the foot is then
+    assert p.command(1.01, 1.0, loaded=False, drive_fault=False, position_rad=0.1) == SafeCommand("short")
+    assert p.command(1.2, 1.0, loaded=True, drive_fault=False, position_rad=0.25) == _hold(0.25)
 
 
 def test_without_a_fresh_position_the_short_stands_in_for_the_hold() -> None:
@@ -87,7 +96,7 @@ def test_without_a_fresh_position_the_short_stands_in_for_the_hold() -> None:
 
 @pytest.mark.parametrize(("state", "offered", "link"), [
     ("handbrake", SERVO, "can-servo"), ("damping", UART, "uart"), ("short", MIT, "can-mit"),
-    ("handbrake", MIT, "can-mit"), ("hold", MIT, "can-mit")])
+    ("handbrake", MIT, "can-mit"), ("hold", ("release", "hold"), "test")])  # the hold needs a damper to stand in
 def test_a_safe_state_the_link_lacks_is_refused_naming_it(state: str, offered: tuple[str, ...], link: str) -> None:
     with pytest.raises(ValueError, match=f"safe_state = '{state}' is not offered by the {link} link: it offers"):
         check_offered(state, offered, link)

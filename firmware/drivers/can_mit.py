@@ -11,10 +11,11 @@ mode" (PROTOCOLS.md G). Replies come on the master ID (0, as Ben Katz's mini-che
 series follows) with the driver id in byte 0; the motor answers every frame, the special ones too, in
 order: ``requests`` and ``replies`` count the commands and their answers, ``max_age_s`` is the
 longest command-to-reply time as the driver took them, a command sent while the previous one is
-unanswered counts a ``missing_replies``. The safe behaviours MIT mode carries are release (zero torque) and
-damping (kp = 0, kd > 0; the profile's "brake" is the damper at ``brake_kd``). The stop path sends zero torque
-then "exit motor mode" (torque off), or for damping the damper alone (it replaces any torque; a zero-torque frame
-of the same identifier could leave a mailbox after it), which it leaves on.
+unanswered counts a ``missing_replies``. The safe behaviours MIT mode carries are release (zero torque),
+damping (kp = 0, kd > 0; the profile's "brake" is the damper at ``brake_kd``) and the hold (kp > 0, kd > 0 about
+the position the motor last reported, v = t_ff = 0). The stop path sends zero torque then "exit motor mode" (torque
+off), or for damping and the hold their frame alone (it replaces any torque; a zero-torque frame of the same
+identifier could leave a mailbox after it), which it leaves on.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ class CanMitDriver(CanLink):
     """Talks to an AK-series motor (the AK60-6 by default) in MIT mode over ``port``; callers pass the time."""
 
     LINK: ClassVar[str] = "can-mit"
-    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "damping")
+    SAFE_BEHAVIOURS: ClassVar[tuple[str, ...]] = ("release", "brake", "damping", "hold")
 
     def __init__(self, port: CanPort, driver_id: int = 1, *, nm_per_a: float = AK60_6_NM_PER_A,
                  brake_kd: float = 1.0, limits: can_mit.MitLimits = can_mit.AK60_6,
@@ -109,12 +110,15 @@ class CanMitDriver(CanLink):
         return self._command(cmd, now_s)
 
     def send_safe(self, command: SafeCommand, now_s: float, *, request: bool = True) -> int:
-        """Send the safe state's MIT command: zero torque (release), or kp = 0 and the damper's kd; return the bytes."""
+        """Send the safe state's MIT command: zero torque (release), kp = 0 and the damper's kd, or the hold's kp and kd
+        about its target; return the bytes."""
         return self._command(self._safe_command(command), now_s)
 
     def _safe_command(self, command: SafeCommand) -> can_mit.MitCommand:
         if command.behaviour == "damping":
             return can_mit.MitCommand(kd=command.kd)
+        if command.behaviour == "hold":
+            return can_mit.MitCommand(p_des=command.position_rad, kp=command.kp, kd=command.kd)
         if command.behaviour == "brake":
             return can_mit.MitCommand(kd=self.brake_kd)
         return can_mit.MitCommand()
@@ -140,12 +144,14 @@ class CanMitDriver(CanLink):
         return written + 8
 
     def send_stop(self, now_s: float, command: SafeCommand | float, timeout_s: float = 0.5) -> SafeStop:
-        """The stop path: zero torque, then exit motor mode (torque off), or for damping the damper alone (left on: a
-        motor not in motor mode ignores it and stays released); wait until they have left."""
+        """The stop path: zero torque, then exit motor mode (torque off), or for damping and the hold their frame alone
+        (left on: a motor not in motor mode ignores it and stays released); wait until they have left."""
         cmd = stop_command(command)
-        if cmd.behaviour == "damping":
-            damper = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(kd=cmd.kd), self.limits))
-            return self._stop((damper,), (f"MIT command (damping, kp = 0, kd = {cmd.kd})",), now_s, timeout_s)
+        if cmd.behaviour in ("damping", "hold"):
+            frame = CanFrame(self.driver_id, can_mit.encode_command(self._safe_command(cmd), self.limits))
+            what = f"MIT command (damping, kp = 0, kd = {cmd.kd})" if cmd.behaviour == "damping" else \
+                f"MIT command (hold at {cmd.position_rad:.4f} rad, kp = {cmd.kp}, kd = {cmd.kd})"
+            return self._stop((frame,), (what,), now_s, timeout_s)
         zero = CanFrame(self.driver_id, can_mit.encode_command(can_mit.MitCommand(), self.limits))
         frames = (zero, CanFrame(self.driver_id, can_mit.EXIT_MOTOR_MODE))
         stop = self._stop(frames, ("MIT command (zero torque, kp = kd = 0)", "EXIT_MOTOR_MODE"), now_s, timeout_s)
