@@ -344,8 +344,15 @@ class Scheduler:
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
         wds = self._watchdogs
-        trace_job = trace.job_appender() if trace is not None else None
-        trace_irq = trace.irq_appender() if trace is not None else None
+        trace_job: Callable[[tuple[int, int, int, int, int, int, int]], None] | None = None
+        trace_irq: Callable[[tuple[int, int, int, int]], None] | None = None
+        trace_times: Callable[[tuple[int, ...]], None] | None = None
+        trace_ids: list[int] = []
+        trace_room = 0
+        if trace is not None:
+            trace_job = trace.job_appender()
+            trace_irq, trace_times = trace.irq_appender()
+            trace_ids, trace_room = trace.task_ids([s.name for s in slots]), trace.room()
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
         t_begin = now
@@ -426,12 +433,17 @@ class Scheduler:
                     if trace_irq is not None and f != start + c:  # the firings the solve counted, each source's
                         for b in irqs:
                             if b.hits:
-                                trace_irq((start, b.index, b.hits, b.src.fired_at(start, f)))
+                                times = b.src.fired_at(start, f)
+                                trace_irq((start, b.index, b.hits, len(times)))
+                                trace_times(times)  # type: ignore[misc]
                 else:
                     f = start + c
                 self._account(slot, r, start, f, c)
                 if trace_job is not None:
-                    trace_job((slot.name, slot.index_of(r), r, slot.ready, start, f, c))
+                    trace_job((trace_ids[i], slot.index_of(r), r, slot.ready, start, f, c))
+                    trace_room -= 1
+                    if not trace_room:
+                        trace_room = trace.compact()  # type: ignore[union-attr]
                 # the task's next job: releases that came while this one was pending or running overran
                 nxt = slot.nnext
                 fault = None

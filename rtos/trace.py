@@ -12,12 +12,15 @@ import csv
 import io
 import itertools
 import json
+from array import array
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
+JOB_FIELDS = len(JOB_COLUMNS)
+IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
 
 
 class JobRecord(NamedTuple):
@@ -57,7 +60,11 @@ class TraceEvent(NamedTuple):
 
 
 class Trace:
-    """Keeps the last ``maxlen`` jobs and the last ``maxlen`` instant events.
+    """Keeps the last ``maxlen`` jobs, the last ``maxlen`` interrupt records and the last ``maxlen`` instant events.
+
+    The jobs and the interrupt records are kept flat, as machine integers (``array('q')``, :data:`JOB_FIELDS` per
+    job, the task as an index into a table of names), so a run's many records cost no Python object each; they
+    become :class:`JobRecord` and :class:`IrqRecord` when read.
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -69,36 +76,102 @@ class Trace:
         """Create an empty trace holding at most ``maxlen`` jobs, ``maxlen`` interrupt records and ``maxlen`` events."""
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
-        self._jobs: deque[tuple[str, int, int, int, int, int, int]] = deque(maxlen=maxlen)
-        self._irqs: deque[tuple[int, int, int, tuple[int, ...]]] = deque(maxlen=maxlen)
+        self.maxlen = maxlen
+        # (task id, job, release, ready, start, finish, cost) per job; records before _job0 are dropped
+        self._jobs = array("q")
+        self._job0 = 0
+        # (job start, source index, firings, number of firing times) per record, and the firing times, flat
+        self._irqs = array("q")
+        self._irq_times = array("q")
+        self._irq0 = 0
+        self._times0 = 0
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
+        self._task_table: list[str] = []  # task names by id
+        self._task_id: dict[str, int] = {}
         self.task_names: list[str] = []
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
+
+    def task_ids(self, names: Iterable[str]) -> list[int]:
+        """The ids by which the job records name the tasks ``names`` (the first element of a job appender's tuple)."""
+        return [self._task_of(n) for n in names]
+
+    def _task_of(self, name: str) -> int:
+        k = self._task_id.get(name)
+        if k is None:
+            k = self._task_id[name] = len(self._task_table)
+            self._task_table.append(name)
+        return k
 
     def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int,
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
-        self._jobs.append((task, job, release, ready, start, finish, finish - start if cost is None else cost))
+        self._jobs.extend((self._task_of(task), job, release, ready, start, finish,
+                           finish - start if cost is None else cost))
+        if len(self._jobs) >= 2 * JOB_FIELDS * self.maxlen:
+            self.compact()
 
-    def job_appender(self) -> Callable[[tuple[str, int, int, int, int, int, int]], None]:
-        """``add_job`` for a hot loop: a callable taking the tuple (task, job, release, ready, start, finish, cost)."""
-        return self._jobs.append
+    def job_appender(self) -> Callable[[tuple[int, int, int, int, int, int, int]], None]:
+        """``add_job`` for a hot loop: a callable taking the tuple (task id (:meth:`task_ids`), job, release, ready,
+        start, finish, cost); call :meth:`compact` when :meth:`room` (or its last return) appends have been made."""
+        return self._jobs.extend
 
-    def irq_appender(self) -> Callable[[tuple[int, int, int, tuple[int, ...]]], None]:
-        """For the hot loop: a callable taking (job start, source index, firings, firing times) (see IrqRecord)."""
-        return self._irqs.append
+    def irq_appender(self) -> tuple[Callable[[tuple[int, int, int, int]], None], Callable[[tuple[int, ...]], None]]:
+        """For the hot loop: a callable taking (job start, source index, firings, number of firing times) and one
+        taking the firing times (see IrqRecord); :meth:`compact` bounds them with the jobs."""
+        return self._irqs.extend, self._irq_times.extend
+
+    def room(self) -> int:
+        """Jobs that may be appended before :meth:`compact` must run (it keeps the memory within 2 ``maxlen``)."""
+        return max(1, 2 * self.maxlen - len(self._jobs) // JOB_FIELDS)
+
+    def compact(self) -> int:
+        """Free the records beyond the last ``maxlen`` (and those pruned); return :meth:`room`."""
+        self._trim()
+        if self._job0:
+            del self._jobs[:self._job0]
+            self._job0 = 0
+        if self._irq0:
+            del self._irqs[:self._irq0]
+            del self._irq_times[:self._times0]
+            self._irq0 = self._times0 = 0
+        return self.room()
+
+    def _trim(self) -> None:
+        """Drop all but the last ``maxlen`` jobs and interrupt records (as ``deque(maxlen=...)`` would have)."""
+        self._job0 = max(self._job0, len(self._jobs) - JOB_FIELDS * self.maxlen)
+        irqs, first = self._irqs, len(self._irqs) - IRQ_FIELDS * self.maxlen
+        while self._irq0 < first:
+            self._times0 += irqs[self._irq0 + 3]
+            self._irq0 += IRQ_FIELDS
+
+    def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
+        """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
+        self._trim()
+        jobs, names = self._jobs, self._task_table
+        for k in range(self._job0, len(jobs), JOB_FIELDS):
+            task, job, release, ready, start, finish, cost = jobs[k:k + JOB_FIELDS]
+            yield names[task], job, release, ready, start, finish, cost
 
     def irqs(self) -> list[IrqRecord]:
         """The recorded interrupt firings inside jobs, oldest first."""
-        return [IrqRecord(*r) for r in self._irqs]
+        self._trim()
+        irqs, times, t = self._irqs, self._irq_times, self._times0
+        out = []
+        for k in range(self._irq0, len(irqs), IRQ_FIELDS):
+            n = irqs[k + 3]
+            out.append(IrqRecord(irqs[k], irqs[k + 1], irqs[k + 2], tuple(times[t:t + n])))
+            t += n
+        return out
 
     def prune_before(self, t: int) -> None:
         """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t."""
+        self._trim()
         jobs, irqs, events = self._jobs, self._irqs, self._events
-        while jobs and jobs[0][5] < t:
-            jobs.popleft()
-        while irqs and irqs[0][0] < t:
-            irqs.popleft()
+        while self._job0 < len(jobs) and jobs[self._job0 + 5] < t:
+            self._job0 += JOB_FIELDS
+        while self._irq0 < len(irqs) and irqs[self._irq0] < t:
+            self._times0 += irqs[self._irq0 + 3]
+            self._irq0 += IRQ_FIELDS
         while events and events[0][1] < t:
             events.popleft()
 
@@ -108,7 +181,7 @@ class Trace:
 
     def jobs(self) -> list[JobRecord]:
         """The recorded jobs, oldest first."""
-        return [JobRecord(*r) for r in self._jobs]
+        return [JobRecord(*r) for r in self._job_rows()]
 
     def events(self) -> list[TraceEvent]:
         """The recorded instant events, oldest first."""
@@ -116,15 +189,15 @@ class Trace:
 
     def clear(self) -> None:
         """Forget every record."""
-        self._jobs.clear()
-        self._irqs.clear()
+        del self._jobs[:], self._irqs[:], self._irq_times[:]
+        self._job0 = self._irq0 = self._times0 = 0
         self._events.clear()
 
     def write_csv(self, out: TextIO) -> None:
         """Write the jobs as CSV with a header row (times in cycles)."""
         w = csv.writer(out, lineterminator="\n")
         w.writerow(JOB_COLUMNS)
-        w.writerows(self._jobs)
+        w.writerows(self._job_rows())
 
     def to_csv(self) -> str:
         """Return the jobs as CSV text."""
@@ -147,7 +220,7 @@ class Trace:
         for n in names:
             yield {"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}}
             yield {"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n], "args": {"sort_index": tid[n]}}
-        for task, job, release, ready, start, finish, _cost in self._jobs:
+        for task, job, release, ready, start, finish, _cost in self._job_rows():
             yield {
                 "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
                 "ts": start * us, "dur": (finish - start) * us,
@@ -180,7 +253,7 @@ class Trace:
         try:
             with tmp.open("w", encoding="utf-8") as f:
                 f.write('{"traceEvents": [' + ", ".join(head))
-                jobs = iter(self._jobs)
+                jobs = self._job_rows()
                 while batch := list(itertools.islice(jobs, 10_000)):
                     f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
                                                    ready, finish - release)
@@ -199,11 +272,15 @@ class Trace:
     def _names(self) -> list[str]:
         """Task names in tid order: the declared ones, then any other seen in the jobs."""
         names = list(self.task_names)
-        for r in self._jobs:
-            if r[0] not in names:
-                names.append(r[0])
+        seen = set(self.task_ids(names))
+        self._trim()
+        for task in self._jobs[self._job0::JOB_FIELDS]:
+            if task not in seen:
+                seen.add(task)
+                names.append(self._task_table[task])
         return names
 
     def __len__(self) -> int:
         """Number of recorded jobs."""
-        return len(self._jobs)
+        self._trim()
+        return (len(self._jobs) - self._job0) // JOB_FIELDS
