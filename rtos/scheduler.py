@@ -352,7 +352,8 @@ class Scheduler:
         if trace is not None:
             trace_job = trace.job_appender()
             trace_irq, trace_times = trace.irq_appender()
-            trace_ids, trace_room = trace.task_ids([s.name for s in slots]), trace.room()
+            trace_ids = trace.task_ids([(s.name, s.offset, s.period, s.cost) for s in slots])
+            trace_room = trace.room()
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
         t_begin = now
@@ -440,7 +441,9 @@ class Scheduler:
                     f = start + c
                 self._account(slot, r, start, f, c)
                 if trace_job is not None:
-                    trace_job((trace_ids[i], slot.index_of(r), r, slot.ready, start, f, c))
+                    k = slot.index_of(r)  # the record as Trace.job_appender takes it: mostly small ints (no allocation)
+                    trace_job((trace_ids[i], k, start, r - slot.offset - k * slot.period, slot.ready - r, f - start - c,
+                               c - slot.cost))
                     trace_room -= 1
                     if not trace_room:
                         trace_room = trace.compact()  # type: ignore[union-attr]

@@ -12,6 +12,7 @@ import csv
 import io
 import itertools
 import json
+import struct
 from array import array
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -21,6 +22,7 @@ from typing import NamedTuple, TextIO
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
 JOB_FIELDS = len(JOB_COLUMNS)
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
+CHUNK = 256  # jobs appended between two packings of the new records (Trace.compact)
 
 
 class JobRecord(NamedTuple):
@@ -62,9 +64,13 @@ class TraceEvent(NamedTuple):
 class Trace:
     """Keeps the last ``maxlen`` jobs, the last ``maxlen`` interrupt records and the last ``maxlen`` instant events.
 
-    The jobs and the interrupt records are kept flat, as machine integers (``array('q')``, :data:`JOB_FIELDS` per
-    job, the task as an index into a table of names), so a run's many records cost no Python object each; they
-    become :class:`JobRecord` and :class:`IrqRecord` when read.
+    The jobs and the interrupt records are kept flat, as machine integers (``array('q')``: :data:`JOB_FIELDS` per
+    job, the task as an index into a table of tasks), so the records of a run cost no Python objects; they become
+    :class:`JobRecord` and :class:`IrqRecord` when read. A job is kept as its differences from what its task's
+    timing predicts (release ``offset + job * period``, ready at its release, finish ``start + cost``, the task's
+    nominal cost), which are mostly zero: a small int, which a hot loop boxes without allocating. A hot loop appends to lists of Python ints that
+    :meth:`compact` packs every :data:`CHUNK` jobs, so that the ints it made stay few (and the memory they take is
+    reused while still in the cache).
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -77,67 +83,76 @@ class Trace:
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
         self.maxlen = maxlen
-        # (task id, job, release, ready, start, finish, cost) per job; records before _job0 are dropped
+        # per job: task id, job, start and the differences from the task's timing (see job_appender); the records
+        # before _job0 are dropped
         self._jobs = array("q")
         self._job0 = 0
-        # (job start, source index, firings, number of firing times) per record, and the firing times, flat
+        # (job start, source index, firings, number of firing times) per record, and the firing times
         self._irqs = array("q")
         self._irq_times = array("q")
         self._irq0 = 0
         self._times0 = 0
+        self._new: tuple[list[int], list[int], list[int]] = ([], [], [])  # jobs, irqs, times not packed yet
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
-        self._task_table: list[str] = []  # task names by id
-        self._task_id: dict[str, int] = {}
+        self._task_table: list[tuple[str, int, int, int]] = []  # (name, offset, period, nominal cost) by task id
+        self._task_id: dict[tuple[str, int, int, int], int] = {}
         self.task_names: list[str] = []
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
 
-    def task_ids(self, names: Iterable[str]) -> list[int]:
-        """The ids by which the job records name the tasks ``names`` (the first element of a job appender's tuple)."""
-        return [self._task_of(n) for n in names]
+    def task_ids(self, tasks: Iterable[tuple[str, int, int, int]]) -> list[int]:
+        """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles)."""
+        return [self._task_of(t) for t in tasks]
 
-    def _task_of(self, name: str) -> int:
-        k = self._task_id.get(name)
+    def _task_of(self, task: tuple[str, int, int, int]) -> int:
+        k = self._task_id.get(task)
         if k is None:
-            k = self._task_id[name] = len(self._task_table)
-            self._task_table.append(name)
+            k = self._task_id[task] = len(self._task_table)
+            self._task_table.append(task)
         return k
 
     def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int,
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
-        self._jobs.extend((self._task_of(task), job, release, ready, start, finish,
-                           finish - start if cost is None else cost))
-        if len(self._jobs) >= 2 * JOB_FIELDS * self.maxlen:
+        cost = finish - start if cost is None else cost
+        self._new[0].extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release,
+                             finish - start - cost, cost))
+        if len(self._new[0]) >= JOB_FIELDS * CHUNK:
             self.compact()
 
     def job_appender(self) -> Callable[[tuple[int, int, int, int, int, int, int]], None]:
-        """``add_job`` for a hot loop: a callable taking the tuple (task id (:meth:`task_ids`), job, release, ready,
-        start, finish, cost); call :meth:`compact` when :meth:`room` (or its last return) appends have been made."""
-        return self._jobs.extend
+        """``add_job`` for a hot loop: a callable taking the tuple (task id (:meth:`task_ids`), job, start,
+        release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost); the loop calls
+        :meth:`compact` each time it has appended :meth:`room` jobs since."""
+        return self._new[0].extend
 
     def irq_appender(self) -> tuple[Callable[[tuple[int, int, int, int]], None], Callable[[tuple[int, ...]], None]]:
         """For the hot loop: a callable taking (job start, source index, firings, number of firing times) and one
-        taking the firing times (see IrqRecord); :meth:`compact` bounds them with the jobs."""
-        return self._irqs.extend, self._irq_times.extend
+        taking the firing times (see IrqRecord); :meth:`compact` packs them with the jobs."""
+        return self._new[1].extend, self._new[2].extend
 
     def room(self) -> int:
-        """Jobs that may be appended before :meth:`compact` must run (it keeps the memory within 2 ``maxlen``)."""
-        return max(1, 2 * self.maxlen - len(self._jobs) // JOB_FIELDS)
+        """Jobs that may be appended before :meth:`compact` must run (>= 1)."""
+        return max(1, CHUNK - len(self._new[0]) // JOB_FIELDS)
 
     def compact(self) -> int:
-        """Free the records beyond the last ``maxlen`` (and those pruned); return :meth:`room`."""
+        """Pack the records appended since the last call, drop all but the last ``maxlen`` (and the pruned ones), free
+        them when they take as much memory as the kept ones; return :meth:`room`."""
         self._trim()
-        if self._job0:
+        if self._job0 * 2 >= len(self._jobs):
             del self._jobs[:self._job0]
             self._job0 = 0
-        if self._irq0:
-            del self._irqs[:self._irq0]
-            del self._irq_times[:self._times0]
+        if self._irq0 * 2 >= len(self._irqs):
+            del self._irqs[:self._irq0], self._irq_times[:self._times0]
             self._irq0 = self._times0 = 0
         return self.room()
 
     def _trim(self) -> None:
-        """Drop all but the last ``maxlen`` jobs and interrupt records (as ``deque(maxlen=...)`` would have)."""
+        """Pack the new records; drop all but the last ``maxlen`` jobs and interrupt records (as a ``deque(maxlen=...)``
+        would)."""
+        for flat, new in zip((self._jobs, self._irqs, self._irq_times), self._new, strict=True):
+            if new:
+                flat.frombytes(struct.pack(f"{len(new)}q", *new))  # several times faster than array.extend(new)
+                new.clear()
         self._job0 = max(self._job0, len(self._jobs) - JOB_FIELDS * self.maxlen)
         irqs, first = self._irqs, len(self._irqs) - IRQ_FIELDS * self.maxlen
         while self._irq0 < first:
@@ -147,10 +162,18 @@ class Trace:
     def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
         """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
         self._trim()
-        jobs, names = self._jobs, self._task_table
+        jobs, tasks = self._jobs, self._task_table
         for k in range(self._job0, len(jobs), JOB_FIELDS):
-            task, job, release, ready, start, finish, cost = jobs[k:k + JOB_FIELDS]
-            yield names[task], job, release, ready, start, finish, cost
+            task, job, start, release, ready, finish, cost = jobs[k:k + JOB_FIELDS]
+            name, offset, period, nominal = tasks[task]
+            release += offset + job * period
+            cost += nominal
+            yield name, job, release, release + ready, start, start + cost + finish, cost
+
+    def _finish(self, k: int) -> int:
+        """The finish of the job whose record starts at ``self._jobs[k]``."""
+        jobs = self._jobs
+        return jobs[k + 2] + self._task_table[jobs[k]][3] + jobs[k + 6] + jobs[k + 5]
 
     def irqs(self) -> list[IrqRecord]:
         """The recorded interrupt firings inside jobs, oldest first."""
@@ -167,7 +190,7 @@ class Trace:
         """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t."""
         self._trim()
         jobs, irqs, events = self._jobs, self._irqs, self._events
-        while self._job0 < len(jobs) and jobs[self._job0 + 5] < t:
+        while self._job0 < len(jobs) and self._finish(self._job0) < t:
             self._job0 += JOB_FIELDS
         while self._irq0 < len(irqs) and irqs[self._irq0] < t:
             self._times0 += irqs[self._irq0 + 3]
@@ -190,6 +213,8 @@ class Trace:
     def clear(self) -> None:
         """Forget every record."""
         del self._jobs[:], self._irqs[:], self._irq_times[:]
+        for new in self._new:
+            new.clear()
         self._job0 = self._irq0 = self._times0 = 0
         self._events.clear()
 
@@ -272,12 +297,11 @@ class Trace:
     def _names(self) -> list[str]:
         """Task names in tid order: the declared ones, then any other seen in the jobs."""
         names = list(self.task_names)
-        seen = set(self.task_ids(names))
         self._trim()
-        for task in self._jobs[self._job0::JOB_FIELDS]:
-            if task not in seen:
-                seen.add(task)
-                names.append(self._task_table[task])
+        for task in dict.fromkeys(self._jobs[self._job0::JOB_FIELDS]):
+            name = self._task_table[task][0]
+            if name not in names:
+                names.append(name)
         return names
 
     def __len__(self) -> int:
