@@ -12,8 +12,6 @@ import csv
 import io
 import itertools
 import json
-import struct
-from array import array
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -22,7 +20,6 @@ from typing import NamedTuple, TextIO
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
 JOB_FIELDS = len(JOB_COLUMNS)
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
-CHUNK = 256  # jobs appended between two packings of the new records (Trace.compact)
 
 
 class JobRecord(NamedTuple):
@@ -64,13 +61,12 @@ class TraceEvent(NamedTuple):
 class Trace:
     """Keeps the last ``maxlen`` jobs, the last ``maxlen`` interrupt records and the last ``maxlen`` instant events.
 
-    The jobs and the interrupt records are kept flat, as machine integers (``array('q')``: :data:`JOB_FIELDS` per
-    job, the task as an index into a table of tasks), so the records of a run cost no Python objects; they become
-    :class:`JobRecord` and :class:`IrqRecord` when read. A job is kept as its differences from what its task's
-    timing predicts (release ``offset + job * period``, ready at its release, finish ``start + cost``, the task's
-    nominal cost), which are mostly zero: a small int, which a hot loop boxes without allocating. A hot loop appends to lists of Python ints that
-    :meth:`compact` packs every :data:`CHUNK` jobs, so that the ints it made stay few (and the memory they take is
-    reused while still in the cache).
+    The jobs and the interrupt records are kept flat, as lists of ints (:data:`JOB_FIELDS` per job, the task as an
+    index into a table of tasks): no tuple per record; they become :class:`JobRecord` and :class:`IrqRecord` when
+    read. A job is kept as its differences from what its task's timing predicts (release ``offset + job * period``,
+    ready at its release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's
+    shared small ints, which a hot loop boxes without allocating
+    (the list keeps them as one pointer each).
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -85,14 +81,13 @@ class Trace:
         self.maxlen = maxlen
         # per job: task id, job, start and the differences from the task's timing (see job_appender); the records
         # before _job0 are dropped
-        self._jobs = array("q")
+        self._jobs: list[int] = []
         self._job0 = 0
         # (job start, source index, firings, number of firing times) per record, and the firing times
-        self._irqs = array("q")
-        self._irq_times = array("q")
+        self._irqs: list[int] = []
+        self._irq_times: list[int] = []
         self._irq0 = 0
         self._times0 = 0
-        self._new: tuple[list[int], list[int], list[int]] = ([], [], [])  # jobs, irqs, times not packed yet
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
         self._task_table: list[tuple[str, int, int, int]] = []  # (name, offset, period, nominal cost) by task id
         self._task_id: dict[tuple[str, int, int, int], int] = {}
@@ -114,29 +109,29 @@ class Trace:
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
         cost = finish - start if cost is None else cost
-        self._new[0].extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release,
-                             finish - start - cost, cost))
-        if len(self._new[0]) >= JOB_FIELDS * CHUNK:
+        self._jobs.extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release,
+                           finish - start - cost, cost))
+        if len(self._jobs) >= 2 * JOB_FIELDS * self.maxlen:
             self.compact()
 
     def job_appender(self) -> Callable[[tuple[int, int, int, int, int, int, int]], None]:
         """``add_job`` for a hot loop: a callable taking the tuple (task id (:meth:`task_ids`), job, start,
         release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost); the loop calls
         :meth:`compact` each time it has appended :meth:`room` jobs since."""
-        return self._new[0].extend
+        return self._jobs.extend
 
     def irq_appender(self) -> tuple[Callable[[tuple[int, int, int, int]], None], Callable[[tuple[int, ...]], None]]:
         """For the hot loop: a callable taking (job start, source index, firings, number of firing times) and one
-        taking the firing times (see IrqRecord); :meth:`compact` packs them with the jobs."""
-        return self._new[1].extend, self._new[2].extend
+        taking the firing times (see IrqRecord); :meth:`compact` bounds them with the jobs."""
+        return self._irqs.extend, self._irq_times.extend
 
     def room(self) -> int:
-        """Jobs that may be appended before :meth:`compact` must run (>= 1)."""
-        return max(1, CHUNK - len(self._new[0]) // JOB_FIELDS)
+        """Jobs that may be appended before :meth:`compact` must run (it keeps the memory within 2 ``maxlen`` jobs)."""
+        return self.maxlen
 
     def compact(self) -> int:
-        """Pack the records appended since the last call, drop all but the last ``maxlen`` (and the pruned ones), free
-        them when they take as much memory as the kept ones; return :meth:`room`."""
+        """Drop all but the last ``maxlen`` records (and the pruned ones), free them when they take as much memory as
+        the kept ones; return :meth:`room`."""
         self._trim()
         if self._job0 * 2 >= len(self._jobs):
             del self._jobs[:self._job0]
@@ -147,12 +142,7 @@ class Trace:
         return self.room()
 
     def _trim(self) -> None:
-        """Pack the new records; drop all but the last ``maxlen`` jobs and interrupt records (as a ``deque(maxlen=...)``
-        would)."""
-        for flat, new in zip((self._jobs, self._irqs, self._irq_times), self._new, strict=True):
-            if new:
-                flat.frombytes(struct.pack(f"{len(new)}q", *new))  # several times faster than array.extend(new)
-                new.clear()
+        """Drop all but the last ``maxlen`` jobs and interrupt records (as a ``deque(maxlen=...)`` would)."""
         self._job0 = max(self._job0, len(self._jobs) - JOB_FIELDS * self.maxlen)
         irqs, first = self._irqs, len(self._irqs) - IRQ_FIELDS * self.maxlen
         while self._irq0 < first:
@@ -213,8 +203,6 @@ class Trace:
     def clear(self) -> None:
         """Forget every record."""
         del self._jobs[:], self._irqs[:], self._irq_times[:]
-        for new in self._new:
-            new.clear()
         self._job0 = self._irq0 = self._times0 = 0
         self._events.clear()
 
