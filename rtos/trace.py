@@ -79,7 +79,7 @@ class Trace:
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
         self.maxlen = maxlen
-        # per job: task id, job, start and the differences from the task's timing (see job_appender); the records
+        # per job: task id, job, start and the differences from the task's timing (see flat_records); the records
         # before _job0 are dropped
         self._jobs: list[int] = []
         self._job0 = 0
@@ -114,16 +114,13 @@ class Trace:
         if len(self._jobs) >= 2 * JOB_FIELDS * self.maxlen:
             self.compact()
 
-    def job_appender(self) -> Callable[[tuple[int, int, int, int, int, int, int]], None]:
-        """``add_job`` for a hot loop: a callable taking the tuple (task id (:meth:`task_ids`), job, start,
-        release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost); the loop calls
-        :meth:`compact` each time it has appended :meth:`room` jobs since."""
-        return self._jobs.extend
-
-    def irq_appender(self) -> tuple[Callable[[tuple[int, int, int, int]], None], Callable[[tuple[int, ...]], None]]:
-        """For the hot loop: a callable taking (job start, source index, firings, number of firing times) and one
-        taking the firing times (see IrqRecord); :meth:`compact` bounds them with the jobs."""
-        return self._irqs.extend, self._irq_times.extend
+    def flat_records(self) -> tuple[list[int], list[int], list[int]]:
+        """The lists a hot loop appends the records to: jobs, :data:`JOB_FIELDS` ints each (task id (:meth:`task_ids`),
+        job, start, release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost);
+        interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing times);
+        the firing times (see IrqRecord). The loop calls :meth:`compact` each time it has appended :meth:`room` jobs
+        since."""
+        return self._jobs, self._irqs, self._irq_times
 
     def room(self) -> int:
         """Jobs that may be appended before :meth:`compact` must run (it keeps the memory within 2 ``maxlen`` jobs)."""
