@@ -13,7 +13,7 @@ import io
 import itertools
 import json
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
@@ -65,8 +65,7 @@ class Trace:
     index into a table of tasks): no tuple per record; they become :class:`JobRecord` and :class:`IrqRecord` when
     read. A job is kept as its differences from what its task's timing predicts (release ``offset + job * period``,
     ready at its release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's
-    shared small ints, which a hot loop boxes without allocating
-    (the list keeps them as one pointer each).
+    shared small ints, which a hot loop boxes without allocating (the list keeps them as one pointer each).
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
