@@ -344,8 +344,15 @@ class Scheduler:
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
         wds = self._watchdogs
-        trace_job = trace.job_appender() if trace is not None else None
-        trace_irq = trace.irq_appender() if trace is not None else None
+        tr_jobs: list[int] = []  # the trace's flat records (Trace.flat_records), appended to natively
+        tr_irqs: list[int] = []
+        tr_times: list[int] = []
+        trace_ids: list[int] = []
+        trace_room = 0
+        if trace is not None:
+            tr_jobs, tr_irqs, tr_times = trace.flat_records()
+            trace_ids = trace.task_ids([(s.name, s.offset, s.period, s.cost) for s in slots])
+            trace_room = trace.room()
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
         t_begin = now
@@ -389,12 +396,13 @@ class Scheduler:
                 mask ^= 1 << i
                 slot = slots[i]
                 r = slot.nrel
+                k = slot.index_of(r)
                 start = now
                 body = slot.body
                 result: object = None
                 if body is not None:
                     job = slot.job
-                    job.index, job.release, job.ready, job.start = slot.index_of(r), r, slot.ready, start
+                    job.index, job.release, job.ready, job.start = k, r, slot.ready, start
                     self._now = start
                     try:
                         result = body(job)
@@ -423,15 +431,29 @@ class Scheduler:
                     c = f - start
                 elif irqs and c:  # a zero-cost job spans an empty window: nothing can fire in it
                     f = solve_bound(start, c, irqs, irq_in_job)
-                    if trace_irq is not None and f != start + c:  # the firings the solve counted, each source's
+                    if trace is not None and f != start + c:  # the firings the solve counted, each source's
                         for b in irqs:
                             if b.hits:
-                                trace_irq((start, b.index, b.hits, b.src.fired_at(start, f)))
+                                times = b.src.fired_at(start, f)
+                                tr_irqs.append(start)
+                                tr_irqs.append(b.index)
+                                tr_irqs.append(b.hits)
+                                tr_irqs.append(len(times))
+                                tr_times.extend(times)
                 else:
                     f = start + c
                 self._account(slot, r, start, f, c)
-                if trace_job is not None:
-                    trace_job((slot.name, slot.index_of(r), r, slot.ready, start, f, c))
+                if trace is not None:  # the record as Trace.flat_records says: mostly small ints (no allocation)
+                    tr_jobs.append(trace_ids[i])
+                    tr_jobs.append(k)
+                    tr_jobs.append(start)
+                    tr_jobs.append(r - slot.offset - k * slot.period)
+                    tr_jobs.append(slot.ready - r)
+                    tr_jobs.append(f - start - c)
+                    tr_jobs.append(c - slot.cost)
+                    trace_room -= 1
+                    if not trace_room:
+                        trace_room = trace.compact()
                 # the task's next job: releases that came while this one was pending or running overran
                 nxt = slot.nnext
                 fault = None

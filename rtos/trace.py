@@ -13,11 +13,13 @@ import io
 import itertools
 import json
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
+JOB_FIELDS = len(JOB_COLUMNS)
+IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
 
 
 class JobRecord(NamedTuple):
@@ -57,7 +59,13 @@ class TraceEvent(NamedTuple):
 
 
 class Trace:
-    """Keeps the last ``maxlen`` jobs and the last ``maxlen`` instant events.
+    """Keeps the last ``maxlen`` jobs, the last ``maxlen`` interrupt records and the last ``maxlen`` instant events.
+
+    The jobs and the interrupt records are kept flat, as lists of ints (:data:`JOB_FIELDS` per job, the task as an
+    index into a table of tasks): no tuple per record; they become :class:`JobRecord` and :class:`IrqRecord` when
+    read. A job is kept as its differences from what its task's timing predicts (release ``offset + job * period``,
+    ready at its release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's
+    shared small ints, which a hot loop boxes without allocating (the list keeps them as one pointer each).
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -69,36 +77,110 @@ class Trace:
         """Create an empty trace holding at most ``maxlen`` jobs, ``maxlen`` interrupt records and ``maxlen`` events."""
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
-        self._jobs: deque[tuple[str, int, int, int, int, int, int]] = deque(maxlen=maxlen)
-        self._irqs: deque[tuple[int, int, int, tuple[int, ...]]] = deque(maxlen=maxlen)
+        self.maxlen = maxlen
+        # per job: task id, job, start and the differences from the task's timing (see flat_records); the records
+        # before _job0 are dropped
+        self._jobs: list[int] = []
+        self._job0 = 0
+        # (job start, source index, firings, number of firing times) per record, and the firing times
+        self._irqs: list[int] = []
+        self._irq_times: list[int] = []
+        self._irq0 = 0
+        self._times0 = 0
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
+        self._task_table: list[tuple[str, int, int, int]] = []  # (name, offset, period, nominal cost) by task id
+        self._task_id: dict[tuple[str, int, int, int], int] = {}
         self.task_names: list[str] = []
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
+
+    def task_ids(self, tasks: Iterable[tuple[str, int, int, int]]) -> list[int]:
+        """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles)."""
+        return [self._task_of(t) for t in tasks]
+
+    def _task_of(self, task: tuple[str, int, int, int]) -> int:
+        k = self._task_id.get(task)
+        if k is None:
+            k = self._task_id[task] = len(self._task_table)
+            self._task_table.append(task)
+        return k
 
     def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int,
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
-        self._jobs.append((task, job, release, ready, start, finish, finish - start if cost is None else cost))
+        cost = finish - start if cost is None else cost
+        self._jobs.extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release,
+                           finish - start - cost, cost))
+        if len(self._jobs) >= 2 * JOB_FIELDS * self.maxlen:
+            self.compact()
 
-    def job_appender(self) -> Callable[[tuple[str, int, int, int, int, int, int]], None]:
-        """``add_job`` for a hot loop: a callable taking the tuple (task, job, release, ready, start, finish, cost)."""
-        return self._jobs.append
+    def flat_records(self) -> tuple[list[int], list[int], list[int]]:
+        """The lists a hot loop appends the records to: jobs, :data:`JOB_FIELDS` ints each (task id (:meth:`task_ids`),
+        job, start, release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost);
+        interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing times);
+        the firing times (see IrqRecord). The loop calls :meth:`compact` each time it has appended :meth:`room` jobs
+        since."""
+        return self._jobs, self._irqs, self._irq_times
 
-    def irq_appender(self) -> Callable[[tuple[int, int, int, tuple[int, ...]]], None]:
-        """For the hot loop: a callable taking (job start, source index, firings, firing times) (see IrqRecord)."""
-        return self._irqs.append
+    def room(self) -> int:
+        """Jobs that may be appended before :meth:`compact` must run (it keeps the memory within 2 ``maxlen`` jobs)."""
+        return self.maxlen
+
+    def compact(self) -> int:
+        """Drop all but the last ``maxlen`` records (and the pruned ones), free them when they take as much memory as
+        the kept ones; return :meth:`room`."""
+        self._trim()
+        if self._job0 * 2 >= len(self._jobs):
+            del self._jobs[:self._job0]
+            self._job0 = 0
+        if self._irq0 * 2 >= len(self._irqs):
+            del self._irqs[:self._irq0], self._irq_times[:self._times0]
+            self._irq0 = self._times0 = 0
+        return self.room()
+
+    def _trim(self) -> None:
+        """Drop all but the last ``maxlen`` jobs and interrupt records (as a ``deque(maxlen=...)`` would)."""
+        self._job0 = max(self._job0, len(self._jobs) - JOB_FIELDS * self.maxlen)
+        irqs, first = self._irqs, len(self._irqs) - IRQ_FIELDS * self.maxlen
+        while self._irq0 < first:
+            self._times0 += irqs[self._irq0 + 3]
+            self._irq0 += IRQ_FIELDS
+
+    def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
+        """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
+        self._trim()
+        jobs, tasks = self._jobs, self._task_table
+        for k in range(self._job0, len(jobs), JOB_FIELDS):
+            task, job, start, release, ready, finish, cost = jobs[k:k + JOB_FIELDS]
+            name, offset, period, nominal = tasks[task]
+            release += offset + job * period
+            cost += nominal
+            yield name, job, release, release + ready, start, start + cost + finish, cost
+
+    def _finish(self, k: int) -> int:
+        """The finish of the job whose record starts at ``self._jobs[k]``."""
+        jobs = self._jobs
+        return jobs[k + 2] + self._task_table[jobs[k]][3] + jobs[k + 6] + jobs[k + 5]
 
     def irqs(self) -> list[IrqRecord]:
         """The recorded interrupt firings inside jobs, oldest first."""
-        return [IrqRecord(*r) for r in self._irqs]
+        self._trim()
+        irqs, times, t = self._irqs, self._irq_times, self._times0
+        out = []
+        for k in range(self._irq0, len(irqs), IRQ_FIELDS):
+            n = irqs[k + 3]
+            out.append(IrqRecord(irqs[k], irqs[k + 1], irqs[k + 2], tuple(times[t:t + n])))
+            t += n
+        return out
 
     def prune_before(self, t: int) -> None:
         """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t."""
+        self._trim()
         jobs, irqs, events = self._jobs, self._irqs, self._events
-        while jobs and jobs[0][5] < t:
-            jobs.popleft()
-        while irqs and irqs[0][0] < t:
-            irqs.popleft()
+        while self._job0 < len(jobs) and self._finish(self._job0) < t:
+            self._job0 += JOB_FIELDS
+        while self._irq0 < len(irqs) and irqs[self._irq0] < t:
+            self._times0 += irqs[self._irq0 + 3]
+            self._irq0 += IRQ_FIELDS
         while events and events[0][1] < t:
             events.popleft()
 
@@ -108,7 +190,7 @@ class Trace:
 
     def jobs(self) -> list[JobRecord]:
         """The recorded jobs, oldest first."""
-        return [JobRecord(*r) for r in self._jobs]
+        return [JobRecord(*r) for r in self._job_rows()]
 
     def events(self) -> list[TraceEvent]:
         """The recorded instant events, oldest first."""
@@ -116,15 +198,15 @@ class Trace:
 
     def clear(self) -> None:
         """Forget every record."""
-        self._jobs.clear()
-        self._irqs.clear()
+        del self._jobs[:], self._irqs[:], self._irq_times[:]
+        self._job0 = self._irq0 = self._times0 = 0
         self._events.clear()
 
     def write_csv(self, out: TextIO) -> None:
         """Write the jobs as CSV with a header row (times in cycles)."""
         w = csv.writer(out, lineterminator="\n")
         w.writerow(JOB_COLUMNS)
-        w.writerows(self._jobs)
+        w.writerows(self._job_rows())
 
     def to_csv(self) -> str:
         """Return the jobs as CSV text."""
@@ -147,7 +229,7 @@ class Trace:
         for n in names:
             yield {"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}}
             yield {"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n], "args": {"sort_index": tid[n]}}
-        for task, job, release, ready, start, finish, _cost in self._jobs:
+        for task, job, release, ready, start, finish, _cost in self._job_rows():
             yield {
                 "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
                 "ts": start * us, "dur": (finish - start) * us,
@@ -180,7 +262,7 @@ class Trace:
         try:
             with tmp.open("w", encoding="utf-8") as f:
                 f.write('{"traceEvents": [' + ", ".join(head))
-                jobs = iter(self._jobs)
+                jobs = self._job_rows()
                 while batch := list(itertools.islice(jobs, 10_000)):
                     f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
                                                    ready, finish - release)
@@ -199,11 +281,14 @@ class Trace:
     def _names(self) -> list[str]:
         """Task names in tid order: the declared ones, then any other seen in the jobs."""
         names = list(self.task_names)
-        for r in self._jobs:
-            if r[0] not in names:
-                names.append(r[0])
+        self._trim()
+        for task in dict.fromkeys(self._jobs[self._job0::JOB_FIELDS]):
+            name = self._task_table[task][0]
+            if name not in names:
+                names.append(name)
         return names
 
     def __len__(self) -> int:
         """Number of recorded jobs."""
-        return len(self._jobs)
+        self._trim()
+        return (len(self._jobs) - self._job0) // JOB_FIELDS

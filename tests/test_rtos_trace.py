@@ -84,3 +84,35 @@ def test_write_chrome_writes_the_bytes_of_to_chrome(tmp_path):
     tr.write_chrome(path, 168_000_000)
     assert path.read_text(encoding="utf-8") == json.dumps(tr.to_chrome(168_000_000))
     assert [p.name for p in tmp_path.iterdir()] == ["trace.json"]
+
+
+def _irq_run(maxlen: int) -> Trace:
+    """Two tasks preempted by two periodic interrupts (one whose firings land inside jobs at several times)."""
+    from rtos import PeriodicInterrupt
+
+    tr = Trace(maxlen=maxlen)
+    tasks = [Task("fast", 1, 100, cost=30), Task("slow", 2, 250, cost=70, offset=5)]
+    irqs = [PeriodicInterrupt("tick", period=40, cost=3), PeriodicInterrupt("rx", period=170, cost=9, offset=11)]
+    Scheduler(tasks, VirtualClock(1_000_000), interrupts=irqs, trace=tr).run_until(20_000)
+    return tr
+
+
+def test_a_bounded_trace_keeps_what_an_unbounded_one_ends_with_and_frees_the_rest():
+    from rtos.trace import IRQ_FIELDS, JOB_FIELDS
+
+    whole, kept = _irq_run(10_000), _irq_run(7)
+    assert len(kept._jobs) <= 2 * JOB_FIELDS * 7  # freed as the run went, not only when read
+    assert len(whole.irqs()) > 100 and any(len(i.times) > 1 for i in whole.irqs())
+    assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == whole.irqs()[-7:] and len(kept) == 7
+    kept.compact()
+    assert len(kept._jobs) == JOB_FIELDS * 7 and len(kept._irqs) == IRQ_FIELDS * 7
+    assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == whole.irqs()[-7:]
+
+
+def test_prune_before_forgets_the_jobs_finished_and_the_firings_in_jobs_started_before():
+    tr, whole = _irq_run(10_000), _irq_run(10_000)
+    tr.prune_before(12_345)
+    assert tr.jobs() == [j for j in whole.jobs() if j.finish >= 12_345]
+    assert tr.irqs() == [i for i in whole.irqs() if i.job_start >= 12_345]
+    tr.compact()
+    assert tr.irqs() == [i for i in whole.irqs() if i.job_start >= 12_345] and len(tr) == len(tr.jobs())
