@@ -14,8 +14,8 @@ from firmware.control.validation import check_int_range, check_range
 from firmware.motor_ratings import MotorRatings
 from firmware.safe_state import SAFE_STATES
 
-__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "HOLD_KP_MAX", "MISS_STREAK_MAX",
-           "PEAK_CURRENT_A", "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S",
+__all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "HOLD_KP_MAX",
+           "MISS_STREAK_MAX", "PEAK_CURRENT_A", "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S",
            "SafetyLimits", "ThermalLimits"]
 
 # The hardware's bounds on every limit; a limit beyond them is no limit at all (or asks the motor for what it

@@ -1,5 +1,6 @@
 """The AK drive's safe behaviours on the plant: torque against speed (phase short, regenerative brake, MIT damping)
-and against angle (handbrake, the MIT hold), and the drive's own command timeout (hal/virtual/devices/ak60_winding.py)."""
+and against angle (handbrake, the MIT hold), and the drive's own command timeout
+(hal/virtual/devices/ak60_winding.py)."""
 
 from __future__ import annotations
 
