@@ -15,8 +15,8 @@ from firmware.motor_ratings import MotorRatings
 from firmware.safe_state import SAFE_STATES
 
 __all__ = ["ANGLE_LIMIT_RAD", "BRAKE_CURRENT_MAX_A", "BRAKE_DELAY_MAX_S", "DAMPING_KD_MAX", "HOLD_KP_MAX",
-           "MISS_STREAK_MAX", "PEAK_CURRENT_A", "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C", "TIMEOUT_MAX_S",
-           "SafetyLimits", "ThermalLimits"]
+           "MISS_STREAK_MAX", "PEAK_CURRENT_A", "STARTUP_GRACE_MAX_S", "TEMPERATURE_MAX_AGE_S", "TEMPERATURE_RANGE_C",
+           "TIMEOUT_MAX_S", "SafetyLimits", "ThermalLimits"]
 
 # The hardware's bounds on every limit; a limit beyond them is no limit at all (or asks the motor for what it
 # cannot give). Sources are the report's Table B2 and the maker's table (shared/PROTOCOLS.md section C). The two
