@@ -160,11 +160,16 @@ ADULT_PROFILE = "designs/adult_80kg.toml"  # profiles/ (profile_path)
 TABLE_STRIDES = 20
 
 
+def _table_head(head: str) -> list[str]:
+    """A markdown table's header row and its separator."""
+    return [head, "|" + "---|" * (head.count("|") - 1)]
+
+
 def energy_table(walks: dict[str, WalkEnergy]) -> str:
     """The markdown table of the walks' mean ledgers (J per stride) against the bounds."""
     head = ("| speed | strides | faults | negative ankle work: curve / walk | spring gives back | actuator absorbs "
             "| rotor absorbs | regenerated | bound: curve / eta_back | bound: eta_back x walk's |")
-    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    lines = _table_head(head)
     for speed, w in walks.items():
         m = w.means()
         lines.append(
@@ -179,7 +184,7 @@ def run_table(walks: dict[str, WalkEnergy]) -> str:
     """The markdown table of the walks' summary.json figures (`pafp run`'s, from the same run)."""
     head = ("| speed | strides | faults | gait events from | encoder RMS ° | steady °C nominal / pessimistic R_ha "
             "(margin to derating) | J/stride (motor alone) | regenerated J/stride | km/charge |")
-    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    lines = _table_head(head)
     for speed, w in walks.items():
         run, th, b = w.run, w.run["thermal"], w.run["battery"]
         hot = th["steady_state_pessimistic_c"]
