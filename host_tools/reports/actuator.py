@@ -273,7 +273,7 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
               f"speed {se['no_load_speed_rpm']} rpm or more, up to {se['peak_demand_speed_rpm']} rpm: no torque "
               "there at any mass)" if se["stance_fraction_above_no_load"] > 0 else "")
     b = check["belt"]
-    rated = (f" against {b['rated_working_tension_n']} N rated ({b['belt']}, assumed rating: "
+    rated = (f" against {b['rated_working_tension_n']} N rated ({b['belt']}, rating: SDP/SI Table 3, "
              "hal/virtual/plant/transmission.py)" if b["rated_working_tension_n"] is not None else
              " (no design profile: the belt's pitch and width, hence its rating, unknown)")
     g = check["gait_data"]
