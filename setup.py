@@ -46,6 +46,7 @@ COMPILED = [
     "hal/virtual/plant/integrator.py",
     "hal/virtual/plant/gap.py",
     "hal/virtual/plant/model.py",
+    "hal/virtual/plant/state.py",
     "hal/virtual/devices/world.py",
     "hal/virtual/devices/ak60.py",
     "hal/virtual/devices/ak60_loops.py",

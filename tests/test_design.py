@@ -256,11 +256,12 @@ def test_a_non_ak60_design_runs_on_the_uart_and_the_can_mit_link(tmp_path: Path,
     assert s["encoder_rms_error_deg"] < 2.0
 
 
-def test_the_adult_design_walks_80_kg_at_free_speed(tmp_path: Path) -> None:
-    """profiles/designs/adult_80kg.toml (issue 38) is the design the shipped search names for 80 kg at free speed on
-    adult-shaped data, and it walks by the search's own criteria (no fault, the moment share and the tracking of
-    WalkCriteria, the belt within its rating, the pessimistic steady winding 20 C below the derating start); 3
-    strides here, docs/design.md gives the 20-stride run."""
+def test_the_adult_design_walks_80_kg_at_free_speed_but_over_its_belts_rating(tmp_path: Path) -> None:
+    """profiles/designs/adult_80kg.toml (issue 38) is the closest design of the shipped search for 80 kg at free speed
+    on adult-shaped data: it walks by every criterion of the search but the belt (no fault, the moment share and the
+    tracking of WalkCriteria, the pessimistic steady winding 20 C below the derating start), and its belt's peak
+    tension is over the belt's rated working tension, the gap its header and docs/design.md state; 3 strides here,
+    docs/design.md gives the 20-stride run."""
     from host_tools.commands.design import _write_profiles
     from host_tools.studies.design_point import run_design_point
     from host_tools.studies.design_report import walks
@@ -293,8 +294,9 @@ sided = "{design.spring.sided}"
     assert tomllib.loads(point.profile_text)["design"] == tomllib.loads(shipped.read_text(encoding="utf-8"))["design"]
     _write_profiles([point], tmp_path / "out")
     row = run_design_point(point)
-    assert row["status"] == "ok" and walks(row, WalkCriteria()), row
-    assert row["belt_tension_n"] <= row["belt_rated_n"] and row["thermal_margin_c"] >= 20.0
+    assert row["status"] == "ok" and walks(row, WalkCriteria(belt_within_rating=False)), row
+    assert not walks(row, WalkCriteria()) and row["thermal_margin_c"] >= 20.0
+    assert row["belt_tension_n"] > row["belt_rated_n"] == pytest.approx(712.0 / 25.4 * 25.0, abs=0.1)
     s = json.loads((Path(point.profile_name).parent / "summary.json").read_text())
     assert not s["faults"] and s["complete"]
     assert s["actuator"]["drive"]["peak_current_a"] == load_motor(design.motor).peak_current_a  # the design's drive

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import pytest
 
@@ -105,10 +106,23 @@ def test_a_designs_belt_is_its_pitchs_widest_unless_it_names_a_stock_width() -> 
 
     table = {"motor": "ak70_10", "belt_driver_teeth": 18, "belt_driven_teeth": 62, "belt_pitch_mm": 5.0}
     d = design_from_mapping(dict(table), "t")
-    assert d.width_mm == 25.0 and d.rated_tension_n == 25.0 * 50.0
-    assert design_from_mapping({**table, "belt_width_mm": 15}, "t").rated_tension_n == 15.0 * 50.0
+    per_mm = 712.0 / 25.4  # SDP/SI Table 3: 712 N per inch of a 5 mm GT belt
+    assert d.width_mm == 25.0 and d.rated_tension_n == pytest.approx(25.0 * per_mm, rel=1e-12)
+    assert design_from_mapping({**table, "belt_width_mm": 15}, "t").rated_tension_n == pytest.approx(15.0 * per_mm,
+                                                                                                     rel=1e-12)
     with pytest.raises(ValueError, match=r"^t: \[design\] belt width 12.0 mm is not allowed for the 5 mm pitch: "
                                          r"one of 9, 15, 25$"):
         design_from_mapping({**table, "belt_width_mm": 12}, "t")
     with pytest.raises(ValueError, match=r"belt_width_mm = 'wide' is outside the allowed range \[1, 100\] mm"):
         design_from_mapping({**table, "belt_width_mm": "wide"}, "t")
+
+
+def test_the_belt_ratings_agree_with_the_handbooks_rated_torque() -> None:
+    """SDP/SI's rated torque of a 20-groove 2 mm GT pulley with a 6 mm belt, about 0.18 N m at 10 rpm, against the
+    working tension of its Table 3 on that pulley's pitch radius (20 x 2 mm / 2 pi): within 10 %."""
+    from hal.virtual.plant.transmission import BELT_RATED_N_PER_INCH, rated_belt_tension_n
+
+    assert BELT_RATED_N_PER_INCH == {2.0: 111.0, 3.0: 507.0, 5.0: 712.0, 8.0: 1690.0}
+    torque = rated_belt_tension_n(2.0, 6.0) * 20 * 2e-3 / (2.0 * math.pi)
+    assert torque == pytest.approx(0.18, rel=0.10)
+    assert torque == pytest.approx(111.0 * 6.0 / 25.4 * 6.366e-3, rel=1e-3)

@@ -225,7 +225,7 @@ def belt_check(params: PlantParams, spec: Design | None, control_limit_a: float,
             "at_run_peak_n": None if run_peak_a is None else round(per_a * run_peak_a, 0),
             "at_control_limit_n": round(per_a * control_limit_a, 0), "at_peak_current_n": round(per_a * peak_a, 0),
             "belt": None if spec is None else f"{spec.belt_pitch_mm:g} mm pitch, {spec.width_mm:g} mm wide",
-            "rated_working_tension_n": None if spec is None else spec.rated_tension_n,
+            "rated_working_tension_n": None if spec is None else round(spec.rated_tension_n, 1),
             "within_rating": None if spec is None or run_peak_a is None else per_a * run_peak_a <= spec.rated_tension_n}
 
 
@@ -273,7 +273,7 @@ def walk_outputs(r, out, t_s: np.ndarray, current_cmd_a: np.ndarray,
               f"speed {se['no_load_speed_rpm']} rpm or more, up to {se['peak_demand_speed_rpm']} rpm: no torque "
               "there at any mass)" if se["stance_fraction_above_no_load"] > 0 else "")
     b = check["belt"]
-    rated = (f" against {b['rated_working_tension_n']} N rated ({b['belt']}, assumed rating: "
+    rated = (f" against {b['rated_working_tension_n']} N rated ({b['belt']}, rating: SDP/SI Table 3, "
              "hal/virtual/plant/transmission.py)" if b["rated_working_tension_n"] is not None else
              " (no design profile: the belt's pitch and width, hence its rating, unknown)")
     g = check["gait_data"]

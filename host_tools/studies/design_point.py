@@ -25,7 +25,7 @@ design profile. Its figures (docs/design.md, "Reading the search"):
   stays below [thermal] derate_start_c;
 * ``belt_tension_n``: the belt's peak effective tension, the largest reported current x Kt x gearbox ratio over the
   driver pulley's pitch radius, taken backdriven (divided by the gearbox's backdriven efficiency, the larger of the
-  two directions); ``belt_rated_n``: the belt's rated working tension (hal/virtual/plant/transmission.py, assumed);
+  two directions); ``belt_rated_n``: the belt's rated working tension (hal/virtual/plant/transmission.py, SDP/SI);
 * ``actuator_kg``: host_tools/studies/design_mass.py; ``keeps_up_to_kg``: summary.json's actuator design check
   (host_tools/reports/actuator.py, on the plant the bench ran), at peak current (``_limit``: the firmware's limit).
 """

@@ -135,7 +135,7 @@ def docs_search_table(spec: DesignSpec, rows: list[dict[str, Any]]) -> str:
     from host_tools.walk import population_for
 
     c = spec.criteria
-    head = ("| point | design | speed | gait data | moment share | RMS ° | peak A | belt N / rated (stand-in) "
+    head = ("| point | design | speed | gait data | moment share | RMS ° | peak A | belt N / rated (SDP/SI Table 3) "
             "| steady °C: nominal / pessimistic R_ha (margin to derating) | J/stride | km/charge | walks |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in sorted(rows, key=lambda r: r["point"]):

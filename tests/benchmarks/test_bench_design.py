@@ -1,17 +1,19 @@
 """The shipped design search, profiles/designs/adult.toml, on 2 worker processes (--benchmark-only): its wall time
 and its answer.
 
-Issue 23's goal: the whole search in under 20 minutes on this 2-core machine with 2 workers (now 8 walking runs
+Issue 23's goal: the whole search in under 20 minutes on this 2-core machine with 2 workers (now 12 walking runs
 of 6 strides on adult-shaped gait data). Reports the spec's check (every design's profile built), the cluster's
 start-up, the total, the time per point and the median point's own time, and checks that every point gave figures
-(ok or a fault, none an error). Issue 38: the shipped adult design (profiles/designs/adult_80kg.toml) is a point
-that walks 80 kg at free and at fast speed by the spec's criteria (belt within its rating, the steady winding with
-the pessimistic housing resistance 20 C below the derating start); design.md and results.csv are kept in
+(ok or a fault, none an error). Issue 38: no point walks 80 kg by every criterion of the spec (docs/design.md
+says so), and the shipped adult design (profiles/designs/adult_80kg.toml), the closest, is a point that walks 80 kg
+at free and at fast speed by every criterion but its belt's rating (the steady winding with the pessimistic housing
+resistance 20 C below the derating start), its belt over the rating; design.md and results.csv are kept in
 runs/bench/design-adult/, and docs/design.md's table of the search must be the one these rows give.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import statistics
 import time
@@ -57,7 +59,7 @@ def test_bench_adult_design_search(benchmark, tmp_path: Path):
     info["per_point_s"] = round(result["search_s"] / len(rows), 3)
     info["point_median_s"] = round(statistics.median(r["wall_time_s"] for r in rows), 3)
     info["status"] = {s: sum(r["status"] == s for r in rows) for s in sorted({r["status"] for r in rows})}
-    assert len(rows) == 8
+    assert len(rows) == 12
     assert all(r["status"] in ("ok", "fault") for r in rows), [r["error"] for r in rows if r["error"]][:3]
     kept = Path("runs/bench/design-adult")
     kept.mkdir(parents=True, exist_ok=True)
@@ -71,7 +73,9 @@ def test_bench_adult_design_search(benchmark, tmp_path: Path):
         design.motor, design.belt_driver_teeth, design.belt_driven_teeth, design.belt_pitch_mm)
         and r["spring"].startswith(f"{design.spring.stiffness_nm_per_rad:g} N")]
     assert sorted(r["speed"] for r in mine) == ["fast", "free"]
-    assert all(walks(r, spec.criteria) for r in mine), mine
+    assert not any(walks(r, spec.criteria) for r in rows), [r["point"] for r in rows if walks(r, spec.criteria)]
+    but_the_belt = dataclasses.replace(spec.criteria, belt_within_rating=False)
+    assert all(walks(r, but_the_belt) and r["belt_tension_n"] > r["belt_rated_n"] for r in mine), mine
     info["adult_80kg"] = {r["speed"]: {k: r[k] for k in ("moment_share", "tracking_rms_deg", "belt_tension_n",
                                                           "belt_rated_n", "steady_state_pessimistic_c")} for r in mine}
     assert block("design_search") == docs_search_table(spec, rows), (

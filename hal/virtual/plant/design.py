@@ -119,7 +119,7 @@ class Design:
 
     @property
     def rated_tension_n(self) -> float:
-        """The belt's rated working tension (hal/virtual/plant/transmission.py, BELT_RATED_N_PER_MM: assumed)."""
+        """The belt's rated working tension (hal/virtual/plant/transmission.py, BELT_RATED_N_PER_MM: SDP/SI)."""
         return rated_belt_tension_n(self.belt_pitch_mm, self.width_mm)
 
     @property

@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["BELT_RATED_N_PER_MM", "BELT_WIDTHS_MM", "MAX_SINGLE_STAGE_RATIO", "belt_tension_n", "belt_width_mm",
-           "planetary_backdriven_efficiency", "planetary_stages", "rated_belt_tension_n"]
+__all__ = ["BELT_RATED_N_PER_INCH", "BELT_RATED_N_PER_MM", "BELT_WIDTHS_MM", "MAX_SINGLE_STAGE_RATIO", "belt_tension_n",
+           "belt_width_mm", "planetary_backdriven_efficiency", "planetary_stages", "rated_belt_tension_n"]
 
 MAX_SINGLE_STAGE_RATIO = 10.0
 """Largest ratio built as one sun-planet-carrier stage [I]: a larger ratio needs planets too small for the sun
@@ -64,19 +64,25 @@ BELT_WIDTHS_MM: dict[float, tuple[float, ...]] = {
     5.0: (9.0, 15.0, 25.0),
     8.0: (20.0, 30.0),
 }
-"""Stock widths per pitch (mm), narrowest first [I]; a design's belt is the widest unless it names one (the design
-search checks the belt at its best: a narrower belt only lowers the rating)."""
-BELT_RATED_N_PER_MM: dict[float, float] = {2.0: 20.0, 3.0: 30.0, 5.0: 50.0, 8.0: 90.0}
-"""Rated working tension per mm of belt width, per pitch [I]: ASSUMED stand-ins of the order of the belt makers'
-low-speed ratings for glass-cord GT2 belts, NOT read from a maker's table. A 6 mm GT2 belt is rated 120 N here
-against its breaking load of about 1 kN (FarmBot's acceptance test of its 6 mm GT2 belt: 100 kg - 20 kg hung
-weight, genesis.farm.bot/v1.6/bom/drivetrain/belt). The only belt rating held with the project, the report's
-(section 3.2.1: "Gates PowerGrip GT3 charts", 30 N m on its 19.1 mm driver pulley, 9 N m after a length factor of
-0.3), is ~940 N of effective tension for a belt whose pitch and width the report leaves inconsistent (an "HTD
-10 mm" belt of 36 teeth on pulleys of 2 mm pitch): it cannot give a rating per mm of a 5 mm pitch. What replaces
-these: the rated torque tables of the Gates PowerGrip GT3 Drive Design Manual (2014, "Power Rating Tables": 5 mm
-pitch pp. 46-47, 8 mm pp. 48-50; the 2 and 3 mm pitches in the PowerGrip GT2 manual no. 17195) by small-sprocket
-grooves and rpm, with their width and length-correction factors, over the small sprocket's pitch radius."""
+"""Stock widths per pitch (mm), narrowest first [I], not checked against a maker's stock list (none was reachable
+here; the 5 mm pitch's 9, 15 and 25 mm are the standard widths a 5 mm HTD belt is sold in, XRobots/openDogV3 issue
+12); a design's belt is the widest unless it names one (the design search checks the belt at its best: a narrower
+belt only lowers the rating)."""
+
+BELT_RATED_N_PER_INCH: dict[float, float] = {2.0: 111.0, 3.0: 507.0, 5.0: 712.0, 8.0: 1690.0}
+"""Allowable working tension per inch (25.4 mm) of belt width, per pitch, of a neoprene GT (GT2/GT3 profile) belt
+with fibreglass cord: SDP/SI (Stock Drive Products / Sterling Instrument), *Handbook of Timing Belts, Pulleys, Chains
+and Sprockets*, Technical Section (sdp-si.com/D820/PDFS/Technical-Section.pdf), Table 3 "Allowable Working Tension
+of Different Belt Constructions" (the same table: HTD 3M 285 N, 5M 454 N, 8M 792 N; MXL 80 N, XL 125 N). Read
+through two independent secondary transcriptions of that table, not from the PDF itself. Cross-check against the
+same handbook's rated-torque table: a 20-groove 2 mm GT pulley (12.73 mm pitch diameter) with a 6 mm belt is rated
+about 0.18 N m at 10 rpm, and 111 N x 6 / 25.4 x 6.37 mm = 0.167 N m (8 % below). The figures are the belt's
+working tension (tight minus slack side), the quantity `belt_tension_n` gives."""
+
+MM_PER_INCH = 25.4
+BELT_RATED_N_PER_MM: dict[float, float] = {pitch: n / MM_PER_INCH for pitch, n in BELT_RATED_N_PER_INCH.items()}
+"""Allowable working tension per mm of belt width, per pitch (BELT_RATED_N_PER_INCH / 25.4): 4.37, 19.96, 28.03 and
+66.54 N/mm for the 2, 3, 5 and 8 mm pitches."""
 
 
 def belt_width_mm(pitch_mm: float, width_mm: float | None = None) -> float:
@@ -91,7 +97,11 @@ def belt_width_mm(pitch_mm: float, width_mm: float | None = None) -> float:
 
 
 def rated_belt_tension_n(pitch_mm: float, width_mm: float) -> float:
-    """The belt's rated working tension (BELT_RATED_N_PER_MM x width)."""
+    """The belt's rated working tension (BELT_RATED_N_PER_MM x width).
+
+    >>> round(rated_belt_tension_n(5.0, 25.0), 1)  # 712 N per inch x 25 / 25.4
+    700.8
+    """
     return BELT_RATED_N_PER_MM[pitch_mm] * width_mm
 
 
