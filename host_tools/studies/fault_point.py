@@ -1,10 +1,10 @@
 """One point of a fault campaign, run where Dask puts it: `run_fault_point(point)` returns its row (never raises).
 
 A point is two virtual runs with the same seeds and the same instruments (hal/virtual/faults/observer.py): the
-fault-free run (made once per worker for each scenario, controller, link and duration, and reused) and the run with the
-fault. The fault's onset is a gait phase of the first whole stride, placed on the fault-free run's gait clock
-(the two runs are the same until the onset). The faulted run ends ``settle_s`` after the fault's end. Figures
-are taken from the onset to the end of the faulted run, against the fault-free run:
+fault-free run (made once per worker for each scenario, controller, link, duration and safe state, and reused) and
+the run with the fault. The fault's onset is a gait phase of the first whole stride, placed on the fault-free
+run's gait clock (the two runs are the same until the onset). The faulted run ends ``settle_s`` after the fault's
+end. Figures are taken from the onset to the end of the faulted run, against the fault-free run:
 
 * ``excursion_deg``, ``velocity_dps``, ``torque_nm``: the largest unintended ankle angle, velocity and output
   torque (faulted minus fault-free), from the onset until the safe command reached the motor (to the run's end
