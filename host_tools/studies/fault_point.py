@@ -1,10 +1,10 @@
 """One point of a fault campaign, run where Dask puts it: `run_fault_point(point)` returns its row (never raises).
 
 A point is two virtual runs with the same seeds and the same instruments (hal/virtual/faults/observer.py): the
-fault-free run (made once per worker for each scenario, controller and link, and reused) and the run with the
-fault. The fault's onset is a gait phase of the first whole stride, placed on the fault-free run's gait clock
-(the two runs are the same until the onset). The faulted run ends ``settle_s`` after the fault's end. Figures
-are taken from the onset to the end of the faulted run, against the fault-free run:
+fault-free run (made once per worker for each scenario, controller, link, duration and safe state, and reused) and
+the run with the fault. The fault's onset is a gait phase of the first whole stride, placed on the fault-free
+run's gait clock (the two runs are the same until the onset). The faulted run ends ``settle_s`` after the fault's
+end. Figures are taken from the onset to the end of the faulted run, against the fault-free run:
 
 * ``excursion_deg``, ``velocity_dps``, ``torque_nm``: the largest unintended ankle angle, velocity and output
   torque (faulted minus fault-free), from the onset until the safe command reached the motor (to the run's end
@@ -116,7 +116,10 @@ def point_run_config(p: FaultPoint, faults: tuple[Any, ...], duration_s: float, 
                      faults=faults, duration_s=duration_s, design=_design_of(p.profile_text, p.profile_name))
 
 
-@functools.lru_cache(maxsize=16)  # the points of one scenario, controller and link share their fault-free run
+# One fault-free run per scenario, controller, link, duration and safe state, kept for the worker's whole share:
+# points run fault by fault, so a cache smaller than a spec's combinations would make each run again per point
+# (150 kB each for a 3-s run).
+@functools.lru_cache(maxsize=256)
 def _fault_free(p: FaultPoint, duration_s: float) -> tuple[float, float, dict[str, np.ndarray], str]:
     from hal.virtual.faults.observer import Observer
     from host_tools.runner import run_virtual
