@@ -76,8 +76,9 @@ and Sprockets*, Technical Section (sdp-si.com/D820/PDFS/Technical-Section.pdf), 
 of Different Belt Constructions" (the same table: HTD 3M 285 N, 5M 454 N, 8M 792 N; MXL 80 N, XL 125 N). Read
 through two independent secondary transcriptions of that table, not from the PDF itself. Cross-check against the
 same handbook's rated-torque table: a 20-groove 2 mm GT pulley (12.73 mm pitch diameter) with a 6 mm belt is rated
-about 0.18 N m at 10 rpm, and 111 N x 6 / 25.4 x 6.37 mm = 0.167 N m (8 % below). The figures are the belt's
-working tension (tight minus slack side), the quantity `belt_tension_n` gives."""
+about 0.18 N m at 10 rpm, and 111 N x 6 / 25.4 x 6.37 mm = 0.167 N m (8 % below). They are held here against the
+effective tension (tight minus slack side) that `belt_tension_n` gives; the tight side carries the installation
+tension as well, which this check leaves out (its error is on the optimistic side)."""
 
 MM_PER_INCH = 25.4
 BELT_RATED_N_PER_MM: dict[float, float] = {pitch: n / MM_PER_INCH for pitch, n in BELT_RATED_N_PER_INCH.items()}
