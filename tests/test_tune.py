@@ -45,9 +45,15 @@ def test_saturation_storm_is_infeasible():
     assert "saturation storm" in e.reason
 
 
-def test_profile_gains_are_feasible_with_a_finite_score():
+@pytest.fixture(scope="module")
+def nominal() -> tuning.Evaluation:
+    """The profile's own gains on the default plant, one stride, seed 0 (two tests read it)."""
     base = load_firmware_config()
-    e = tuning.evaluate(0, base, tuning.gains_of(base), strides=1, seed=0)
+    return tuning.evaluate(0, base, tuning.gains_of(base), strides=1, seed=0)
+
+
+def test_profile_gains_are_feasible_with_a_finite_score(nominal):
+    e = nominal
     assert e.feasible, e.reason
     assert e.score == pytest.approx(e.rms_error_deg + tuning.EFFORT_WEIGHT * (e.rms_current_a + e.rms_current_step_a))
 
@@ -138,10 +144,9 @@ def _heavier_plant(tmp_path):
     return path
 
 
-def test_candidates_run_the_plant_they_are_given(tmp_path):
+def test_candidates_run_the_plant_they_are_given(tmp_path, nominal):
     base = load_firmware_config()
     gains = tuning.gains_of(base)
-    nominal = tuning.evaluate(0, base, gains, strides=1, seed=0)
     packaged = tuning.evaluate(0, base, gains, strides=1, seed=0, plant=tuning.TunePlant(PLANT))
     heavier = tuning.evaluate(0, base, gains, strides=1, seed=0, plant=tuning.TunePlant(_heavier_plant(tmp_path)))
     drawn = tuning.evaluate(0, base, gains, strides=1, seed=0, plant=tuning.TunePlant(seed=7))
