@@ -218,6 +218,15 @@ def _startup_error(tmp_path: Path, capsys: pytest.CaptureFixture[str], motor: st
     return capsys.readouterr().err
 
 
+def test_no_trace_and_no_plot_leave_those_files_out_in_serial_mode(tmp_path: Path) -> None:
+    """--no-trace and --no-plot mean in serial mode what they mean on the virtual bench."""
+    main(["run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--duration", "1", "--no-realtime", "--no-trace",
+          "--no-plot", "--out", str(tmp_path), "--quiet"])
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {"summary.json", "report.md", "telemetry.bin", "telemetry.csv"} <= names, names
+    assert not names & {"trace.pftrace", "tracking.png"}, names
+
+
 def test_port_that_cannot_open_names_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     err = _startup_error(tmp_path, capsys, "/dev/does-not-exist-42", "sim://bno08x")
     assert "/dev/does-not-exist-42" in err and "motor" in err

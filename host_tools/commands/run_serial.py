@@ -96,7 +96,7 @@ def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> 
 
         extra, md = serial_extra(result)
         try:  # telemetry.bin is rewritten from memory: a capture that failed mid-run is complete if this works
-            s = write_outputs(result, out, extra, md)
+            s = write_outputs(result, out, extra, md, plot=not args.no_plot, trace=not args.no_trace)
         except OSError as e:
             _remove_partial(out / "telemetry.bin", len(result.telemetry))
             safe = result.stop.safe
@@ -128,7 +128,8 @@ def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> 
           f"{', '.join(stop['safe_frames']) or 'nothing sent'}; "
           f"{'on the wire' if stop['safe_on_wire'] else 'NOT confirmed on the wire'} {stop['latency_ms']} ms "
           f"after the stop began (goal {stop['goal_ms']} ms)")
-    print(f"  outputs: {out}/summary.json, report.md, tracking.png, {TRACE_FILE}, telemetry.bin/.csv"
+    print(f"  outputs: {out}/summary.json, report.md, " + "".join(f"{name}, " for name, on in
+          (("tracking.png", not args.no_plot), (TRACE_FILE, not args.no_trace)) if on) + "telemetry.bin/.csv"
           + (f"; wire capture in {args.capture}" if args.capture else ""))
     link = s["link_lost"]
     if link is not None:
