@@ -26,7 +26,7 @@ from pathlib import Path
 
 from host_tools.stop_signals import EXIT_CODES, StopSignals
 
-__all__ = ["Interrupted", "interrupting", "stopped_line"]
+__all__ = ["Interrupted", "interrupting", "raise_if_stopped", "stopped_line"]
 
 REDELIVER_AFTER_S = 0.02
 """How long after Python dropped the Interrupted (raised in a gc callback) its signal comes again: long enough for
@@ -42,6 +42,22 @@ class Interrupted(BaseException):
         self.signal = signal
         self.exit_code = EXIT_CODES.get(signal, 130)
         self.elapsed_s = elapsed_s
+
+
+_STOPS: list[tuple[StopSignals, float]] = []
+"""The entered :func:`interrupting` blocks, innermost last: (their signals, their start on perf_counter)."""
+
+
+def raise_if_stopped() -> None:
+    """Raise Interrupted if a stop signal came to an entered :func:`interrupting` block and its Interrupted was lost.
+
+    A job that calls this is still running, so the Interrupted raised at the signal did not leave it: somewhere on its
+    way it was swallowed without a trace (where Python reports it, :func:`interrupting` delivers the signal again).
+    A loop calls this once per step (`run_tasks`, once per finished point), so a lost stop ends the job at its next
+    step instead of letting it run on to its end and exit 0."""
+    for signals, t0 in _STOPS:
+        if signals.name is not None:
+            raise Interrupted(signals.name, time.perf_counter() - t0)
 
 
 @contextmanager
@@ -68,10 +84,12 @@ def interrupting() -> Iterator[StopSignals]:
     signals.on_stop = raise_now
     previous_hook = sys.unraisablehook
     sys.unraisablehook = swallowed
+    _STOPS.append((signals, t0))
     try:
         with signals:
             yield signals
     finally:
+        _STOPS.remove((signals, t0))
         sys.unraisablehook = previous_hook
 
 

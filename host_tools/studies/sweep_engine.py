@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
+from host_tools.studies.interrupt import raise_if_stopped
 from host_tools.studies.sweep_point import (
     FIGURES,
     PointTask,
@@ -242,6 +243,7 @@ def run_tasks(tasks: list[Any], run: Callable[[Any], dict[str, Any]], out: Path,
             table.add(row)
             bar.step(not ok(row))
             fut.release()
+            raise_if_stopped()  # a stop signal whose Interrupted was swallowed on its way out of the wait
     finally:
         table.close()
     return SweepOutcome(table.sorted_rows(), len(todo), len(tasks) - len(todo), time.perf_counter() - t0)
