@@ -128,8 +128,9 @@ def _serial_outputs(args: argparse.Namespace, cfg, out: Path, telemetry_pty) -> 
           f"{', '.join(stop['safe_frames']) or 'nothing sent'}; "
           f"{'on the wire' if stop['safe_on_wire'] else 'NOT confirmed on the wire'} {stop['latency_ms']} ms "
           f"after the stop began (goal {stop['goal_ms']} ms)")
-    print(f"  outputs: {out}/summary.json, report.md, " + "".join(f"{name}, " for name, on in
-          (("tracking.png", not args.no_plot), (TRACE_FILE, not args.no_trace)) if on) + "telemetry.bin/.csv"
+    files = ["summary.json", "report.md", *([] if args.no_plot else ["tracking.png"]),
+             *([] if args.no_trace else [TRACE_FILE]), "telemetry.bin/.csv"]
+    print(f"  outputs: {out}/{', '.join(files)}"
           + (f"; wire capture in {args.capture}" if args.capture else ""))
     link = s["link_lost"]
     if link is not None:
