@@ -56,8 +56,9 @@ def raise_if_stopped() -> None:
     A loop calls this once per step (`run_tasks`, once per finished point), so a lost stop ends the job at its next
     step instead of letting it run on to its end and exit 0."""
     for signals, t0 in _STOPS:
-        if signals.name is not None:
-            raise Interrupted(signals.name, time.perf_counter() - t0)
+        if signals.name is not None:  # the elapsed time to the signal (StopSignals' clock is perf_counter_ns)
+            at = time.perf_counter() if signals.at_ns is None else signals.at_ns / 1e9
+            raise Interrupted(signals.name, at - t0)
 
 
 @contextmanager
