@@ -157,6 +157,27 @@ def test_criteria_and_hazard_table(one_worker):
     assert table["motor_stall"]["control"].startswith("none")
 
 
+def _row(point: int, safe: str, shipped: str, excursion: float) -> dict:
+    return {"point": point, "fault": "motor_stall", "safe_state": safe, "profile_safe_state": shipped,
+            "status": "ok", "detected": True, "excursion_deg": excursion}
+
+
+def test_the_verdict_judges_the_shipped_safe_state_and_compares_the_others():
+    limit = {"motor_stall": {"excursion_deg": 5.0}}
+    rows = [_row(0, "graded", "graded", 4.0), _row(1, "brake", "graded", 40.0), _row(2, "graded", "graded", 3.0)]
+    fails = check_criteria(rows, limit)
+    assert [(f.safe_state, f.judged, f.point, f.value) for f in fails] == [("brake", False, 1, 40.0)]
+    rows[2]["excursion_deg"] = 6.0  # the shipped state over its limit: judged
+    fails = check_criteria(rows, limit)
+    assert [(f.safe_state, f.judged, f.point) for f in fails] == [("graded", True, 2), ("brake", False, 1)]
+    assert "not met by motor_stall (graded): 6 deg at point 2" in fails[0].line(load_fault_spec(
+        Path(__file__).resolve().parents[1] / "profiles" / "faults" / "safe_states.toml"))
+    what_if = [_row(0, "brake", "graded", 40.0), _row(1, "short", "graded", 1.0)]  # none shipped: judged whole
+    assert [(f.safe_state, f.judged) for f in check_criteria(what_if, limit)] == [("brake", True)]
+    one = [_row(0, "graded", "graded", 6.0)]  # one safe state: no name in the line
+    assert [(f.safe_state, f.judged) for f in check_criteria(one, limit)] == [("", True)]
+
+
 def test_the_command_writes_the_table_and_report_and_exits_1_per_failed_criterion(tmp_path, capsys):
     crit = "[default]\nexcursion_deg = 0.5\ntime_to_safe_ms = 100\n"
     spec = spec_file(tmp_path, criteria=crit)

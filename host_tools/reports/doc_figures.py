@@ -17,12 +17,13 @@ The blocks:
 * ``over_temperature_row`` (docs/safety.md): the hazard table's OVER_TEMPERATURE row, from the hot walk and its
   pair (``host_tools.studies.fault_heat``).
 
-``BENCH_BLOCKS`` take minutes: ``make bench`` checks them (tests/benchmarks/test_bench_safe_states.py), ``--bench``
-checks or writes them here too:
+``BENCH_BLOCKS`` take minutes: ``make bench`` checks them (tests/benchmarks/test_bench_faults.py and
+test_bench_safe_states.py), ``--bench`` checks or writes them here too:
 
-* ``safe_states_campaign`` (docs/safety.md): the hazard table and the safe states side by side of
-  ``pafp faults profiles/faults/safe_states.toml --workers 2`` (the campaign's own tables, host_tools/studies/
-  fault_report.py; a campaign's rows do not depend on its workers).
+* ``default_campaign`` (docs/safety.md): the verdict's criterion lines, the hazard table and the safe states side
+  by side of ``pafp faults profiles/faults/default.toml --workers 2`` (the campaign's own tables, host_tools/
+  studies/fault_report.py; a campaign's rows do not depend on its workers).
+* ``safe_states_campaign`` (docs/safety.md): the same of ``profiles/faults/safe_states.toml``.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["BENCH_BLOCKS", "BLOCKS", "FILES", "campaign_tables", "check", "render", "write"]
+__all__ = ["BENCH_BLOCKS", "BLOCKS", "FILES", "campaign_run", "campaign_tables", "check", "render", "write"]
 
 ROOT = Path(__file__).resolve().parents[2]
 FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md", "docs/safety.md")
@@ -147,12 +148,14 @@ def over_temperature_row() -> str:
     return hot_walk_table()
 
 
+DEFAULT_SPEC = "profiles/faults/default.toml"
 SAFE_STATES_SPEC = "profiles/faults/safe_states.toml"
 
 
-@functools.lru_cache(maxsize=1)
-def _campaign_rows(spec_rel: str) -> tuple[Any, tuple[dict[str, Any], ...]]:
-    """(the spec, its rows in point order) of a fault campaign run on 2 workers, as `pafp faults` runs it."""
+@functools.lru_cache(maxsize=2)
+def campaign_run(spec_rel: str) -> tuple[Any, tuple[dict[str, Any], ...], float]:
+    """(the spec, its rows in point order, the campaign's wall time in s) of a fault campaign run on 2 workers, as
+    `pafp faults` runs it (the cluster's start-up left out of the time)."""
     import tempfile
 
     import pyarrow.parquet as pq
@@ -165,33 +168,52 @@ def _campaign_rows(spec_rel: str) -> tuple[Any, tuple[dict[str, Any], ...]]:
     spec = load_fault_spec(ROOT / spec_rel)
     with tempfile.TemporaryDirectory() as tmp, dask_client(workers=2) as client:
         out = Path(tmp) / "out"
-        run_tasks(spec.points(), run_fault_point, out, client, columns=columns(), digest=spec.digest,
-                  error_row=fault_error_row, progress=False)
+        outcome = run_tasks(spec.points(), run_fault_point, out, client, columns=columns(), digest=spec.digest,
+                            error_row=fault_error_row, progress=False)
         rows = pq.read_table(out / "results.parquet").to_pylist()
-    return spec, tuple(sorted(rows, key=lambda r: r["point"]))
+    return spec, tuple(sorted(rows, key=lambda r: r["point"])), outcome.wall_time_s
 
 
 def campaign_tables(spec: Any, rows: list[dict[str, Any]] | tuple[dict[str, Any], ...]) -> str:
-    """A campaign's hazard table and its safe states side by side, as report.md has them (worst points by number)."""
-    from host_tools.studies.fault_report import hazard_table, safe_states_table
+    """A campaign's verdict (its criterion lines, short), hazard table and safe states side by side, as report.md
+    has them (worst points by number)."""
+    from host_tools.studies.fault_report import (
+        CRITERIA,
+        check_criteria,
+        hazard_table,
+        judged,
+        load_criteria,
+        safe_states_table,
+    )
     from host_tools.studies.sweep_table import status_counts
 
     rel = spec.path.resolve().relative_to(ROOT).as_posix()
     rows = list(rows)
+    verdict = [f for f in check_criteria(rows, load_criteria(spec.criteria)) if f.judged]
+    shipped = ", ".join(sorted({str(r["safe_state"]) for r in judged(rows)}))
+    lines = [f"- {f.fault}: {f.criterion} {f.value:.3g} > {f.limit:g} {CRITERIA[f.criterion][1]} (point {f.point})"
+             for f in verdict] or ["- none: every criterion is met"]
     return "\n".join([f"{len(rows)} points ({status_counts(rows)}); `pafp faults {rel} --point N --out DIR` re-runs "
-                      "point N with every output of `pafp run`.", "", *hazard_table(spec, rows, rerun=False), "",
-                      *safe_states_table(rows)])
+                      "point N with every output of `pafp run`.", "",
+                      f"Criterion lines of the verdict (the shipped safe state, {shipped}):", "", *lines, "",
+                      *hazard_table(spec, rows, rerun=False), "", *safe_states_table(rows)])
+
+
+def default_campaign() -> str:
+    """The shipped campaign's tables (docs/safety.md, "The hazard analysis")."""
+    return campaign_tables(*campaign_run(DEFAULT_SPEC)[:2])
 
 
 def safe_states_campaign() -> str:
-    """The safe states campaign's tables (docs/safety.md, "The hazard analysis")."""
-    return campaign_tables(*_campaign_rows(SAFE_STATES_SPEC))
+    """The safe states campaign's tables (docs/safety.md, "The safe states on a reduced spec")."""
+    return campaign_tables(*campaign_run(SAFE_STATES_SPEC)[:2])
 
 
 BLOCKS: dict[str, Callable[[], str]] = {"baud_gains": baud_gains, "baud_gains_summary": baud_gains_summary,
                                         "motor_catalogue": motor_catalogue,
                                         "over_temperature_row": over_temperature_row}
-BENCH_BLOCKS: dict[str, Callable[[], str]] = {"safe_states_campaign": safe_states_campaign}
+BENCH_BLOCKS: dict[str, Callable[[], str]] = {"default_campaign": default_campaign,
+                                              "safe_states_campaign": safe_states_campaign}
 
 
 def _pattern(name: str) -> re.Pattern[str]:

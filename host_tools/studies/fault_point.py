@@ -40,8 +40,8 @@ __all__ = ["FIGURES", "GAIT_START_MAX_S", "IDENTITY", "fault_error_row", "fault_
 
 GAIT_START_MAX_S = 1.5  # the fault-free run covers a gait start up to this late (sensors up, start-up ramp)
 #: What names a point in every row (errors too): its axes, and the plant and safe state it ran with.
-IDENTITY = ("point", "fault", "params", "scenario", "body_mass_kg", "design", "safe_state", "controller", "link",
-            "onset_phase", "duration_s", "seed")
+IDENTITY = ("point", "fault", "params", "scenario", "body_mass_kg", "design", "safe_state", "profile_safe_state",
+            "controller", "link", "onset_phase", "duration_s", "seed")
 FIGURES = ("onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "detected", "reason",
            "detect_ms", "safe_ms", "excursion_deg", "velocity_dps", "torque_nm", "torque_share", "settle_excursion_deg",
            "safe_excursion_deg", "safe_impact_dps", "stop_hit", "impact_dps", "cmd_peak_a", "cmd_last_a",
@@ -51,7 +51,8 @@ FIGURES = ("onset_s", "fired", "fired_first_s", "fired_count", "fired_what", "de
 def _base_row(p: FaultPoint) -> dict[str, Any]:
     """The point's IDENTITY columns."""
     return dict(zip(IDENTITY, (p.index, p.fault, ", ".join(f"{k}={v}" for k, v in p.params), p.scenario,
-                               p.body_mass_kg, _design_name(p), _firmware(p).safety.safe_state, p.controller, p.link,
+                               p.body_mass_kg, _design_name(p), _firmware(p).safety.safe_state,
+                               _profile_firmware(p).safety.safe_state, p.controller, p.link,
                                p.onset_phase, p.duration_s, p.seed), strict=True))
 
 
@@ -65,10 +66,15 @@ def fault_error_row(p: FaultPoint, status: str, error: str, wall_time_s: float =
     return row
 
 
-def _firmware(p: FaultPoint) -> Any:
+def _profile_firmware(p: FaultPoint) -> Any:
+    """The firmware configuration the point's profile ships (its own safe state, link and controller)."""
     from host_tools.studies.sweep_point import firmware_config_of
 
-    fw = firmware_config_of(p.profile_text, {}, p.profile_name)
+    return firmware_config_of(p.profile_text, {}, p.profile_name)
+
+
+def _firmware(p: FaultPoint) -> Any:
+    fw = _profile_firmware(p)
     changes: dict[str, Any] = {}
     if p.link != fw.motor_link:
         changes["motor_link"] = p.link

@@ -24,8 +24,8 @@ from host_tools.outdir import write_atomic
 from host_tools.studies.fault_spec import FaultSpec
 from host_tools.studies.sweep_table import status_counts
 
-__all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "hazard_table", "load_criteria", "rerun_command",
-           "safe_state_rows", "safe_states_table", "write_fault_report"]
+__all__ = ["CRITERIA", "Failure", "check_criteria", "hazard_rows", "hazard_table", "judged", "load_criteria",
+           "rerun_command", "safe_state_rows", "safe_states_table", "write_fault_report"]
 
 #: criterion -> (the row's figure, unit, what it bounds)
 CRITERIA: dict[str, tuple[str, str, str]] = {
@@ -112,19 +112,23 @@ def _num(v: object) -> float:
 
 @dataclass(frozen=True)
 class Failure:
-    """A criterion one fault did not meet, at its worst point."""
+    """A criterion one fault did not meet, at its worst point; ``safe_state`` names the safe state when the campaign
+    compares several, and ``judged`` is False for a compared one that its profile does not ship."""
 
     fault: str
     criterion: str
     limit: float
     value: float
     point: int
+    safe_state: str = ""
+    judged: bool = True
 
     def line(self, spec: FaultSpec) -> str:
         """One line for stderr and report.md."""
         figure, unit, _ = CRITERIA[self.criterion]
         value = "never" if math.isinf(self.value) else f"{self.value:.3g} {unit}"
-        return (f"criterion {self.criterion} <= {self.limit:g} {unit} not met by {self.fault}: {value} at point "
+        who = f"{self.fault} ({self.safe_state})" if self.safe_state else self.fault
+        return (f"criterion {self.criterion} <= {self.limit:g} {unit} not met by {who}: {value} at point "
                 f"{self.point} (re-run: {rerun_command(spec, self.point)})")
 
 
@@ -146,15 +150,26 @@ def _worst(rows: list[dict[str, Any]], criterion: str) -> tuple[float, int] | No
     return best
 
 
+def judged(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows the verdict covers: those that ran the safe state their profile ships. A campaign that compares
+    other safe states beside it shows them, unjudged; one that runs none of the shipped ones is judged whole."""
+    shipped = [r for r in rows if _safe_state(r) == str(r.get("profile_safe_state", _safe_state(r)))]
+    return shipped or rows
+
+
 def check_criteria(rows: list[dict[str, Any]], criteria: dict[str, dict[str, float]]) -> list[Failure]:
-    """Every (fault, criterion) whose worst point exceeds its limit, in fault then criterion order."""
+    """Every (fault, safe state, criterion) whose worst point exceeds its limit, in fault, safe state then criterion
+    order; a safe state outside the verdict (``judged``) gives failures with ``judged`` False."""
     failures = []
-    for fault in dict.fromkeys(r["fault"] for r in rows):
-        mine = [r for r in rows if r["fault"] == fault]
+    verdict = {id(r) for r in judged(rows)}
+    several = len({_safe_state(r) for r in rows}) > 1
+    for fault, safe, in_verdict in dict.fromkeys((r["fault"], _safe_state(r), id(r) in verdict) for r in rows):
+        mine = [r for r in rows if r["fault"] == fault and _safe_state(r) == safe and (id(r) in verdict) == in_verdict]
         for criterion, limit in criteria[fault].items():
             worst = _worst(mine, criterion)
             if worst is not None and worst[0] > limit:
-                failures.append(Failure(fault, criterion, limit, worst[0], worst[1]))
+                failures.append(Failure(fault, criterion, limit, worst[0], worst[1], safe if several else "",
+                                        in_verdict))
     return failures
 
 
@@ -344,10 +359,18 @@ def write_fault_report(spec: FaultSpec, rows: list[dict[str, Any]], out: Path, f
            "against the fault-free run of the same seeds (docs/safety.md). Angles, velocities and torques are the "
            "plant's truth (emulation only).", ""]
     md += ["## Criteria", ""]
-    if failures:
-        md += [f"- **not met**: {f.line(spec)}" for f in failures]
+    verdict, compared = [f for f in failures if f.judged], [f for f in failures if not f.judged]
+    shipped = sorted({_safe_state(r) for r in judged(rows)})
+    if len(shipped) < len({_safe_state(r) for r in rows}):
+        md += [f"The verdict judges the safe state the profiles ship ({', '.join(shipped)}); the others run beside it "
+               "are compared, not judged.", ""]
+    if verdict:
+        md += [f"- **not met**: {f.line(spec)}" for f in verdict]
     else:
         md += ["Every criterion is met on every fault's worst point."]
+    if compared:
+        md += ["", "Not met by the compared safe states (not judged):", ""]
+        md += [f"- {f.line(spec)}" for f in compared]
     md += ["", "Limits (criteria " + str(spec.criteria) + "): " + ", ".join(
         f"{k} <= {v:g} {CRITERIA[k][1]}" for k, v in criteria[next(iter(criteria))].items()) + " (defaults; "
         "per-fault overrides in the file).", ""]

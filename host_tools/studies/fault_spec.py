@@ -9,7 +9,8 @@ controllers x motor links, checked whole before any run (docs/safety.md)::
     durations_s = [0.05, 0.2]        # how long each fault acts, (0, 10] s
     controllers = ["cascade"]        # shipped controllers
     links = ["uart", "can-servo"]    # motor links (firmware/drivers/motor_links.py)
-    safe_states = ["brake", "short"] # [safety] safe_state values compared side by side (default: the profile's)
+    safe_states = ["graded", "brake"] # [safety] safe_state values side by side (default: the profile's); the
+                                      # verdict judges the profile's own, the others are compared
     settle_s = 0.3                   # simulated time kept after the fault's end, (0, 5] s
     timeout_s = 120                  # wall seconds per point
 
