@@ -47,7 +47,7 @@ from hal.virtual.plant.integrator import Coefficients, Drive, lag_factors, lag_t
 from hal.virtual.plant.params import PlantParams
 from hal.virtual.plant.state import State
 
-__all__ = ["MAX_OMEGA_H", "BeltDynamics", "motor_side_inertia_kg_m2"]
+__all__ = ["MAX_OMEGA_H", "BeltDynamics", "belt_figures", "motor_side_inertia_kg_m2"]
 
 MAX_OMEGA_H = 0.25
 """Largest omega h of the belt mode per RK4 step (RK4's amplitude error per step is about (omega h)^6 / 144)."""
@@ -56,6 +56,16 @@ MAX_OMEGA_H = 0.25
 def motor_side_inertia_kg_m2(p: PlantParams) -> float:
     """The inertia on the motor side of the belt, at the ankle: J_m N^2 + J_out b^2."""
     return p.rotor_inertia_kg_m2 * p.total_ratio ** 2 + p.actuator_output_inertia_kg_m2 * p.belt_ratio ** 2
+
+
+def belt_figures(p: PlantParams) -> dict[str, float]:
+    """The belt's figures on the plant without bench load: free span [m], k at the ankle [N m/rad], the two sides'
+    inertias [kg m^2], the free-free mode and the motor side's on the belt with the ankle held [Hz]."""
+    k, j_ms = p.belt_stiffness_nm_per_rad, motor_side_inertia_kg_m2(p)
+    j_as = p.output_inertia_kg_m2 - j_ms
+    return {"span_m": p.belt_span_m, "k_nm_per_rad": k, "j_ms": j_ms, "j_as": j_as,
+            "free_hz": math.sqrt(k * (1.0 / j_ms + 1.0 / j_as)) / (2.0 * math.pi),
+            "held_hz": math.sqrt(k / j_ms) / (2.0 * math.pi)}
 
 
 class BeltDynamics:
