@@ -63,12 +63,17 @@ def test_a_static_torque_stretches_the_belt_by_torque_over_k(current_a):
     assert not FREE.stop_min_rad < plant.output_angle_rad(2.0) < FREE.stop_max_rad  # held by the stop
 
 
-def test_with_friction_the_stretch_is_within_breakaway_over_k():
-    p = replace(BASE, **BELT)
+@pytest.mark.parametrize("more", [{}, {"stribeck_peak_nm": 0.415, "ripple_amplitude_nm": 0.025}])
+def test_with_friction_the_stretch_is_within_breakaway_over_k(more):
+    """The motor side's friction (and ripple, with the others on) holds at most breakaway + ripple off the belt."""
+    p = replace(BASE, **BELT, **more)
+    assert set(active(p)) == {"belt_compliance"} | ({"stribeck", "torque_ripple"} if more else set())
     plant = Plant(p, suspended())
     plant.set_current_command(5.0, 0.0)
     torque = p.output_torque_per_amp_nm * 5.0
-    assert abs(_stretch(plant, 2.0) * p.belt_stiffness_nm_per_rad - torque) <= p.static_friction_nm * 1.001
+    held = max(p.static_friction_nm, p.coulomb_friction_nm + p.stribeck_peak_nm) + p.ripple_amplitude_nm
+    off = _stretch(plant, 2.0) * p.belt_stiffness_nm_per_rad - torque
+    assert abs(off) <= held * 1.001 and plant.state_at(2.0).motor_velocity_rad_s == 0.0
 
 
 def _ring(params, step_s=1e-4, t_end=0.15, n=6001):

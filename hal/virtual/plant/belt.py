@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from hal.virtual.plant.integrator import Coefficients, Drive, lag_factors, lag_target, parallel_spring
+from hal.virtual.plant.integrator import Coefficients, Drive, lag_factors, lag_target, nominal_accel
 from hal.virtual.plant.params import PlantParams
 from hal.virtual.plant.state import State
 
@@ -100,20 +100,9 @@ class BeltDynamics:
         return self.j_ms * (w * dd + 0.5 * dd * dd) + 0.5 * self.k_nm * d * d
 
     def _ankle(self, th: float, w: float, ext: float) -> float:
-        """The ankle side's torques but the belt's, / J_total: load, springs, gravity, foot damping, stops."""
-        c = self.c
-        a = ext + c.c0 + c.ks * th - c.mg * math.sin(th + c.psi0) - c.kd * w
-        if c.kp != 0.0:
-            a -= parallel_spring(c.kp, c.pe, c.p2, th)
-        if th > c.hi:
-            x = c.kst * (th - c.hi) + c.cst * w
-            if x > 0.0:
-                a -= x
-        elif th < c.lo:
-            x = c.kst * (th - c.lo) + c.cst * w
-            if x < 0.0:
-                a -= x
-        return a
+        """The ankle side's torques but the belt's, / J_total: load (ext, N m), springs, gravity, foot damping, stops
+        (the rigid model's sliding acceleration without current and friction)."""
+        return nominal_accel(self.c, th, w, 0.0, ext, 1) + self.c.tc
 
     def _drive(self, th: float, i: float, s: int, d: float) -> float:
         """The motor side's torque but friction and belt, / J_total: the drive's (gain by power direction), ripple."""
@@ -122,7 +111,7 @@ class BeltDynamics:
         return kt * i + self.ripple * math.sin(self.ripple_k * (th + d))
 
     def _sliding(self, th: float, w: float, d: float, dd: float, i: float, x: float, s: int) -> tuple[float, float]:
-        """(ankle acceleration, stretch acceleration) while the motor side slides in direction s; x = ext / J."""
+        """(ankle acceleration, stretch acceleration) while the motor side slides in direction s; x the load."""
         b = self.kb * d + self.cb * dd
         aa = self.ra * (self._ankle(th, w, x) + b)
         wm = w + dd
@@ -139,7 +128,7 @@ class BeltDynamics:
 
     def accel(self, th: float, w: float, i: float, ext: float, s: int, d: float = 0.0, dd: float = 0.0) -> float:
         """The ankle's acceleration (it does not depend on the motor side's friction mode)."""
-        return self.ra * (self._ankle(th, w, ext * self.c.inv_j) + self.kb * d + self.cb * dd)
+        return self.ra * (self._ankle(th, w, ext) + self.kb * d + self.cb * dd)
 
     def integrate(self, dv: Drive, state: State, t_base: float, k_first: int, n: int, h: float, ea: float, eb: float,
                   fn: Callable[[float], float] | None, exps: tuple[float, float]) -> State:
@@ -159,10 +148,9 @@ class BeltDynamics:
               fn: Callable[[float], float] | None, exps: tuple[float, float]) -> State:
         """One RK4 step from t: the exact current lag, the motor side's stick, breakaway and reversal rules."""
         th, w, i, s, d, dd = state
-        inv_j, hh = self.c.inv_j, 0.5 * h
+        hh = 0.5 * h
         x1, x2, x4 = ((ea + eb * t, ea + eb * (t + hh), ea + eb * (t + h)) if fn is None
                       else (fn(t), fn(t + hh), fn(t + h)))
-        x1, x2, x4 = x1 * inv_j, x2 * inv_j, x4 * inv_j
         eh, e1 = exps
         tg = lag_target(self.c, dv, w + dd)  # back-EMF and brake from the rotor's speed
         i_m = tg + (i - tg) * eh
