@@ -192,7 +192,8 @@ def safe_states_campaign() -> str:
 
 def belt_compliance() -> str:
     """The belt compliance's figures (docs/plant.md, "Belt compliance"): the AK60-6 bench with the belt of
-    ``OTHER_PLANTS["belt"]``, and the ``adult_80kg`` design's plant with the same belt keys but its own width."""
+    ``OTHER_PLANTS["belt"]``, and the ``adult_80kg`` design's plant with the same belt keys but its belt's width (a
+    design's plant keeps the base plant's [belt] keys, its width too)."""
     import tomllib
     from dataclasses import replace
 
@@ -208,7 +209,8 @@ def belt_compliance() -> str:
     design = Design(d["motor"], d["belt_driver_teeth"], d["belt_driven_teeth"], d["belt_pitch_mm"])
     with open(ROOT / "profiles" / "firmware.toml", "rb") as f:
         shipped_limit = tomllib.load(f)["control"]["current_limit_a"]
-    plants = [(base, shipped_limit), (plant_params_for(design, base), adult["control"]["current_limit_a"])]
+    adult_plant = replace(plant_params_for(design, base), belt_width_mm=design.width_mm)
+    plants = [(base, shipped_limit), (adult_plant, adult["control"]["current_limit_a"])]
     figs = [(p, belt_figures(p), limit) for p, limit in plants]
 
     def row(label: str, cell: Callable[[Any, dict[str, float], float], str]) -> str:

@@ -330,7 +330,6 @@ def plant_params_for(design: Design, base: PlantParams) -> PlantParams:
         belt_ratio=design.belt_ratio,
         belt_driver_pitch_diameter_m=driver_d,
         belt_driven_pitch_diameter_m=driven_d,
-        belt_width_mm=design.width_mm,  # the belt compliance's width (off unless the base plant switches it on)
         actuator_output_inertia_kg_m2=base.actuator_output_inertia_kg_m2
         * (driver_d / base.belt_driver_pitch_diameter_m) ** 4,
         ankle_pulley_inertia_kg_m2=base.ankle_pulley_inertia_kg_m2
