@@ -100,7 +100,7 @@ def test_the_motor_on_belt_mode_rings_at_its_natural_frequency():
     assert len(crossings) >= 5
     f_d = (len(crossings) - 1) / (crossings[-1] - crossings[0])
     assert f_d == pytest.approx(f_n * math.sqrt(1.0 - zeta**2), rel=0.01)
-    peaks = [np.max(np.abs(x[(ts >= a) & (ts < b)])) for a, b in zip(crossings[:-1], crossings[1:])]
+    peaks = [np.max(np.abs(x[(ts >= a) & (ts < b)])) for a, b in zip(crossings[:-1], crossings[1:], strict=True)]
     decrement = math.log(peaks[0] / peaks[2]) / 2.0
     assert decrement / (2.0 * math.pi) == pytest.approx(zeta, rel=0.1)
 

@@ -115,7 +115,8 @@ class BeltDynamics:
         b = self.kb * d + self.cb * dd
         aa = self.ra * (self._ankle(th, w, x) + b)
         wm = w + dd
-        am = self.rm * (self._drive(th, i, s, d) - b - s * (self.c.tc + self.stribeck * math.exp(-wm * wm * self.inv_ws2)))
+        friction = self.c.tc + self.stribeck * math.exp(-wm * wm * self.inv_ws2)
+        am = self.rm * (self._drive(th, i, s, d) - b - s * friction)
         return aa, am - aa
 
     def _held(self, th: float, w: float, thm: float, x: float) -> float:
