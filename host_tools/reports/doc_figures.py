@@ -14,6 +14,8 @@ The blocks:
   the workers (docs/sweeps.md), so these are the sweep's rows.
 * ``motor_catalogue`` (docs/design.md): every ``profiles/motors/`` file with its winding figures from
   ``hal.virtual.plant.thermal`` and every ``profiles/batteries/`` pack.
+* ``belt_compliance`` (docs/plant.md): the belt's stiffness at the ankle, its modes and its stretch at the control
+  limit and at peak current, on the AK60-6 bench and the ``adult_80kg`` design (``hal.virtual.plant.belt``).
 * ``over_temperature_row`` (docs/safety.md): the hazard table's OVER_TEMPERATURE row, from the hot walk and its
   pair (``host_tools.studies.fault_heat``).
 
@@ -40,7 +42,7 @@ from typing import Any
 __all__ = ["BENCH_BLOCKS", "BLOCKS", "FILES", "campaign_run", "campaign_tables", "check", "render", "write"]
 
 ROOT = Path(__file__).resolve().parents[2]
-FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md", "docs/safety.md")
+FILES = ("docs/commands.md", "docs/sweeps.md", "docs/design.md", "docs/safety.md", "docs/plant.md")
 """The Markdown files (relative to the checkout) that hold generated blocks."""
 
 
@@ -209,8 +211,54 @@ def safe_states_campaign() -> str:
     return campaign_tables(*campaign_run(SAFE_STATES_SPEC)[:2])
 
 
+def belt_compliance() -> str:
+    """The belt compliance's figures (docs/plant.md, "Belt compliance"): the AK60-6 bench with the belt of
+    ``OTHER_PLANTS["belt"]``, and the ``adult_80kg`` design's plant with the same belt keys but its belt's width (a
+    design's plant keeps the base plant's [belt] keys, its width too)."""
+    import tomllib
+    from dataclasses import replace
+
+    from hal.virtual.plant import load_plant_params
+    from hal.virtual.plant.belt import belt_figures
+    from hal.virtual.plant.design import Design, plant_params_for
+    from hal.virtual.plant.imperfections import OTHER_PLANTS
+
+    base = replace(load_plant_params(), **OTHER_PLANTS["belt"]["belt"])
+    with open(ROOT / "profiles" / "designs" / "adult_80kg.toml", "rb") as f:
+        adult = tomllib.load(f)
+    d = adult["design"]
+    design = Design(d["motor"], d["belt_driver_teeth"], d["belt_driven_teeth"], d["belt_pitch_mm"])
+    with open(ROOT / "profiles" / "firmware.toml", "rb") as f:
+        shipped_limit = tomllib.load(f)["control"]["current_limit_a"]
+    adult_plant = replace(plant_params_for(design, base), belt_width_mm=design.width_mm)
+    plants = [(base, shipped_limit), (adult_plant, adult["control"]["current_limit_a"])]
+    figs = [(p, belt_figures(p), limit) for p, limit in plants]
+
+    def row(label: str, cell: Callable[[Any, dict[str, float], float], str]) -> str:
+        return f"| {label} | " + " | ".join(cell(p, f, limit) for p, f, limit in figs) + " |"
+
+    def stretch(current_a: float, p: Any, f: dict[str, float]) -> str:
+        torque = p.output_torque_per_amp_nm * current_a
+        return f"{torque:.1f} N·m ({current_a:g} A): {math.degrees(torque / f['k_nm_per_rad']):.2f}°"
+
+    return "\n".join([
+        "| quantity | AK60-6 bench | `adult_80kg` design |", "|---|---|---|",
+        row("EA per mm of width", lambda p, f, lim: f"{p.belt_stiffness_n_per_mm / 1000:.1f} kN"),
+        row("width", lambda p, f, lim: f"{p.belt_width_mm:g} mm"),
+        row("centre distance → free span", lambda p, f, lim: f"{p.belt_center_distance_m * 1000:.0f} → "
+                                                            f"{f['span_m'] * 1000:.1f} mm"),
+        row("ankle pulley pitch radius", lambda p, f, lim: f"{p.belt_driven_pitch_diameter_m * 500:.2f} mm"),
+        row("k = 2 (EA / L) r² at the ankle", lambda p, f, lim: f"{f['k_nm_per_rad']:.0f} N·m/rad"),
+        row("motor side J_m N² + J_out b² / ankle side", lambda p, f, lim: f"{f['j_ms']:.4f} / {f['j_as']:.4f} kg·m²"),
+        row("free-free mode √(k / J_red)", lambda p, f, lim: f"{f['free_hz']:.1f} Hz"),
+        row("motor side on the belt, ankle held", lambda p, f, lim: f"{f['held_hz']:.1f} Hz"),
+        row("stretch at the control limit", lambda p, f, lim: stretch(lim, p, f)),
+        row("stretch at peak current", lambda p, f, lim: stretch(p.peak_current_a, p, f)),
+    ])
+
+
 BLOCKS: dict[str, Callable[[], str]] = {"baud_gains": baud_gains, "baud_gains_summary": baud_gains_summary,
-                                        "motor_catalogue": motor_catalogue,
+                                        "motor_catalogue": motor_catalogue, "belt_compliance": belt_compliance,
                                         "over_temperature_row": over_temperature_row}
 BENCH_BLOCKS: dict[str, Callable[[], str]] = {"default_campaign": default_campaign,
                                               "safe_states_campaign": safe_states_campaign}

@@ -24,11 +24,13 @@ byte). Torques are at the ankle, speeds the ankle's, like the profile's other fr
   [torque_ripple]): 0.05 N m and 140 per revolution are the issue's review figures [I]. The ripple is integrated
   with the plant's step: at n N w / (2 pi) above about a tenth of the step rate (1 kHz at 10 kHz: w = 1.6 rad/s
   for 140 per revolution through 28:1) it is resolved coarsely.
-- **belt_compliance**: not modelled (the single-degree-of-freedom plant has no motor side of its own to hang a
-  spring on); its size is in profiles/bench_imperfections.toml [belt_compliance].
+- **belt_compliance** ([belt] ``belt_stiffness_n_per_mm``, ``belt_width_mm``, ``belt_center_distance_m``,
+  ``belt_damping_ratio``): the belt as a spring between the motor side and the ankle, a second mass
+  (hal/virtual/plant/belt.py has the model, its stiffness at the ankle and its sources). With it on, the Stribeck
+  friction and the ripple act on the motor side in the same two-mass model.
 
-`MISSPECIFIED` holds the issue's four recordings' settings; `profile_text` writes a plant profile with one of them
-for `pafp run --plant FILE`.
+`MISSPECIFIED` holds the issue's four recordings' settings, `OTHER_PLANTS` more (the belt); `profile_text` writes a
+plant profile with one of them for `pafp run --plant FILE`.
 """
 
 from __future__ import annotations
@@ -39,11 +41,12 @@ from pathlib import Path
 
 from hal.virtual.plant.integrator import Coefficients, Drive, lag_target, nominal_accel, static_accel
 from hal.virtual.plant.params import PlantParams
+from hal.virtual.plant.state import State
 
-__all__ = ["MISSPECIFIED", "NAMES", "active", "install", "profile_text"]
+__all__ = ["MISSPECIFIED", "NAMES", "OTHER_PLANTS", "active", "install", "profile_text"]
 
-NAMES = ("stribeck", "load_friction", "torque_ripple")
-"""The imperfections a plant profile can switch on (belt compliance is not modelled: module docstring)."""
+NAMES = ("stribeck", "load_friction", "torque_ripple", "belt_compliance")
+"""The imperfections a plant profile can switch on."""
 
 MISSPECIFIED: dict[str, dict[str, dict[str, float]]] = {
     # the issue's review figures: the static minus Coulomb friction spread over 0.02 rad/s
@@ -61,18 +64,33 @@ MISSPECIFIED: dict[str, dict[str, dict[str, float]]] = {
 }
 """The issue's four misspecified plants (issue 34, "unmodelled effects"), as plant-profile keys over the base."""
 
+OTHER_PLANTS: dict[str, dict[str, dict[str, float]]] = {
+    # the shipped AK60-6 bench's belt (belt.py): 2 kN per mm of width [I], 10 mm wide, 80 mm centres (report 3.2.2)
+    "belt": {"belt": {"belt_stiffness_n_per_mm": 2000.0, "belt_width_mm": 10.0, "belt_center_distance_m": 0.080,
+                      "belt_damping_ratio": 0.05}},
+}
+"""Further plants with an imperfection on, beside the issue's four (kept apart: the fit's benchmark runs those)."""
+
 
 def active(p: PlantParams) -> tuple[str, ...]:
     """The imperfections switched on in these parameters, in `NAMES` order."""
     on = {"stribeck": p.stribeck_peak_nm > 0.0, "load_friction": p.efficiency_backdriven is not None,
-          "torque_ripple": p.ripple_amplitude_nm > 0.0}
+          "torque_ripple": p.ripple_amplitude_nm > 0.0, "belt_compliance": p.belt_stiffness_n_per_mm > 0.0}
     return tuple(n for n in NAMES if on[n])
 
 
 def install(c: Coefficients, p: PlantParams) -> None:
-    """Hand the integrator the imperfections' dynamics when the Stribeck friction or the ripple is on (the
-    backdriven efficiency is the nominal integrator's own); otherwise leave it untouched."""
-    if p.stribeck_peak_nm > 0.0 or p.ripple_amplitude_nm > 0.0:
+    """Hand the integrator the imperfections' dynamics when the belt compliance (the two-mass model, with the others
+    in it), the Stribeck friction or the ripple is on (the backdriven efficiency is the nominal integrator's own);
+    otherwise leave it untouched."""
+    if p.belt_stiffness_n_per_mm > 0.0:
+        from hal.virtual.plant.belt import BeltDynamics
+
+        belt = BeltDynamics(c, p)
+        c.imp_accel = belt.accel
+        c.imp_integrate = belt.integrate
+        c.imp_energy = belt.energy
+    elif p.stribeck_peak_nm > 0.0 or p.ripple_amplitude_nm > 0.0:
         dyn = ImperfectDynamics(c, p)
         c.imp_accel = dyn.accel
         c.imp_integrate = dyn.integrate
@@ -101,8 +119,9 @@ class ImperfectDynamics:
         return (nominal_accel(self.c, th, w, i, ext, s) + self.ripple * math.sin(self.ripple_k * th)
                 - s * self.stribeck * math.exp(-w * w * self.inv_ws2))
 
-    def accel(self, th: float, w: float, i: float, ext: float, s: int) -> float:
-        """Acceleration of the ankle for angle, velocity, current, external torque and friction mode."""
+    def accel(self, th: float, w: float, i: float, ext: float, s: int, d: float = 0.0, dd: float = 0.0) -> float:
+        """Acceleration of the ankle for angle, velocity, current, external torque and friction mode (the belt is
+        rigid here: its stretch d, dd is 0)."""
         if s != 0:
             return self._sliding(th, w, i, ext, s)
         a = self._static(th, i, ext)
@@ -110,11 +129,10 @@ class ImperfectDynamics:
             return 0.0
         return a - self.zero_speed if a > 0.0 else a + self.zero_speed
 
-    def integrate(self, d: Drive, state: tuple[float, float, float, int], t_base: float, k_first: int, n: int,
-                  h: float, ea: float, eb: float, fn: Callable[[float], float] | None,
-                  exps: tuple[float, float]) -> tuple[float, float, float, int]:
+    def integrate(self, d: Drive, state: State, t_base: float, k_first: int, n: int, h: float, ea: float, eb: float,
+                  fn: Callable[[float], float] | None, exps: tuple[float, float]) -> State:
         """`integrator.integrate`'s n RK4 steps (the same current lag, stick and breakaway rules) on this model."""
-        th, w, i, s = state
+        th, w, i, s, bd, bdd = state
         hh, h6 = 0.5 * h, h / 6.0
         eh, e1 = exps
         for kk in range(k_first, k_first + n):
@@ -148,18 +166,20 @@ class ImperfectDynamics:
                     s = 1 if w > 0.0 else -1
                 else:
                     s = 1 if a > 0.0 else -1
-        return th, w, i, s
+        return th, w, i, s, bd, bdd
 
 
 def profile_text(name: str, base: str | Path | None = None) -> str:
-    """The base plant profile's text (default: the packaged one) with `MISSPECIFIED[name]`'s keys set: a key the
-    profile has is given the new value in place, a new one goes under its table's header (a new table at the end)."""
+    """The base plant profile's text (default: the packaged one) with the keys of `MISSPECIFIED[name]` (or
+    `OTHER_PLANTS[name]`) set: a key the profile has is given the new value in place, a new one goes under its table's
+    header (a new table at the end)."""
     from hal.virtual.plant.params import default_profile_path
 
-    if name not in MISSPECIFIED:
-        raise ValueError(f"misspecified plant {name!r} unknown: choose from {', '.join(MISSPECIFIED)}")
+    plants = {**MISSPECIFIED, **OTHER_PLANTS}
+    if name not in plants:
+        raise ValueError(f"misspecified plant {name!r} unknown: choose from {', '.join(plants)}")
     lines = Path(base if base is not None else default_profile_path()).read_text(encoding="utf-8").splitlines()
-    for table, keys in MISSPECIFIED[name].items():
+    for table, keys in plants[name].items():
         after = None
         for key, value in keys.items():
             after = _set_key(lines, table, key, value, after)

@@ -46,8 +46,9 @@ class Coefficients:
         self.p2 = p2  # two-sided (else only theta > pe, the dorsiflexion side)
         # the opt-in imperfections' dynamics (hal/virtual/plant/imperfections.py), installed by the plant when one is
         # on; None (the default): the nominal functions below run unchanged
-        self.imp_accel: Callable[[float, float, float, float, int], float] | None = None
-        self.imp_integrate: Callable[..., tuple[float, float, float, int]] | None = None
+        self.imp_accel: Callable[[float, float, float, float, int, float, float], float] | None = None
+        self.imp_integrate: Callable[..., tuple[float, float, float, int, float, float]] | None = None
+        self.imp_energy: Callable[[float, float, float], float] | None = None  # the belt's energy beyond the rigid one
 
 
 def parallel_spring(kp: float, pe: float, two: bool, th: float) -> float:
@@ -90,10 +91,12 @@ def static_accel(c: Coefficients, th: float, i: float, ext: float) -> float:
     return a
 
 
-def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int) -> float:
-    """Acceleration of the ankle for angle, velocity, current, external torque and friction mode."""
+def accel(c: Coefficients, th: float, w: float, i: float, ext: float, s: int, d: float = 0.0,
+          dd: float = 0.0) -> float:
+    """Acceleration of the ankle for angle, velocity, current, external torque, friction mode and the belt's stretch
+    and its rate (0 with a rigid belt)."""
     if c.imp_accel is not None:
-        return c.imp_accel(th, w, i, ext, s)
+        return c.imp_accel(th, w, i, ext, s, d, dd)
     return nominal_accel(c, th, w, i, ext, s)
 
 
@@ -124,19 +127,20 @@ def lag_factors(h: float, tau: float) -> tuple[float, float]:
     return math.exp(-(0.5 * h) / tau), math.exp(-h / tau)
 
 
-def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int], t_base: float, k_first: int,
-              n: int, h: float, ea: float, eb: float, fn: Callable[[float], float] | None,
-              exps: tuple[float, float]) -> tuple[float, float, float, int]:
+def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int, float, float], t_base: float,
+              k_first: int, n: int, h: float, ea: float, eb: float, fn: Callable[[float], float] | None,
+              exps: tuple[float, float]) -> tuple[float, float, float, int, float, float]:
     """Take n RK4 steps of size h; step j starts at t_base + (k_first + j) * h.
 
-    state = (theta, omega, i_q, s) with s the friction mode: +1/-1 sliding that way, 0 stuck.
+    state = (theta, omega, i_q, s, stretch, its rate) with s the friction mode: +1/-1 sliding that way, 0 stuck; the
+    belt's stretch and rate pass through unchanged (0 with a rigid belt: hal/virtual/plant/belt.py integrates them).
     External torque is ea + eb * t, or fn(t) at the stage times when fn is given. exps is
     (exp(-h/2/tau), exp(-h/tau)) for this h, from :func:`lag_factors` (computed once for the grid step).
     With an opt-in imperfection on, its own integrator takes the steps (`Coefficients.imp_integrate`).
     """
     if c.imp_integrate is not None:
         return c.imp_integrate(d, state, t_base, k_first, n, h, ea, eb, fn, exps)
-    th, w, i, s = state
+    th, w, i, s, bd, bdd = state
     inv_j, kto, kbo, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.kbo, c.ks, c.c0, c.kd, c.mg, c.psi0
     lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk
     kp, pe, p2 = c.kp, c.pe, c.p2
@@ -257,7 +261,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int],
                 s = 1 if w > 0.0 else -1
             else:
                 s = 1 if a > 0.0 else -1
-    return th, w, i, s
+    return th, w, i, s, bd, bdd
 
 
 def lag_target(c: Coefficients, d: Drive, w: float) -> float:
@@ -276,15 +280,17 @@ def lag_target(c: Coefficients, d: Drive, w: float) -> float:
     return lim if tg < lim else tg
 
 
-def hermite(x0: tuple[float, float, float, int], x1: tuple[float, float, float, int], a0: float, a1: float,
-            dt: float, h: float, target_a: float, tau: float) -> tuple[float, float, float, int]:
+def hermite(x0: tuple[float, float, float, int, float, float], x1: tuple[float, float, float, int, float, float],
+            a0: float, a1: float, dt: float, h: float, target_a: float,
+            tau: float) -> tuple[float, float, float, int, float, float]:
     """State h into a step of size dt from x0 to x1 (same friction mode), without integrating.
 
     Angle: cubic Hermite from (theta, omega) at both ends; velocity: cubic Hermite from (omega, alpha);
-    current: the exact first-order lag towards target_a, the target held over the step.
+    current: the exact first-order lag towards target_a, the target held over the step; the belt's stretch: cubic
+    Hermite from (stretch, rate), its rate linear.
     """
-    th0, w0, i0, s = x0
-    th1, w1 = x1[0], x1[1]
+    th0, w0, i0, s, d0, dd0 = x0
+    th1, w1, d1, dd1 = x1[0], x1[1], x1[4], x1[5]
     u = h / dt
     v = 1.0 - u
     h01 = u * u * (3.0 - 2.0 * u)
@@ -293,4 +299,5 @@ def hermite(x0: tuple[float, float, float, int], x1: tuple[float, float, float, 
     h11 = -u * u * v * dt
     return (h00 * th0 + h10 * w0 + h01 * th1 + h11 * w1,
             h00 * w0 + h10 * a0 + h01 * w1 + h11 * a1,
-            target_a + (i0 - target_a) * math.exp(-h / tau), s)
+            target_a + (i0 - target_a) * math.exp(-h / tau), s,
+            h00 * d0 + h10 * dd0 + h01 * d1 + h11 * dd1, dd0 + u * (dd1 - dd0))

@@ -108,7 +108,7 @@ class Plant:
             ker=p.ke_v_s_per_rad * p.total_ratio / p.phase_resistance_ohm,
             bscale=p.total_ratio / p.brake_speed_scale_rad_s, ipk=p.peak_current_a,
             kp=p.parallel_stiffness_nm_per_rad * inv_j, pe=p.parallel_engage_rad, p2=p.parallel_two_sided)
-        install_imperfections(self._c, p)  # the opt-in ones the fit lacks (Stribeck, ripple); none by default
+        install_imperfections(self._c, p)  # the opt-in ones the fit lacks (Stribeck, ripple, belt); none by default
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
         self._grid_lag = lag_factors(step_s, self._c.tau)  # current-lag factors of one grid step
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
@@ -117,7 +117,7 @@ class Plant:
         self._t = start_time_s
         self._latest = start_time_s
         w0 = initial_velocity_rad_s
-        self._x: State = (initial_angle_rad, w0, initial_current_a, (w0 > 0) - (w0 < 0))
+        self._x: State = (initial_angle_rad, w0, initial_current_a, (w0 > 0) - (w0 < 0), 0.0, 0.0)
         self._powered = fx.powered
         self._command_a = 0.0
         self._brake_a = 0.0
@@ -177,8 +177,8 @@ class Plant:
         self._command_a = 0.0
         self._brake_a = 0.0
         if not self._powered:
-            th, w, _, s = self._x
-            self._x = (th, w, 0.0, s)
+            x = self._x
+            self._x = (x[0], x[1], 0.0, x[3], x[4], x[5])
         self._drive = self._make_drive()
 
     def set_supply_voltage(self, voltage_v: float, t_s: float) -> None:
@@ -211,8 +211,8 @@ class Plant:
         cmd = self._command_a
         gap = self._gap
         if gap.command(t_s, (cmd > 0.0) - (cmd < 0.0)):
-            th, w_out, i, s = self._x
-            gap.free_under(cmd, accel(self._c, th, w_out, i, self._ext_value(t_s), s))
+            x = self._x
+            gap.free_under(cmd, accel(self._c, x[0], x[1], x[2], self._ext_value(t_s), x[3], x[4], x[5]))
             self._command_a = 0.0
 
     @property
@@ -228,20 +228,20 @@ class Plant:
 
     def state_at(self, t_s: float) -> PlantState:
         """All observables at time t_s (>= every time seen so far)."""
-        th, w, i, s = self._state_tuple(t_s)
+        th, w, i, s, d, dd = self._state_tuple(t_s)
         p = self.params
         ext = self._ext_value(t_s)
-        a = accel(self._c, th, w, i, ext, s)
+        a = accel(self._c, th, w, i, ext, s, d, dd)
         n = self._ratio
         lo, hi = p.stop_min_rad, p.stop_max_rad
         phi, dw = self._gap.motion(t_s)
         return PlantState(
             t_s=t_s, output_angle_rad=th, output_velocity_rad_s=w, output_accel_rad_s2=a,
-            motor_angle_rad=n * th + self.motor_angle_offset_rad + phi, motor_velocity_rad_s=n * w + dw,
+            motor_angle_rad=n * (th + d) + self.motor_angle_offset_rad + phi, motor_velocity_rad_s=n * (w + dd) + dw,
             current_q_a=i,
             current_command_a=self._command_a, motor_torque_nm=p.kt_nm_per_a * i,
             output_torque_nm=p.output_torque_nm(i, s), external_torque_nm=ext,
-            energy_j=self._energy(th, w), powered=self._powered, stuck=s == 0 and a == 0.0,
+            energy_j=self._energy(th, w, d, dd), powered=self._powered, stuck=s == 0 and a == 0.0,
             in_contact=not lo <= th <= hi)
 
     def output_angle_rad(self, t_s: float) -> float:
@@ -254,28 +254,30 @@ class Plant:
 
     def output_accel_rad_s2(self, t_s: float) -> float:
         """Ankle angular acceleration at t_s [rad/s^2]."""
-        th, w, i, s = self._state_tuple(t_s)
-        return accel(self._c, th, w, i, self._ext_value(t_s), s)
+        th, w, i, s, d, dd = self._state_tuple(t_s)
+        return accel(self._c, th, w, i, self._ext_value(t_s), s, d, dd)
 
     def motor_angle_rad(self, t_s: float) -> float:
-        """Rotor mechanical angle at t_s: N * ankle angle + offset + the rotor's place in the backlash [rad]."""
-        th = self._state_tuple(t_s)[0]
-        return self._ratio * th + self.motor_angle_offset_rad + self._gap.motion(t_s)[0]
+        """Rotor mechanical angle at t_s: N * (ankle angle + belt stretch) + offset + the rotor's place in the backlash
+        [rad]."""
+        x = self._state_tuple(t_s)
+        return self._ratio * (x[0] + x[4]) + self.motor_angle_offset_rad + self._gap.motion(t_s)[0]
 
     def motor_velocity_rad_s(self, t_s: float) -> float:
-        """Rotor mechanical speed at t_s: N * ankle speed + the rotor's speed through the backlash [rad/s]."""
-        w = self._state_tuple(t_s)[1]
-        return self._ratio * w + self._gap.motion(t_s)[1]
+        """Rotor mechanical speed at t_s: N * (ankle speed + stretch rate) + the rotor's speed through the backlash
+        [rad/s]."""
+        x = self._state_tuple(t_s)
+        return self._ratio * (x[1] + x[5]) + self._gap.motion(t_s)[1]
 
     def motor_sample(self, t_s: float) -> tuple[float, float, float]:
         """(q current [A], rotor speed [rad/s], rotor angle [rad]) at t_s from one state evaluation.
 
         The rotor's own encoder sits before the gearbox: its angle moves through the backlash at each reversal
-        while the output does not (`Gap.motion`)."""
-        th, w, i, _ = self._state_tuple(t_s)
+        while the output does not (`Gap.motion`); it leads the ankle by the belt's stretch (0 with a rigid belt)."""
+        th, w, i, _, d, dd = self._state_tuple(t_s)
         n = self._ratio
         phi, dw = self._gap.motion(t_s)
-        return i, n * w + dw, n * th + self.motor_angle_offset_rad + phi
+        return i, n * (w + dd) + dw, n * (th + d) + self.motor_angle_offset_rad + phi
 
     def current_q_a(self, t_s: float) -> float:
         """q-axis current at t_s [A]."""
@@ -283,8 +285,8 @@ class Plant:
 
     def energy_j(self, t_s: float) -> float:
         """Mechanical energy at t_s: kinetic + gravity + spring + stop-contact potential [J]."""
-        th, w, _, _ = self._state_tuple(t_s)
-        return self._energy(th, w)
+        x = self._state_tuple(t_s)
+        return self._energy(x[0], x[1], x[4], x[5])
 
     @property
     def latest_time_s(self) -> float:
@@ -327,8 +329,8 @@ class Plant:
             return float(self._fn(t_s))
         return self._ea + self._eb * t_s
 
-    def _energy(self, th: float, w: float) -> float:
-        """Kinetic + potential energy for angle and velocity."""
+    def _energy(self, th: float, w: float, d: float, dd: float) -> float:
+        """Kinetic + potential energy for angle, velocity and the belt's stretch and rate."""
         p = self.params
         e = 0.5 * self.output_inertia_kg_m2 * w * w
         e -= self._gravity_moment_nm * math.cos(th + p.com_angle_at_zero_rad)
@@ -341,6 +343,8 @@ class Plant:
             over = th - p.stop_max_rad
         elif th < p.stop_min_rad:
             over = th - p.stop_min_rad
+        if c.imp_energy is not None:
+            e += c.imp_energy(w, d, dd)
         return e + 0.5 * p.stop_stiffness_nm_per_rad * over * over
 
     def _check_time(self, t_s: float) -> None:
@@ -391,8 +395,8 @@ class Plant:
         x1 = integrate(c, self._drive, x0, self._t0, self._k, 1, dt, self._ea, self._eb, self._fn,
                        self._grid_lag)
         t1 = self._t0 + (self._k + 1) * dt
-        a0 = accel(c, x0[0], x0[1], x0[2], self._ext_value(t), x0[3])
-        a1 = accel(c, x1[0], x1[1], x1[2], self._ext_value(t1), x1[3])
+        a0 = accel(c, x0[0], x0[1], x0[2], self._ext_value(t), x0[3], x0[4], x0[5])
+        a1 = accel(c, x1[0], x1[1], x1[2], self._ext_value(t1), x1[3], x1[4], x1[5])
         self._ahead = ahead = StepAhead(self._t0, self._k, x1, a0, a1, lag_target(c, self._drive, x0[1]))
         return ahead
 

@@ -63,14 +63,22 @@ _RANGES: dict[str, tuple[str, float, float]] = {
     "stribeck_speed_rad_s": ("friction", 1e-4, 100.0),
     "ripple_amplitude_nm": ("ripple", 0.0, 100.0),
     "ripple_periods_per_rev": ("ripple", 1.0, 10000.0),
+    # belt compliance (hal/virtual/plant/belt.py): the belt's tension members as a spring; stiffness 0 = off
+    "belt_stiffness_n_per_mm": ("belt", 0.0, 1e5),
+    "belt_width_mm": ("belt", 1.0, 200.0),
+    "belt_center_distance_m": ("belt", 1e-3, 2.0),
+    "belt_damping_ratio": ("belt", 0.0, 2.0),
 }
 OPTIONAL = {"parallel_stiffness_nm_per_rad": 0.0, "parallel_engage_rad": 0.0, "parallel_two_sided": False,
             "backlash_deg": None, "efficiency_backdriven": None, "stribeck_peak_nm": 0.0,
-            "stribeck_speed_rad_s": 0.02, "ripple_amplitude_nm": 0.0, "ripple_periods_per_rev": 140.0}
+            "stribeck_speed_rad_s": 0.02, "ripple_amplitude_nm": 0.0, "ripple_periods_per_rev": 140.0,
+            "belt_stiffness_n_per_mm": 0.0, "belt_width_mm": 10.0, "belt_center_distance_m": 0.080,
+            "belt_damping_ratio": 0.05}
 """Keys a plant profile may leave out, with their values then: [spring] (no parallel spring); backlash_deg None =
 the bench imperfection's figure (profiles/bench_imperfections.toml [gearbox_backlash]); efficiency_backdriven None =
 one efficiency as a torque gain in both power directions (see PlantParams.backdriven_torque_per_amp_nm); the
-Stribeck friction's and the torque ripple's amplitudes 0 = none (hal/virtual/plant/imperfections.py)."""
+Stribeck friction's and the torque ripple's amplitudes 0 = none (hal/virtual/plant/imperfections.py); the belt's
+stiffness 0 = a rigid belt (hal/virtual/plant/belt.py)."""
 _BOOLS = ("parallel_two_sided",)
 
 #: Relative mismatch allowed between ``belt_ratio`` and the ratio of the pitch diameters.
@@ -135,6 +143,13 @@ class PlantParams:
     stribeck_speed_rad_s: float = 0.02
     ripple_amplitude_nm: float = 0.0
     ripple_periods_per_rev: float = 140.0
+    # belt compliance (hal/virtual/plant/belt.py, docs/plant.md): the tension members' stiffness per mm of belt width
+    # (N per unit strain per mm), the belt's width, the pulleys' centre distance and the belt mode's damping
+    # ratio; stiffness 0 = a rigid belt (off)
+    belt_stiffness_n_per_mm: float = 0.0
+    belt_width_mm: float = 10.0
+    belt_center_distance_m: float = 0.080
+    belt_damping_ratio: float = 0.05
 
     def __post_init__(self) -> None:
         """Check every value against its allowed range and the cross-field rules."""
@@ -210,6 +225,22 @@ class PlantParams:
                                 angle_rad)
 
     @property
+    def belt_span_m(self) -> float:
+        """Length of each free span of the belt: the pulleys' common tangent, sqrt(C^2 - (R - r)^2)."""
+        dr = 0.5 * (self.belt_driven_pitch_diameter_m - self.belt_driver_pitch_diameter_m)
+        return math.sqrt(self.belt_center_distance_m**2 - dr * dr)
+
+    @property
+    def belt_stiffness_nm_per_rad(self) -> float:
+        """The belt's torsional stiffness at the ankle pulley, both spans preloaded: 2 (EA / L) r_ankle^2; 0 = rigid
+        (hal/virtual/plant/belt.py)."""
+        if self.belt_stiffness_n_per_mm == 0.0:
+            return 0.0
+        ea_n = self.belt_stiffness_n_per_mm * self.belt_width_mm
+        r = 0.5 * self.belt_driven_pitch_diameter_m
+        return 2.0 * ea_n / self.belt_span_m * r * r
+
+    @property
     def spring_stiffness_nm_per_rad(self) -> float:
         """Bench spring as a torsional stiffness at the ankle, k_l = k * lever^2."""
         return self.spring_rate_n_per_m * self.spring_lever_m**2
@@ -254,6 +285,12 @@ def validate_plant_params(p: PlantParams) -> None:
         raise ValueError(
             f"plant parameter transmission.belt_ratio = {p.belt_ratio!r} disagrees with the pitch diameters "
             f"(ratio {diameter_ratio:.4f}); allowed range [{lo_r:.4f}, {hi_r:.4f}]"
+        )
+    reach = 0.5 * (p.belt_driven_pitch_diameter_m + p.belt_driver_pitch_diameter_m)
+    if p.belt_stiffness_n_per_mm > 0.0 and not p.belt_center_distance_m > reach:
+        raise ValueError(
+            f"plant parameter belt.belt_center_distance_m = {p.belt_center_distance_m!r} puts the pulleys into each "
+            f"other (pitch radii {reach:.4f} m together); allowed range ({reach:.4f}, 2.0]"
         )
     if p.stop_min_rad >= p.stop_max_rad:
         raise ValueError(

@@ -7,8 +7,10 @@ from dataclasses import dataclass
 
 from mypy_extensions import mypyc_attr
 
-#: (angle [rad], velocity [rad/s], q current [A], friction mode: +1/-1 sliding that way, 0 stuck)
-State = tuple[float, float, float, int]
+#: (angle [rad], velocity [rad/s], q current [A], friction mode: +1/-1 sliding that way, 0 stuck, belt stretch [rad],
+#: its rate [rad/s]): the ankle's, and the motor side's lead over the ankle at the ankle pulley (0, 0 with a rigid
+#: belt; hal/virtual/plant/belt.py)
+State = tuple[float, float, float, int, float, float]
 
 
 @dataclass(frozen=True)
