@@ -192,13 +192,18 @@ class Trace:
     def _trim(self) -> None:
         """Move the appended records into the arrays; drop all but the last ``maxlen`` jobs and interrupt records (as
         a ``deque(maxlen=...)`` would)."""
-        for kept, appended in zip((self._jobs, self._irqs, self._irq_times), self._appended, strict=True):
-            kept.extend(appended)
+        self._move()
         self._job0 = max(self._job0, len(self._jobs) - self.maxlen)
         first, counts = len(self._irqs) - self.maxlen, self._irqs.fields[3]
         while self._irq0 < first:
             self._times0 += counts[self._irq0]
             self._irq0 += 1
+
+    def _move(self) -> None:
+        """Move the records the hot loop appended into the arrays."""
+        for kept, appended in zip((self._jobs, self._irqs, self._irq_times), self._appended, strict=True):
+            if appended:
+                kept.extend(appended)
 
     def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
         """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
@@ -226,15 +231,23 @@ class Trace:
         return out
 
     def prune_before(self, t: int) -> None:
-        """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t."""
-        self._trim()
-        n, events = len(self._jobs), self._events
-        while self._job0 < n and self._finish(self._job0) < t:
-            self._job0 += 1
-        starts, counts = self._irqs.fields[0], self._irqs.fields[3]
-        while self._irq0 < len(starts) and starts[self._irq0] < t:
-            self._times0 += counts[self._irq0]
-            self._irq0 += 1
+        """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t.
+
+        The records the hot loop appended since the last :meth:`compact` are moved into the arrays only when every
+        record there is older than t (the timeline prunes every 100 ms: moving a few records each time would cost
+        more than the records)."""
+        while True:
+            n = len(self._jobs)
+            while self._job0 < n and self._finish(self._job0) < t:
+                self._job0 += 1
+            starts, counts = self._irqs.fields[0], self._irqs.fields[3]
+            while self._irq0 < len(starts) and starts[self._irq0] < t:
+                self._times0 += counts[self._irq0]
+                self._irq0 += 1
+            if (self._job0 < n and self._irq0 < len(starts)) or not any(self._appended):
+                break
+            self._move()
+        events = self._events
         while events and events[0][1] < t:
             events.popleft()
 
