@@ -4,8 +4,7 @@ Besides the jobs it keeps, for each job that interrupts preempted, the firings o
 scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`), and instant
 events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends ints to short lists, which
 the trace moves into arrays (one per field, each as narrow as its values) every :data:`CHUNK_JOBS` jobs; formatting
-happens on export.
-``prune_before`` drops what ended before a time (a window of the last seconds of a run).
+happens on export. ``prune_before`` drops what ended before a time (a window of the last seconds of a run).
 """
 
 from __future__ import annotations
@@ -26,8 +25,8 @@ JOB_FIELDS = len(JOB_COLUMNS)
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
 CHUNK_JOBS = 1024
 """Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists and the
-ints they box stay small and their memory is reused; what is kept takes a few bytes per job (docs/benchmarks.md,
-"The trace": memory the run touches for the first time is what the trace costs most)."""
+ints they box stay small and their memory is reused, what is kept takes a few bytes per job (13 in a 2-stride run),
+and what the window left behind is freed as the run goes (docs/telemetry.md, "Cost")."""
 _WIDER = {"b": "h", "h": "i", "i": "q"}
 
 
@@ -110,10 +109,10 @@ class Trace:
 
     The jobs and the interrupt records are kept as columns of ints, an array per field (the task as an index into a
     table of tasks): no object per record or per field; they become :class:`JobRecord` and :class:`IrqRecord` when
-    read. The hot loop appends to lists (:meth:`flat_records`), which :meth:`compact` empties
-    into the arrays. A job is kept as its differences from what its task's timing predicts (release ``offset + job *
-    period``, ready at its release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small:
-    Python's shared small ints, which the hot loop boxes without allocating, and a byte each in their arrays.
+    read. The hot loop appends to lists (:meth:`flat_records`), which :meth:`compact` empties into the arrays. A job
+    is kept as its differences from what its task's timing predicts (release ``offset + job * period``, ready at its
+    release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's shared small
+    ints, which the hot loop boxes without allocating, and a byte each in their arrays.
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
