@@ -2,7 +2,8 @@
 
 Besides the jobs it keeps, for each job that interrupts preempted, the firings of each interrupt source as the
 scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`), and instant
-events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends plain tuples; formatting
+events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends ints to short lists, which
+the trace moves into arrays (one per field, each as narrow as its values) every :data:`CHUNK_JOBS` jobs; formatting
 happens on export. ``prune_before`` drops what ended before a time (a window of the last seconds of a run).
 """
 
@@ -12,14 +13,59 @@ import csv
 import io
 import itertools
 import json
+import struct
+from array import array
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
 JOB_FIELDS = len(JOB_COLUMNS)
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
+CHUNK_JOBS = 1024
+"""Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists and the
+ints they box stay small and their memory is reused, what is kept takes a few bytes per job (13 in a 2-stride run),
+and what the window left behind is freed as the run goes (docs/telemetry.md, "Cost")."""
+_WIDER = {"b": "h", "h": "i", "i": "q"}
+
+
+def _packed(code: str, values: Sequence[int]) -> bytes:
+    """``values`` as the bytes of an array of typecode ``code`` (struct packs ints ten times faster than
+    ``array.extend`` converts them); struct.error when one does not fit."""
+    return struct.pack(f"@{len(values)}{code}", *values)
+
+
+def _extended(column: array, values: list[int]) -> array:
+    """``column`` with ``values`` appended, first widened (8, 16, 32, 64 bits) until they fit."""
+    while True:
+        try:
+            column.frombytes(_packed(column.typecode, values))
+            return column
+        except struct.error:
+            wide = _WIDER[column.typecode]
+            column = array(wide, _packed(wide, column))
+
+
+class _Columns:
+    """Records of ``width`` ints, kept as one array per field (starting at 8 bits, widened when a value needs it)."""
+
+    def __init__(self, width: int) -> None:
+        self.fields = [array("b") for _ in range(width)]
+
+    def __len__(self) -> int:
+        return len(self.fields[0])
+
+    def extend(self, flat: list[int]) -> None:
+        """Append the records of ``flat`` (``width`` ints each), and empty it."""
+        width = len(self.fields)
+        self.fields = [_extended(f, flat[k::width]) for k, f in enumerate(self.fields)]
+        del flat[:]
+
+    def drop(self, n: int) -> None:
+        """Forget the first ``n`` records."""
+        for f in self.fields:
+            del f[:n]
 
 
 class JobRecord(NamedTuple):
@@ -61,11 +107,12 @@ class TraceEvent(NamedTuple):
 class Trace:
     """Keeps the last ``maxlen`` jobs, the last ``maxlen`` interrupt records and the last ``maxlen`` instant events.
 
-    The jobs and the interrupt records are kept flat, as lists of ints (:data:`JOB_FIELDS` per job, the task as an
-    index into a table of tasks): no tuple per record; they become :class:`JobRecord` and :class:`IrqRecord` when
-    read. A job is kept as its differences from what its task's timing predicts (release ``offset + job * period``,
-    ready at its release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's
-    shared small ints, which a hot loop boxes without allocating (the list keeps them as one pointer each).
+    The jobs and the interrupt records are kept as columns of ints, an array per field (the task as an index into a
+    table of tasks): no object per record or per field; they become :class:`JobRecord` and :class:`IrqRecord` when
+    read. The hot loop appends to lists (:meth:`flat_records`), which :meth:`compact` empties into the arrays. A job
+    is kept as its differences from what its task's timing predicts (release ``offset + job * period``, ready at its
+    release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's shared small
+    ints, which the hot loop boxes without allocating, and a byte each in their arrays.
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -78,13 +125,14 @@ class Trace:
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
         self.maxlen = maxlen
-        # per job: task id, job, start and the differences from the task's timing (see flat_records); the records
+        # per job: task id, job, start and the differences from the task's timing (see flat_records); the jobs
         # before _job0 are dropped
-        self._jobs: list[int] = []
+        self._jobs = _Columns(JOB_FIELDS)
         self._job0 = 0
         # (job start, source index, firings, number of firing times) per record, and the firing times
-        self._irqs: list[int] = []
-        self._irq_times: list[int] = []
+        self._irqs = _Columns(IRQ_FIELDS)
+        self._irq_times = _Columns(1)
+        self._appended: tuple[list[int], list[int], list[int]] = ([], [], [])  # the hot loop's (flat_records)
         self._irq0 = 0
         self._times0 = 0
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
@@ -108,9 +156,10 @@ class Trace:
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
         cost = finish - start if cost is None else cost
-        self._jobs.extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release,
-                           finish - start - cost, cost))
-        if len(self._jobs) >= 2 * JOB_FIELDS * self.maxlen:
+        jobs = self._appended[0]
+        jobs.extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release, finish - start - cost,
+                     cost))
+        if len(jobs) >= JOB_FIELDS * min(self.maxlen, CHUNK_JOBS):
             self.compact()
 
     def flat_records(self) -> tuple[list[int], list[int], list[int]]:
@@ -119,68 +168,85 @@ class Trace:
         interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing times);
         the firing times (see IrqRecord). The loop calls :meth:`compact` each time it has appended :meth:`room` jobs
         since."""
-        return self._jobs, self._irqs, self._irq_times
+        return self._appended
 
     def room(self) -> int:
-        """Jobs that may be appended before :meth:`compact` must run (it keeps the memory within 2 ``maxlen`` jobs)."""
-        return self.maxlen
+        """Jobs that may be appended before :meth:`compact` must run (it keeps the lists short and the memory within
+        2 ``maxlen`` jobs)."""
+        return max(1, min(self.maxlen, CHUNK_JOBS) - len(self._appended[0]) // JOB_FIELDS)
 
     def compact(self) -> int:
-        """Drop all but the last ``maxlen`` records (and the pruned ones), free them when they take as much memory as
-        the kept ones; return :meth:`room`."""
+        """Move the appended records into the arrays, drop all but the last ``maxlen`` records (and the pruned
+        ones), free them when they take as much memory as the kept ones; return :meth:`room`."""
         self._trim()
         if self._job0 * 2 >= len(self._jobs):
-            del self._jobs[:self._job0]
+            self._jobs.drop(self._job0)
             self._job0 = 0
         if self._irq0 * 2 >= len(self._irqs):
-            del self._irqs[:self._irq0], self._irq_times[:self._times0]
+            self._irqs.drop(self._irq0)
+            self._irq_times.drop(self._times0)
             self._irq0 = self._times0 = 0
         return self.room()
 
     def _trim(self) -> None:
-        """Drop all but the last ``maxlen`` jobs and interrupt records (as a ``deque(maxlen=...)`` would)."""
-        self._job0 = max(self._job0, len(self._jobs) - JOB_FIELDS * self.maxlen)
-        irqs, first = self._irqs, len(self._irqs) - IRQ_FIELDS * self.maxlen
+        """Move the appended records into the arrays; drop all but the last ``maxlen`` jobs and interrupt records (as
+        a ``deque(maxlen=...)`` would)."""
+        self._move()
+        self._job0 = max(self._job0, len(self._jobs) - self.maxlen)
+        first, counts = len(self._irqs) - self.maxlen, self._irqs.fields[3]
         while self._irq0 < first:
-            self._times0 += irqs[self._irq0 + 3]
-            self._irq0 += IRQ_FIELDS
+            self._times0 += counts[self._irq0]
+            self._irq0 += 1
+
+    def _move(self) -> None:
+        """Move the records the hot loop appended into the arrays."""
+        for kept, appended in zip((self._jobs, self._irqs, self._irq_times), self._appended, strict=True):
+            if appended:
+                kept.extend(appended)
 
     def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
         """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
         self._trim()
-        jobs, tasks = self._jobs, self._task_table
-        for k in range(self._job0, len(jobs), JOB_FIELDS):
-            task, job, start, release, ready, finish, cost = jobs[k:k + JOB_FIELDS]
+        tasks, k = self._task_table, self._job0
+        for task, job, start, release, ready, finish, cost in zip(*(f[k:] for f in self._jobs.fields), strict=True):
             name, offset, period, nominal = tasks[task]
             release += offset + job * period
             cost += nominal
             yield name, job, release, release + ready, start, start + cost + finish, cost
 
     def _finish(self, k: int) -> int:
-        """The finish of the job whose record starts at ``self._jobs[k]``."""
-        jobs = self._jobs
-        return jobs[k + 2] + self._task_table[jobs[k]][3] + jobs[k + 6] + jobs[k + 5]
+        """The finish of the ``k``-th job kept."""
+        task, _job, start, _release, _ready, preempted, cost = (f[k] for f in self._jobs.fields)
+        return start + self._task_table[task][3] + cost + preempted
 
     def irqs(self) -> list[IrqRecord]:
         """The recorded interrupt firings inside jobs, oldest first."""
         self._trim()
-        irqs, times, t = self._irqs, self._irq_times, self._times0
+        times, t, k = self._irq_times.fields[0], self._times0, self._irq0
         out = []
-        for k in range(self._irq0, len(irqs), IRQ_FIELDS):
-            n = irqs[k + 3]
-            out.append(IrqRecord(irqs[k], irqs[k + 1], irqs[k + 2], tuple(times[t:t + n])))
+        for start, source, firings, n in zip(*(f[k:] for f in self._irqs.fields), strict=True):
+            out.append(IrqRecord(start, source, firings, tuple(times[t:t + n])))
             t += n
         return out
 
     def prune_before(self, t: int) -> None:
-        """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t."""
-        self._trim()
-        jobs, irqs, events = self._jobs, self._irqs, self._events
-        while self._job0 < len(jobs) and self._finish(self._job0) < t:
-            self._job0 += JOB_FIELDS
-        while self._irq0 < len(irqs) and irqs[self._irq0] < t:
-            self._times0 += irqs[self._irq0 + 3]
-            self._irq0 += IRQ_FIELDS
+        """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t.
+
+        The records the hot loop appended since the last :meth:`compact` are moved into the arrays only when every
+        record there is older than t (the timeline prunes every 100 ms: moving a few records each time would cost
+        more than the records)."""
+        while True:
+            n = len(self._jobs)
+            while self._job0 < n and self._finish(self._job0) < t:
+                self._job0 += 1
+            starts, counts = self._irqs.fields[0], self._irqs.fields[3]
+            while self._irq0 < len(starts) and starts[self._irq0] < t:
+                self._times0 += counts[self._irq0]
+                self._irq0 += 1
+            if (self._job0 < n and self._irq0 < len(starts)) or not any(self._appended):
+                break
+            self._move()
+        events = self._events
         while events and events[0][1] < t:
             events.popleft()
 
@@ -198,7 +264,9 @@ class Trace:
 
     def clear(self) -> None:
         """Forget every record."""
-        del self._jobs[:], self._irqs[:], self._irq_times[:]
+        for kept, appended in zip((self._jobs, self._irqs, self._irq_times), self._appended, strict=True):
+            del appended[:]
+            kept.drop(len(kept))
         self._job0 = self._irq0 = self._times0 = 0
         self._events.clear()
 
@@ -282,7 +350,7 @@ class Trace:
         """Task names in tid order: the declared ones, then any other seen in the jobs."""
         names = list(self.task_names)
         self._trim()
-        for task in dict.fromkeys(self._jobs[self._job0::JOB_FIELDS]):
+        for task in dict.fromkeys(self._jobs.fields[0][self._job0:]):
             name = self._task_table[task][0]
             if name not in names:
                 names.append(name)
@@ -291,4 +359,4 @@ class Trace:
     def __len__(self) -> int:
         """Number of recorded jobs."""
         self._trim()
-        return (len(self._jobs) - self._job0) // JOB_FIELDS
+        return len(self._jobs) - self._job0
