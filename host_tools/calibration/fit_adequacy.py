@@ -3,7 +3,7 @@
 A model that lacks an effect the bench has (a friction that depends on speed or load, a ripple with the rotor's
 angle) can leave residuals that follow the input; a correct model leaves only the sensors' noise. For each signal
 (encoder angle, motor current, IMU pitch), each segment (the fitting part, the held-out part) and each input the
-check takes the cross-covariance c(l) of the residual with the input l samples earlier, at the lags 0..LAGS-1, and
+check takes the cross-covariance c(l) of the residual with the input l earlier, at LAGS lags LAG_S apart, and
 its standard deviation for a residual independent of the input when both are colored (L. Ljung, *System
 Identification*, 2nd ed., 1999, section 16.6; Bartlett's formula):
 
@@ -36,13 +36,16 @@ from statistics import NormalDist
 import numpy as np
 
 from hal.virtual.plant import PlantParams
-from host_tools.calibration.fit_data import Experiment
+from host_tools.calibration.fit_data import WINDOW_S, Experiment
 from host_tools.calibration.fit_model import simulate, windows
 
-__all__ = ["ACF_S", "FAMILY_ALPHA", "LAGS", "adequacy", "cross_test", "inputs", "z_bound"]
+__all__ = ["ACF_S", "FAMILY_ALPHA", "LAGS", "LAG_S", "adequacy", "cross_test", "inputs", "z_bound"]
 
-LAGS = 26  # lags 0, 1, ..., 25 telemetry samples (0-50 ms at 500 Hz): the mechanics' and the IMU lag's span
-ACF_S = 0.1  # the residual's and the command's autocovariances summed to this lag for the bound
+# lags 0, 10, ..., 250 ms: a simulation window's span, over which the closed loop answers its reference (at lags
+# to 50 ms only, a Coulomb friction three times the truth's and half its damping passed on a correct recording)
+LAGS, LAG_S = 26, 0.01
+ACF_S = WINDOW_S  # the residual's and the input's autocovariances summed to this lag for the bound (pairs within
+# a window: the windowed errors start afresh at each)
 FAMILY_ALPHA = 0.01  # a correct model's chance of failing the verdict (all its tests together)
 MISSES = "the model misses something"
 NOT_CHECKED = "not checked (too few samples)"
@@ -80,9 +83,9 @@ def _autocov(x: np.ndarray, win: np.ndarray, max_lag: int) -> np.ndarray:
 
 def cross_test(e: np.ndarray, t: np.ndarray, win: np.ndarray, signal: tuple[np.ndarray, np.ndarray], dt: float,
                bound: float) -> dict:
-    """The independence test of residual e (at times t, in simulation windows `win`) from `signal` (times, values)
-    at lags 0..LAGS-1 samples of dt, each lag failing beyond |z| `bound`: {the largest |z| over the lags, the bound,
-    ok, the lags (ms) beyond it, the correlation at each lag and its own 95 % bound}."""
+    """The independence test of residual e (at times t, sampled every dt, in simulation windows `win`) from `signal`
+    (times, values) at lags 0, LAG_S, ..., (LAGS - 1) LAG_S, each lag failing beyond |z| `bound`: {the largest |z|
+    over the lags, the bound, ok, the lags (ms) beyond it, the correlation at each lag and its own 95 % bound}."""
     n = len(e)
     e = e - e.mean()
     k_max = max(1, int(round(ACF_S / dt)))
@@ -90,7 +93,7 @@ def cross_test(e: np.ndarray, t: np.ndarray, win: np.ndarray, signal: tuple[np.n
     twice = np.r_[1.0, 2.0 * np.ones(k_max)]  # k and -k
     corr, z = np.zeros(LAGS), np.zeros(LAGS)
     for lag in range(LAGS):
-        u = _held(*signal, t - lag * dt)
+        u = _held(*signal, t - lag * LAG_S)
         u = u - u.mean()
         r_u = _autocov(u, win, k_max)
         sd = math.sqrt(max(float(np.sum(twice * r_e * r_u)), 1e-300) / n)  # of sum(e u) / n
@@ -100,7 +103,7 @@ def cross_test(e: np.ndarray, t: np.ndarray, win: np.ndarray, signal: tuple[np.n
     own95 = 1.96 * corr / np.where(z != 0.0, z, np.inf)  # each lag's own 95 % bound on the correlation
     worst = float(np.max(np.abs(z)))
     return {"max_abs_z": round(worst, 2), "z_bound": round(bound, 2), "ok": bool(worst <= bound),
-            "lags_ms_beyond": [round(1e3 * k * dt, 1) for k in range(LAGS) if abs(z[k]) > bound], "samples": n,
+            "lags_ms_beyond": [round(1e3 * k * LAG_S, 1) for k in range(LAGS) if abs(z[k]) > bound], "samples": n,
             "correlation": [round(float(x), 4) for x in corr], "bound95": [round(abs(float(x)), 4) for x in own95]}
 
 
@@ -109,7 +112,6 @@ def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment
     ``adequacy``: {verdict, against (the inputs tested), tests: {segment: {signal: {input: cross_test's}}},
     failing: [segment signal against input: lags]}."""
     residual: dict[str, dict[str, tuple]] = {}
-    max_lag_ms = math.nan
     for seg, part in parts.items():
         if len(part.t) < 4 * LAGS:
             continue
@@ -119,7 +121,6 @@ def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment
         for w, (k, end) in enumerate(windows(part)):
             win[k:end] = w
         dt = float(np.median(np.diff(part.t)))
-        max_lag_ms = round(1e3 * (LAGS - 1) * dt, 1)
         residual[seg] = {name: ((meas - sim)[used], part.t[used], win[used], dt)
                          for name, sim, meas, used in (("angle", angle, part.angle, mask),
                                                        ("current", current, part.current, mask & heard),
@@ -135,5 +136,5 @@ def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment
                for seg, sig in tests.items() for name, by in sig.items() for u, d in by.items() if not d["ok"]]
     checked = any(tests.values())
     return {"verdict": MISSES if failing else "adequate" if checked else NOT_CHECKED, "failing": failing,
-            "against": list(against), "lags": LAGS, "max_lag_ms": max_lag_ms, "family_alpha": FAMILY_ALPHA,
+            "against": list(against), "lags": LAGS, "max_lag_ms": round(1e3 * (LAGS - 1) * LAG_S, 1), "family_alpha": FAMILY_ALPHA,
             "tests_in_family": family, "z_bound": round(bound, 3), "tests": tests}
