@@ -136,5 +136,5 @@ def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment
                for seg, sig in tests.items() for name, by in sig.items() for u, d in by.items() if not d["ok"]]
     checked = any(tests.values())
     return {"verdict": MISSES if failing else "adequate" if checked else NOT_CHECKED, "failing": failing,
-            "against": list(against), "lags": LAGS, "max_lag_ms": round(1e3 * (LAGS - 1) * LAG_S, 1), "family_alpha": FAMILY_ALPHA,
-            "tests_in_family": family, "z_bound": round(bound, 3), "tests": tests}
+            "against": list(against), "lags": LAGS, "max_lag_ms": round(1e3 * (LAGS - 1) * LAG_S, 1),
+            "family_alpha": FAMILY_ALPHA, "tests_in_family": family, "z_bound": round(bound, 3), "tests": tests}

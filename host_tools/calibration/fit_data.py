@@ -20,8 +20,8 @@ from hal.record.reader import RecordReader
 from host_tools.recording import RECORD_NAME, read_record_header
 from host_tools.reports.run_files import check_same_run
 
-__all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "EXOGENOUS", "STALL_BOUND_S", "WINDOW_S", "Experiment", "encoder_velocity",
-           "load_experiment", "reading_mean"]
+__all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "EXOGENOUS", "STALL_BOUND_S", "WINDOW_S", "Experiment",
+           "encoder_velocity", "load_experiment", "reading_mean"]
 
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 # a simulation window whose writes' arrivals the record leaves unknown by more than one and a half motor periods on

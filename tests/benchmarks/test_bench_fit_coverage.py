@@ -15,7 +15,8 @@ interval, the truth the emulator's (`host_tools.calibration.plant_truth`, emulat
   friction 5 % of the transmitted torque and cogging on the tests' 10 s experiment, all three milder on the default
   29 s one): each must say "the model misses something" (asserted: fixed seeds, a deterministic verdict). The nominal
   plants' false alarms are counted by the two coverage benchmarks above, which fit correct models (goal: at most one
-  recording in ten flagged; warned about).
+  recording in ten flagged; warned about). Each recording's largest |z| over the check's tests is printed beside its
+  bound: how far apart the two kinds of recording lie, not only which side of the bound.
 
 - ``test_fit_under_a_rounding_nudge``: the tests' 10 s experiment on `--plant-seed 7` fitted as recorded and with
   its encoder angle, IMU pitch and current multiplied by 1 + 1e-12: how far apart the identified values come, in
@@ -194,7 +195,7 @@ def test_adequacy_flags_unmodelled_effects(benchmark, tmp_path: Path) -> None:  
     benchmark.extra_info.update(figures)
     print("\nmodel adequacy on plants with effects the fit lacks (noise seed 0):")
     for name, f in figures.items():
-        print(f"  {name}: {f['verdict']} (largest |z| {f['largest_z']} against the bound {f['z_bound']}; held-out fit % "
-              f"{f['held_out_fit_percent']})"
+        print(f"  {name}: {f['verdict']} (largest |z| {f['largest_z']} against the bound {f['z_bound']}; held-out "
+              f"fit % {f['held_out_fit_percent']})"
               + "".join(f"\n    {x}" for x in f["failing"]))
     assert all(f["verdict"] == "the model misses something" for f in figures.values()), figures
