@@ -265,8 +265,8 @@ def adequacy_lines(a: dict) -> list[str]:
     closed = against == ["command"]
     inputs = "the command" if closed else "the experiment's " + " and ".join(against)
     head = (f"**Model adequacy: {a['verdict']}.** The residuals of angle, current and IMU pitch against {inputs} "
-            f"at lags 0-{a['max_lag_ms']:g} ms (cross-correlation, its bound corrected for colored residuals; |z| bound "
-            f"{a['z_bound']:g}, {100 * a['family_alpha']:g} % shared over the {a.get('tests_in_family', '')} lags"
+            f"at lags 0-{a['max_lag_ms']:g} ms (cross-correlation, its bound corrected for colored residuals; |z| "
+            f"bound {a['z_bound']:g}, {100 * a['family_alpha']:g} % shared over the {a.get('tests_in_family', '')} lags"
             + ("; the command carries the closed loop's feedback of the measured angle, so a correct model can "
                "fail: docs/calibration.md, Limits)" if closed else ")"))
     if not a["failing"]:
