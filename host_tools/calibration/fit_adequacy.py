@@ -15,9 +15,9 @@ IMU's noise are colored); this one does not need white residuals. (Ljung's joint
 tried first: the input is smooth, so its lags' covariance is nearly singular.)
 
 The inputs (`inputs`): the experiment is closed loop, the PD hold's part of the command is the measured angle's,
-noise included, so the command follows the angle's residual with no model error at all (on six correct models the
-angle's residual against the command reached |z| 3.7 at lag 0, the current's 4.2 held out). Ljung's test assumes an
-input independent of the noise; the experiment's own reference and excitation are (`fit_data.EXOGENOUS`, functions
+noise included, so the command follows the angle's residual with no model error at all (tests/test_fit_adequacy.py
+shows it on a seeded residual; on the benchmark's correct models the check against the command flagged 4 of 6).
+Ljung's test assumes an input independent of the noise; the experiment's own reference and excitation are (`fit_data.EXOGENOUS`, functions
 of time), so the check takes them when the recording carries them and the command only when it does not (then the
 verdict says the bound is not exact). A residual prewhitened by its own AR model did worse: the windowed errors are
 no stationary AR process.
