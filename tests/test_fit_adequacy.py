@@ -1,7 +1,8 @@
 """The model-adequacy check's test (host_tools/calibration/fit_adequacy.py) on residuals made here, seeded: a residual
-independent of a colored command passes although both are colored; one that carries a friction-like function of the
-command fails, at the lags it carries it. Its verdict on `pafp fit`'s recordings: tests/test_plant_fit.py; its rates
-over plants with and without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py."""
+independent of a colored input passes although both are colored; one that carries a friction-like function of the
+input fails, at the lags it carries it; in closed loop the command follows the measurement noise, the experiment's own
+excitation does not. Its verdict on `pafp fit`'s recordings: tests/test_plant_fit.py; its rates over plants with and
+without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from host_tools.calibration.fit_adequacy import LAGS, Z_BOUND, cross_test
+from host_tools.calibration.fit_adequacy import LAGS, cross_test, inputs, z_bound
 
 DT = 0.002  # telemetry at 500 Hz, commands at 1 kHz, windows of 0.25 s
+BOUND = z_bound(6 * LAGS)
 
 
 def _bench(seed: int = 4):  # type: ignore[no-untyped-def]
@@ -31,8 +33,8 @@ def _bench(seed: int = 4):  # type: ignore[no-untyped-def]
 def test_a_residual_independent_of_a_colored_command_passes():
     """Both colored: the naive bound for white residuals (1.96 / sqrt(N)) is exceeded, the corrected one is not."""
     exp, t, win, noise = _bench()
-    d = cross_test(noise, t, win, exp, DT)
-    assert d["ok"] and d["max_abs_z"] <= Z_BOUND and not d["lags_ms_beyond"], d
+    d = cross_test(noise, t, win, (exp.t_cmd, exp.i_cmd), DT, BOUND)
+    assert d["ok"] and d["max_abs_z"] <= BOUND and not d["lags_ms_beyond"], d
     assert len(d["correlation"]) == LAGS
     white = 1.96 / math.sqrt(len(t))
     assert max(abs(c) for c in d["correlation"]) > white  # the white bound would have called it dependent
@@ -44,11 +46,34 @@ def test_a_residual_that_follows_the_command_fails_at_its_lags():
     lags about 10 ms among those beyond the bound."""
     exp, t, win, noise = _bench()
     sign = np.sign(np.interp(t - 0.010, exp.t_cmd, exp.i_cmd))
-    d = cross_test(noise + 0.3 * float(np.std(noise)) * sign, t, win, exp, DT)
-    assert not d["ok"] and d["max_abs_z"] > Z_BOUND, d
+    d = cross_test(noise + 0.3 * float(np.std(noise)) * sign, t, win, (exp.t_cmd, exp.i_cmd), DT, BOUND)
+    assert not d["ok"] and d["max_abs_z"] > BOUND, d
     assert 10.0 in d["lags_ms_beyond"], d["lags_ms_beyond"]
+
+
+def test_in_closed_loop_the_command_follows_the_noise_and_the_excitation_does_not():
+    """The angle's residual of a correct model is its measurement noise; a PD hold feeds that noise into the command
+    (here 0.5 of the excitation's size through the gain). Against the command the check fails at lag 0 although
+    nothing is missing from the model; against the excitation, which is a function of time only, it passes."""
+    exp, t, win, noise = _bench()
+    excitation = np.interp(t, exp.t_cmd, exp.i_cmd)
+    command = excitation - 0.5 * float(np.std(excitation)) * noise / float(np.std(noise))
+    closed = cross_test(noise, t, win, (t, command), DT, BOUND)
+    assert not closed["ok"] and 0.0 in closed["lags_ms_beyond"], closed
+    assert cross_test(noise, t, win, (t, excitation), DT, BOUND)["ok"]
+
+
+def test_the_inputs_are_the_experiments_own_when_recorded():
+    t = np.arange(0.0, 1.0, 0.002)
+    cmd = SimpleNamespace(t_cmd=t, i_cmd=np.sin(t), t_exo=None, exogenous=None)
+    assert list(inputs(cmd)) == ["command"]
+    exo = SimpleNamespace(t_cmd=t, i_cmd=np.sin(t), t_exo=t, exogenous={"sysid_target_deg": t,
+                                                                      "sysid_excitation_a": np.cos(t)})
+    assert list(inputs(exo)) == ["sysid_target_deg", "sysid_excitation_a"]
+    assert z_bound(312) > z_bound(156) > 3.9  # the family's bound grows with its size
 
 
 def test_the_check_is_deterministic():
     exp, t, win, noise = _bench()
-    assert cross_test(noise, t, win, exp, DT) == cross_test(noise.copy(), t, win, exp, DT)
+    sig = (exp.t_cmd, exp.i_cmd)
+    assert cross_test(noise, t, win, sig, DT, BOUND) == cross_test(noise.copy(), t, win, sig, DT, BOUND)

@@ -20,8 +20,8 @@ from hal.record.reader import RecordReader
 from host_tools.recording import RECORD_NAME, read_record_header
 from host_tools.reports.run_files import check_same_run
 
-__all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "STALL_BOUND_S", "WINDOW_S", "Experiment", "encoder_velocity",
-           "load_experiment", "reading_mean"]
+__all__ = ["COMMAND_DELAY_S", "CURRENT_FIELD", "EXOGENOUS", "STALL_BOUND_S", "WINDOW_S", "Experiment",
+           "encoder_velocity", "load_experiment", "reading_mean"]
 
 WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/calibration.md: why this short)
 # a simulation window whose writes' arrivals the record leaves unknown by more than one and a half motor periods on
@@ -30,6 +30,8 @@ WINDOW_S = 0.25  # each simulated window starts from the measured state (docs/ca
 # Chosen on eleven pty recordings: above every window's mean (0.6-1.4 ms) of the ten that did not stall throughout
 # but one; 1 ms left out 6-17 % of four of them and moved one's damping out of its interval
 STALL_BOUND_S = 1.5e-3
+# the sysid experiment's reference and excitation (firmware/control/sysid.py publishes them): functions of time only
+EXOGENOUS = ("sysid_target_deg", "sysid_excitation_a")
 
 
 @dataclass
@@ -58,6 +60,10 @@ class Experiment:
     # per sample: how far above its encoder reading a simulation window starting there starts (rad; None: 0). The
     # reading places the foot only to its count: `fit_consider.stuck_starts_term` draws it within the count
     start_shift: np.ndarray | None = None
+    # the experiment's own signals, the same whatever the bench does (telemetry's `EXOGENOUS` columns, when the
+    # controller published them): {name: value at each time of t_exo}, the adequacy check's inputs in closed loop
+    t_exo: np.ndarray | None = None
+    exogenous: dict[str, np.ndarray] | None = None
 
     def interleave(self, every: int, window_s: float = 4 * WINDOW_S,
                    drop: np.ndarray | None = None) -> tuple[Experiment, Experiment]:
@@ -379,12 +385,13 @@ def load_experiment(run_dir: Path) -> Experiment:
     w = _wire(record)
     t_cmd, i_cmd = w.t_cmd, w.i_cmd
     cols = ("time_s", "encoder_angle_rad", "imu_pitch_rad", "current_meas_a", "supervisor_state_name")
-    rows: list[tuple[float, float, float, float]] = []
+    rows: list[tuple[float, ...]] = []
     with tel.open(encoding="utf-8", newline="") as f:
         reader = csv.DictReader(f)
         missing = [c for c in cols if c not in (reader.fieldnames or [])]
         if missing:
             raise ValueError(f"{tel}: not a telemetry table (no column {missing[0]!r})")
+        exo = [c for c in EXOGENOUS if c in (reader.fieldnames or [])]
         started = False
         for line, r in enumerate(reader, start=2):
             if r["supervisor_state_name"] != "RUN":
@@ -394,13 +401,14 @@ def load_experiment(run_dir: Path) -> Experiment:
             started = True
             try:
                 rows.append((float(r["time_s"]), float(r["encoder_angle_rad"]), float(r["imu_pitch_rad"]),
-                             float(r["current_meas_a"])))
+                             float(r["current_meas_a"]), *(float(r[c]) for c in exo)))
             except ValueError:
                 raise ValueError(f"{tel}: line {line} is not numeric") from None
     if len(rows) < 100 or len(t_cmd) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(rows)} samples in RUN and {len(t_cmd)} current "
                          "commands (at least 100 of each; run `pafp run --experiment sysid`)")
     a = np.array(rows)
+    t_exo, exogenous = (a[:, 0], {c: a[:, 4 + k] for k, c in enumerate(exo)}) if exo else (None, None)
     a = a[_swing_up(a[:, 0], a[:, 1]):]
     if len(a) < 100:
         raise ValueError(f"{run_dir}: too short to fit: {len(a)} samples in RUN once the foot came to rest "
@@ -422,7 +430,8 @@ def load_experiment(run_dir: Path) -> Experiment:
     return Experiment(t_cmd + late, i_cmd, a[:, 0], a[:, 1], a[:, 2], reading_mean(a[:, 3]), str(run_dir),
                       encoder_velocity(a[:, 0], a[:, 1]), t_req, _reply_requests(a[:, 0], w), from_reply,
                       _angle_requests(a[:, 0], w) if from_reply else None, bounds,
-                      np.array(w.req_cmd, dtype=int) if serial and paired else None)
+                      np.array(w.req_cmd, dtype=int) if serial and paired else None, t_exo=t_exo,
+                      exogenous=exogenous)
 
 
 SWING_DEG = 4.0  # a start further than this from where the foot comes to rest is a swing-up (the foot hung on a stop)

@@ -261,15 +261,18 @@ def adequacy_lines(a: dict) -> list[str]:
         return []
     if not a["tests"]:
         return [f"**Model adequacy: {a['verdict']}.** The intervals hold only for the model."]
-    head = (f"**Model adequacy: {a['verdict']}.** The residuals of angle, current and IMU pitch against the command "
-            f"at lags 0-{a['max_lag_ms']:g} ms (cross-correlation, its bound corrected for colored residuals; "
-            f"|z| bound {a['z_bound']:g}, set so that an open-loop experiment's correct model would fail "
-            f"{100 * a['family_alpha']:g} % of fits; the closed loop can flag a correct one: docs/calibration.md, "
-            "Limits)")
+    against = a.get("against", ["command"])
+    closed = against == ["command"]
+    inputs = "the command" if closed else "the experiment's " + " and ".join(against)
+    head = (f"**Model adequacy: {a['verdict']}.** The residuals of angle, current and IMU pitch against {inputs} "
+            f"at lags 0-{a['max_lag_ms']:g} ms (cross-correlation, its bound corrected for colored residuals; |z| "
+            f"bound {a['z_bound']:g}, {100 * a['family_alpha']:g} % shared over the {a.get('tests_in_family', '')} lags"
+            + ("; the command carries the closed loop's feedback of the measured angle, so a correct model can "
+               "fail: docs/calibration.md, Limits)" if closed else ")"))
     if not a["failing"]:
-        return [head + ": independent of it on both segments. The intervals hold for this model; an effect it "
-                "lacks that leaves no trace in the command's direction is not excluded."]
-    return [head + ": they follow the command, so the model likely lacks an effect the bench has. **The 95 % intervals "
+        return [head + ": independent of them on both segments. The intervals hold for this model; an effect it "
+                "lacks that leaves no linear trace of these signals is not excluded."]
+    return [head + ": they follow them, so the model likely lacks an effect the bench has. **The 95 % intervals "
             "above are conditional on the model**: they bound the noise's part of the error, not the bias from what "
             "it lacks. Failing:", "", *(f"- {f}" for f in a["failing"])]
 

@@ -15,7 +15,8 @@ interval, the truth the emulator's (`host_tools.calibration.plant_truth`, emulat
   friction 5 % of the transmitted torque and cogging on the tests' 10 s experiment, all three milder on the default
   29 s one): each must say "the model misses something" (asserted: fixed seeds, a deterministic verdict). The nominal
   plants' false alarms are counted by the two coverage benchmarks above, which fit correct models (goal: at most one
-  recording in ten flagged; warned about).
+  recording in ten flagged; warned about). Each recording's largest |z| over the check's tests is printed beside its
+  bound: how far apart the two kinds of recording lie, not only which side of the bound.
 
 - ``test_fit_under_a_rounding_nudge``: the tests' 10 s experiment on `--plant-seed 7` fitted as recorded and with
   its encoder angle, IMU pitch and current multiplied by 1 + 1e-12: how far apart the identified values come, in
@@ -67,7 +68,7 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 
 def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: Path) -> dict:
     """Record, fit and score each (label, plant options, noise seed) run: the counts and each run's half-widths off."""
-    rows, inside, total, walls, flagged, dynamics = {}, 0, 0, [], {}, {}
+    rows, inside, total, walls, flagged, dynamics, largest = {}, 0, 0, [], {}, {}, {}
     for label, plant, seed in runs:
         run = out / f"{label.replace('/', '_')}_{seed}"
         assert main(["run", "--experiment", "sysid", *profile, *plant, "--seed", str(seed), "--quiet", "--no-plot",
@@ -80,6 +81,7 @@ def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: P
                   if r.identifiable.get(n) and n in truth and r.ci95.get(n)}
         rows[label] = {n: round(e, 2) for n, e in errors.items()}
         dynamics[label] = {n: round(r.values[n] / truth[n] - 1, 4) for n in DYNAMICS if r.identifiable.get(n)}
+        largest[label] = _largest_z(r.adequacy)
         if r.adequacy.get("failing"):
             flagged[label] = r.adequacy["failing"]
         inside += sum(e <= 1.0 for e in errors.values())
@@ -88,8 +90,14 @@ def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: P
     return {"inside": inside, "identified": total, "coverage": round(inside / max(total, 1), 3),
             "coverage_ci95": [round(lo, 3), round(hi, 3)],
             "half_widths_off": rows, "dynamics_relative_error": dynamics, "fit_wall_s_max": round(max(walls), 1),
-            "adequacy_flagged": flagged, "recordings": len(runs),
+            "adequacy_flagged": flagged, "adequacy_largest_z": largest, "recordings": len(runs),
             "load_average_1min": round(os.getloadavg()[0], 2)}
+
+
+def _largest_z(adequacy: dict) -> float:
+    """The largest |z| over every test of a fit's adequacy check (its verdict fails beyond the check's z_bound)."""
+    return max((d["max_abs_z"] for sig in adequacy["tests"].values() for by in sig.values() for d in by.values()),
+               default=0.0)
 
 
 def _report(benchmark, figures: dict, what: str, runs: int) -> None:  # type: ignore[no-untyped-def]
@@ -102,7 +110,8 @@ def _report(benchmark, figures: dict, what: str, runs: int) -> None:  # type: ig
         print(f"  {label}: " + ", ".join(f"{n} {e}" for n, e in errors.items()))
     flagged = figures["adequacy_flagged"]
     print(f"  model adequacy: {len(flagged)} of {figures['recordings']} correct-model recordings flagged (goal at most "
-          f"one in ten)" + "".join(f"\n    {label}: {'; '.join(f)}" for label, f in flagged.items()))
+          f"one in ten); largest |z| of each: {figures['adequacy_largest_z']}"
+          + "".join(f"\n    {label}: {'; '.join(f)}" for label, f in flagged.items()))
     if len(flagged) > ADEQUACY_FALSE_GOAL * figures["recordings"]:
         warnings.warn(f"the adequacy check flagged {len(flagged)} of {figures['recordings']} correct-model "
                       "recordings", stacklevel=2)
@@ -178,6 +187,7 @@ def test_adequacy_flags_unmodelled_effects(benchmark, tmp_path: Path) -> None:  
                          "--seed", "0", "--quiet", "--no-plot", "--no-trace", "--out", str(run)]) == 0
             r = fit_plant(load_base(None), load_experiment(run))
             out[name] = {"verdict": r.adequacy["verdict"], "failing": r.adequacy["failing"],
+                         "largest_z": _largest_z(r.adequacy), "z_bound": r.adequacy["z_bound"],
                          "held_out_fit_percent": {k: round(v, 1) for k, v in r.fit_pct["held_out"].items()}}
         return out
 
@@ -185,6 +195,7 @@ def test_adequacy_flags_unmodelled_effects(benchmark, tmp_path: Path) -> None:  
     benchmark.extra_info.update(figures)
     print("\nmodel adequacy on plants with effects the fit lacks (noise seed 0):")
     for name, f in figures.items():
-        print(f"  {name}: {f['verdict']} (held-out fit % {f['held_out_fit_percent']})"
+        print(f"  {name}: {f['verdict']} (largest |z| {f['largest_z']} against the bound {f['z_bound']}; held-out "
+              f"fit % {f['held_out_fit_percent']})"
               + "".join(f"\n    {x}" for x in f["failing"]))
     assert all(f["verdict"] == "the model misses something" for f in figures.values()), figures
