@@ -28,7 +28,7 @@ from host_tools.runner import RunConfig, run_virtual
 from tests.benchmarks.test_bench_process import _process
 from tests.trace_reader import read_trace
 
-ROUNDS = 5
+ROUNDS = 15
 SIZE_MB = 10.0
 
 
