@@ -43,8 +43,8 @@ import warnings
 from pathlib import Path
 
 from host_tools.calibration.fit_data import load_experiment
-from host_tools.calibration.fit_model import load_base
-from host_tools.calibration.plant_fit import fit_plant
+from host_tools.calibration.fit_model import base_values, load_base, residuals
+from host_tools.calibration.plant_fit import fit_parts, fit_plant
 from host_tools.calibration.plant_truth import truth_of
 from host_tools.cli import main
 from tests.fit_shared import HANDMADE, SHORT
@@ -64,8 +64,8 @@ NUDGED = """
 import json, sys
 from pathlib import Path
 from host_tools.calibration.fit_data import load_experiment
-from host_tools.calibration.fit_model import load_base
-from host_tools.calibration.plant_fit import fit_plant
+from host_tools.calibration.fit_model import base_values, load_base, residuals
+from host_tools.calibration.plant_fit import fit_parts, fit_plant
 exp = load_experiment(Path(sys.argv[1]))
 exp.angle, exp.imu, exp.current, exp.vel = (x * (1.0 + 1e-12) for x in (exp.angle, exp.imu, exp.current, exp.vel))
 Path(sys.argv[2]).write_text(json.dumps(fit_plant(load_base(None), exp).values))
@@ -209,16 +209,27 @@ def test_fit_under_another_kernel(benchmark, tmp_path: Path) -> None:  # type: i
         other = subprocess.run([sys.executable, "-c", NUDGED, str(run), str(tmp_path / "other.json")], cwd=ROOT,
                                env=env, capture_output=True, text=True, timeout=3600)
         assert other.returncode == 0, other.stderr
-        a, b = fit_plant(load_base(None), load_experiment(run)), json.loads((tmp_path / "other.json").read_text())
+        base, exp = load_base(None), load_experiment(run)
+        a, b = fit_plant(base, exp), json.loads((tmp_path / "other.json").read_text())
         apart = {n: round(abs(a.values[n] - b[n]) / a.ci95[n], 4) for n in a.names
                  if a.identifiable.get(n) and a.ci95.get(n)}
-        return {"half_widths_apart": apart, "max": max(apart.values()), "other_kernel": other_kernel(),
+        # the fit's cost (this process's kernel) on the line from its solution to the other's: which one is lower,
+        # and how rough the cost is between them (an interval spans 1.92 of it)
+        v, fit_part = {**base_values(base), **a.values}, fit_parts(exp)[0]
+        line = {}
+        for t in (0.0, 0.25, 0.5, 0.75, 1.0):
+            r = residuals(base, {**v, **{n: v[n] + t * (b[n] - v[n]) for n in a.names}}, fit_part, a.noise_scales)
+            line[str(t)] = round(0.5 * float(r @ r), 3)
+        return {"half_widths_apart": apart, "max": max(apart.values()), "cost_along_the_line": line,
+                "other_kernel": " ".join(f"{k}={x}" for k, x in other_kernel().items()),
                 "load_average_1min": round(os.getloadavg()[0], 2)}
 
     figures = benchmark.pedantic(measure, rounds=1, iterations=1)
     benchmark.extra_info.update(figures)
     print(f"\nfit under {figures['other_kernel']} with the data nudged by 1e-12: at most {figures['max']} half-widths "
-          f"apart (goal {NUDGE_GOAL}): " + ", ".join(f"{n} {e}" for n, e in figures["half_widths_apart"].items()))
+          f"apart (goal {NUDGE_GOAL}): " + ", ".join(f"{n} {e}" for n, e in figures["half_widths_apart"].items())
+          + "\n  cost from this fit (0) to the other's (1): "
+          + ", ".join(f"{t} {c}" for t, c in figures["cost_along_the_line"].items()))
     assert len(figures["half_widths_apart"]) >= 5 and math.isfinite(figures["max"])
     if figures["max"] > NUDGE_GOAL:
         warnings.warn(f"the fit moved {figures['max']} half-widths under another BLAS kernel (goal {NUDGE_GOAL})",
