@@ -2,18 +2,15 @@
 
 The hand-made plant file (tests/data/plant_handmade.toml: a plant that is not the nominal one) runs the tests' 10 s
 experiment (`SHORT`: the default 29 s one's figures are tests/benchmarks/test_bench_fit_coverage.py's), a different
-run on the same plant (10 strides of gait tracking, another seed), `pafp fit --validate` of the first against the
-second, and the same recording fitted again in a process of its own under another BLAS set-up (`other_kernel`) with its
-data nudged by 1e-12 (`NUDGED`), the two fits side by side. Made once a session: under pytest-xdist the first worker
-to ask makes it in the session's shared temporary directory while the others wait on its lock and then read it.
+run on the same plant (10 strides of gait tracking, another seed) and `pafp fit --validate` of the first against the
+second. Made once a session: under pytest-xdist the first worker to ask makes it in the session's shared temporary
+directory while the others wait on its lock and then read it. (The same recording fitted under another BLAS set-up
+with its data nudged by 1e-12 is tests/benchmarks/test_bench_fit_coverage.py's `test_fit_under_another_kernel`.)
 """
 
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -24,34 +21,6 @@ HANDMADE = ROOT / "tests" / "data" / "plant_handmade.toml"
 SHORT = ('\n[controller]\nname = "sysid"\nhold_s = 0.5\nsweep_deg = 12.0\nsweep_deg_s = 16.0\nchirp_s = 4.0\n'
          'prbs_s = 2.0\n')
 QUIET = ["--quiet", "--no-plot", "--no-trace"]
-
-# the fit of argv[1] with its encoder angle, IMU pitch, current and velocity multiplied by 1 + 1e-12: {name: value}
-# into argv[2]
-NUDGED = """
-import json, sys
-from pathlib import Path
-from host_tools.calibration.fit_data import load_experiment
-from host_tools.calibration.fit_model import load_base
-from host_tools.calibration.plant_fit import fit_plant
-exp = load_experiment(Path(sys.argv[1]))
-exp.angle, exp.imu, exp.current, exp.vel = (x * (1.0 + 1e-12) for x in (exp.angle, exp.imu, exp.current, exp.vel))
-Path(sys.argv[2]).write_text(json.dumps(fit_plant(load_base(None), exp).values))
-"""
-
-
-def other_kernel() -> dict[str, str]:
-    """An OpenBLAS set-up other than the default one this CPU runs: one thread, and on an x86 CPU with AVX the
-    Sandybridge kernel (numpy's and scipy's OpenBLAS both honour OPENBLAS_CORETYPE; a kernel the CPU lacks the
-    instructions for would crash, so none is named without AVX)."""
-    env = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    try:
-        flags = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        flags = ""
-    if " avx " in flags or " avx\n" in flags:
-        env["OPENBLAS_CORETYPE"] = "Sandybridge"
-    return env
-
 
 @contextmanager
 def _locked(path: Path):
@@ -75,29 +44,20 @@ def _make(d: Path) -> None:
     plant = ["--plant", str(HANDMADE)]
     assert main(["run", "--experiment", "sysid", "--profile", str(d / "fw.toml"), *plant, *QUIET,
                  "--out", str(d / "sysid")]) == 0
-    env = {**os.environ, **other_kernel(), "PYTHONPATH": str(ROOT)}
-    other = subprocess.Popen([sys.executable, "-c", NUDGED, str(d / "sysid"), str(d / "other.json")], cwd=ROOT,
-                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
-        # a different run: 10 strides of gait tracking on the same plant (another seed: other noise, other offsets)
-        gait = ["run", "--strides", "10", "--seed", "5", "--record", *plant, *QUIET, "--out", str(d / "gait")]
-        assert main(gait) == 0
-        assert main(["fit", str(d / "sysid"), "--validate", str(d / "gait"), "--no-plot", "--out", str(d / "fit")]) == 0
-        _, err = other.communicate(timeout=1800)
-    finally:
-        other.kill()
-    assert other.returncode == 0, err
+    # a different run: 10 strides of gait tracking on the same plant (another seed: other noise, other offsets)
+    gait = ["run", "--strides", "10", "--seed", "5", "--record", *plant, *QUIET, "--out", str(d / "gait")]
+    assert main(gait) == 0
+    assert main(["fit", str(d / "sysid"), "--validate", str(d / "gait"), "--no-plot", "--out", str(d / "fit")]) == 0
     (d / "done").write_text("")
 
 
 def handmade_fit(shared: Path) -> dict:
-    """{"dir", "run" (the sysid recording), "fit" (its `pafp fit` directory), "gait", "json" (fit.json), "other"
-    (the other process's {name: value})}: made under `shared` once, whichever process asks first."""
+    """{"dir", "run" (the sysid recording), "fit" (its `pafp fit` directory), "gait", "json" (fit.json)}: made under
+    `shared` once, whichever process asks first."""
     d = shared / "handmade_fit"
     with _locked(shared / "handmade_fit.lock"):
         if not (d / "done").exists():
             d.mkdir(exist_ok=True)
             _make(d)
     return {"dir": d, "run": d / "sysid", "fit": d / "fit", "gait": d / "gait",
-            "json": json.loads((d / "fit" / "fit.json").read_text()),
-            "other": json.loads((d / "other.json").read_text())}
+            "json": json.loads((d / "fit" / "fit.json").read_text())}

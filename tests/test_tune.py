@@ -95,22 +95,6 @@ def test_search_rejects_bad_budgets(budget):
         tuning.search(load_firmware_config(), strides=1, budget=budget)
 
 
-def test_pafp_tune_writes_profile_json_and_plot(tmp_path, capsys):
-    out = tmp_path / "tune"
-    assert main(["tune", "--budget", "5", "--strides", "1", "--workers", "1", "--seed", "3", "--quiet",
-                 "--out", str(out)]) == 0
-    doc = json.loads((out / "tune.json").read_text())
-    assert len(doc["evaluations"]) == 5 and doc["seed"] == 3
-    assert doc["best"]["score"] <= doc["before"]["score"]
-    cfg = load_firmware_config(out / "firmware_tuned.toml")
-    assert tuning.gains_of(cfg) == pytest.approx(doc["best"]["gains"])
-    assert (out / "tune.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    printed = capsys.readouterr().out
-    assert "before: RMS" in printed and "after:  RMS" in printed
-    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet",
-                 "--out", str(tmp_path / "run")]) == 0
-
-
 @pytest.mark.parametrize(("old", "new", "needle"), [
     ("control = 1000", "contrl = 1000", "[rates_hz] has no key 'contrl'"),
     ("angle_min_deg = -33.0", "angle_mni_deg = -33.0", "[safety] has no key 'angle_mni_deg'"),
@@ -155,18 +139,28 @@ def test_candidates_run_the_plant_they_are_given(tmp_path, nominal):
     assert drawn.rms_error_deg != nominal.rms_error_deg
 
 
-def test_pafp_tune_on_a_plant_file(tmp_path, capsys):
+def test_pafp_tune_on_a_plant_file_writes_profile_json_and_plot(tmp_path, capsys):
+    """One `pafp tune` (its Dask cluster's start-up is most of its time): the outputs, and the plant it was given."""
     plant = _heavier_plant(tmp_path)
     out = tmp_path / "tune"
     assert main(["tune", "--budget", "5", "--strides", "1", "--workers", "1", "--seed", "3", "--quiet",
                  "--plant", str(plant), "--plant-seed", "7", "--out", str(out)]) == 0
     doc = json.loads((out / "tune.json").read_text())
+    assert len(doc["evaluations"]) == 5 and doc["seed"] == 3
+    assert doc["best"]["score"] <= doc["before"]["score"]
     assert doc["plant"] == {"file": str(plant), "seed": 7}
     base = load_firmware_config()
     again = tuning.evaluate(0, base, tuning.gains_of(base), strides=1, seed=3,
                             plant=tuning.TunePlant(plant, 7))
     assert doc["before"] == json.loads(json.dumps(again.as_dict()))  # candidate 0 ran that plant, that draw
-    assert f"on plant {plant} drawn with seed 7" in capsys.readouterr().out
+    cfg = load_firmware_config(out / "firmware_tuned.toml")
+    assert tuning.gains_of(cfg) == pytest.approx(doc["best"]["gains"])
+    assert (out / "tune.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    printed = capsys.readouterr().out
+    assert "before: RMS" in printed and "after:  RMS" in printed
+    assert f"on plant {plant} drawn with seed 7" in printed
+    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet",
+                 "--out", str(tmp_path / "run")]) == 0
 
 
 def test_pafp_tune_refuses_a_missing_plant_file_before_any_run(tmp_path, capsys):

@@ -21,6 +21,10 @@ interval, the truth the emulator's (`host_tools.calibration.plant_truth`, emulat
 - ``test_fit_under_a_rounding_nudge``: the tests' 10 s experiment on `--plant-seed 7` fitted as recorded and with
   its encoder angle, IMU pitch and current multiplied by 1 + 1e-12: how far apart the identified values come, in
   half-widths (goal 0.05: the answer must not hang on rounding).
+- ``test_fit_under_another_kernel``: the hand-made plant's 10 s recording (tests/fit_shared.py's) fitted in this
+  process and in a process of its own under another BLAS set-up (`other_kernel`: one thread, Sandybridge where the
+  CPU has AVX) with its data nudged by 1e-12 (`NUDGED`): how far apart, in half-widths (issue 34's done-when: 0.05;
+  not met yet, a make-test test when it is: an expected failure there cost a whole fit each run).
 
 Each run is fitted with `pafp fit`'s defaults. A calibrated marginal 95 % interval would put about 95 % inside. Prints
 each run's errors in half-widths and the count with its exact (Clopper-Pearson) 95 % confidence interval (the
@@ -30,15 +34,18 @@ uncertainty); records them in ``extra_info``. The goal (at least 90 % inside) is
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import subprocess
+import sys
 import time
 import warnings
 from pathlib import Path
 
 from host_tools.calibration.fit_data import load_experiment
-from host_tools.calibration.fit_model import load_base
-from host_tools.calibration.plant_fit import fit_plant
+from host_tools.calibration.fit_model import base_values, load_base, residuals
+from host_tools.calibration.plant_fit import fit_parts, fit_plant
 from host_tools.calibration.plant_truth import truth_of
 from host_tools.cli import main
 from tests.fit_shared import HANDMADE, SHORT
@@ -50,6 +57,34 @@ COVERAGE_GOAL = 0.90
 NUDGE_GOAL = 0.05
 ADEQUACY_FALSE_GOAL = 0.1  # correct-model recordings the adequacy check may flag
 DYNAMICS = ("output_inertia_kg_m2", "foot_damping_nm_s_per_rad", "gravity_moment_nm", "coulomb_friction_nm")
+
+
+# the fit of argv[1] with its encoder angle, IMU pitch, current and velocity multiplied by 1 + 1e-12: {name: value}
+# into argv[2]
+NUDGED = """
+import json, sys
+from pathlib import Path
+from host_tools.calibration.fit_data import load_experiment
+from host_tools.calibration.fit_model import base_values, load_base, residuals
+from host_tools.calibration.plant_fit import fit_parts, fit_plant
+exp = load_experiment(Path(sys.argv[1]))
+exp.angle, exp.imu, exp.current, exp.vel = (x * (1.0 + 1e-12) for x in (exp.angle, exp.imu, exp.current, exp.vel))
+Path(sys.argv[2]).write_text(json.dumps(fit_plant(load_base(None), exp).values))
+"""
+
+
+def other_kernel() -> dict[str, str]:
+    """An OpenBLAS set-up other than the default one this CPU runs: one thread, and on an x86 CPU with AVX the
+    Sandybridge kernel (numpy's and scipy's OpenBLAS both honour OPENBLAS_CORETYPE; a kernel the CPU lacks the
+    instructions for would crash, so none is named without AVX)."""
+    env = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    try:
+        flags = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        flags = ""
+    if " avx " in flags or " avx\n" in flags:
+        env["OPENBLAS_CORETYPE"] = "Sandybridge"
+    return env
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -169,6 +204,44 @@ def test_fit_under_a_rounding_nudge(benchmark, tmp_path: Path) -> None:  # type:
     assert figures["finite"] and len(figures["half_widths_apart"]) >= 5
     if figures["max"] > NUDGE_GOAL:
         warnings.warn(f"the fit moved {figures['max']} half-widths under a 1e-12 nudge (goal {NUDGE_GOAL})",
+                      stacklevel=2)
+
+
+def test_fit_under_another_kernel(benchmark, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    (tmp_path / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
+    run = tmp_path / "hand-made"
+    assert main(["run", "--experiment", "sysid", "--profile", str(tmp_path / "fw.toml"), "--plant", str(HANDMADE),
+                 "--quiet", "--no-plot", "--no-trace", "--out", str(run)]) == 0
+
+    def measure() -> dict:
+        env = {**os.environ, **other_kernel(), "PYTHONPATH": str(ROOT)}
+        other = subprocess.run([sys.executable, "-c", NUDGED, str(run), str(tmp_path / "other.json")], cwd=ROOT,
+                               env=env, capture_output=True, text=True, timeout=3600)
+        assert other.returncode == 0, other.stderr
+        base, exp = load_base(None), load_experiment(run)
+        a, b = fit_plant(base, exp), json.loads((tmp_path / "other.json").read_text())
+        apart = {n: round(abs(a.values[n] - b[n]) / a.ci95[n], 4) for n in a.names
+                 if a.identifiable.get(n) and a.ci95.get(n)}
+        # the fit's cost (this process's kernel) on the line from its solution to the other's: which one is lower,
+        # and how rough the cost is between them (an interval spans 1.92 of it)
+        v, fit_part = {**base_values(base), **a.values}, fit_parts(exp)[0]
+        line = {}
+        for t in (0.0, 0.25, 0.5, 0.75, 1.0):
+            r = residuals(base, {**v, **{n: v[n] + t * (b[n] - v[n]) for n in a.names}}, fit_part, a.noise_scales)
+            line[str(t)] = round(0.5 * float(r @ r), 3)
+        return {"half_widths_apart": apart, "max": max(apart.values()), "cost_along_the_line": line,
+                "other_kernel": " ".join(f"{k}={x}" for k, x in other_kernel().items()),
+                "load_average_1min": round(os.getloadavg()[0], 2)}
+
+    figures = benchmark.pedantic(measure, rounds=1, iterations=1)
+    benchmark.extra_info.update(figures)
+    print(f"\nfit under {figures['other_kernel']} with the data nudged by 1e-12: at most {figures['max']} half-widths "
+          f"apart (goal {NUDGE_GOAL}): " + ", ".join(f"{n} {e}" for n, e in figures["half_widths_apart"].items())
+          + "\n  cost from this fit (0) to the other's (1): "
+          + ", ".join(f"{t} {c}" for t, c in figures["cost_along_the_line"].items()))
+    assert len(figures["half_widths_apart"]) >= 5 and math.isfinite(figures["max"])
+    if figures["max"] > NUDGE_GOAL:
+        warnings.warn(f"the fit moved {figures['max']} half-widths under another BLAS kernel (goal {NUDGE_GOAL})",
                       stacklevel=2)
 
 
