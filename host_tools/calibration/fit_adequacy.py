@@ -17,10 +17,10 @@ tried first: the input is smooth, so its lags' covariance is nearly singular.)
 The inputs (`inputs`): the experiment is closed loop, the PD hold's part of the command is the measured angle's,
 noise included, so the command follows the angle's residual with no model error at all (tests/test_fit_adequacy.py
 shows it on a seeded residual; on the benchmark's correct models the check against the command flagged 4 of 6).
-Ljung's test assumes an input independent of the noise; the experiment's own reference and excitation are (`fit_data.EXOGENOUS`, functions
-of time), so the check takes them when the recording carries them and the command only when it does not (then the
-verdict says the bound is not exact). A residual prewhitened by its own AR model did worse: the windowed errors are
-no stationary AR process.
+Ljung's test assumes an input independent of the noise; the experiment's own reference and excitation are
+(`fit_data.EXOGENOUS`, functions of time), so the check takes them when the recording carries them and the command
+only when it does not (then the verdict says the bound is not exact). A residual prewhitened by its own AR model
+did worse: the windowed errors are no stationary AR process.
 
 A lag fails when |z| exceeds the bound that shares FAMILY_ALPHA over every lag of every test (Bonferroni), so that a
 correct model fails one fit in a hundred or fewer. When one fails, the fit's 95 % intervals hold only for the model:
