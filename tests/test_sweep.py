@@ -241,3 +241,24 @@ def test_an_out_that_is_a_file_is_refused_before_any_cluster(tmp_path, capsys):
     (tmp_path / "f").write_text("x")
     assert main(["sweep", str(spec), "--out", str(tmp_path / "f"), "--workers", "1"]) == 2
     assert "is a file" in capsys.readouterr().err
+
+
+def _worker_filters() -> list[str]:
+    import logging
+
+    return [getattr(f, "__name__", type(f).__name__) for f in logging.getLogger("distributed.worker").filters]
+
+
+def test_local_process_workers_drop_only_the_lost_heartbeat_error():
+    """A worker still finishing a point when a stop closes the scheduler would print the heartbeat's traceback on the
+    command's stderr (seen once in the faults stop test); the workers filter that record and no other."""
+    import logging
+
+    from host_tools.studies.quiet_workers import HEARTBEAT_LOST, drop_lost_heartbeat
+
+    def record(msg: str) -> logging.LogRecord:
+        return logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1, msg, None, None)
+    assert not drop_lost_heartbeat(record(HEARTBEAT_LOST + "."))
+    assert drop_lost_heartbeat(record("Compute Failed")) and drop_lost_heartbeat(record("Worker is at 95% memory"))
+    with dask_client(workers=1) as client:
+        assert list(client.run(_worker_filters).values()) == [["drop_lost_heartbeat"]]

@@ -90,10 +90,15 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, proces
                                silence_logs=logging.ERROR, **where)
     client = Client(cluster)
     try:
+        if processes:  # the worker processes' stderr is the command's
+            from host_tools.studies.quiet_workers import QuietHeartbeat
+
+            client.register_plugin(QuietHeartbeat())
         yield client
     finally:
         client.close()
         cluster.close()
+
 
 
 TERMINAL_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGHUP") if hasattr(signal, n))
