@@ -68,16 +68,26 @@ def interrupting() -> Iterator[StopSignals]:
     garbage-collector callback), the signal is delivered again, so the stop is never lost."""
     signals = StopSignals()
     t0 = time.perf_counter()
+    in_flight = [False]  # an Interrupted was raised and Python has not dropped it
 
     def raise_now() -> None:
+        if in_flight[0]:  # a late redelivery while one is already on its way out: nothing more to do
+            return
+        in_flight[0] = True
         raise Interrupted(signals.name or "SIGINT", time.perf_counter() - t0)
 
-    def again() -> None:  # once the hook and the callback that dropped it have returned
-        time.sleep(REDELIVER_AFTER_S)
-        signals.redeliver()
+    def again() -> None:
+        """Deliver the signal again once the hook and the callback that dropped it have returned, and again every
+        REDELIVER_AFTER_S until its handler raised: a delivery that lands between the main thread's last check and
+        a blocking call (a sleep, a wait) is handled only when the call returns, and the next one interrupts it."""
+        while not in_flight[0] and (signals, t0) in _STOPS:
+            time.sleep(REDELIVER_AFTER_S)
+            if not in_flight[0]:
+                signals.redeliver()
 
     def swallowed(unraisable: sys.UnraisableHookArgs) -> None:  # raised inside a gc callback (distributed's
         if isinstance(unraisable.exc_value, Interrupted):   # GCDiagnosis) and dropped: delivered again
+            in_flight[0] = False
             threading.Thread(target=again, daemon=True).start()
         else:
             previous_hook(unraisable)
