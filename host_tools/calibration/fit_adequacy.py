@@ -37,9 +37,10 @@ import numpy as np
 
 from hal.virtual.plant import PlantParams
 from host_tools.calibration.fit_data import WINDOW_S, Experiment
-from host_tools.calibration.fit_model import simulate, windows
+from host_tools.calibration.fit_model import encoder_step, simulate, windows
 
-__all__ = ["ACF_S", "FAMILY_ALPHA", "LAGS", "LAG_S", "adequacy", "cross_test", "inputs", "z_bound"]
+__all__ = ["ACF_S", "BEYOND_COUNT_LIMIT", "FAMILY_ALPHA", "LAGS", "LAG_S", "adequacy", "beyond_count", "cross_test",
+           "inputs", "z_bound"]
 
 # lags 0, 10, ..., 250 ms: a simulation window's span, over which the closed loop answers its reference (at lags
 # to 50 ms only, a Coulomb friction three times the truth's and half its damping passed on a correct recording)
@@ -47,6 +48,7 @@ LAGS, LAG_S = 26, 0.01
 ACF_S = WINDOW_S  # the residual's and the input's autocovariances summed to this lag for the bound (pairs within
 # a window: the windowed errors start afresh at each)
 FAMILY_ALPHA = 0.01  # a correct model's chance of failing the verdict (all its tests together)
+BEYOND_COUNT_LIMIT = 0.005  # the share of a segment's encoder residuals allowed beyond one count (see the docstring)
 MISSES = "the model misses something"
 NOT_CHECKED = "not checked (too few samples)"
 
@@ -107,11 +109,21 @@ def cross_test(e: np.ndarray, t: np.ndarray, win: np.ndarray, signal: tuple[np.n
             "correlation": [round(float(x), 4) for x in corr], "bound95": [round(abs(float(x)), 4) for x in own95]}
 
 
+def beyond_count(e: np.ndarray, count: float) -> dict:
+    """The resolution test of the encoder angle's residual e (rad) with the encoder's count (rad): {the share of
+    samples farther than one count from the model's angle, the largest |e| in counts, the limit, ok}."""
+    share = float(np.mean(np.abs(e) > count))
+    return {"share_beyond_one_count": round(share, 5), "max_counts": round(float(np.max(np.abs(e))) / count, 2),
+            "count_deg": round(math.degrees(count), 5), "limit": BEYOND_COUNT_LIMIT, "samples": len(e),
+            "ok": share <= BEYOND_COUNT_LIMIT}
+
+
 def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment]) -> dict:
     """The check on the fitted values v for each segment in parts ({"fit": ..., "held_out": ...}): fit.json's
     ``adequacy``: {verdict, against (the inputs tested), tests: {segment: {signal: {input: cross_test's}}},
-    failing: [segment signal against input: lags]}."""
+    resolution: {segment: beyond_count's}, failing: [what failed, one line each]}."""
     residual: dict[str, dict[str, tuple]] = {}
+    counts: dict[str, float] = {}
     for seg, part in parts.items():
         if len(part.t) < 4 * LAGS:
             continue
@@ -121,6 +133,7 @@ def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment
         for w, (k, end) in enumerate(windows(part)):
             win[k:end] = w
         dt = float(np.median(np.diff(part.t)))
+        counts[seg] = encoder_step(part)
         residual[seg] = {name: ((meas - sim)[used], part.t[used], win[used], dt)
                          for name, sim, meas, used in (("angle", angle, part.angle, mask),
                                                        ("current", current, part.current, mask & heard),
@@ -131,10 +144,16 @@ def adequacy(base: PlantParams, v: dict[str, float], parts: dict[str, Experiment
     bound = z_bound(max(family, 1))
     tests = {seg: {name: {u: cross_test(e, t, win, sig, dt, bound) for u, sig in against.items()}
                    for name, (e, t, win, dt) in r.items()} for seg, r in residual.items()}
+    resolution = {seg: beyond_count(r["angle"][0], counts[seg]) for seg, r in residual.items()
+                  if "angle" in r and counts[seg] > 0.0}
     failing = [f"{seg} {name} against {u} at lags {', '.join(f'{x:g}' for x in d['lags_ms_beyond'])} ms (|z| up to "
                f"{d['max_abs_z']:g} > {d['z_bound']:g})"
                for seg, sig in tests.items() for name, by in sig.items() for u, d in by.items() if not d["ok"]]
+    failing += [f"{seg} angle beyond the encoder's count: {100 * d['share_beyond_one_count']:.2f} % of its samples "
+                f"more than one count ({d['count_deg']:g} deg) from the model's (limit {100 * d['limit']:g} %; up to "
+                f"{d['max_counts']:g} counts)" for seg, d in resolution.items() if not d["ok"]]
     checked = any(tests.values())
     return {"verdict": MISSES if failing else "adequate" if checked else NOT_CHECKED, "failing": failing,
             "against": list(against), "lags": LAGS, "max_lag_ms": round(1e3 * (LAGS - 1) * LAG_S, 1),
-            "family_alpha": FAMILY_ALPHA, "tests_in_family": family, "z_bound": round(bound, 3), "tests": tests}
+            "family_alpha": FAMILY_ALPHA, "tests_in_family": family, "z_bound": round(bound, 3), "tests": tests,
+            "resolution": resolution}
