@@ -269,12 +269,16 @@ def adequacy_lines(a: dict) -> list[str]:
             f"bound {a['z_bound']:g}, {100 * a['family_alpha']:g} % shared over the {a.get('tests_in_family', '')} lags"
             + ("; the command carries the closed loop's feedback of the measured angle, so a correct model can "
                "fail: docs/calibration.md, Limits)" if closed else ")"))
+    res = next(iter(a.get("resolution", {}).values()), None)
+    if res:
+        head += (f"; and the encoder angle's residual against the encoder's count ({res['count_deg']:g} deg: at most "
+                 f"{100 * res['limit']:g} % of the samples more than one count from the model's)")
     if not a["failing"]:
-        return [head + ": independent of them on both segments. The intervals hold for this model; an effect it "
-                "lacks that leaves no linear trace of these signals is not excluded."]
-    return [head + ": they follow them, so the model likely lacks an effect the bench has. **The 95 % intervals "
-            "above are conditional on the model**: they bound the noise's part of the error, not the bias from what "
-            "it lacks. Failing:", "", *(f"- {f}" for f in a["failing"])]
+        return [head + ": passed on both segments. The intervals hold for this model; an effect it lacks that "
+                "leaves neither a linear trace of these signals nor the angle beyond a count is not excluded."]
+    return [head + ": failed, so the model likely lacks an effect the bench has. **The 95 % intervals above are "
+            "conditional on the model**: they bound the noise's part of the error, not the bias from what it lacks. "
+            "Failing:", "", *(f"- {f}" for f in a["failing"])]
 
 
 def write_fit_outputs(out: Path, base: PlantParams, base_text: str, r: FitResult, exp: Experiment,
