@@ -352,7 +352,9 @@ def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
              "foot_damping_nm_s_per_rad": 0.5 * values["foot_damping_nm_s_per_rad"]}
     bad = adequacy(load_plant_params(), wrong, {"fit": fit_part, "held_out": held})
     assert bad["verdict"] == MISSES and bad["failing"], bad
-    assert all(" at lags " in f and " ms (|z| up to " in f for f in bad["failing"])
+    assert all((" at lags " in f and " ms (|z| up to " in f) or " beyond the encoder's count: " in f
+               for f in bad["failing"]), bad["failing"]
+    assert set(bad["resolution"]) == {"fit", "held_out"}
 
 
 def test_the_check_passes_the_correct_model(experiment):

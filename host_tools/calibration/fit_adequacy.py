@@ -22,6 +22,15 @@ Ljung's test assumes an input independent of the noise; the experiment's own ref
 only when it does not (then the verdict says the bound is not exact). A residual prewhitened by its own AR model
 did worse: the windowed errors are no stationary AR process.
 
+Beside it, the resolution test (`beyond_count`): a correct model started from the encoder's reading follows the
+true angle to within a fraction of a count, and the reading is the true angle rounded to a count, so the angle's
+residual stays within about one count (the readings' smallest step, `fit_model.encoder_step`). A segment fails when
+more than BEYOND_COUNT_LIMIT of its samples lie farther. The cross-correlations above miss what the fit absorbs into
+biased parameters (Stribeck friction, a loss by power direction, cogging: their residuals follow no linear function
+of the excitation); those leave the simulated angle more than a count off at some starts and reversals. The limit is
+not derived: 0.5 % sits between the nominal plants' largest share (0.26 %) and the misspecified ones' smallest
+(tests/benchmarks/test_bench_fit_coverage.py prints both). An encoder noisier than its count fails it too.
+
 A lag fails when |z| exceeds the bound that shares FAMILY_ALPHA over every lag of every test (Bonferroni), so that a
 correct model fails one fit in a hundred or fewer. When one fails, the fit's 95 % intervals hold only for the model:
 they bound the noise's part of the error, not a bias from what the model lacks; the failing tests and lags are
