@@ -354,7 +354,7 @@ def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
     assert bad["verdict"] == MISSES and bad["failing"], bad
     assert all((" at lags " in f and " ms (|z| up to " in f) or " beyond the encoder's count: " in f
                for f in bad["failing"]), bad["failing"]
-    assert set(bad["resolution"]) == {"fit", "held_out"}
+    assert set(bad["resolution"]["segments"]) == {"fit", "held_out"}
 
 
 def test_the_check_passes_the_correct_model(experiment):
