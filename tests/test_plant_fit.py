@@ -327,7 +327,8 @@ def test_a_column_made_of_a_switching_step_is_not_a_slope():
 def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
     """Every fit reports the adequacy check (fit.json's adequacy: each segment's three signals; its verdict in fit.md).
     The same recording against a model that is clearly wrong, the fitted plant with three times its Coulomb friction
-    and half its damping: the check says the model misses something and names the signals and lags. (The rates over
+    and half its damping: the check says the model misses something, its angle more than an encoder count from the
+    reading at more samples than the limit allows. (The rates over
     plants with and without unmodelled effects: tests/benchmarks/test_bench_fit_coverage.py.)"""
     from host_tools.calibration.fit_adequacy import MISSES, adequacy
     from host_tools.calibration.fit_data import EXOGENOUS, load_experiment
@@ -352,7 +353,11 @@ def test_the_fit_checks_its_model_and_reports_the_verdict(experiment):
              "foot_damping_nm_s_per_rad": 0.5 * values["foot_damping_nm_s_per_rad"]}
     bad = adequacy(load_plant_params(), wrong, {"fit": fit_part, "held_out": held})
     assert bad["verdict"] == MISSES and bad["failing"], bad
-    assert all(" at lags " in f and " ms (|z| up to " in f for f in bad["failing"])
+    assert all((" at lags " in f and " ms (|z| up to " in f) or " beyond the encoder's count: " in f
+               for f in bad["failing"]), bad["failing"]
+    # its verdict is the resolution test's (the cross-correlations are reported beside it)
+    assert not bad["resolution"]["ok"] and set(bad["resolution"]["segments"]) == {"fit", "held_out"}, bad["resolution"]
+    assert bad["decided_by"] == "resolution" and isinstance(bad["correlation_beyond"], list)
 
 
 def test_the_check_passes_the_correct_model(experiment):

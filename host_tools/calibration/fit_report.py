@@ -264,17 +264,26 @@ def adequacy_lines(a: dict) -> list[str]:
     against = a.get("against", ["command"])
     closed = against == ["command"]
     inputs = "the command" if closed else "the experiment's " + " and ".join(against)
-    head = (f"**Model adequacy: {a['verdict']}.** The residuals of angle, current and IMU pitch against {inputs} "
-            f"at lags 0-{a['max_lag_ms']:g} ms (cross-correlation, its bound corrected for colored residuals; |z| "
-            f"bound {a['z_bound']:g}, {100 * a['family_alpha']:g} % shared over the {a.get('tests_in_family', '')} lags"
-            + ("; the command carries the closed loop's feedback of the measured angle, so a correct model can "
-               "fail: docs/calibration.md, Limits)" if closed else ")"))
+    res = a.get("resolution")
+    correlation = (f"the residuals of angle, current and IMU pitch against {inputs} at lags 0-{a['max_lag_ms']:g} ms "
+                   f"(cross-correlation, its bound corrected for colored residuals; |z| bound {a['z_bound']:g}, "
+                   f"{100 * a['family_alpha']:g} % shared over the {a.get('tests_in_family', '')} lags"
+                   + ("; the command carries the closed loop's feedback of the measured angle, so a correct model can "
+                      "fail: docs/calibration.md, Limits)" if closed else ")"))
+    if res:
+        head = (f"**Model adequacy: {a['verdict']}.** The encoder angle's residual against the encoder's count "
+                f"({res['count_deg']:g} deg): {100 * res['share_beyond_one_count']:.2f} % of the samples more than one "
+                f"count from the model's (limit {100 * res['limit']:g} %). Reported beside it, not deciding (correct "
+                f"models exceed their bound too: docs/calibration.md, Limits): {correlation}: "
+                + ("; ".join(a.get("correlation_beyond", [])) or "none beyond") + ".")
+    else:
+        head = f"**Model adequacy: {a['verdict']}.** The encoder never moved; decided by {correlation}."
     if not a["failing"]:
-        return [head + ": independent of them on both segments. The intervals hold for this model; an effect it "
-                "lacks that leaves no linear trace of these signals is not excluded."]
-    return [head + ": they follow them, so the model likely lacks an effect the bench has. **The 95 % intervals "
-            "above are conditional on the model**: they bound the noise's part of the error, not the bias from what "
-            "it lacks. Failing:", "", *(f"- {f}" for f in a["failing"])]
+        return [head + " The intervals hold for this model; an effect it lacks that keeps the angle within a count "
+                "is not excluded."]
+    return [head + " The model likely lacks an effect the bench has. **The 95 % intervals above are conditional on "
+            "the model**: they bound the noise's part of the error, not the bias from what it lacks. Failing:", "",
+            *(f"- {f}" for f in a["failing"])]
 
 
 def write_fit_outputs(out: Path, base: PlantParams, base_text: str, r: FitResult, exp: Experiment,

@@ -13,10 +13,12 @@ interval, the truth the emulator's (`host_tools.calibration.plant_truth`, emulat
 - ``test_adequacy_flags_unmodelled_effects``: the model-adequacy check (host_tools/calibration/fit_adequacy.py) on the
   issue's four misspecified plants (`hal.virtual.plant.imperfections.MISSPECIFIED`, noise seed 0: Stribeck friction,
   friction 5 % of the transmitted torque and cogging on the tests' 10 s experiment, all three milder on the default
-  29 s one): each must say "the model misses something" (asserted: fixed seeds, a deterministic verdict). The nominal
-  plants' false alarms are counted by the two coverage benchmarks above, which fit correct models (goal: at most one
-  recording in ten flagged; warned about). Each recording's largest |z| over the check's tests is printed beside its
-  bound: how far apart the two kinds of recording lie, not only which side of the bound.
+  29 s one): each must say "the model misses something" (asserted: fixed seeds, a deterministic verdict). The belt's
+  compliance (`OTHER_PLANTS`), an effect the check was not built around, is fitted and reported beside them. The
+  nominal plants' false alarms are counted by the two coverage benchmarks above, which fit correct models (goal: at
+  most one recording in ten flagged; warned about). Each recording's share of encoder residuals beyond one count (the
+  verdict's test) is printed beside its limit, and its largest cross-correlation |z| beside its bound: how far apart
+  the two kinds of recording lie, not only which side of the limit.
 
 - ``test_fit_under_a_rounding_nudge``: the tests' 10 s experiment on `--plant-seed 7` fitted as recorded and with
   its encoder angle, IMU pitch and current multiplied by 1 + 1e-12: how far apart the identified values come, in
@@ -43,6 +45,7 @@ import time
 import warnings
 from pathlib import Path
 
+from host_tools.calibration.fit_adequacy import BEYOND_COUNT_LIMIT
 from host_tools.calibration.fit_data import load_experiment
 from host_tools.calibration.fit_model import base_values, load_base, residuals
 from host_tools.calibration.plant_fit import fit_parts, fit_plant
@@ -103,7 +106,7 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 
 def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: Path) -> dict:
     """Record, fit and score each (label, plant options, noise seed) run: the counts and each run's half-widths off."""
-    rows, inside, total, walls, flagged, dynamics, largest = {}, 0, 0, [], {}, {}, {}
+    rows, inside, total, walls, flagged, dynamics, largest, beyond = {}, 0, 0, [], {}, {}, {}, {}
     for label, plant, seed in runs:
         run = out / f"{label.replace('/', '_')}_{seed}"
         assert main(["run", "--experiment", "sysid", *profile, *plant, "--seed", str(seed), "--quiet", "--no-plot",
@@ -117,6 +120,7 @@ def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: P
         rows[label] = {n: round(e, 2) for n, e in errors.items()}
         dynamics[label] = {n: round(r.values[n] / truth[n] - 1, 4) for n in DYNAMICS if r.identifiable.get(n)}
         largest[label] = _largest_z(r.adequacy)
+        beyond[label] = _beyond(r.adequacy)
         if r.adequacy.get("failing"):
             flagged[label] = r.adequacy["failing"]
         inside += sum(e <= 1.0 for e in errors.values())
@@ -125,7 +129,8 @@ def _coverage(runs: list[tuple[str, list[str], int]], profile: list[str], out: P
     return {"inside": inside, "identified": total, "coverage": round(inside / max(total, 1), 3),
             "coverage_ci95": [round(lo, 3), round(hi, 3)],
             "half_widths_off": rows, "dynamics_relative_error": dynamics, "fit_wall_s_max": round(max(walls), 1),
-            "adequacy_flagged": flagged, "adequacy_largest_z": largest, "recordings": len(runs),
+            "adequacy_flagged": flagged, "adequacy_largest_z": largest, "adequacy_beyond_count": beyond,
+            "recordings": len(runs),
             "load_average_1min": round(os.getloadavg()[0], 2)}
 
 
@@ -133,6 +138,12 @@ def _largest_z(adequacy: dict) -> float:
     """The largest |z| over every test of a fit's adequacy check (its verdict fails beyond the check's z_bound)."""
     return max((d["max_abs_z"] for sig in adequacy["tests"].values() for by in sig.values() for d in by.values()),
                default=0.0)
+
+
+def _beyond(adequacy: dict) -> float:
+    """The share of a fit's encoder residuals (both segments) beyond one count (the check fails it beyond
+    `fit_adequacy.BEYOND_COUNT_LIMIT`)."""
+    return adequacy.get("resolution", {}).get("share_beyond_one_count", 0.0)
 
 
 def _report(benchmark, figures: dict, what: str, runs: int) -> None:  # type: ignore[no-untyped-def]
@@ -145,7 +156,8 @@ def _report(benchmark, figures: dict, what: str, runs: int) -> None:  # type: ig
         print(f"  {label}: " + ", ".join(f"{n} {e}" for n, e in errors.items()))
     flagged = figures["adequacy_flagged"]
     print(f"  model adequacy: {len(flagged)} of {figures['recordings']} correct-model recordings flagged (goal at most "
-          f"one in ten); largest |z| of each: {figures['adequacy_largest_z']}"
+          f"one in ten); largest |z| of each: {figures['adequacy_largest_z']}; largest share of encoder residuals "
+          f"beyond one count: {figures['adequacy_beyond_count']}"
           + "".join(f"\n    {label}: {'; '.join(f)}" for label, f in flagged.items()))
     if len(flagged) > ADEQUACY_FALSE_GOAL * figures["recordings"]:
         warnings.warn(f"the adequacy check flagged {len(flagged)} of {figures['recordings']} correct-model "
@@ -246,13 +258,13 @@ def test_fit_under_another_kernel(benchmark, tmp_path: Path) -> None:  # type: i
 
 
 def test_adequacy_flags_unmodelled_effects(benchmark, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from hal.virtual.plant.imperfections import MISSPECIFIED, profile_text
+    from hal.virtual.plant.imperfections import MISSPECIFIED, OTHER_PLANTS, profile_text
 
     (tmp_path / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
 
     def measure() -> dict:
         out = {}
-        for name in MISSPECIFIED:
+        for name in (*MISSPECIFIED, *OTHER_PLANTS):
             (tmp_path / f"{name}.toml").write_text(profile_text(name))
             profile = [] if name == "all_milder" else ["--profile", str(tmp_path / "fw.toml")]
             run = tmp_path / name
@@ -261,6 +273,7 @@ def test_adequacy_flags_unmodelled_effects(benchmark, tmp_path: Path) -> None:  
             r = fit_plant(load_base(None), load_experiment(run))
             out[name] = {"verdict": r.adequacy["verdict"], "failing": r.adequacy["failing"],
                          "largest_z": _largest_z(r.adequacy), "z_bound": r.adequacy["z_bound"],
+                         "beyond_count": _beyond(r.adequacy),
                          "held_out_fit_percent": {k: round(v, 1) for k, v in r.fit_pct["held_out"].items()}}
         return out
 
@@ -268,7 +281,9 @@ def test_adequacy_flags_unmodelled_effects(benchmark, tmp_path: Path) -> None:  
     benchmark.extra_info.update(figures)
     print("\nmodel adequacy on plants with effects the fit lacks (noise seed 0):")
     for name, f in figures.items():
-        print(f"  {name}: {f['verdict']} (largest |z| {f['largest_z']} against the bound {f['z_bound']}; held-out "
-              f"fit % {f['held_out_fit_percent']})"
+        print(f"  {name}: {f['verdict']} (largest |z| {f['largest_z']} against the bound {f['z_bound']}; encoder "
+              f"residuals beyond one count {100 * f['beyond_count']:.2f} % against {100 * BEYOND_COUNT_LIMIT:g} %; "
+              f"held-out fit % {f['held_out_fit_percent']})"
               + "".join(f"\n    {x}" for x in f["failing"]))
-    assert all(f["verdict"] == "the model misses something" for f in figures.values()), figures
+    # the issue's four are asserted; the belt's compliance, an effect the check was not built around, is reported
+    assert all(figures[name]["verdict"] == "the model misses something" for name in MISSPECIFIED), figures
