@@ -184,7 +184,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         # the backlash is the fit's (`fit_gap`): the plant runs without it and is given the share of each command
         # that reaches the output
         plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v_start,
-                      start_time_s=t0, initial_current_a=i0)
+                      start_time_s=t0, initial_current_a=i0, located_switching=True)
         gap = GapShare(params, backlash, t0, band) if backlash > 0.0 else None
 
         def command(amps: float, te: float) -> None:
