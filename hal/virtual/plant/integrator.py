@@ -145,7 +145,7 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int, 
     if c.imp_integrate is not None:
         return c.imp_integrate(d, state, t_base, k_first, n, h, ea, eb, fn, exps)
     if c.located:
-        return integrate_located(c, d, state, t_base, k_first, n, h, ea, eb, fn)
+        return integrate_located(c, d, state, t_base, k_first, n, h, ea, eb, fn, exps)
     th, w, i, s, bd, bdd = state
     inv_j, kto, kbo, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.kbo, c.ks, c.c0, c.kd, c.mg, c.psi0
     lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk
@@ -275,7 +275,8 @@ MAX_SWITCHINGS: Final = 4  # a step's friction switchings located (`integrate_lo
 
 def integrate_located(c: Coefficients, d: Drive, state: tuple[float, float, float, int, float, float],
                       t_base: float, k_first: int, n: int, h: float, ea: float, eb: float,
-                      fn: Callable[[float], float] | None) -> tuple[float, float, float, int, float, float]:
+                      fn: Callable[[float], float] | None,
+                      exps: tuple[float, float]) -> tuple[float, float, float, int, float, float]:
     """`integrate` (rigid belt, no opt-in imperfection) with each friction switching placed where it happens
     inside a step: the instant the velocity reaches 0 (then stick or reverse) and the instant a stuck foot's
     torque passes the static friction (breakaway), each by linear interpolation over the step, the step finished
@@ -307,7 +308,8 @@ def integrate_located(c: Coefficients, d: Drive, state: tuple[float, float, floa
                 i = tg + (i - tg) * math.exp(-dt / c.tau)
                 s = 1 if a1 > 0.0 else -1
             else:
-                th1, w1, i1 = _rk4_sliding(c, d, th, w, i, s, t, rem, ea, eb, fn)
+                th1, w1, i1 = _rk4_sliding(c, d, th, w, i, s, t, rem, ea, eb, fn,
+                                           exps if rem == h else lag_factors(rem, c.tau))
                 if w1 * s > 0.0:
                     th, w, i = th1, w1, i1
                     break
@@ -321,7 +323,7 @@ def integrate_located(c: Coefficients, d: Drive, state: tuple[float, float, floa
                     break
                 # the velocity reaches 0 inside: where its line between the ends does, then stick or reverse there
                 dt = rem * w / (w - w1) if w != w1 else 0.0
-                th, _, i = _rk4_sliding(c, d, th, w, i, s, t, dt, ea, eb, fn)
+                th, _, i = _rk4_sliding(c, d, th, w, i, s, t, dt, ea, eb, fn, lag_factors(dt, c.tau))
                 w = 0.0
                 a = static_accel(c, th, i, _ext(t + dt, ea, eb, fn))
                 s = 0 if -c.tsx <= a <= c.tsx else (1 if a > 0.0 else -1)
@@ -337,12 +339,13 @@ def _ext(t: float, ea: float, eb: float, fn: Callable[[float], float] | None) ->
 
 
 def _rk4_sliding(c: Coefficients, d: Drive, th: float, w: float, i: float, s: int, t: float, h: float, ea: float,
-                 eb: float, fn: Callable[[float], float] | None) -> tuple[float, float, float]:
+                 eb: float, fn: Callable[[float], float] | None,
+                 exps: tuple[float, float]) -> tuple[float, float, float]:
     """(angle, velocity, current) after one RK4 step of h from t sliding in mode s (`integrate`'s step, the current
-    lag exact towards the target held from the step's start)."""
+    lag exact towards the target held from the step's start; exps: `lag_factors` of h)."""
     tg = lag_target(c, d, w)
-    i_m = tg + (i - tg) * math.exp(-0.5 * h / c.tau)
-    i_e = tg + (i - tg) * math.exp(-h / c.tau)
+    i_m = tg + (i - tg) * exps[0]
+    i_e = tg + (i - tg) * exps[1]
     hh = 0.5 * h
     a1 = nominal_accel(c, th, w, i, _ext(t, ea, eb, fn), s)
     th2, w2 = th + hh * w, w + hh * a1
