@@ -53,3 +53,32 @@ def test_located_switching_is_the_bench_plant_between_switchings() -> None:
     grid, located = _angles(BASE.foot_damping_nm_s_per_rad, False), _angles(BASE.foot_damping_nm_s_per_rad, True)
     assert np.abs(located[:25] - grid[:25]).max() < 1e-12
     assert 0.0 < np.abs(located - grid).max() < 1e-4  # measured 9.4e-6 rad
+
+
+# the fit's cost along each parameter whose answer moved most with the BLAS kernel before the switchings were located
+SCANNED = ("foot_damping_nm_s_per_rad", "coulomb_friction_nm", "output_inertia_kg_m2", "gravity_moment_nm",
+           "static_friction_nm")
+SCAN_STEP_HW = 0.01  # a fifth of the kernels' agreement goal (0.05 half-widths)
+
+
+def test_the_fits_cost_is_smooth_at_the_scale_of_its_rounding_goal(handmade_fit) -> None:
+    """The shared fit's cost (its own weights) about its solution, one parameter at a time in steps of a hundredth of
+    its 95 % half-width: its second differences are the cost's curvature (an interval spans 1.92 units, so 0.01
+    half-widths is about 4e-4 of them), not steps. With the friction switching on the grid the damping alone, in steps
+    of a thousandth of its value, moved one window's cost by 1.5 units (docs/calibration.md, "Rounding")."""
+    from host_tools.calibration.fit_data import load_experiment
+    from host_tools.calibration.fit_model import base_values, load_base, residuals
+    from host_tools.calibration.plant_fit import fit_parts
+
+    s = handmade_fit["json"]
+    base, fit_part = load_base(None), fit_parts(load_experiment(handmade_fit["run"]))[0]
+    ns = s["noise_scales"]
+    scales = {"angle": np.radians(ns["angle_deg"]), "current": ns["current_a"], "imu": np.radians(ns["imu_deg"])}
+    v = {**base_values(base), **{n: p["value"] for n, p in s["params"].items()}}
+    worst = {}
+    for name in SCANNED:
+        h = SCAN_STEP_HW * s["params"][name]["ci95_half_width"]
+        cost = [0.5 * float(np.sum(residuals(base, {**v, name: v[name] + k * h}, fit_part, scales) ** 2))
+                for k in range(-3, 4)]
+        worst[name] = float(np.abs(np.diff(cost, 2)).max())
+    assert max(worst.values()) < 0.02, worst
