@@ -63,9 +63,11 @@ SCAN_STEP_HW = 0.01  # a fifth of the kernels' agreement goal (0.05 half-widths)
 
 def test_the_fits_cost_is_smooth_at_the_scale_of_its_rounding_goal(handmade_fit) -> None:
     """The shared fit's cost (its own weights) about its solution, one parameter at a time in steps of a hundredth of
-    its 95 % half-width: its second differences are the cost's curvature (an interval spans 1.92 units, so 0.01
-    half-widths is about 4e-4 of them), not steps. With the friction switching on the grid the damping alone, in steps
-    of a thousandth of its value, moved one window's cost by 1.5 units (docs/calibration.md, "Rounding")."""
+    its 95 % half-width: its first differences follow a line (the cost's slope and curvature; a kink bends it) to
+    within half a unit (an interval spans 1.92), no step. With the friction switching on the plant's grid the same
+    scans stepped by up to 4.7 units (the gravity moment); about another solution of the same recording, the
+    backlash's blend passing half a command to a rotor that ends its crossing on the command's wrong side stepped the
+    damping's by 1.9 (`fit_gap.GapShare.share`; docs/calibration.md, "Rounding")."""
     from host_tools.calibration.fit_data import load_experiment
     from host_tools.calibration.fit_model import base_values, load_base, residuals
     from host_tools.calibration.plant_fit import fit_parts
@@ -80,5 +82,6 @@ def test_the_fits_cost_is_smooth_at_the_scale_of_its_rounding_goal(handmade_fit)
         h = SCAN_STEP_HW * s["params"][name]["ci95_half_width"]
         cost = [0.5 * float(np.sum(residuals(base, {**v, name: v[name] + k * h}, fit_part, scales) ** 2))
                 for k in range(-3, 4)]
-        worst[name] = float(np.abs(np.diff(cost, 2)).max())
-    assert max(worst.values()) < 0.02, worst
+        d1, k = np.diff(cost), np.arange(6)
+        worst[name] = float(np.abs(d1 - np.polyval(np.polyfit(k, d1, 1), k)).max())
+    assert max(worst.values()) < 0.5, worst

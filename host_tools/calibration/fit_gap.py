@@ -80,7 +80,11 @@ class GapShare:
             # until this crossing ends, the command held (0: pushed back against the side it left, which the plant
             # holds free until the next command)
             left = reach_time(gap.phi, gap.w, gap.a, gap.half)
-            return 0.5 - 0.5 * left / self.band if 0.0 < left < self.band else 0.0
+            # the end it reaches: the command's side, or the other one (pressed into the side it is at, at once),
+            # where the plant's next command frees it again and nothing passes: 0 on both sides of that instant
+            if left >= self.band or (gap.phi + (gap.w + 0.5 * gap.a * left) * left) * command_a <= 0.0:
+                return 0.0
+            return 0.5 - 0.5 * left / self.band
         if not was_free:
             return 1.0
         # the crossing ended since the last command: how long before this one (0 where rounding puts it after)
