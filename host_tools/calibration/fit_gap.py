@@ -13,7 +13,9 @@ the BLAS kernel's rounding took it (the hand-made plant's current lag 0.37 half-
 Here the plant runs without backlash and the fit passes it the share of each command that reaches the output
 (`GapShare.share`): the plant's own rule (0 while the rotor is free, the whole command once it has crossed), except
 within ``band`` of the command nearest the crossing's end, where the share goes linearly from 1 (ended ``band``
-before the command) through 1/2 (ended at it) to 0 (ends ``band`` after it). The blend is symmetric about the
+before the command) through 1/2 (ended at it) to 0 (ends ``band`` after it); a crossing that ends on the side opposite
+to the command (the output running ahead of the rotor) passes nothing either side of the command, the plant's next
+command freeing the rotor again. The blend is symmetric about the
 plant's rule, so it adds no lead or lag on average; outside it the fit's simulation is the plant's.
 """
 
