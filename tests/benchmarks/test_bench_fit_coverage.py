@@ -24,7 +24,7 @@ interval, the truth the emulator's (`host_tools.calibration.plant_truth`, emulat
 - ``test_fit_under_another_kernel``: the hand-made plant's 10 s recording (tests/fit_shared.py's) fitted in this
   process and in a process of its own under another BLAS set-up (`other_kernel`: one thread, Sandybridge where the
   CPU has AVX) with its data nudged by 1e-12 (`NUDGED`): how far apart, in half-widths (issue 34's done-when: within
-  0.05, asserted). A whole fit in another process (some three CPU minutes) is too long for `make test`, which checks
+  0.05, asserted). A whole fit in another process (about a CPU minute here) is too long for `make test`, which checks
   the cause instead: the fit's cost has no steps at a hundredth of a half-width (tests/test_plant_located.py).
 
 Each run is fitted with `pafp fit`'s defaults. A calibrated marginal 95 % interval would put about 95 % inside. Prints
