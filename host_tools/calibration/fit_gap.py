@@ -79,11 +79,10 @@ class GapShare:
         ended = gap.t + reach_time(gap.phi, gap.w, gap.a, gap.half) if was_free else math.inf
         if gap.command(t_s, (command_a > 0.0) - (command_a < 0.0)):
             gap.free_under(command_a, output_accel_rad_s2)
-            # until this crossing ends, the command held (0: pushed back against the side it left, which the plant
-            # holds free until the next command)
+            # until this crossing ends, the command held; none when it ends on the side opposite to the command
+            # (pushed back against the side it left, or at once into the one it is at): the plant's next command
+            # frees it again, so nothing passes, however close to this command it ends
             left = reach_time(gap.phi, gap.w, gap.a, gap.half)
-            # the end it reaches: the command's side, or the other one (pressed into the side it is at, at once),
-            # where the plant's next command frees it again and nothing passes: 0 on both sides of that instant
             if left >= self.band or (gap.phi + (gap.w + 0.5 * gap.a * left) * left) * command_a <= 0.0:
                 return 0.0
             return 0.5 - 0.5 * left / self.band
