@@ -156,7 +156,8 @@ def backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, scal
 
 def backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
                      grids: tuple[tuple[float, int], ...] = VALLEY_GRIDS) -> float:
-    """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid).
+    """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid, then the vertex of
+    the parabola through the finest grid's best and its neighbours).
 
     The backlash's valley is narrow: each reversal's crossing ends on a whole command period, and the measured
     current, which resolves the crossing's length, moves the cost in steps a few hundredths of a degree wide (on
