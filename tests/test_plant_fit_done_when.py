@@ -4,8 +4,8 @@ its 95 % interval and inertia, damping, Coulomb friction and the gravity moment 
 different run (10 strides of gait tracking on the same plant, `pafp fit --validate`) with at least 90 % fit on the
 encoder angle and 75 % on the current. The recordings and fits are tests/fit_shared.py's, shared with
 tests/test_plant_fit.py (a 10 s experiment keeps them short; the default 29 s one's figures, `--plant-seed` 3, 7, 11,
-21 and 42's, and the same fit under another BLAS kernel and thread count with the data nudged by 1e-12, which does not
-hold yet: tests/benchmarks/test_bench_fit_coverage.py)."""
+21 and 42's, and the same fit under another BLAS kernel and thread count with the data nudged by 1e-12:
+tests/benchmarks/test_bench_fit_coverage.py; its cost without steps: tests/test_plant_located.py)."""
 
 from __future__ import annotations
 

@@ -13,7 +13,9 @@ the BLAS kernel's rounding took it (the hand-made plant's current lag 0.37 half-
 Here the plant runs without backlash and the fit passes it the share of each command that reaches the output
 (`GapShare.share`): the plant's own rule (0 while the rotor is free, the whole command once it has crossed), except
 within ``band`` of the command nearest the crossing's end, where the share goes linearly from 1 (ended ``band``
-before the command) through 1/2 (ended at it) to 0 (ends ``band`` after it). The blend is symmetric about the
+before the command) through 1/2 (ended at it) to 0 (ends ``band`` after it); a crossing that ends on the side opposite
+to the command (the output running ahead of the rotor) passes nothing either side of the command, the plant's next
+command freeing the rotor again. The blend is symmetric about the
 plant's rule, so it adds no lead or lag on average; outside it the fit's simulation is the plant's.
 """
 
@@ -77,10 +79,13 @@ class GapShare:
         ended = gap.t + reach_time(gap.phi, gap.w, gap.a, gap.half) if was_free else math.inf
         if gap.command(t_s, (command_a > 0.0) - (command_a < 0.0)):
             gap.free_under(command_a, output_accel_rad_s2)
-            # until this crossing ends, the command held (0: pushed back against the side it left, which the plant
-            # holds free until the next command)
+            # until this crossing ends, the command held; none when it ends on the side opposite to the command
+            # (pushed back against the side it left, or at once into the one it is at): the plant's next command
+            # frees it again, so nothing passes, however close to this command it ends
             left = reach_time(gap.phi, gap.w, gap.a, gap.half)
-            return 0.5 - 0.5 * left / self.band if 0.0 < left < self.band else 0.0
+            if left >= self.band or (gap.phi + (gap.w + 0.5 * gap.a * left) * left) * command_a <= 0.0:
+                return 0.0
+            return 0.5 - 0.5 * left / self.band
         if not was_free:
             return 1.0
         # the crossing ended since the last command: how long before this one (0 where rounding puts it after)

@@ -9,7 +9,9 @@ a first-order lag and a bias), each divided by its noise scale (`residuals`). Wh
 start is a nuisance, taken from its own data: the initial velocity and, in a moving window, where in its count the
 angle starts (`_project_initial_velocity`, `_project_along`), whether a foot
 the encoder shows at rest is stuck or at the turn of a slide (`_slow_start`), the IMU's offset and its lag's start
-state (`_project_imu_start`).
+state (`_project_imu_start`). The plant places its friction's switchings (reversal, stick, breakaway) where they
+happen inside its 0.1 ms step (`Plant(located_switching=True)`); the bench's plant switches on the grid, which made
+the cost jump as a parameter moved a switching across a grid point (docs/calibration.md, "Rounding").
 """
 
 from __future__ import annotations
@@ -182,9 +184,10 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
         start_angle = min(hi, max(lo, start))
         i0 = float(exp.current[k])
         # the backlash is the fit's (`fit_gap`): the plant runs without it and is given the share of each command
-        # that reaches the output
+        # that reaches the output; its friction switches where it happens, not on its step grid (a cost without
+        # jumps)
         plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v_start,
-                      start_time_s=t0, initial_current_a=i0)
+                      start_time_s=t0, initial_current_a=i0, located_switching=True)
         gap = GapShare(params, backlash, t0, band) if backlash > 0.0 else None
 
         def command(amps: float, te: float) -> None:

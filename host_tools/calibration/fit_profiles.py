@@ -156,7 +156,8 @@ def backlash_cost(base: PlantParams, v: dict[str, float], part: Experiment, scal
 
 def backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, scales: dict[str, float],
                      grids: tuple[tuple[float, int], ...] = VALLEY_GRIDS) -> float:
-    """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid).
+    """The backlash of least cost about v's, the other parameters held at v (a coarse-to-fine grid, then the vertex of
+    the parabola through the finest grid's best and its neighbours).
 
     The backlash's valley is narrow: each reversal's crossing ends on a whole command period, and the measured
     current, which resolves the crossing's length, moves the cost in steps a few hundredths of a degree wide (on
@@ -175,6 +176,12 @@ def backlash_valley(base: PlantParams, v: dict[str, float], part: Experiment, sc
             if 0.0 < b <= PARAMS["backlash_deg"].hi and b not in costs:
                 costs[b] = cost(b)
         best = min(costs, key=costs.__getitem__)
+    # the parabola through the best and its neighbours on the finest grid: a best that rounding moves from one point to
+    # the next where two cost the same moves the vertex little (a grid point is a step of 0.01 deg)
+    step = grids[-1][0]
+    near = [round(best + k * step, 6) for k in (-1, 0, 1)]
+    if all(b in costs for b in near):
+        return parabola_vertex(np.array(near), np.array([costs[b] for b in near]))
     return best
 
 

@@ -22,7 +22,8 @@ __all__ = ["SOLVER_TOL", "scales", "solve"]
 
 # the relative change of the cost (in units of the noise scales) and of the scaled step below which the solver stops:
 # 1e-8 of each parameter's scale is far below any interval (>= 1e-3 of its scale), and of the cost far below the
-# 1.92 units an interval spans (the kernels' agreement: tests/test_plant_fit_done_when.py)
+# 1.92 units an interval spans (the kernels' agreement:
+# tests/benchmarks/test_bench_fit_coverage.py's test_fit_under_another_kernel)
 SOLVER_TOL = 1e-8
 
 

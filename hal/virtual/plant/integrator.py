@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 
@@ -49,6 +50,9 @@ class Coefficients:
         self.imp_accel: Callable[[float, float, float, float, int, float, float], float] | None = None
         self.imp_integrate: Callable[..., tuple[float, float, float, int, float, float]] | None = None
         self.imp_energy: Callable[[float, float, float], float] | None = None  # the belt's energy beyond the rigid one
+        # the friction's switchings at the instant they happen inside a step (`integrate_located`): `pafp fit`'s
+        # model; False (every run): each takes effect at a step's end or start
+        self.located = False
 
 
 def parallel_spring(kp: float, pe: float, two: bool, th: float) -> float:
@@ -140,6 +144,8 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int, 
     """
     if c.imp_integrate is not None:
         return c.imp_integrate(d, state, t_base, k_first, n, h, ea, eb, fn, exps)
+    if c.located:
+        return integrate_located(c, d, state, t_base, k_first, n, h, ea, eb, fn, exps)
     th, w, i, s, bd, bdd = state
     inv_j, kto, kbo, ks, c0, kd, mg, psi0 = c.inv_j, c.kto, c.kbo, c.ks, c.c0, c.kd, c.mg, c.psi0
     lo, hi, kst, cst, tc, tsx, ker, bscale, ipk = c.lo, c.hi, c.kst, c.cst, c.tc, c.tsx, c.ker, c.bscale, c.ipk
@@ -262,6 +268,93 @@ def integrate(c: Coefficients, d: Drive, state: tuple[float, float, float, int, 
             else:
                 s = 1 if a > 0.0 else -1
     return th, w, i, s, bd, bdd
+
+
+MAX_SWITCHINGS: Final = 4  # a step's friction switchings located (`integrate_located`); beyond, the step's end rule
+
+
+def integrate_located(c: Coefficients, d: Drive, state: tuple[float, float, float, int, float, float],
+                      t_base: float, k_first: int, n: int, h: float, ea: float, eb: float,
+                      fn: Callable[[float], float] | None,
+                      exps: tuple[float, float]) -> tuple[float, float, float, int, float, float]:
+    """`integrate` (rigid belt, no opt-in imperfection) with each friction switching placed where it happens
+    inside a step: the instant the velocity reaches 0 (then stick or reverse) and the instant a stuck foot's
+    torque passes the static friction (breakaway), each by linear interpolation over the step, the step finished
+    from there in the new mode.
+
+    `integrate` switches at the grid: a reversal keeps the old friction's sign to the end of its step, a breakaway
+    waits for the next step's start. As a switching crosses a grid point the trajectory jumps (a reversal by up to
+    2 T_c h / J in velocity, a breakaway by (T_s - T_c) h / J): a least squares on simulated outputs then sees a
+    cost with steps in it (`pafp fit`, docs/calibration.md, "Rounding"). Located, the trajectory is continuous in
+    the parameters. The bench's plant keeps `integrate` (every run's outputs unchanged)."""
+    th, w, i, s, bd, bdd = state
+    for kk in range(k_first, k_first + n):
+        t = t_base + kk * h
+        rem = h
+        events = 0
+        while rem > 0.0:
+            if s == 0:  # stuck: until the torque passes the static friction
+                tg = lag_target(c, d, 0.0)
+                a0 = static_accel(c, th, i, _ext(t, ea, eb, fn))
+                if a0 > c.tsx or a0 < -c.tsx:
+                    s = 1 if a0 > 0.0 else -1
+                    continue
+                i_end = tg + (i - tg) * math.exp(-rem / c.tau)
+                a1 = static_accel(c, th, i_end, _ext(t + rem, ea, eb, fn))
+                if -c.tsx <= a1 <= c.tsx or events >= MAX_SWITCHINGS:
+                    i = i_end
+                    break
+                dt = rem * (math.copysign(c.tsx, a1) - a0) / (a1 - a0)
+                i = tg + (i - tg) * math.exp(-dt / c.tau)
+                s = 1 if a1 > 0.0 else -1
+            else:
+                th1, w1, i1 = _rk4_sliding(c, d, th, w, i, s, t, rem, ea, eb, fn,
+                                           exps if rem == h else lag_factors(rem, c.tau))
+                if w1 * s > 0.0:
+                    th, w, i = th1, w1, i1
+                    break
+                if events >= MAX_SWITCHINGS:  # as `integrate` decides at a step's end
+                    th, w, i = th1, w1, i1
+                    a = static_accel(c, th, i, _ext(t + rem, ea, eb, fn))
+                    if -c.tsx <= a <= c.tsx:
+                        s, w = 0, 0.0
+                    else:
+                        s = (1 if w > 0.0 else -1) if w != 0.0 else (1 if a > 0.0 else -1)
+                    break
+                # the velocity reaches 0 inside: where its line between the ends does, then stick or reverse there
+                dt = rem * w / (w - w1) if w != w1 else 0.0
+                th, _, i = _rk4_sliding(c, d, th, w, i, s, t, dt, ea, eb, fn, lag_factors(dt, c.tau))
+                w = 0.0
+                a = static_accel(c, th, i, _ext(t + dt, ea, eb, fn))
+                s = 0 if -c.tsx <= a <= c.tsx else (1 if a > 0.0 else -1)
+            t += dt
+            rem -= dt
+            events += 1
+    return th, w, i, s, bd, bdd
+
+
+def _ext(t: float, ea: float, eb: float, fn: Callable[[float], float] | None) -> float:
+    """The external torque at t [N m]: fn(t), or ea + eb t."""
+    return fn(t) if fn is not None else ea + eb * t
+
+
+def _rk4_sliding(c: Coefficients, d: Drive, th: float, w: float, i: float, s: int, t: float, h: float, ea: float,
+                 eb: float, fn: Callable[[float], float] | None,
+                 exps: tuple[float, float]) -> tuple[float, float, float]:
+    """(angle, velocity, current) after one RK4 step of h from t sliding in mode s (`integrate`'s step, the current
+    lag exact towards the target held from the step's start; exps: `lag_factors` of h)."""
+    tg = lag_target(c, d, w)
+    i_m = tg + (i - tg) * exps[0]
+    i_e = tg + (i - tg) * exps[1]
+    hh = 0.5 * h
+    a1 = nominal_accel(c, th, w, i, _ext(t, ea, eb, fn), s)
+    th2, w2 = th + hh * w, w + hh * a1
+    a2 = nominal_accel(c, th2, w2, i_m, _ext(t + hh, ea, eb, fn), s)
+    th3, w3 = th + hh * w2, w + hh * a2
+    a3 = nominal_accel(c, th3, w3, i_m, _ext(t + hh, ea, eb, fn), s)
+    th4, w4 = th + h * w3, w + h * a3
+    a4 = nominal_accel(c, th4, w4, i_e, _ext(t + h, ea, eb, fn), s)
+    return (th + h / 6.0 * (w + 2.0 * (w2 + w3) + w4), w + h / 6.0 * (a1 + 2.0 * (a2 + a3) + a4), i_e)
 
 
 def lag_target(c: Coefficients, d: Drive, w: float) -> float:

@@ -52,7 +52,7 @@ class Plant:
                  initial_angle_rad: float = 0.0, initial_velocity_rad_s: float = 0.0,
                  start_time_s: float = 0.0, step_s: float = MAX_STEP_S,
                  motor_angle_offset_rad: float = 0.0, backlash_rad: float = 0.0,
-                 driver: str = "current-lag", initial_current_a: float = 0.0) -> None:
+                 driver: str = "current-lag", initial_current_a: float = 0.0, located_switching: bool = False) -> None:
         """Build the plant at rest-state values given; the fixture defaults to SUSPENDED.
 
         backlash_rad is the gearbox's free play at its (6:1) output; 0 = none (see set_current_command).
@@ -61,6 +61,8 @@ class Plant:
         the PID's +-1 as +-V_bus, the current towards (V - K_e N w)/R with one lag of the amplifier's time
         constant plus the winding's L/R, the two in series taken as one of the same mean delay).
         initial_current_a is the q current at the start (a simulation started mid-run, e.g. by `pafp fit`).
+        located_switching places the friction's switchings inside a step (`integrator.integrate_located`: `pafp
+        fit`'s model, whose cost must be continuous in the parameters); off, every run's, they act on the step grid.
         """
         self.params = params if params is not None else load_plant_params()
         self.fixture = fixture if fixture is not None else suspended()
@@ -109,6 +111,7 @@ class Plant:
             bscale=p.total_ratio / p.brake_speed_scale_rad_s, ipk=p.peak_current_a,
             kp=p.parallel_stiffness_nm_per_rad * inv_j, pe=p.parallel_engage_rad, p2=p.parallel_two_sided)
         install_imperfections(self._c, p)  # the opt-in ones the fit lacks (Stribeck, ripple, belt); none by default
+        self._c.located = located_switching
         self._v_over_r = p.supply_voltage_v / p.phase_resistance_ohm
         self._grid_lag = lag_factors(step_s, self._c.tau)  # current-lag factors of one grid step
         # committed state at time self._t = self._t0 + self._k * step_s; the grid restarts at each input
