@@ -27,7 +27,7 @@ EXC_FIELDS = 6  # per job its task's timing does not predict: position, job, and
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
 CHUNK_JOBS = 1024
 """Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists and the
-ints they box stay small and their memory is reused, what is kept takes a few bytes per job (13 in a 2-stride run),
+ints they box stay small and their memory is reused, what is kept takes a few bytes per job (6 in a 2-stride run),
 and what the window left behind is freed as the run goes (docs/telemetry.md, "Cost")."""
 _WIDER = {"b": "h", "h": "i", "i": "q"}
 
