@@ -451,10 +451,12 @@ class Scheduler:
                     tid = trace_ids[i]
                     tr_jobs.append(tid)
                     tr_jobs.append(start)
+                    # a side record when the job is not as its task predicts (its release is offset + k * period
+                    # always: nrel moves by periods from the offset; kept anyway, as Trace.add_job's are)
                     preempted, dcost = f - start - c, c - slot.cost
                     if (slot.ready != r or preempted != tr_preempted[tid] or dcost != tr_cost[tid]
-                            or start - r >= slot.period):  # (the release is offset + k * period: nrel moves by
-                        tr_exc.append((len(tr_jobs) >> 1) - 1)  # periods from the offset)
+                            or start - r >= slot.period):
+                        tr_exc.append((len(tr_jobs) >> 1) - 1)  # the job's position in tr_jobs
                         tr_exc.append(k)
                         tr_exc.append(r - slot.offset - k * slot.period)
                         tr_exc.append(slot.ready - r)

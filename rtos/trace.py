@@ -120,7 +120,7 @@ class Trace:
     period``, release ``offset + job * period``, ready at its release, and the interference (finish - start - cost)
     and cost - nominal cost of the task's previous job (0 for its first). A job that differs (one that started a
     period or more after its release, had jitter, or whose interference or modelled cost changed) is kept with its
-    values in a side record keyed by its position: one job in twenty in a 2-stride run.
+    values in a side record keyed by its position: one job in eleven in a 2-stride run.
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
