@@ -363,7 +363,8 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     probe_body.listeners.append(heat.sample)
     probe_task = Task("bench_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
     interrupts = bench.interrupt_sources(isr)
-    trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
+    # the probe's jobs are not recorded: the trace file never draws them (reports/timeline.py)
+    trace = Trace(cfg.trace_capacity, skip=(probe_task.name,)) if cfg.trace_capacity else None
     tasks = fw.tasks if recording is None else recording.tasks(fw.tasks)
     sched = Scheduler([*tasks, probe_task], clock, interrupts=interrupts, trace=trace,
                       on_fault=lambda f: fw.on_task_fault(f.task, f.time), seed=cfg.seed)

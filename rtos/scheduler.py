@@ -347,11 +347,15 @@ class Scheduler:
         tr_jobs: list[int] = []  # the trace's flat records (Trace.flat_records), appended to natively
         tr_irqs: list[int] = []
         tr_times: list[int] = []
+        tr_exc: list[int] = []
+        tr_preempted: list[int] = []  # by task id: the last job's interference and cost - nominal (Trace.carried)
+        tr_cost: list[int] = []
         trace_ids: list[int] = []
         trace_room = 0
         if trace is not None:
-            tr_jobs, tr_irqs, tr_times = trace.flat_records()
+            tr_jobs, tr_irqs, tr_times, tr_exc = trace.flat_records()
             trace_ids = trace.task_ids([(s.name, s.offset, s.period, s.cost) for s in slots])
+            tr_preempted, tr_cost = trace.carried()
             trace_room = trace.room()
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
@@ -443,14 +447,23 @@ class Scheduler:
                 else:
                     f = start + c
                 self._account(slot, r, start, f, c)
-                if trace is not None:  # the record as Trace.flat_records says: mostly small ints (no allocation)
-                    tr_jobs.append(trace_ids[i])
-                    tr_jobs.append(k)
+                if trace is not None and trace_ids[i] >= 0:  # the record as Trace.flat_records says (-1: skipped)
+                    tid = trace_ids[i]
+                    tr_jobs.append(tid)
                     tr_jobs.append(start)
-                    tr_jobs.append(r - slot.offset - k * slot.period)
-                    tr_jobs.append(slot.ready - r)
-                    tr_jobs.append(f - start - c)
-                    tr_jobs.append(c - slot.cost)
+                    # a side record when the job is not as its task predicts (its release is offset + k * period
+                    # always: nrel moves by periods from the offset; kept anyway, as Trace.add_job's are)
+                    preempted, dcost = f - start - c, c - slot.cost
+                    if (slot.ready != r or preempted != tr_preempted[tid] or dcost != tr_cost[tid]
+                            or start - r >= slot.period):
+                        tr_exc.append((len(tr_jobs) >> 1) - 1)  # the job's position in tr_jobs
+                        tr_exc.append(k)
+                        tr_exc.append(r - slot.offset - k * slot.period)
+                        tr_exc.append(slot.ready - r)
+                        tr_exc.append(preempted)
+                        tr_exc.append(dcost)
+                        tr_preempted[tid] = preempted
+                        tr_cost[tid] = dcost
                     trace_room -= 1
                     if not trace_room:
                         trace_room = trace.compact()

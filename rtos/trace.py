@@ -15,17 +15,19 @@ import itertools
 import json
 import struct
 from array import array
+from bisect import bisect_left
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
-JOB_FIELDS = len(JOB_COLUMNS)
+JOB_FIELDS = 2  # per job: task id, start
+EXC_FIELDS = 6  # per job its task's timing does not predict: position, job, and the differences (Trace.flat_records)
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
 CHUNK_JOBS = 1024
 """Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists and the
-ints they box stay small and their memory is reused, what is kept takes a few bytes per job (13 in a 2-stride run),
+ints they box stay small and their memory is reused, what is kept takes a few bytes per job (6 in a 2-stride run),
 and what the window left behind is freed as the run goes (docs/telemetry.md, "Cost")."""
 _WIDER = {"b": "h", "h": "i", "i": "q"}
 
@@ -66,6 +68,10 @@ class _Columns:
         """Forget the first ``n`` records."""
         for f in self.fields:
             del f[:n]
+
+    def row(self, k: int) -> tuple[int, ...]:
+        """The ``k``-th record."""
+        return tuple(f[k] for f in self.fields)
 
 
 class JobRecord(NamedTuple):
@@ -110,9 +116,11 @@ class Trace:
     The jobs and the interrupt records are kept as columns of ints, an array per field (the task as an index into a
     table of tasks): no object per record or per field; they become :class:`JobRecord` and :class:`IrqRecord` when
     read. The hot loop appends to lists (:meth:`flat_records`), which :meth:`compact` empties into the arrays. A job
-    is kept as its differences from what its task's timing predicts (release ``offset + job * period``, ready at its
-    release, finish ``start + cost``, the task's nominal cost), which are mostly zero or small: Python's shared small
-    ints, which the hot loop boxes without allocating, and a byte each in their arrays.
+    is kept as its task and start; what its task's timing predicts from them is not kept: job ``(start - offset) //
+    period``, release ``offset + job * period``, ready at its release, and the interference (finish - start - cost)
+    and cost - nominal cost of the task's previous job (0 for its first). A job that differs (one that started a
+    period or more after its release, had jitter, or whose interference or modelled cost changed) is kept with its
+    values in a side record keyed by its position: one job in eleven in a 2-stride run.
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -120,19 +128,28 @@ class Trace:
     [1, 2]
     """
 
-    def __init__(self, maxlen: int = 100_000) -> None:
-        """Create an empty trace holding at most ``maxlen`` jobs, ``maxlen`` interrupt records and ``maxlen`` events."""
+    def __init__(self, maxlen: int = 100_000, skip: Iterable[str] = ()) -> None:
+        """Create an empty trace holding at most ``maxlen`` jobs, ``maxlen`` interrupt records and ``maxlen`` events;
+        the jobs of the tasks named in ``skip`` are not recorded by the scheduler."""
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
         self.maxlen = maxlen
-        # per job: task id, job, start and the differences from the task's timing (see flat_records); the jobs
-        # before _job0 are dropped
+        self.skip = frozenset(skip)
+        # per job: task id and start; the jobs before _job0 are dropped, and _dropped jobs were freed before the first
         self._jobs = _Columns(JOB_FIELDS)
         self._job0 = 0
+        self._dropped = 0
+        # per job its task's timing does not predict: its position (counted from the first job ever recorded), job
+        # and differences (see flat_records), in the order of the positions
+        self._exc = _Columns(EXC_FIELDS)
+        # (interference, cost - nominal cost) of each task's last job: appended (the hot loop's, by task id) and
+        # before _job0 (by task id; absent: (0, 0))
+        self._carried: tuple[list[int], list[int]] = ([], [])
+        self._carried0: dict[int, tuple[int, int]] = {}
         # (job start, source index, firings, number of firing times) per record, and the firing times
         self._irqs = _Columns(IRQ_FIELDS)
         self._irq_times = _Columns(1)
-        self._appended: tuple[list[int], list[int], list[int]] = ([], [], [])  # the hot loop's (flat_records)
+        self._appended: tuple[list[int], list[int], list[int], list[int]] = ([], [], [], [])  # (flat_records)
         self._irq0 = 0
         self._times0 = 0
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
@@ -142,33 +159,44 @@ class Trace:
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
 
     def task_ids(self, tasks: Iterable[tuple[str, int, int, int]]) -> list[int]:
-        """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles)."""
-        return [self._task_of(t) for t in tasks]
+        """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles); -1
+        for a task the trace skips."""
+        return [-1 if t[0] in self.skip else self._task_of(t) for t in tasks]
 
     def _task_of(self, task: tuple[str, int, int, int]) -> int:
         k = self._task_id.get(task)
         if k is None:
             k = self._task_id[task] = len(self._task_table)
             self._task_table.append(task)
+            for carried in self._carried:
+                carried.append(0)
         return k
 
     def add_job(self, task: str, job: int, release: int, ready: int, start: int, finish: int,
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
         cost = finish - start if cost is None else cost
-        jobs = self._appended[0]
-        jobs.extend((self._task_of((task, 0, 0, 0)), job, start, release, ready - release, finish - start - cost,
-                     cost))
+        jobs, exceptions = self._appended[0], self._appended[3]
+        exceptions.extend((len(jobs) // JOB_FIELDS, job, release, ready - release, finish - start - cost, cost))
+        k = self._task_of((task, 0, 0, 0))
+        jobs.extend((k, start))
+        self._carried[0][k], self._carried[1][k] = finish - start - cost, cost
         if len(jobs) >= JOB_FIELDS * min(self.maxlen, CHUNK_JOBS):
             self.compact()
 
-    def flat_records(self) -> tuple[list[int], list[int], list[int]]:
+    def flat_records(self) -> tuple[list[int], list[int], list[int], list[int]]:
         """The lists a hot loop appends the records to: jobs, :data:`JOB_FIELDS` ints each (task id (:meth:`task_ids`),
-        job, start, release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost);
-        interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing times);
-        the firing times (see IrqRecord). The loop calls :meth:`compact` each time it has appended :meth:`room` jobs
-        since."""
+        start); interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing
+        times); the firing times (see IrqRecord); the jobs' exceptions, :data:`EXC_FIELDS` ints each (the job's
+        position in the jobs list (its index there // JOB_FIELDS), job, release - offset - job * period, ready -
+        release, finish - start - cost, cost - nominal cost), appended for each job that is not as predicted (see
+        the class), and then its last two stored into :meth:`carried` lists. The loop calls :meth:`compact` each time
+        it has appended :meth:`room` jobs since."""
         return self._appended
+
+    def carried(self) -> tuple[list[int], list[int]]:
+        """The interference and cost - nominal cost of each task's last job appended, by task id (see the class)."""
+        return self._carried
 
     def room(self) -> int:
         """Jobs that may be appended before :meth:`compact` must run (it keeps the lists short and the memory within
@@ -181,7 +209,9 @@ class Trace:
         self._trim()
         if self._job0 * 2 >= len(self._jobs):
             self._jobs.drop(self._job0)
+            self._dropped += self._job0
             self._job0 = 0
+            self._exc.drop(bisect_left(self._exc.fields[0], self._dropped))
         if self._irq0 * 2 >= len(self._irqs):
             self._irqs.drop(self._irq0)
             self._irq_times.drop(self._times0)
@@ -192,32 +222,69 @@ class Trace:
         """Move the appended records into the arrays; drop all but the last ``maxlen`` jobs and interrupt records (as
         a ``deque(maxlen=...)`` would)."""
         self._move()
-        self._job0 = max(self._job0, len(self._jobs) - self.maxlen)
+        self._forget(len(self._jobs) - self.maxlen)
         first, counts = len(self._irqs) - self.maxlen, self._irqs.fields[3]
         while self._irq0 < first:
             self._times0 += counts[self._irq0]
             self._irq0 += 1
 
+    def _forget(self, k: int) -> None:
+        """Move _job0 on to ``k`` (when later), carrying the values of the exceptions passed."""
+        positions, carried = self._exc.fields[0], self._carried0
+        e = bisect_left(positions, self._dropped + self._job0)
+        while e < len(positions) and positions[e] < self._dropped + k:
+            _pos, _job, _release, _ready, preempted, cost = self._exc.row(e)
+            carried[self._jobs.fields[0][positions[e] - self._dropped]] = (preempted, cost)
+            e += 1
+        self._job0 = max(self._job0, k)
+
     def _move(self) -> None:
         """Move the records the hot loop appended into the arrays."""
-        for kept, appended in zip((self._jobs, self._irqs, self._irq_times), self._appended, strict=True):
+        exceptions = self._appended[3]
+        if exceptions:  # positions counted from the first job ever recorded
+            base = self._dropped + len(self._jobs)
+            exceptions[::EXC_FIELDS] = [base + k for k in exceptions[::EXC_FIELDS]]
+        for kept, appended in zip(self._kept(), self._appended, strict=True):
             if appended:
                 kept.extend(appended)
+
+    def _kept(self) -> tuple[_Columns, _Columns, _Columns, _Columns]:
+        """The arrays :meth:`flat_records`' lists are moved into."""
+        return self._jobs, self._irqs, self._irq_times, self._exc
 
     def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
         """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
         self._trim()
         tasks, k = self._task_table, self._job0
-        for task, job, start, release, ready, finish, cost in zip(*(f[k:] for f in self._jobs.fields), strict=True):
+        exceptions = self._exc.fields
+        e = bisect_left(exceptions[0], self._dropped + k)
+        at = exceptions[0][e] - self._dropped if e < len(exceptions[0]) else -1
+        carried = dict(self._carried0)
+        for task, start in zip(*(f[k:] for f in self._jobs.fields), strict=True):
             name, offset, period, nominal = tasks[task]
+            if k == at:
+                _, job, release, ready, preempted, cost = (f[e] for f in exceptions)
+                carried[task] = preempted, cost
+                e += 1
+                at = exceptions[0][e] - self._dropped if e < len(exceptions[0]) else -1
+            else:
+                job, release, ready = (start - offset) // period, 0, 0
+                preempted, cost = carried.get(task, (0, 0))
+            k += 1
             release += offset + job * period
             cost += nominal
-            yield name, job, release, release + ready, start, start + cost + finish, cost
+            yield name, job, release, release + ready, start, start + cost + preempted, cost
 
     def _finish(self, k: int) -> int:
-        """The finish of the ``k``-th job kept."""
-        task, _job, start, _release, _ready, preempted, cost = (f[k] for f in self._jobs.fields)
-        return start + self._task_table[task][3] + cost + preempted
+        """The finish of the ``k``-th job kept (``k``: _job0, which the values in _carried0 precede)."""
+        task, start = self._jobs.row(k)
+        positions = self._exc.fields[0]
+        e = bisect_left(positions, self._dropped + k)
+        if e < len(positions) and positions[e] == self._dropped + k:
+            _, _job, _release, _ready, preempted, cost = self._exc.row(e)
+        else:
+            preempted, cost = self._carried0.get(task, (0, 0))
+        return start + self._task_table[task][3] + preempted + cost
 
     def irqs(self) -> list[IrqRecord]:
         """The recorded interrupt firings inside jobs, oldest first."""
@@ -238,7 +305,7 @@ class Trace:
         while True:
             n = len(self._jobs)
             while self._job0 < n and self._finish(self._job0) < t:
-                self._job0 += 1
+                self._forget(self._job0 + 1)
             starts, counts = self._irqs.fields[0], self._irqs.fields[3]
             while self._irq0 < len(starts) and starts[self._irq0] < t:
                 self._times0 += counts[self._irq0]
@@ -264,10 +331,11 @@ class Trace:
 
     def clear(self) -> None:
         """Forget every record."""
-        for kept, appended in zip((self._jobs, self._irqs, self._irq_times), self._appended, strict=True):
+        for kept, appended in zip(self._kept(), self._appended, strict=True):
             del appended[:]
             kept.drop(len(kept))
-        self._job0 = self._irq0 = self._times0 = 0
+        self._job0 = self._irq0 = self._times0 = self._dropped = 0
+        self._carried0 = {k: v for k, v in enumerate(zip(*self._carried, strict=True)) if v != (0, 0)}
         self._events.clear()
 
     def write_csv(self, out: TextIO) -> None:

@@ -125,3 +125,55 @@ def test_records_keep_values_of_any_width_exactly():
         tr.add_job("t", abs(v), start - k, start - k, start, start + abs(v) + 3, abs(v))
     assert [(j.job, j.release, j.start, j.finish, j.cost) for j in tr.jobs()] == [
         (abs(v), abs(v), abs(v) + k, abs(v) + k + abs(v) + 3, abs(v)) for k, v in enumerate(values)]
+
+
+def _varied_run(maxlen: int, prune: int = 0):
+    """Jobs whose timing their task does not predict (jitter, a cost model, late and skipped releases, interrupts),
+    with what each body saw, and a skipped task; pruned at ``prune`` cycles (0: not) halfway through."""
+    from rtos import PeriodicInterrupt
+
+    seen = []
+
+    def body(job):
+        seen.append((job.task.name, job.index, job.release, job.ready, job.start))
+        return job.index
+
+    tr = Trace(maxlen=maxlen, skip=("probe",))
+    tasks = [Task("fast", 1, 100, cost=30, body=body, jitter=20),
+             Task("modelled", 2, 300, cost=lambda n: 60 + 170 * (n % 4 == 0), body=body,
+                  overrun=OverrunPolicy.LATE),
+             Task("slow", 3, 700, cost=400, body=body, offset=5),
+             Task("probe", 9, 50, cost=0, body=body)]
+    s = Scheduler(tasks, VirtualClock(1_000_000), interrupts=[PeriodicInterrupt("tick", period=40, cost=3)], trace=tr)
+    s.run_until(15_000)
+    if prune:
+        tr.prune_before(prune)
+    s.run_until(30_000)
+    return s, tr, [v for v in seen if v[0] != "probe"]
+
+
+def test_jobs_their_task_does_not_predict_read_back_as_they_ran():
+    s, tr, seen = _varied_run(100_000)
+    jobs = tr.jobs()
+    assert [(j.task, j.job, j.release, j.ready, j.start) for j in jobs] == seen
+    assert all(j.cost == (60 + 170 * (j.job % 4 == 0) if j.task == "modelled" else {"fast": 30, "slow": 400}[j.task])
+               for j in jobs)
+    tick = s.interrupt_stats()[0]
+    assert sum(j.finish - j.start - j.cost for j in jobs) == tick.in_jobs * tick.cost_cycles > 0
+    assert sum(j.finish - j.start for j in jobs if j.task == "slow") == s.stats["slow"].busy_cycles + 3 * sum(
+        i.firings for i in tr.irqs() if i.job_start in {j.start for j in jobs if j.task == "slow"})
+    late = [j for j in jobs if j.start - j.release >= 300 and j.task == "modelled"]
+    assert late and s.stats["slow"].skipped and any(j.ready > j.release for j in jobs)
+    tr.compact()
+    assert len(tr._exc) < len(tr)  # the side records: the jobs that differ from their task's previous one
+
+
+def test_a_ring_and_a_prune_keep_the_jobs_a_whole_trace_ends_with():
+    _, whole, _ = _varied_run(100_000)
+    _, kept, _ = _varied_run(13)
+    assert kept.jobs() == whole.jobs()[-13:]
+    _, pruned, _ = _varied_run(100_000, prune=12_345)
+    rest = [j for j in whole.jobs() if j.finish >= 12_345 or j.start >= 15_000]
+    assert pruned.jobs() == rest and pruned.jobs()[0].finish >= 12_345
+    pruned.compact()
+    assert pruned.jobs() == rest

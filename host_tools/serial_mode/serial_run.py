@@ -414,7 +414,8 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
 
     tasks = [instrument(t, timings) for t in (fw.tasks if recording is None else recording.tasks(fw.tasks))]
     tasks.append(Task("serial_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body))
-    trace = Trace(cfg.trace_capacity) if cfg.trace_capacity else None
+    # the probe's jobs are not recorded: the trace file never draws them (reports/timeline.py)
+    trace = Trace(cfg.trace_capacity, skip=("serial_probe",)) if cfg.trace_capacity else None
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     now.bind(sched)
