@@ -67,6 +67,61 @@ def test_refused_fifo_is_reported_and_then_no_pinning(monkeypatch: pytest.Monkey
         assert rt.granted["mlock"] == "not requested"
 
 
+_PINNED_FIFO_CHILD = """
+import os, sys, time
+core = max(os.sched_getaffinity(0))
+os.sched_setaffinity(0, {core})
+os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+print(core, flush=True)
+time.sleep(30)
+"""
+
+
+@linux
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2 if hasattr(os, "sched_getaffinity") else True,
+                    reason="one core: nothing to choose")
+def test_a_second_loop_is_pinned_away_from_a_core_another_fifo_loop_holds() -> None:
+    """Another process's SCHED_FIFO thread pinned to the last core (another serial run's loop): it is counted, and
+    this loop takes another core (two loops on one core reach the kernel's RT throttling: 50 ms stalls)."""
+    import subprocess
+
+    from host_tools.serial_mode.realtime import realtime_threads_pinned
+
+    child = subprocess.Popen([sys.executable, "-c", _PINNED_FIFO_CHILD], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        line = child.stdout.readline().strip()  # type: ignore[union-attr]
+        if not line:
+            pytest.skip(f"SCHED_FIFO not granted here: {child.stderr.read().strip().splitlines()[-1:]}")  # type: ignore[union-attr]
+        core = int(line)
+        assert realtime_threads_pinned()[core] >= 1
+        with RealtimeSection(RealtimeSettings(gc=False, mlock=False)) as rt:
+            assert rt.granted["pin"].startswith("granted"), rt.granted
+            assert os.sched_getaffinity(0) != {core}
+    finally:
+        child.kill()
+        child.wait()
+
+
+def test_kernel_threads_and_unpinned_or_ordinary_threads_are_not_counted(tmp_path: Path) -> None:
+    from host_tools.serial_mode.realtime import realtime_threads_pinned
+
+    def task(pid: int, flags: int, policy: int, cpus: str) -> None:
+        d = tmp_path / str(pid) / "task" / str(pid)
+        d.mkdir(parents=True)
+        fields = ["S"] + ["0"] * 5 + [str(flags)] + ["0"] * 31 + [str(policy)] + ["0"] * 5
+        (d / "stat").write_text(f"{pid} (a (b) c) " + " ".join(fields) + "\n")
+        (d / "status").write_text(f"Name:\tx\nCpus_allowed_list:\t{cpus}\n")
+
+    task(101, 0x00200000, 1, "3")  # a kernel thread (migration/3): FIFO on one core
+    task(102, 0, 1, "3")  # a user FIFO thread on core 3
+    task(103, 0, 2, "1")  # a user SCHED_RR thread on core 1
+    task(104, 0, 1, "0-3")  # FIFO, not pinned
+    task(105, 0, 0, "2")  # pinned, ordinary policy
+    (tmp_path / "106" / "task" / "106").mkdir(parents=True)  # ended while read: no files
+    assert realtime_threads_pinned(tmp_path) == {3: 1, 1: 1}
+
+
 def test_realtime_settings_refuse_bad_values() -> None:
     with pytest.raises(ValueError, match="spin_s 0.5 out of range: 0..0.01 s"):
         RealtimeSettings(spin_s=0.5)

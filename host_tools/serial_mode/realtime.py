@@ -5,9 +5,12 @@ Each measure is optional and reported as granted or refused (the OS decides; not
 * ``gc``: collect, then freeze what exists and disable the cyclic collector; the caller collects the
   young generation at safe points (:meth:`RealtimeSection.collect_young`). A full collection stalled
   the loop 45 ms on this host.
-* ``pin``: bind the loop's thread to one core (the last), when the machine has more than one and
-  ``SCHED_FIFO`` was granted: an ordinary thread pinned to a core it shares with a busy process cannot move
-  away (measured here: release jitter p99 8 ms pinned without FIFO, 0.2 ms unpinned, 0.08 ms with both).
+* ``pin``: bind the loop's thread to one core, when the machine has more than one and ``SCHED_FIFO`` was granted:
+  an ordinary thread pinned to a core it shares with a busy process cannot move away (measured here: release
+  jitter p99 8 ms pinned without FIFO, 0.2 ms unpinned, 0.08 ms with both). The core is the last of those with the
+  fewest real-time threads of other processes pinned there (another serial run's loop, or `make test`'s other
+  worker's): two FIFO loops that each sleep, spin and work on one core share it, and what FIFO threads get of a
+  core is bounded by the kernel's RT throttling.
 * ``fifo``: ``SCHED_FIFO`` at priority ``fifo_priority`` (needs root or CAP_SYS_NICE / an RLIMIT_RTPRIO).
   The loop sleeps most of each period, so other processes keep running; the kernel's RT throttling
   (``/proc/sys/kernel/sched_rt_runtime_us``) bounds it anyway.
@@ -26,10 +29,12 @@ import ctypes.util
 import gc
 import logging
 import os
+from collections import Counter
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from types import TracebackType
 
-__all__ = ["RealtimeSection", "RealtimeSettings"]
+__all__ = ["RealtimeSection", "RealtimeSettings", "realtime_threads_pinned"]
 
 log = logging.getLogger(__name__)
 
@@ -120,7 +125,8 @@ class RealtimeSection:
         before = os.sched_getaffinity(0)
         if len(before) < 2:
             return f"not done: {len(before)} core available"
-        core = max(before)
+        taken = realtime_threads_pinned()
+        core = min(before, key=lambda c: (taken[c], -c))
         try:
             os.sched_setaffinity(0, {core})
         except OSError as e:
@@ -149,3 +155,30 @@ class RealtimeSection:
             return f"refused: {os.strerror(err)} (needs CAP_IPC_LOCK or a larger RLIMIT_MEMLOCK)"
         self._undo.append(libc.munlockall)
         return "granted: mlockall(MCL_CURRENT | MCL_FUTURE)"
+
+
+_PF_KTHREAD = 0x00200000  # a task's flag for a kernel thread (linux/sched.h)
+
+
+def realtime_threads_pinned(proc: Path = Path("/proc")) -> Counter[int]:
+    """Per core, the user threads of other processes running SCHED_FIFO or SCHED_RR pinned to that core alone
+    (/proc/PID/task/TID/stat's flags and policy, status's Cpus_allowed_list); kernel threads (a FIFO migration
+    thread on every core) and unreadable tasks are left out."""
+    me = str(os.getpid())
+    taken: Counter[int] = Counter()
+    for task in proc.glob("[0-9]*/task/[0-9]*"):
+        if task.parts[-3] == me:
+            continue
+        try:
+            stat = (task / "stat").read_text()
+            fields = stat[stat.rindex(")") + 2:].split()  # from field 3 (state) on: the name may hold spaces
+            if int(fields[6]) & _PF_KTHREAD or int(fields[38]) not in (os.SCHED_FIFO, os.SCHED_RR):
+                continue
+            for line in (task / "status").read_text().splitlines():
+                if line.startswith("Cpus_allowed_list:"):
+                    cpus = line.split(":", 1)[1].strip()
+                    if cpus.isdigit():
+                        taken[int(cpus)] += 1
+        except (OSError, ValueError, IndexError):
+            continue  # a task that ended while it was read
+    return taken
