@@ -10,7 +10,8 @@ arrival the record leaves unknown, carried into them: `fit_profiles`, `fit_consi
 a parameter whose column is
 (nearly) a combination of the others' (variance inflation, from the normalised Jacobian's conditioning) is reported
 "not identifiable", not given a confident number. Every fit ends with the model-adequacy check (`fit_adequacy`):
-whether its residuals are independent of the command, without which the intervals hold only for the model.
+whether its angle stays within the encoder's count of the readings (the verdict) and its residuals' correlation with
+the experiment's reference and excitation; when the model misses something the intervals hold only for the model.
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ class FitResult:
     stall_bound_ms: float = 0.0
     # the part of each 95 % half-width that is the encoder's count at the windows that start stuck (`stuck_starts_term`)
     stuck_ci95: dict[str, float] = field(default_factory=dict)
-    # the model-adequacy check (`fit_adequacy.adequacy`): the residuals' independence of the command, and the verdict
+    # the model-adequacy check (`fit_adequacy.adequacy`): the resolution test's verdict, the cross-correlations too
     adequacy: dict = field(default_factory=dict)
 
 
