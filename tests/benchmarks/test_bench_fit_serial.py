@@ -16,11 +16,15 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
+
+import pytest
 
 from host_tools.cli import main
 from tests.test_plant_fit_serial import record_serial
 
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 # the hand-made plant's truth (emulation only)
 TRUTH = {"output_inertia_kg_m2": 0.0645854, "foot_damping_nm_s_per_rad": 0.5, "coulomb_friction_nm": 0.25,
          "gravity_moment_nm": 1.72872}
