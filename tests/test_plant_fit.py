@@ -121,7 +121,8 @@ def test_fit_reports_its_noise_scales_and_the_samples_left_out(experiment):
 def test_the_lag_and_the_backlash_alone_are_fitted(holds_only_run, tmp_path):
     """--params with only the two that the first solution leaves out: the lag is fitted alone first. On the holds-only
     recording (tests/fit_shared.py's: the lag shows in the current's response to the hold's commands; the backlash's
-    profile keeps it at 0 there, so the final least squares has the lag alone)."""
+    profile keeps it at 0 there, so the final least squares has the lag alone; measured: the lag 1.127 ms, its 95 %
+    half-width 0.18 ms against the 0.56 ms that would leave it unidentified)."""
     assert main(["fit", str(holds_only_run), "--params", "backlash_deg,current_time_constant_s", "--no-plot",
                  "--out", str(tmp_path / "fit")]) == 0
     p = json.loads((tmp_path / "fit" / "fit.json").read_text())["params"]

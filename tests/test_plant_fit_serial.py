@@ -4,9 +4,9 @@ PTY --experiment sysid` on the other, then `pafp fit` on that run (a 10 s experi
 What the fit of a serial run must get right whatever the draw is asserted here: its timing is the emulator's, the
 encoder's zero is found through the IMU, the writes' unknown arrival is in the intervals, a stall's windows are
 counted out. The fit here is of two parameters (the current lag, whose interval the arrival widens most, and the
-encoder offset), a seventh of the whole fit's time. How close the whole fit comes to the plant's truth (10 %, two
-half-widths, held-out fit) on one recording that a real-time run on a shared host makes differently each time is a
-claim about the draw: tests/benchmarks/test_bench_fit_serial.py asserts it (`make bench`)."""
+encoder offset), to keep it short. How close the whole fit comes to the plant's truth (10 %, two half-widths,
+held-out fit) on one recording that a real-time run on a shared host makes differently each time is a claim about
+the draw: tests/benchmarks/test_bench_fit_serial.py asserts it (`make bench`)."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ two parameters of such a run: tests/test_plant_fit_serial.py): inertia, damping,
 moment within 10 %, the encoder's zero found through the IMU (the foot rested on its -30 deg stop), the held-out fit
 at least 90 % on the angle and 75 % on the current, the backlash within 0.5 deg of its 1.5, and every identified plant
 parameter within two half-widths of the truth: a bound no calibrated interval misses by chance (a normal error beyond
-twice its 95 % half-width: 1 in 10^4 a parameter; at most 1.21 on six serial recordings, docs/calibration.md). That
+twice its 95 % half-width: 1 in 10^4 a parameter; the measured figure is in docs/benchmarks.md). That
 each falls inside its own interval is a coverage claim, tests/benchmarks/test_bench_fit_coverage.py's. The errors in
 half-widths and the fit's time are in ``extra_info``.
 """
