@@ -1,11 +1,13 @@
-"""One identification experiment and its fit, shared by the plant-fit test files (tests/conftest.py's `handmade_fit`).
+"""The identification experiments and fits the plant-fit test files share (tests/conftest.py's `handmade_fit` and
+`holds_only_run`; the second, a holds-only recording of the nominal plant, is tests/test_plant_fit.py's).
 
 The hand-made plant file (tests/data/plant_handmade.toml: a plant that is not the nominal one) runs the tests' 10 s
 experiment (`SHORT`: the default 29 s one's figures are tests/benchmarks/test_bench_fit_coverage.py's), a different
 run on the same plant (10 strides of gait tracking, another seed) and `pafp fit --validate` of the first against the
 second. Made once a session: under pytest-xdist the first worker to ask makes it in the session's shared temporary
-directory while the others wait on its lock and then read it. (The same recording fitted under another BLAS set-up
-with its data nudged by 1e-12 is tests/benchmarks/test_bench_fit_coverage.py's `test_fit_under_another_kernel`.)
+directory while the others wait on its lock and then read it (`made_once`; the holds-only one likewise). (The same
+recording fitted under another BLAS set-up with its data nudged by 1e-12 is
+tests/benchmarks/test_bench_fit_coverage.py's `test_fit_under_another_kernel`.)
 """
 
 from __future__ import annotations
