@@ -28,11 +28,25 @@ settings.register_profile(
 settings.load_profile("pafp")
 
 
+def _shared(tmp_path_factory):
+    """The session's temporary directory all the pytest-xdist workers see (a worker's basetemp is its own in it)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
 @pytest.fixture(scope="session")
 def handmade_fit(tmp_path_factory):
-    """The hand-made plant's 10 s identification experiment, its fit and the same fit in another process under
-    another BLAS set-up (tests/fit_shared.py): made once for all the pytest-xdist workers of a session."""
+    """The hand-made plant's 10 s identification experiment, its fit, a gait run and the fit's validation against it
+    (tests/fit_shared.py): made once for all the pytest-xdist workers of a session."""
     from tests.fit_shared import handmade_fit as make
 
-    base = tmp_path_factory.getbasetemp()  # a worker's is its own directory in the session's
-    return make(base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base)
+    return make(_shared(tmp_path_factory))
+
+
+@pytest.fixture(scope="session")
+def holds_only_run(tmp_path_factory):
+    """A holds-only identification run of the nominal plant with its `pafp fit` in `fit` (tests/fit_shared.py):
+    made once for all the pytest-xdist workers of a session; read it, never write into it."""
+    from tests.fit_shared import holds_only_fit
+
+    return holds_only_fit(_shared(tmp_path_factory))

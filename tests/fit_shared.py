@@ -1,16 +1,19 @@
-"""One identification experiment and its fit, shared by the plant-fit test files (tests/conftest.py's `handmade_fit`).
+"""The identification experiments and fits the plant-fit test files share (tests/conftest.py's `handmade_fit` and
+`holds_only_run`; the second, a holds-only recording of the nominal plant, is tests/test_plant_fit.py's).
 
 The hand-made plant file (tests/data/plant_handmade.toml: a plant that is not the nominal one) runs the tests' 10 s
 experiment (`SHORT`: the default 29 s one's figures are tests/benchmarks/test_bench_fit_coverage.py's), a different
 run on the same plant (10 strides of gait tracking, another seed) and `pafp fit --validate` of the first against the
 second. Made once a session: under pytest-xdist the first worker to ask makes it in the session's shared temporary
-directory while the others wait on its lock and then read it. (The same recording fitted under another BLAS set-up
-with its data nudged by 1e-12 is tests/benchmarks/test_bench_fit_coverage.py's `test_fit_under_another_kernel`.)
+directory while the others wait on its lock and then read it (`made_once`; the holds-only one likewise). (The same
+recording fitted under another BLAS set-up with its data nudged by 1e-12 is
+tests/benchmarks/test_bench_fit_coverage.py's `test_fit_under_another_kernel`.)
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -51,13 +54,37 @@ def _make(d: Path) -> None:
     (d / "done").write_text("")
 
 
+def made_once(shared: Path, name: str, make: Callable[[Path], None]) -> Path:
+    """shared/name, made by `make` (which writes `done` last) once, whichever process asks first."""
+    d = shared / name
+    with _locked(shared / f"{name}.lock"):
+        if not (d / "done").exists():
+            d.mkdir(exist_ok=True)
+            make(d)
+    return d
+
+
 def handmade_fit(shared: Path) -> dict:
     """{"dir", "run" (the sysid recording), "fit" (its `pafp fit` directory), "gait", "json" (fit.json)}: made under
     `shared` once, whichever process asks first."""
-    d = shared / "handmade_fit"
-    with _locked(shared / "handmade_fit.lock"):
-        if not (d / "done").exists():
-            d.mkdir(exist_ok=True)
-            _make(d)
+    d = made_once(shared, "handmade_fit", _make)
     return {"dir": d, "run": d / "sysid", "fit": d / "fit", "gait": d / "gait",
             "json": json.loads((d / "fit" / "fit.json").read_text())}
+
+
+# holds only (no sweep to speak of, no chirp, no PRBS): 0.75 s at the centre, a 1 deg sweep, 0.75 s again
+HOLDS_ONLY = ('\n[controller]\nname = "sysid"\nhold_s = 0.75\nsweep_deg = 1.0\nsweep_deg_s = 60.0\nchirp_s = 0.0\n'
+              'prbs_s = 0.0\n')
+
+
+def _make_holds_only(d: Path) -> None:
+    """A holds-only recording of the nominal plant and its `pafp fit` (its directory's default `fit`)."""
+    (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + HOLDS_ONLY)
+    assert main(["run", "--experiment", "sysid", "--profile", str(d / "fw.toml"), *QUIET, "--out", str(d / "run")]) == 0
+    assert main(["fit", str(d / "run"), "--no-plot"]) == 0
+    (d / "done").write_text("")
+
+
+def holds_only_fit(shared: Path) -> Path:
+    """The holds-only recording's run directory (its fit in `fit`): made under `shared` once."""
+    return made_once(shared, "holds_only", _make_holds_only) / "run"

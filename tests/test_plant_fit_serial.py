@@ -1,6 +1,12 @@
-"""Issue 21's done-when through serial mode: `pafp emulate bench --pty --plant FILE` on one side, `pafp run --motor
-PTY --imu PTY --experiment sysid` on the other, then `pafp fit` on that run (a 10 s experiment: the test stays
-short)."""
+"""Issue 21's fit through serial mode: `pafp emulate bench --pty --plant FILE` on one side, `pafp run --motor PTY --imu
+PTY --experiment sysid` on the other, then `pafp fit` on that run (a 10 s experiment).
+
+What the fit of a serial run must get right whatever the draw is asserted here: its timing is the emulator's, the
+encoder's zero is found through the IMU, the writes' unknown arrival is in the intervals, a stall's windows are
+counted out. The fit here is of two parameters (the current lag, whose interval the arrival widens most, and the
+encoder offset), to keep it short. How close the whole fit comes to the plant's truth (10 %, two half-widths,
+held-out fit) on one recording that a real-time run on a shared host makes differently each time is a claim about
+the draw: tests/benchmarks/test_bench_fit_serial.py asserts it (`make bench`)."""
 
 from __future__ import annotations
 
@@ -9,6 +15,7 @@ import math
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,11 +48,10 @@ def _emulator(*options: str) -> tuple[subprocess.Popen, str, str]:
     return proc, paths["motor"], paths["imu"]
 
 
-# session-scoped: under xdist a module fixture is made again each time a worker comes back to the module (measured: the
-# fit made twice in one run, 248 s and 120 s)
-@pytest.fixture(scope="session")
-def serial_fit(tmp_path_factory):
-    d = tmp_path_factory.mktemp("serial_fit")
+def record_serial(d: Path) -> tuple[Path, Path]:
+    """The hand-made plant's 10 s identification run through serial mode into d: (its run directory, the emulator's
+    capture). Run again when a host stall latched a link fault or stalled too much of it; skipped when every attempt
+    did."""
     (d / "fw.toml").write_text((ROOT / "profiles" / "firmware.toml").read_text() + SHORT)
     stalls: list[str] = []
     for attempt in range(4):  # a stall of this shared host may latch a link fault (justly): run again
@@ -69,26 +75,31 @@ def serial_fit(tmp_path_factory):
     else:  # every run latched a fault a host stall explains: the fit is untested here, and said so
         pytest.skip(f"this host stalled on every attempt: {'; '.join(stalls)}")
     assert code == 0 and not s["faults"], s["faults"]
-    assert main(["fit", str(out), "--no-plot", "--out", str(d / "fit")]) == 0
+    return out, capture
+
+
+# the two parameters fitted here (see the module's docstring)
+FITTED = "current_time_constant_s,encoder_offset_deg"
+
+
+# session-scoped: under xdist a module fixture is made again each time a worker comes back to the module (measured: the
+# fit made twice in one run, 248 s and 120 s)
+@pytest.fixture(scope="session")
+def serial_fit(tmp_path_factory):
+    d = tmp_path_factory.mktemp("serial_fit")
+    out, capture = record_serial(d)
+    assert main(["fit", str(out), "--no-plot", "--params", FITTED, "--out", str(d / "fit")]) == 0
     return {**json.loads((d / "fit" / "fit.json").read_text()), "run": out, "capture": capture}
 
 
-# the hand-made plant's truth (emulation only)
-TRUTH = {"output_inertia_kg_m2": 0.0645854, "foot_damping_nm_s_per_rad": 0.5, "coulomb_friction_nm": 0.25,
-         "gravity_moment_nm": 1.72872}
-
-
-def test_serial_run_is_fitted(serial_fit):
+def test_serial_encoder_zero_is_found_through_the_imu(serial_fit):
+    """The foot rested on its -30 deg stop before the run: the fit starts the encoder's zero from the IMU and keeps it
+    within 4 deg of that (the whole fit's answer against the truth: tests/benchmarks/test_bench_fit_serial.py; with the
+    other parameters at the nominal plant's, not the hand-made one's, this fit's offset is not identified)."""
     p = serial_fit["params"]
-    for name in ("output_inertia_kg_m2", "gravity_moment_nm"):
-        assert p[name]["identifiable"], name
-        assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
-    # the foot rested on its -30 deg stop before the run: the encoder's zero is found through the IMU
-    assert -34.0 < p["encoder_offset_deg"]["value"] < -26.0, p["encoder_offset_deg"]
-    assert serial_fit["fit_percent"]["held_out"]["angle"] >= 90
-    assert serial_fit["fit_percent"]["held_out"]["current"] >= 75
-    b = p["backlash_deg"]  # what holds through a pty (docs/calibration.md, "Through serial mode")
-    assert b["identifiable"] and abs(b["value"] - 1.5) <= 0.5, b
+    assert set(p) == set(FITTED.split(",")), p
+    offset = p["encoder_offset_deg"]
+    assert -34.0 < offset["start"] < -26.0 and abs(offset["value"] - offset["start"]) <= 4.0 + 1e-9, offset
 
 
 def test_the_fits_timing_is_the_emulators(serial_fit):
@@ -141,27 +152,6 @@ def test_a_stalls_windows_are_counted_out_of_the_fit(serial_fit):
     assert sum(left_out.values()) == int(load_experiment(serial_fit["run"]).stalled().sum()), left_out
     md = (serial_fit["run"].parent / "fit" / "fit.md").read_text()
     assert f"{left_out['fit']} (fit), {left_out['held_out']} (held out)" in md and "windows of a stall" in md
-
-
-def test_serial_damping_and_coulomb_within_ten_percent(serial_fit):
-    p = serial_fit["params"]
-    for name in ("foot_damping_nm_s_per_rad", "coulomb_friction_nm"):
-        assert p[name]["identifiable"], name
-        assert abs(p[name]["value"] / TRUTH[name] - 1) < 0.10, (name, p[name]["value"], TRUTH[name])
-
-
-SERIAL_TRUTH = {**TRUTH, "static_friction_nm": 0.933333, "backlash_deg": 1.5, "current_time_constant_s": 0.00114}
-
-
-def test_serial_identified_parameters_within_two_half_widths(serial_fit):
-    """A bound no calibrated interval misses by chance (a normal error beyond twice its 95 % half-width: 1 in 10^4 a
-    parameter): every identified plant parameter within two half-widths of the truth (at most 1.21 on six serial
-    recordings: docs/calibration.md). That each falls inside its own interval is a coverage claim, measured over
-    many draws in tests/benchmarks/test_bench_fit_coverage.py."""
-    p = serial_fit["params"]
-    for name, value in SERIAL_TRUTH.items():
-        assert p[name]["identifiable"], name
-        assert abs(p[name]["value"] - value) <= 2.0 * p[name]["ci95_half_width"], (name, p[name], value)
 
 
 def test_sysid_takes_its_zero_from_the_fused_angle_only_when_the_foot_is_off_its_mark():
