@@ -144,7 +144,7 @@ def test_lost_imu_port_is_named_and_the_motor_still_gets_the_safe_command(tmp_pa
 
 def test_telemetry_pty_is_printed_and_a_monitor_attaches(tmp_path: Path) -> None:
     run = _pafp("run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--encoder", "sim", "--duration", "2.5",
-                "--telemetry", "pty", "--out", str(tmp_path / "out"), "--quiet")
+                "--telemetry", "pty", "--out", str(tmp_path / "out"), "--quiet", "--no-plot", "--no-trace")
     try:
         run.stdout.readline()  # type: ignore[union-attr]  # the banner
         line = run.stdout.readline()  # type: ignore[union-attr]

@@ -162,8 +162,8 @@ def test_pafp_tune_on_a_plant_file_writes_profile_json_and_plot(tmp_path, capsys
     printed = capsys.readouterr().out
     assert "before: RMS" in printed and "after:  RMS" in printed
     assert f"on plant {plant} drawn with seed 7" in printed
-    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet",
-                 "--out", str(tmp_path / "run")]) == 0
+    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet", "--no-plot",
+                 "--no-trace", "--out", str(tmp_path / "run")]) == 0
 
 
 def test_pafp_tune_refuses_a_missing_plant_file_before_any_run(tmp_path, capsys):
