@@ -116,8 +116,10 @@ async def _stop_workers(cluster: Any) -> None:
     nanny_log = logging.getLogger("distributed.nanny")
     level = nanny_log.level
     nanny_log.setLevel(logging.ERROR)
-    try:  # a Nanny waits 0.8 * timeout for its worker to stop, then kills it
-        await asyncio.gather(*(w.close(timeout=WORKER_STOP_GRACE_S / 0.8) for w in list(cluster.workers.values())))
+    try:  # a Nanny waits 0.8 * timeout for its worker to stop, then kills it; a kill slow to be joined on a loaded
+        # host (its TimeoutError) must not hide the exception on its way out: cluster.close() follows either way
+        await asyncio.gather(*(w.close(timeout=WORKER_STOP_GRACE_S / 0.8) for w in list(cluster.workers.values())),
+                             return_exceptions=True)
     finally:
         nanny_log.setLevel(level)
 
