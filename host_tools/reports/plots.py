@@ -16,6 +16,20 @@ from host_tools.reports.metrics import StrideSet  # noqa: E402
 
 __all__ = ["plot_per_stride", "plot_tracking"]
 
+MARGINS_IN = {"left": 0.8, "right": 0.15, "top": 0.35, "bottom": 0.5}
+"""The figures' margins in inches, set once: matplotlib's constrained layout measured every tick label again on each
+figure: drawing a 2-stride run's two figures took 1.11 s of CPU with it, 0.69 s with these (best of 8 each)."""
+
+
+def _framed(fig: plt.Figure, gap_in: float = 0.7) -> None:
+    """Place the figure's axes inside :data:`MARGINS_IN`, ``gap_in`` inches apart (room for an x label)."""
+    w, h = fig.get_size_inches()
+    m = MARGINS_IN
+    rows = len(fig.axes)
+    axes_h = (h - m["top"] - m["bottom"] - gap_in * (rows - 1)) / rows
+    fig.subplots_adjust(left=m["left"] / w, right=1 - m["right"] / w, top=1 - m["top"] / h, bottom=m["bottom"] / h,
+                        hspace=gap_in / axes_h)
+
 
 def plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndarray, np.ndarray, np.ndarray],
                   t_s: np.ndarray, current_cmd_a: np.ndarray, current_meas_a: np.ndarray,
@@ -34,7 +48,8 @@ def plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndar
 def _plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.ndarray, np.ndarray, np.ndarray],
                    t_s: np.ndarray, current_cmd_a: np.ndarray, current_meas_a: np.ndarray,
                    errors_deg: dict[str, np.ndarray], title: str) -> None:
-    fig, (ax1, ax2, ax4) = plt.subplots(3, 1, figsize=(9, 11), constrained_layout=True)
+    fig, (ax1, ax2, ax4) = plt.subplots(3, 1, figsize=(9, 11))
+    _framed(fig)
     pct, mean, sd = band
     ax1.fill_between(pct, mean - sd, mean + sd, color="0.85", label="normative mean ± 1 SD")
     ax1.plot(pct, mean, color="0.4", lw=1.2, ls="--", label="normative mean")
@@ -71,8 +86,8 @@ def _plot_tracking(path: Path, strides: dict[str, StrideSet], band: tuple[np.nda
 def plot_per_stride(path: Path, upper: dict[str, list], upper_label: str, lower: dict[str, list], lower_label: str,
                     title: str) -> None:
     """Series with one value per stride (None: not known) against the stride number; a second panel if lower."""
-    fig, axes = plt.subplots(2 if lower else 1, 1, figsize=(9, 7 if lower else 4.5), constrained_layout=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(2 if lower else 1, 1, figsize=(9, 7 if lower else 4.5), squeeze=False)
+    _framed(fig)
     for ax, panel, label in zip(axes[:, 0], (upper, lower), (upper_label, lower_label), strict=False):
         for name, values in panel.items():
             y = np.array([np.nan if v is None else v for v in values], dtype=float)
