@@ -310,7 +310,7 @@ def test_root_locus_reproduces_appendix_b_and_its_pick_tracks_on_the_emulator():
     assert 0 < r.parameters["track_rms_deg"] < 3.0  # the pick follows the gait on the nonlinear plant
 
 
-def test_loading_current_changes_sign_only_hanging_with_the_tables_spring():
+def test_loading_current_changes_sign_only_hanging_with_the_tables_spring(loading_result):
     # Issue 24 read the report's -0.2..0.7 A as a q current that changes sign under eq 3.55 with the spring
     # rate of Tables B4/B5. Emulated over a whole period: hanging with the tables' 11.4 N/m the current does
     # change sign (about -1.5..1.7 A with 1.48 kg, -1.0..1.1 A without a load: larger than the report's, the
@@ -321,7 +321,7 @@ def test_loading_current_changes_sign_only_hanging_with_the_tables_spring():
     for key in ("current_a_tables_spring_no_load", "current_a_tables_spring_1.48kg"):
         lo, hi = hanging[key]
         assert lo < 0 < hi and hi - lo < 4.0, key
-    level = loading.run(periods=1.0).parameters
+    level = loading_result.parameters  # loading.run(periods=1.0): the level-COM geometry
     assert level["current_a_tables_spring_no_load"][0] > 0 and level["current_a_tables_spring_1.48kg"][0] > 0
 
 

@@ -10,7 +10,6 @@ cluster is not what is tested.
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import json
 import os
@@ -23,7 +22,8 @@ from pathlib import Path
 import pytest
 
 from host_tools.cli import main
-from host_tools.studies import sweep_engine, sweep_table
+from host_tools.studies import sweep_table
+from tests.study_clusters import no_cluster, threads_cluster  # noqa: F401 - fixtures
 
 PAFP = [sys.executable, "-m", "host_tools"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,28 +52,9 @@ def _one_line(err: str) -> str:
     return lines[0]
 
 
-@pytest.fixture
-def threads_cluster(monkeypatch):
-    """The commands' LocalCluster as worker threads of this process (fast; the command's own code path)."""
-    real = sweep_engine.dask_client
-
-    @contextlib.contextmanager
-    def threads(workers=None, scheduler=None, processes=True):
-        with real(workers=1, processes=False) as client:
-            yield client
-    monkeypatch.setattr(sweep_engine, "dask_client", threads)
-
-
-@pytest.fixture
-def no_cluster(monkeypatch):
-    """A cluster may not start: the test fails if the command tries."""
-    def refuse(*args, **kwargs):
-        raise AssertionError("a cluster was started")
-    monkeypatch.setattr(sweep_engine, "dask_client", refuse)
-
-
 # ---- specs read back: the shape of every table ------------------------------------------------------------
 
+@pytest.mark.usefixtures("no_cluster")
 @pytest.mark.parametrize("command, text, key, expected", [
     ("faults", '[[campaign]]\nseed = 0\n[[fault]]\nname = "imu_silent"\n', "campaign", "a table, written [campaign]"),
     ("faults", '[scenario]\nname = "walk"\n[[fault]]\nname = "imu_silent"\n', "scenario",
@@ -84,7 +65,7 @@ def no_cluster(monkeypatch):
     ("design", "[[search]]\nstrides = 1\n", "search", "a table, written [search]"),
     ("design", "belt = 3\n", "belt", "an array of tables, each written [[belt]]"),
 ])
-def test_a_spec_table_of_the_wrong_shape_is_one_line_naming_file_key_and_shape(tmp_path, capsys, no_cluster,
+def test_a_spec_table_of_the_wrong_shape_is_one_line_naming_file_key_and_shape(tmp_path, capsys,
                                                                                 command, text, key, expected):
     spec = tmp_path / "spec.toml"
     spec.write_text(text, encoding="utf-8")
@@ -98,16 +79,18 @@ def test_a_spec_table_of_the_wrong_shape_is_one_line_naming_file_key_and_shape(t
 
 # ---- outputs checked before the work -----------------------------------------------------------------------
 
+@pytest.mark.usefixtures("no_cluster")
 @pytest.mark.parametrize("command", ["faults", "design"])
-def test_an_out_below_a_file_is_refused_before_a_cluster_starts(tmp_path, capsys, no_cluster, command):
+def test_an_out_below_a_file_is_refused_before_a_cluster_starts(tmp_path, capsys, command):
     (tmp_path / "afile").write_text("x")
     spec = _campaign(tmp_path, [0.0]) if command == "faults" else ROOT / "profiles" / "designs" / "adult.toml"
     assert main([command, str(spec), "--out", str(tmp_path / "afile" / "out")]) == 2
     assert "is not a directory" in _one_line(capsys.readouterr().err)
 
 
+@pytest.mark.usefixtures("no_cluster")
 @pytest.mark.parametrize("command", ["faults", "design"])
-def test_less_than_a_mebibyte_free_is_refused_before_a_cluster_starts(tmp_path, capsys, no_cluster, monkeypatch,
+def test_less_than_a_mebibyte_free_is_refused_before_a_cluster_starts(tmp_path, capsys, monkeypatch,
                                                                        command):
     real = os.statvfs
     monkeypatch.setattr(os, "statvfs", lambda p: os.statvfs_result(tuple(real(p))[:3] + (100, 100)
@@ -120,8 +103,9 @@ def test_less_than_a_mebibyte_free_is_refused_before_a_cluster_starts(tmp_path, 
 
 # ---- a disk that fills during a campaign -------------------------------------------------------------------
 
+@pytest.mark.usefixtures("threads_cluster")
 def test_a_disk_that_fills_while_a_row_is_appended_is_exit_74_and_the_journal_keeps_whole_rows(
-        tmp_path, capsys, threads_cluster, monkeypatch):
+        tmp_path, capsys, monkeypatch):
     spec, out = _campaign(tmp_path, [0.0, 0.5]), tmp_path / "out"
     real_write = os.write
     appended = []
@@ -200,8 +184,9 @@ def test_faults_point_writes_the_outputs_of_pafp_run_with_its_trace(tmp_path, ca
     assert sorted(p.name for p in tmp_path.iterdir()) == ["campaign.toml", "point"]  # nothing staged left
 
 
+@pytest.mark.usefixtures("no_cluster")
 @pytest.mark.parametrize("criteria", ["", "[default]\n", "[fault.imu_silent]\nexcursion_deg = 1.0\n"])
-def test_criteria_that_judge_nothing_are_refused(tmp_path, capsys, no_cluster, criteria):
+def test_criteria_that_judge_nothing_are_refused(tmp_path, capsys, criteria):
     (tmp_path / "criteria.toml").write_text(criteria, encoding="utf-8")
     spec = _campaign(tmp_path, [0.0], 'criteria = "criteria.toml"')
     assert main(["faults", str(spec), "--out", str(tmp_path / "out")]) == 2

@@ -19,6 +19,7 @@ from host_tools.studies.fault_spec import load_fault_spec
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 from host_tools.studies.sweep_spec import SpecError
 from host_tools.studies.sweep_table import TIMING_COLUMNS
+from tests.study_clusters import threads_cluster  # noqa: F401 - a fixture
 from tests.trace_reader import read_trace
 
 SPEC = """
@@ -178,6 +179,7 @@ def test_the_verdict_judges_the_shipped_safe_state_and_compares_the_others():
     assert [(f.safe_state, f.judged) for f in check_criteria(one, limit)] == [("", True)]
 
 
+@pytest.mark.usefixtures("threads_cluster")  # the command's cluster of processes: tests/test_contract_studies.py
 def test_the_command_writes_the_table_and_report_and_exits_1_per_failed_criterion(tmp_path, capsys):
     crit = "[default]\nexcursion_deg = 0.5\ntime_to_safe_ms = 100\n"
     spec = spec_file(tmp_path, criteria=crit)

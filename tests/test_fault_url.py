@@ -151,7 +151,8 @@ def _run_with_lost_replies(tmp_path: Path, caplog, onset: str) -> tuple[int, dic
         proc, motor, imu = _emulator(20.0)
         try:
             code = main(["run", "--motor", f"fault://{motor}?fault=motor_replies_lost&{onset}&duration=1", "--imu",
-                         imu, "--duration", "3", "--out", str(out), "--quiet", "--capture", str(capture)])
+                         imu, "--duration", "3", "--out", str(out), "--quiet", "--capture", str(capture),
+                         "--no-plot", "--no-trace"])  # what is read here: the summary, the capture, the log
         finally:
             _stop(proc)
         s = _summary(out)

@@ -189,7 +189,7 @@ def test_unplug_is_attributed_and_files_are_complete(tmp_path: Path, capsys: pyt
 
 def test_sim_urls_run_in_process_with_1000_releases_per_second(tmp_path: Path) -> None:
     code = main(["run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--encoder", "sim", "--duration", "1",
-                 "--out", str(tmp_path), "--quiet"])
+                 "--out", str(tmp_path), "--quiet", "--no-plot", "--no-trace"])
     s = _summary(tmp_path)
     assert_faults_justified(s)
     assert code == (1 if s["faults"] else 0)

@@ -146,7 +146,7 @@ def test_telemetry_pty_is_printed_and_a_monitor_attaches(tmp_path: Path) -> None
     """The run outlasts the monitor whatever its start-up takes (seconds on a host without a bytecode cache: a run
     of fixed length could end before the monitor opened the pty); SIGINT then ends it the usual way."""
     run = _pafp("run", "--motor", "sim://ak60-6", "--imu", "sim://bno08x", "--encoder", "sim", "--duration", "60",
-                "--telemetry", "pty", "--out", str(tmp_path / "out"), "--quiet")
+                "--telemetry", "pty", "--out", str(tmp_path / "out"), "--quiet", "--no-plot", "--no-trace")
     try:
         run.stdout.readline()  # type: ignore[union-attr]  # the banner
         line = run.stdout.readline()  # type: ignore[union-attr]

@@ -11,6 +11,7 @@ from firmware.control.pid import PidGains
 from host_tools.cli import main
 from host_tools.studies import tuning
 from host_tools.studies.sweep_engine import dask_client
+from tests.study_clusters import threads_cluster  # noqa: F401 - a fixture
 
 
 def test_search_is_deterministic_whatever_the_worker_count():
@@ -139,8 +140,10 @@ def test_candidates_run_the_plant_they_are_given(tmp_path, nominal):
     assert drawn.rms_error_deg != nominal.rms_error_deg
 
 
+@pytest.mark.usefixtures("threads_cluster")
 def test_pafp_tune_on_a_plant_file_writes_profile_json_and_plot(tmp_path, capsys):
-    """One `pafp tune` (its Dask cluster's start-up is most of its time): the outputs, and the plant it was given."""
+    """One `pafp tune`: the outputs, and the plant it was given (pickled to the worker with each candidate, as to a
+    worker process; `pafp tune` on its cluster of processes: the stop-signal tests in tests/test_output_failures.py)."""
     plant = _heavier_plant(tmp_path)
     out = tmp_path / "tune"
     assert main(["tune", "--budget", "5", "--strides", "1", "--workers", "1", "--seed", "3", "--quiet",
@@ -159,8 +162,8 @@ def test_pafp_tune_on_a_plant_file_writes_profile_json_and_plot(tmp_path, capsys
     printed = capsys.readouterr().out
     assert "before: RMS" in printed and "after:  RMS" in printed
     assert f"on plant {plant} drawn with seed 7" in printed
-    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet",
-                 "--out", str(tmp_path / "run")]) == 0
+    assert main(["run", "--profile", str(out / "firmware_tuned.toml"), "--strides", "1", "--quiet", "--no-plot",
+                 "--no-trace", "--out", str(tmp_path / "run")]) == 0
 
 
 def test_pafp_tune_refuses_a_missing_plant_file_before_any_run(tmp_path, capsys):

@@ -54,15 +54,35 @@ class Installed:
     sources: tuple[str, ...]  # the package files of the copy the wheel was built from, relative to it
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
-    """A fresh virtual environment outside the checkout with the wheel of a copy of the source installed."""
+    """A fresh virtual environment outside the checkout with the wheel of a copy of the source installed: built once
+    a session, by the first pytest-xdist worker that needs it, under a lock in the directory the workers share (a
+    module fixture would be built again by every worker the module's tests are dealt to)."""
+    import fcntl
+
+    shared = os.environ.get("PYTEST_XDIST_WORKER") is not None
+    root = tmp_path_factory.getbasetemp().parent if shared else tmp_path_factory.getbasetemp()
+    base, done = root / "wheel", root / "wheel.json"
+    with open(root / "wheel.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not done.is_file():
+            shutil.rmtree(base, ignore_errors=True)  # a build that failed in another worker
+            base.mkdir()
+            built = _build_and_install(base)
+            done.write_text(json.dumps({"venv": str(built.venv), "wheel": str(built.wheel),
+                                        "sources": built.sources}))
+    d = json.loads(done.read_text())
+    return Installed(Path(d["venv"]), Path(d["wheel"]), tuple(d["sources"]))
+
+
+def _build_and_install(base: Path) -> Installed:
+    """Build the wheel of a copy of the source in base and install it into a new virtual environment there."""
     import setuptools
 
     (wants,) = [r for r in map(Requirement, tomllib.loads((ROOT / "pyproject.toml").read_text())["build-system"]
                                ["requires"]) if r.name == "setuptools"]
     assert wants.specifier.contains(setuptools.__version__), f"setuptools {setuptools.__version__}: {wants} builds"
-    base = tmp_path_factory.mktemp("wheel")
     src = base / "src"  # a copy without extensions or build leftovers: the wheel holds what git would ship
     src.mkdir()
     for name in SOURCE_FILES:

@@ -110,7 +110,6 @@ def run(args: argparse.Namespace) -> int:
 def _write(args: argparse.Namespace, source: Path, base: object, result: object, where: str) -> int:
     """Write the tuned profile, tune.json and (a finished search) tune.png; print the figures; the exit code."""
     from firmware.config import load_firmware_config
-    from host_tools.benchtests.tracking import run_case
     from host_tools.outdir import write_atomic
     from host_tools.stop_signals import EXIT_CODES
     from host_tools.studies import tuning
@@ -123,6 +122,8 @@ def _write(args: argparse.Namespace, source: Path, base: object, result: object,
         print(f"pafp tune: {profile_path} does not read back the tuned gains", file=sys.stderr)
         return 1
     if result.interrupted is None:
+        from host_tools.benchtests.tracking import run_case  # 1.4 s of imports a stopped search does not wait for
+
         plant = tuning.TunePlant(args.plant, args.plant_seed).run_options()
         before = run_case("before", base, strides=args.strides, seed=args.seed, run_options=plant)
         after = run_case("after", tuning.with_gains(base, result.best.gains), strides=args.strides, seed=args.seed,

@@ -97,7 +97,31 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, proces
         yield client
     finally:
         client.close()
+        if processes:  # with the client gone, a point still computing (after a stop signal or an error) is not wanted
+            cluster.sync(_stop_workers, cluster)
         cluster.close()
+
+
+WORKER_STOP_GRACE_S = 1.0
+"""How long a worker process still computing a point when its cluster closes (after a stop signal or an error) is
+given to stop before it is killed; an idle one stops at once. (Distributed's nanny would give it 4 s, which a Ctrl-C
+would wait for; the point's result is not wanted.)"""
+
+
+async def _stop_workers(cluster: Any) -> None:
+    """Close every worker process of the LocalCluster, killing those still busy after WORKER_STOP_GRACE_S (without
+    the nanny's warning that it does: that is the intent)."""
+    import asyncio
+
+    nanny_log = logging.getLogger("distributed.nanny")
+    level = nanny_log.level
+    nanny_log.setLevel(logging.ERROR)
+    try:  # a Nanny waits 0.8 * timeout for its worker to stop, then kills it; a kill slow to be joined on a loaded
+        # host (its TimeoutError) must not hide the exception on its way out: cluster.close() follows either way
+        await asyncio.gather(*(w.close(timeout=WORKER_STOP_GRACE_S / 0.8) for w in list(cluster.workers.values())),
+                             return_exceptions=True)
+    finally:
+        nanny_log.setLevel(level)
 
 
 
