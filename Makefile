@@ -48,10 +48,10 @@ CACHED = PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$(CURDIR)/build/pycache
 # The files that hold tests paced by the wall clock (conftest.py's REALTIME): the second run collects only those.
 REALTIME_FILES = $$($(PY) -c 'import conftest; print(*(f"tests/{name}" for name in conftest.REALTIME))')
 
-# -n 2: the suite on two worker processes (pytest-xdist), one per core of the 2-core machines it is timed on; then
-# the tests paced by the wall clock, alone
+# -n 2: the suite on two worker processes (pytest-xdist), one per core of the 2-core machines it is timed on, dealt
+# whole files in conftest.py's order (FIRST: the longest first); then the tests paced by the wall clock, alone
 test: $(STAMP)
-	$(CACHED) $(PY) -m pytest -q -n 2 -m "not realtime" --ignore=tests/benchmarks
+	$(CACHED) $(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder -m "not realtime" --ignore=tests/benchmarks
 	$(CACHED) $(PY) -m pytest -q -m realtime $(REALTIME_FILES)
 
 # The property tests under the exploring Hypothesis profile (tests/conftest.py): random seeds, more examples.

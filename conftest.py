@@ -51,9 +51,21 @@ in two runs of two, the last two once in a fresh clone's run, the serial runs ag
 load). The other tests of those files run virtual and stay with the rest."""
 
 
+FIRST = ("test_plant_fit.py", "test_plant_fit_serial.py", "test_output_failures.py", "test_design_search.py",
+         "test_serial_stop.py", "test_sweep.py", "test_vesc_properties.py", "test_serial_run.py", "test_fault_url.py",
+         "test_tune.py", "test_wheel.py", "test_run_heat.py", "test_benchtests.py", "test_run.py")
+"""The longest test files (summed durations of `make test`, slowest first), run before the rest: `make test` deals
+whole files to its two workers in this order (``--dist loadfile``), so neither is left alone with a long one at the
+end. test_plant_fit.py comes first because it makes the plant fit that other files share (tests/conftest.py): they
+come later in the order, when it is made, instead of waiting on its lock beside it. The order is only a schedule:
+a wrong one costs time, never a result."""
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         if item.path.name in REALTIME:
             prefixes = REALTIME[item.path.name]
             if prefixes is None or item.name.startswith(prefixes):
                 item.add_marker(pytest.mark.realtime)
+    rank = {name: k for k, name in enumerate(FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(FIRST)))  # stable: the rest keep their order

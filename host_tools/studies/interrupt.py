@@ -69,10 +69,11 @@ def interrupting() -> Iterator[StopSignals]:
     signals = StopSignals()
     t0 = time.perf_counter()
     in_flight = [False]  # an Interrupted was raised and Python has not dropped it
+    in_hook = [False]  # swallowed() is running: what it raised would be dropped for good (not passed to a hook)
 
     def raise_now() -> None:
-        if in_flight[0]:  # a late redelivery while one is already on its way out: nothing more to do
-            return
+        if in_flight[0] or in_hook[0]:  # a late redelivery while one is already on its way out, or one that came
+            return  # while the hook starts the redelivering thread (which delivers it again): nothing more to do
         in_flight[0] = True
         raise Interrupted(signals.name or "SIGINT", time.perf_counter() - t0)
 
@@ -87,8 +88,12 @@ def interrupting() -> Iterator[StopSignals]:
 
     def swallowed(unraisable: sys.UnraisableHookArgs) -> None:  # raised inside a gc callback (distributed's
         if isinstance(unraisable.exc_value, Interrupted):   # GCDiagnosis) and dropped: delivered again
-            in_flight[0] = False
-            threading.Thread(target=again, daemon=True).start()
+            in_hook[0] = True
+            try:
+                in_flight[0] = False
+                threading.Thread(target=again, daemon=True).start()
+            finally:
+                in_hook[0] = False
         else:
             previous_hook(unraisable)
 
