@@ -56,24 +56,9 @@ class Installed:
 
 @pytest.fixture(scope="session")
 def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
-    """A fresh virtual environment outside the checkout with the wheel of a copy of the source installed: built once
-    a session, by the first pytest-xdist worker that needs it, under a lock in the directory the workers share (a
-    module fixture would be built again by every worker the module's tests are dealt to)."""
-    import fcntl
-
-    shared = os.environ.get("PYTEST_XDIST_WORKER") is not None
-    root = tmp_path_factory.getbasetemp().parent if shared else tmp_path_factory.getbasetemp()
-    base, done = root / "wheel", root / "wheel.json"
-    with open(root / "wheel.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
-        if not done.is_file():
-            shutil.rmtree(base, ignore_errors=True)  # a build that failed in another worker
-            base.mkdir()
-            built = _build_and_install(base)
-            done.write_text(json.dumps({"venv": str(built.venv), "wheel": str(built.wheel),
-                                        "sources": built.sources}))
-    d = json.loads(done.read_text())
-    return Installed(Path(d["venv"]), Path(d["wheel"]), tuple(d["sources"]))
+    """A fresh virtual environment outside the checkout with the wheel of a copy of the source installed (once a
+    session: `make test` deals this file whole to one worker)."""
+    return _build_and_install(tmp_path_factory.mktemp("wheel"))
 
 
 def _build_and_install(base: Path) -> Installed:
