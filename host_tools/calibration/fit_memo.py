@@ -1,5 +1,6 @@
 """`pafp fit`'s memo of simulations: within one fit (`one_fit`), a simulation already run with the same base
-profile, parameter values and recording is taken from the memo, not run again.
+profile, parameter values and recording is taken from the memo, not run again (`remembered`); so is a window's run of
+the plant (`recall`, keyed by what it depends on: `fit_window.window_key`).
 
 A fit asks for the same simulation again where its steps meet: the solver's Jacobian at the point it stopped and the
 intervals' Jacobian there, the cost of that point in the next step (the noise scales, a profile's centre, the
@@ -18,22 +19,45 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MEMO_SIZE", "one_fit", "remembered"]
+__all__ = ["MEMO_SIZE", "WINDOW_MEMO_SIZE", "one_fit", "recall", "remembered"]
 
 MEMO_SIZE = 64  # simulations held (a recording of 30 s: about 0.3 MB each)
+WINDOW_MEMO_SIZE = 4096  # windows' runs held (about 3 kB each)
 _memo: OrderedDict | None = None  # key -> (base, recording, outputs, heard): the fit's under way; None outside one
+_windows: OrderedDict | None = None  # key -> (what the key names by identity, the run)
 
 
 @contextmanager
 def one_fit() -> Iterator[None]:
     """Within: `remembered` simulations are taken from the memo of this fit (one memo for nested calls)."""
-    global _memo
-    outer = _memo
-    _memo = OrderedDict() if outer is None else outer
+    global _memo, _windows
+    outer = _memo, _windows
+    if _memo is None:
+        _memo, _windows = OrderedDict(), OrderedDict()
     try:
         yield
     finally:
-        _memo = outer
+        _memo, _windows = outer
+
+
+def _held(memo: OrderedDict, key: tuple, make: Callable[[], Any], size: int) -> Any:
+    """memo[key], made by `make` when it is not there; the least recently used dropped beyond `size`."""
+    hit = memo.get(key)
+    if hit is None:
+        hit = memo[key] = make()
+        if len(memo) > size:
+            memo.popitem(last=False)
+    else:
+        memo.move_to_end(key)
+    return hit
+
+
+def recall(key: tuple, keep: tuple, run: Callable[[], Any]) -> Any:
+    """run() or, within `one_fit`, what it returned for the same key (`keep`: the objects the key names by identity,
+    held with it). The caller must not change what it returns."""
+    if _windows is None:
+        return run()
+    return _held(_windows, key, lambda: (keep, run()), WINDOW_MEMO_SIZE)[1]
 
 
 def remembered(simulate: Callable[..., tuple[np.ndarray, ...]]) -> Callable[..., tuple[np.ndarray, ...]]:
@@ -47,15 +71,12 @@ def remembered(simulate: Callable[..., tuple[np.ndarray, ...]]) -> Callable[...,
             return simulate(base, v, exp, *args, heard_out=heard_out, **kwargs)
         key = (id(base), id(exp), args, tuple(sorted(kwargs.items())),
                tuple((name, float(x).hex()) for name, x in sorted(v.items())))
-        hit = _memo.get(key)
-        if hit is None:
+
+        def run() -> tuple:
             heard = np.zeros(len(exp.t), dtype=bool)
-            hit = (base, exp, simulate(base, v, exp, *args, heard_out=heard, **kwargs), heard)
-            _memo[key] = hit
-            if len(_memo) > MEMO_SIZE:
-                _memo.popitem(last=False)
-        else:
-            _memo.move_to_end(key)
+            return base, exp, simulate(base, v, exp, *args, heard_out=heard, **kwargs), heard
+
+        hit = _held(_memo, key, run, MEMO_SIZE)
         if heard_out is not None:
             heard_out[:] = hit[3]
         return tuple(a.copy() for a in hit[2])
