@@ -219,7 +219,8 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                                (moved_imu - imu[w]) / SLOW_STEP_RAD_S)
             else:
                 run_window(k, end, t0, v_start)
-        frames = _frame_times(exp, k, end)
+        frames = recall(("frames", id(exp.t), id(exp.imu), k, end), (exp.t, exp.imu),
+                        lambda k=k, end=end: _frame_times(exp, k, end))  # the data's alone
         imu[k:end] = np.interp(frames, exp.t[k:end], imu[k:end])
         if FREE_IMU_OFFSET:
             _project_imu_start(exp, k, end, imu, mask, np.exp(-(frames - t0) / lag))
