@@ -69,10 +69,10 @@ def _bits(x: object) -> object:
 
 def window_key(ev: Events, k: int, end: int, t0: float, v_start: float, start_angle: float, c: int,
                backlash: float) -> tuple:
-    """What a window's run (`run_plant`) depends on: the recording's arrays (by identity: `Events.keep`), the window,
-    its start, the plant's parameters but the backlash, and the backlash only when it acts (a command of each sign in
-    the window, or the encoder reads the reply's rotor angle, which has the rotor's place in the gap in it)."""
-    return (tuple(map(id, ev.keep)), k, end, ev.plant_bits,
+    """What a window's run (`run_plant`) depends on: the recording's arrays (by identity: `Events.keep`) and which
+    angle its encoder reads, the window, its start, the plant's parameters but the backlash, and the backlash only
+    where it acts (`Events.gap`)."""
+    return (tuple(map(id, ev.keep)), ev.exp.angle_from_reply, k, end, ev.plant_bits,
             tuple(_bits(float(x)) for x in (t0, v_start, start_angle, ev.delay, backlash if ev.gap(c, end, backlash)
                                              else 0.0)))
 
