@@ -15,6 +15,7 @@ import functools
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import Any
 
 import numpy as np
@@ -23,21 +24,22 @@ __all__ = ["MEMO_SIZE", "WINDOW_MEMO_SIZE", "one_fit", "recall", "remembered"]
 
 MEMO_SIZE = 64  # simulations held (a recording of 30 s: about 0.3 MB each)
 WINDOW_MEMO_SIZE = 4096  # windows' runs held (about 3 kB each)
-_memo: OrderedDict | None = None  # key -> (base, recording, outputs, heard): the fit's under way; None outside one
-_windows: OrderedDict | None = None  # key -> (what the key names by identity, the run)
+# the fit's under way (None outside one; a thread's own): simulations, key -> (base, recording, outputs, heard), and
+# windows' runs, key -> (what the key names by identity, the run)
+_memos: ContextVar[tuple[OrderedDict, OrderedDict] | None] = ContextVar("fit_memos", default=None)
 
 
 @contextmanager
 def one_fit() -> Iterator[None]:
     """Within: `remembered` simulations are taken from the memo of this fit (one memo for nested calls)."""
-    global _memo, _windows
-    outer = _memo, _windows
-    if _memo is None:
-        _memo, _windows = OrderedDict(), OrderedDict()
+    if _memos.get() is not None:
+        yield
+        return
+    token = _memos.set((OrderedDict(), OrderedDict()))
     try:
         yield
     finally:
-        _memo, _windows = outer
+        _memos.reset(token)
 
 
 def _held(memo: OrderedDict, key: tuple, make: Callable[[], Any], size: int) -> Any:
@@ -55,9 +57,10 @@ def _held(memo: OrderedDict, key: tuple, make: Callable[[], Any], size: int) -> 
 def recall(key: tuple, keep: tuple, run: Callable[[], Any]) -> Any:
     """run() or, within `one_fit`, what it returned for the same key (`keep`: the objects the key names by identity,
     held with it). The caller must not change what it returns."""
-    if _windows is None:
+    memos = _memos.get()
+    if memos is None:
         return run()
-    return _held(_windows, key, lambda: (keep, run()), WINDOW_MEMO_SIZE)[1]
+    return _held(memos[1], key, lambda: (keep, run()), WINDOW_MEMO_SIZE)[1]
 
 
 def remembered(simulate: Callable[..., tuple[np.ndarray, ...]]) -> Callable[..., tuple[np.ndarray, ...]]:
@@ -67,7 +70,8 @@ def remembered(simulate: Callable[..., tuple[np.ndarray, ...]]) -> Callable[...,
     @functools.wraps(simulate)
     def wrapper(base: Any, v: dict[str, float], exp: Any, *args: Any, heard_out: np.ndarray | None = None,
                 **kwargs: Any) -> tuple[np.ndarray, ...]:
-        if _memo is None:
+        memos = _memos.get()
+        if memos is None:
             return simulate(base, v, exp, *args, heard_out=heard_out, **kwargs)
         key = (id(base), id(exp), args, tuple(sorted(kwargs.items())),
                tuple((name, float(x).hex()) for name, x in sorted(v.items())))
@@ -76,7 +80,7 @@ def remembered(simulate: Callable[..., tuple[np.ndarray, ...]]) -> Callable[...,
             heard = np.zeros(len(exp.t), dtype=bool)
             return base, exp, simulate(base, v, exp, *args, heard_out=heard, **kwargs), heard
 
-        hit = _held(_memo, key, run, MEMO_SIZE)
+        hit = _held(memos[0], key, run, MEMO_SIZE)
         if heard_out is not None:
             heard_out[:] = hit[3]
         return tuple(a.copy() for a in hit[2])
