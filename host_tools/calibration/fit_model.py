@@ -22,9 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hal.virtual.plant import Plant, PlantParams, load_plant_params, suspended
+from hal.virtual.plant import PlantParams, load_plant_params
 from host_tools.calibration.fit_data import COMMAND_DELAY_S, WINDOW_S, Experiment
-from host_tools.calibration.fit_gap import GAP_BLEND, GapShare
+from host_tools.calibration.fit_memo import recall, remembered
+from host_tools.calibration.fit_window import Events, run_plant, window_key
 
 __all__ = ["DEFAULT_FIT", "IMU_FRAME_AGE_S", "PARAMS", "SIGMA", "FitParam", "base_values", "encoder_step",
            "fit_percentage", "fit_percentages", "noise_scales", "plant_with", "residuals", "rotor_side_sd", "simulate",
@@ -135,6 +136,7 @@ FREE_V0 = True  # each moving window's initial velocity is projected out (`_proj
 FREE_IMU_OFFSET = True
 
 
+@remembered
 def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: float = WINDOW_S,
              free_v0: bool = FREE_V0, heard_out: np.ndarray | None = None
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -161,97 +163,37 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     angle, current, imu = np.zeros(n), np.zeros(n), np.zeros(n)
     mask = np.ones(n, dtype=bool)
     vel = exp.vel
-    fixture = suspended()
     lo, hi = params.stop_min_rad, params.stop_max_rad
-    delay = v.get("command_delay_s", COMMAND_DELAY_S)
-    t_cmd, i_cmd, t_req, req_of = exp.t_cmd, exp.i_cmd, exp.t_req + (delay - COMMAND_DELAY_S), exp.req_of
-    angle_of = req_of if exp.angle_req_of is None else exp.angle_req_of  # the reply whose position the encoder is
-    n_cmd, n_req = len(t_cmd), len(t_req)
-    tau = params.current_time_constant_s
-    peak = params.peak_current_a
-    ratio = params.total_ratio
-    band = GAP_BLEND * float(np.median(np.diff(t_cmd))) if n_cmd > 1 else 1e-3
+    ev = Events(exp, v.get("command_delay_s", COMMAND_DELAY_S), params)
+    angle_of = exp.req_of if exp.angle_req_of is None else exp.angle_req_of  # the reply whose position the encoder is
 
     def run_window(k: int, end: int, t0: float, v_start: float, project: bool = False) -> None:
         """Simulate window [k, end) from the measured angle at t0, at v_start (0: stuck), into the arrays; with
         `project`, its start velocity's error projected out along the free motion's analytic response."""
-        t_first = float(exp.t[k])
         start = exp.angle[k] + offset + (0.0 if exp.start_shift is None else float(exp.start_shift[k]))
-        c = int(np.searchsorted(t_cmd, t0 - delay, side="right")) - 1  # the command acting at t0
+        c = ev.acting(t0)
         if exp.angle_from_reply and c >= 0:  # a reply's angle has the rotor's place in the backlash in it: the
             # output is half the gap (through the belt) behind it on the side the command acting pushes
-            start -= 0.5 * backlash / params.belt_ratio * float(np.sign(i_cmd[c]))
+            start -= 0.5 * backlash / params.belt_ratio * float(np.sign(exp.i_cmd[c]))
         start_angle = min(hi, max(lo, start))
-        i0 = float(exp.current[k])
-        # the backlash is the fit's (`fit_gap`): the plant runs without it and is given the share of each command
-        # that reaches the output; its friction switches where it happens, not on its step grid (a cost without
-        # jumps)
-        plant = Plant(params, fixture, initial_angle_rad=start_angle, initial_velocity_rad_s=v_start,
-                      start_time_s=t0, initial_current_a=i0, located_switching=True)
-        gap = GapShare(params, backlash, t0, band) if backlash > 0.0 else None
-
-        def command(amps: float, te: float) -> None:
-            if gap is not None:
-                amps = max(-peak, min(peak, amps))
-                amps *= gap.share(te, amps, plant.output_accel_rad_s2(te))
-            plant.set_current_command(amps, te)
-
-        if c >= 0:
-            command(float(i_cmd[c]), t0)
-        target = max(-peak, min(peak, float(i_cmd[c - 1]))) if c >= 1 else 0.0
-        c += 1
-        r = int(np.searchsorted(t_req, t0, side="right"))  # the next request to reach the motor
-        means: dict[int, float] = {}  # request index -> the mean its reply carries
-        positions: dict[int, float] = {}  # request index -> the rotor angle its reply carries
-        r_prev = r - 1
-        t_mark = float(t_req[r_prev]) if r_prev >= 0 else t0  # the driver's averages reset here
-        acc = i0 * (t0 - t_mark)  # before t0 the current is taken as the measured one
-        t_last, i_last = t0, i0
-        # the IMU's lag state: following the start's motion (its offset and its transient are the window's own:
-        # projected out below)
+        th, angle[k:end], current[k:end], heard[k:end] = recall(
+            window_key(ev, k, end, t0, v_start, start_angle, c, backlash), ev.keep,
+            lambda: run_plant(ev, params, backlash, k, end, t0, v_start, start_angle, c))
+        angle[k:end] -= offset
+        # the IMU's lag, its state following the start's motion (its offset and its transient are the window's own:
+        # projected out below), integrated exactly for an input linear between samples (as the sensor's model)
         filt = start_angle - lag * v_start
         t_prev, u_prev = t0, start_angle
-        for j in range(k, end):
-            tj = float(exp.t[j])
-            while True:  # the events up to tj, in time order: commands arriving, requests arriving
-                ta = float(t_cmd[c]) + delay if c < n_cmd else math.inf
-                tr = float(t_req[r]) if r < n_req else math.inf
-                te = min(ta, tr)
-                if te > tj:
-                    break
-                span = te - t_last
-                if span > 0:
-                    acc += target * span + (i_last - target) * tau * -math.expm1(-span / tau)
-                    i_last, t_last = plant.current_q_a(te), te
-                if tr <= ta:
-                    means[r] = acc / (te - t_mark) if te > t_mark else i_last
-                    positions[r] = plant.motor_angle_rad(te) + (0.0 if gap is None else gap.angle(te))
-                    acc, t_mark = 0.0, te
-                    r += 1
-                else:
-                    command(float(i_cmd[c]), te)
-                    target = max(-peak, min(peak, float(i_cmd[c])))
-                    c += 1
-            th = plant.output_angle_rad(tj)
-            q = int(req_of[j])
-            # through serial mode the encoder angle is a reply's position (one reply older than the current's),
-            # taken when its request reached the motor; on the virtual bench the encoder reads the plant at the
-            # sample's time
-            # (the reply's position is the rotor's, the motor's encoder being on it: over the whole ratio it is the
-            # output plus the rotor's place in the backlash, docs/plant.md)
-            rotor = positions.get(int(angle_of[j])) if exp.angle_from_reply else None
-            angle[j] = (th if rotor is None else rotor / ratio) - offset
-            got = means.get(q)
-            # None: its request reached the motor before this window, or has not yet in the simulation
-            current[j] = exp.current[j] if got is None else got
-            heard[j] = got is not None
-            if tj > t_prev:  # the lag integrated exactly for an input linear between samples (as the sensor's model)
+        out_imu = []
+        for tj, thj in zip(ev.ts[k:end], th.tolist(), strict=True):
+            if tj > t_prev:
                 h = tj - t_prev
-                slope = (th - u_prev) / h
-                filt = th - slope * lag + (filt - u_prev + slope * lag) * math.exp(-h / lag)
-            t_prev, u_prev = tj, th
-            imu[j] = filt + bias
-            mask[j] = tj - t_first >= SKIP_S
+                slope = (thj - u_prev) / h
+                filt = thj - slope * lag + (filt - u_prev + slope * lag) * math.exp(-h / lag)
+            t_prev, u_prev = tj, thj
+            out_imu.append(filt + bias)
+        imu[k:end] = out_imu
+        mask[k:end] = exp.t[k:end] - exp.t[k] >= SKIP_S
         if project:
             _project_initial_velocity(exp, k, end, t0, angle, imu, mask, params, lag)
 
@@ -259,7 +201,7 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
     for k, end in windows(exp, window_s):
         t0 = float(exp.t[k])
         if exp.angle_from_reply and angle_of[k] >= 0:  # the start angle is a reply's: the plant's when its request
-            t0 = min(t0, float(t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
+            t0 = min(t0, float(ev.t_req[angle_of[k]]))  # reached the motor, some 2 ms before the sample
         v0 = float(vel[k])
         if abs(v0) >= REST_RAD_S:
             run_window(k, end, t0, v0, project=free_v0)
@@ -277,7 +219,8 @@ def simulate(base: PlantParams, v: dict[str, float], exp: Experiment, window_s: 
                                (moved_imu - imu[w]) / SLOW_STEP_RAD_S)
             else:
                 run_window(k, end, t0, v_start)
-        frames = _frame_times(exp, k, end)
+        frames = recall(("frames", id(exp.t), id(exp.imu), k, end), (exp.t, exp.imu),
+                        lambda k=k, end=end: _frame_times(exp, k, end))  # the data's alone
         imu[k:end] = np.interp(frames, exp.t[k:end], imu[k:end])
         if FREE_IMU_OFFSET:
             _project_imu_start(exp, k, end, imu, mask, np.exp(-(frames - t0) / lag))

@@ -26,6 +26,7 @@ from host_tools.calibration import fit_solver as solver
 from host_tools.calibration.fit_adequacy import adequacy
 from host_tools.calibration.fit_consider import Solution, stuck_starts_term, timing_term
 from host_tools.calibration.fit_data import STALL_BOUND_S, Experiment
+from host_tools.calibration.fit_memo import one_fit
 from host_tools.calibration.fit_model import (
     DEFAULT_FIT,
     FREE_IMU_OFFSET,
@@ -129,7 +130,15 @@ def check_params(names: tuple[str, ...], given: str = "") -> None:
 
 def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAULT_FIT,
               held_out: float = 0.2, max_nfev: int = 60) -> FitResult:
-    """Least squares on the windowed simulation error over the first (1 - held_out) of the experiment."""
+    """Least squares on the windowed simulation error over the first (1 - held_out) of the experiment (a simulation
+    asked for again taken from the fit's memo: `fit_memo`)."""
+    with one_fit():
+        return _fit_plant(base, exp, names, held_out, max_nfev)
+
+
+def _fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...], held_out: float,
+               max_nfev: int) -> FitResult:
+    """`fit_plant`'s work."""
     import time
 
     check_params(names)
@@ -155,7 +164,6 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     if not first_names:  # only the lag (and the backlash) asked for: the lag alone first
         first_names = tuple(n for n in names if n != "backlash_deg")
     scales = dict(SIGMA)
-    last: list[tuple[tuple[str, ...], np.ndarray, np.ndarray]] = []
 
     def values(names: tuple[str, ...], x: np.ndarray) -> dict[str, float]:
         return {**start, **{n: float(v) for n, v in zip(names, x, strict=True)}}
@@ -174,11 +182,7 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
         steps = np.array([FIXED_STEPS.get(n, SECANT_STEP * float(c)) for n, c in zip(names, scale, strict=True)])
 
         def fun(x: np.ndarray) -> np.ndarray:
-            if last and last[0][0] == names and np.array_equal(last[0][1], x):
-                return last[0][2]
-            r = residuals(base, values(names, x), fit_part, scales)
-            last[:] = [(names, np.array(x), r)]
-            return r
+            return residuals(base, values(names, x), fit_part, scales)
 
         res = solver.solve(fun, x0, lo, hi, lambda x: _secant_jacobian(fun, np.asarray(x, dtype=float), steps, hi)[0],
                            max_nfev, scale=scale)
@@ -198,13 +202,11 @@ def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAU
     # none at all is a model of its own: any gap, however small, frees the rotor until the next command (a period's
     # dead time at each reversal), so a profile at 0 keeps it there (the solver's interior start would be 5e-9 deg)
     names = tuple(n for n in ls_names if n != "backlash_deg" or start["backlash_deg"] > 0.0)
-    last.clear()  # its residuals were in the old scales
     res, steps, hi = solve(names, np.array([first[n] for n in names]))
     # the weights again at this solution and the fit again with them: taken at the first solution alone (without the
     # backlash and the lag), they carried where that one stopped into the answer (the hand-made plant's 10 s
     # recording under two BLAS set-ups: the angle's scale 9 % apart, damping and Coulomb friction 0.04 half-widths)
     scales = noise_scales(residuals(base, values(names, res.x), fit_part, scales), scales)
-    last.clear()
     res, steps, hi = solve(names, np.asarray(res.x, dtype=float))
     x_fit, nfev, cost, message = np.asarray(res.x, dtype=float), int(res.nfev), float(res.cost), str(res.message)
     if "backlash_deg" in names:  # the backlash's valley, found on a fine grid, then the others fitted again in it
