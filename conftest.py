@@ -51,9 +51,10 @@ in two runs of two, the last two once in a fresh clone's run, the serial runs ag
 load). The other tests of those files run virtual and stay with the rest."""
 
 
-FIRST = ("test_plant_fit.py", "test_plant_fit_serial.py", "test_output_failures.py", "test_design_search.py",
-         "test_serial_stop.py", "test_sweep.py", "test_vesc_properties.py", "test_serial_run.py", "test_fault_url.py",
-         "test_tune.py", "test_wheel.py", "test_run_heat.py", "test_benchtests.py", "test_run.py")
+FIRST = ("test_plant_fit.py", "test_output_failures.py", "test_plant_fit_serial.py", "test_serial_stop.py",
+         "test_design_search.py", "test_benchtests.py", "test_serial_run.py", "test_fault_url.py", "test_sweep.py",
+         "test_wheel.py", "test_benchtests_tracking.py", "test_vesc_properties.py", "test_controller_exit.py",
+         "test_tune.py", "test_run_heat.py", "test_run.py", "test_fault_campaign.py")
 """The longest test files (summed durations of `make test`, slowest first), run before the rest: `make test` deals
 whole files to its two workers in this order (``--dist loadfile``), so neither is left alone with a long one at the
 end. test_plant_fit.py comes first because it makes the plant fit that other files share (tests/conftest.py): they
