@@ -205,7 +205,8 @@ def verdict(p: dict) -> str:
 
 def _markdown(s: dict) -> str:
     lines = ["# Plant fit", "", f"Recording `{s['run']}`: {s['samples']} samples, {s['commands']} current commands, "
-             f"{s['evaluations']} simulations in {s['wall_time_s']} s.", "",
+             f"fitted in {s['wall_time_s']} s ({s['evaluations']} evaluations of the cost by the solver; each "
+             "Jacobian it took simulated the recording once more per parameter).", "",
              "| parameter | value | 95 % ± | of which rotor side | of which timing | of which stuck starts | "
              "collinearity | verdict |", "|---|---|---|---|---|---|---|---|"]
     for n, p in s["params"].items():
