@@ -54,7 +54,6 @@ class Events:
         first = max(c, 0)
         return bool(self.positive[last] > self.positive[first] and self.negative[last] > self.negative[first])
 
-
     def gap(self, c: int, end: int, backlash: float) -> bool:
         """Whether the backlash acts in the window [c's start, end): a command of each sign in it, or the encoder reads
         the reply's rotor angle (which has the rotor's place in the gap in it). Where it does not, every command passes

@@ -413,9 +413,10 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
             section.collect_young()  # young objects only: tens of µs, never a full scan in the loop
 
     tasks = [instrument(t, timings) for t in (fw.tasks if recording is None else recording.tasks(fw.tasks))]
-    tasks.append(Task("serial_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body))
+    probe_task = Task("serial_probe", 99, period=f_cpu // PROBE_HZ, cost=0, body=probe_body)
+    tasks.append(probe_task)
     # the probe's jobs are not recorded: the trace file never draws them (reports/timeline.py)
-    trace = Trace(cfg.trace_capacity, skip=("serial_probe",)) if cfg.trace_capacity else None
+    trace = Trace(cfg.trace_capacity, skip=(probe_task.name,)) if cfg.trace_capacity else None
     sched = Scheduler(tasks, clock, trace=trace, on_fault=lambda f: fw.on_task_fault(f.task, f.time),
                       seed=cfg.seed)
     now.bind(sched)

@@ -124,7 +124,6 @@ async def _stop_workers(cluster: Any) -> None:
         nanny_log.setLevel(level)
 
 
-
 TERMINAL_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGHUP") if hasattr(signal, n))
 """What a terminal sends its whole process group (Ctrl-C, a closed terminal): the worker processes ignore them
 and are stopped by the command's own clean-up (host_tools/studies/interrupt.py closes the cluster)."""
