@@ -14,6 +14,8 @@ import pytest
 can = pytest.importorskip("can")
 pytest.importorskip("msgpack")  # udp_multicast needs it
 
+from can_groups import multicast_group  # noqa: E402
+
 from firmware.app import Firmware  # noqa: E402
 from firmware.config import load_firmware_config  # noqa: E402
 from hal.interfaces import Board  # noqa: E402
@@ -24,15 +26,9 @@ from protocol import can_mit, can_servo  # noqa: E402
 CLIENT = Path(__file__).with_name("can_client.py")
 
 
-def _group() -> str:
-    """A multicast group of this test process (so parallel runs on one host do not hear each other)."""
-    n = os.getpid()
-    return f"239.74.{(n >> 8) & 0xFF}.{n & 0xFF}"
-
-
 @pytest.mark.parametrize("mode", ["mit", "servo"])
 def test_plain_python_can_program_drives_the_emulated_motor(mode: str) -> None:
-    group = _group()
+    group = multicast_group()
     url = f"can://udp_multicast/{group}?id=1&mode={mode}"
     emu = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "motor", "--can", url, "--duration", "8"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -59,8 +59,8 @@ def test_virtual_run_latches_controller_error_and_writes_everything(
     assert_safe_at_the_end((capture / "motor.tx.bin").read_bytes())
 
 
-def run_against_emulator(tmp_path: Path, link: str, controller: str, duration_s: float, mode: str = "servo",
-                         tag: int = 0) -> tuple[int, dict, Path]:
+def run_against_emulator(tmp_path: Path, link: str, controller: str, duration_s: float, mode: str = "servo"
+                         ) -> tuple[int, dict, Path]:
     """`pafp run` with `controller` against `pafp emulate bench` (--pty, or --can on udp_multicast), capturing on
     the motor's side: the exit code, summary.json (every output checked) and the emulator's capture folder."""
     device = tmp_path / "device"
@@ -72,7 +72,7 @@ def run_against_emulator(tmp_path: Path, link: str, controller: str, duration_s:
         pytest.importorskip("msgpack")
         from test_serial_can import can_bench, can_url, stop_bench
 
-        motor = can_url(mode, tag)
+        motor = can_url(mode)
         can_proc, imu = can_bench(motor, device)
         stop = lambda: stop_bench(can_proc)  # noqa: E731
     out = tmp_path / "out"
@@ -135,7 +135,7 @@ def test_serial_run_over_uart_stops_safely_when_the_controller_exits(
 @pytest.mark.parametrize("mode", ["servo", "mit"])
 def test_serial_run_over_can_stops_safely_when_the_controller_exits(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], mode: str) -> None:
-    code, s, device = run_against_emulator(tmp_path, "can", "Exits", 2.5, mode, 1)
+    code, s, device = run_against_emulator(tmp_path, "can", "Exits", 2.5, mode)
     _assert_controller_exit(s, code, capsys.readouterr().err, "SystemExit: 0")
     assert_stopped_safely_on(device, "can", mode)
 
@@ -155,7 +155,7 @@ def _assert_controller_exit(s: dict, code: int, err: str, named: str) -> None:
 @pytest.mark.parametrize(("link", "mode"), [("uart", "servo"), ("can", "servo"), ("can", "mit")])
 def test_blocking_controller_gets_the_safe_frames_from_the_host_watchdog(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], link: str, mode: str) -> None:
-    code, s, device = run_against_emulator(tmp_path, link, "Blocks", 4, mode, 2)
+    code, s, device = run_against_emulator(tmp_path, link, "Blocks", 4, mode)
     err = capsys.readouterr().err
     assert code == 1 and s["exit_code"] == 1, err
     stop, hw = s["stop"], s["host_watchdog"]

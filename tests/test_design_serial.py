@@ -70,7 +70,7 @@ def test_can_design_profile_against_the_emulated_design_keeps_the_encoder_check(
     pytest.importorskip("msgpack")
     from test_serial_can import can_bench, can_url, stop_bench
 
-    url = can_url("servo", tag=5)
+    url = can_url("servo")
     bench, imu = can_bench(url, tmp_path / "device", options=("--profile", str(DESIGN)))
     out = tmp_path / "out"
     try:

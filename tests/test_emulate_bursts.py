@@ -6,7 +6,6 @@ the past" on the first burst that found it a few milliseconds behind)."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import signal
 import subprocess
@@ -14,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from can_groups import multicast_group
 
 pytest.importorskip("msgpack", reason="python-can's udp_multicast interface needs msgpack")
 
@@ -50,7 +50,7 @@ def _stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
 
 
 def test_can_bursts_with_a_busy_core() -> None:
-    group = f"239.74.{(os.getpid() >> 8) & 0xFF}.{os.getpid() & 0xFF}"  # apart from other tests' groups
+    group = multicast_group()
     busy = _busy_core()
     emu = _emulator("--can", f"can://udp_multicast/{group}?id=1&mode=servo")
     try:

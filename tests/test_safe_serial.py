@@ -76,7 +76,7 @@ def _can_fault_run(tmp_path: Path, mode: str, safe_state: str) -> list[tuple[int
     pytest.importorskip("msgpack")
     from test_serial_can import can_bench, can_url, received, stop_bench
 
-    url = can_url(mode, tag=3)
+    url = can_url(mode)
     bench, imu = can_bench(url, tmp_path / "device")
     out = tmp_path / "out"
     try:

@@ -16,14 +16,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from can_groups import multicast_group
 
 ROOT = Path(__file__).resolve().parents[1]
 SECONDS = 3.0  # per SDK: 1 s of each command kind (tests/benchmarks/bench_sdk_clients.py runs 60 s)
-
-
-def _group(salt: int) -> str:
-    pid = os.getpid()
-    return f"239.75.{(pid >> 8) & 0xFF}.{(pid + salt) & 0xFF}"
 
 
 def drive(sdk: str, mode: str, motor_type: str, tmp: Path, seconds: float = SECONDS,
@@ -31,7 +27,7 @@ def drive(sdk: str, mode: str, motor_type: str, tmp: Path, seconds: float = SECO
     """Serve the motor, let the SDK drive it; (the SDK's log, the emulator's summary, the captured frames)."""
     import can
 
-    group = _group({"osl": 1, "tmcc": 2}[sdk])
+    group = multicast_group()
     capture = tmp / f"capture-{sdk}"
     emu = subprocess.Popen([sys.executable, "-m", "host_tools", "emulate", "motor", "--can",
                             f"can://udp_multicast/{group}?id=1&mode={mode}", "--capture", str(capture),

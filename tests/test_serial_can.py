@@ -6,7 +6,7 @@ wire only; the bus's echoes of a port's own frames are not frames in; can:// URL
 from __future__ import annotations
 
 import csv
-import os
+import math
 import re
 import signal
 import subprocess
@@ -19,6 +19,7 @@ import pytest
 can = pytest.importorskip("can")
 pytest.importorskip("msgpack")  # udp_multicast needs it
 
+from can_groups import multicast_group  # noqa: E402
 from test_serial_run import _like_a_device  # noqa: E402
 
 import hal.pycan as pycan  # noqa: E402
@@ -32,10 +33,9 @@ SETTLE_S = 0.5  # the emulated suspended foot comes to rest on its stop (tests/t
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 
 
-def can_url(mode: str, tag: int = 0) -> str:
-    """A udp_multicast can:// URL of this test process (parallel runs on one host do not hear each other)."""
-    n = (os.getpid() * 8 + tag) & 0xFFFF
-    return f"can://udp_multicast/239.75.{n >> 8}.{n & 0xFF}?id=1&mode={mode}"
+def can_url(mode: str) -> str:
+    """A udp_multicast can:// URL on a group of its own (tests/can_groups.py)."""
+    return f"can://udp_multicast/{multicast_group()}?id=1&mode={mode}"
 
 
 def can_bench(url: str, capture: Path, duration_s: float = 30.0,
@@ -71,8 +71,12 @@ def safe_frames(mode: str) -> list[tuple[int, bytes]]:
 
 
 def is_safe(frames: list[tuple[int, bytes]], mode: str) -> bool:
-    """Whether frames are the stop path's (in MIT mode: one damping command, kp = 0, no torque, kd > 0)."""
+    """Whether frames are the stop path's (in MIT mode: one damping command, kp = 0, no torque, kd > 0; in servo
+    mode the short, or graded's hold at a position once it has taken the loaded foot, as on the UART:
+    test_serial_run.assert_stopped_safely)."""
     if mode != "mit":
+        if len(frames) == 1 and frames[0][0] == can_servo.command_id(can_servo.PacketId.SET_POS, 1):
+            return math.isfinite(can_servo.decode_command(*frames[0]).value)
         return frames == safe_frames(mode)
     if len(frames) != 1 or frames[0][0] != 1 or len(frames[0][1]) != 8:
         return False
@@ -175,7 +179,7 @@ def test_own_frames_handed_back_by_the_bus_are_dropped_and_counted() -> None:
     plain = PythonCanPort(_Bus(echo=False))  # a bus that does not echo: an equal frame from elsewhere is kept
     plain.bus.inbox.append(can.Message(arbitration_id=0x101, data=bytes(4), is_extended_id=True))
     assert plain.receive() == CanFrame(0x101, bytes(4), True) and plain.echoes == 0
-    mc = pycan.open_can(parse_can_url(can_url("servo", 7)))  # udp_multicast hands a bus its own frames
+    mc = pycan.open_can(parse_can_url(can_url("servo")))  # udp_multicast hands a bus its own frames
     try:
         mc.send(CanFrame(0x101, bytes(4), True))
         time.sleep(0.1)
@@ -228,8 +232,8 @@ def test_bad_can_url_is_one_line_exit_2(capsys: pytest.CaptureFixture[str]) -> N
 
 
 def test_udp_multicast_buses_on_two_groups_do_not_hear_each_other() -> None:
-    a = pycan.open_can(parse_can_url(can_url("servo", 5)))
-    b = pycan.open_can(parse_can_url(can_url("servo", 6)))
+    a = pycan.open_can(parse_can_url(can_url("servo")))
+    b = pycan.open_can(parse_can_url(can_url("servo")))
     try:
         a.send(CanFrame(0x101, bytes(4), True))
         time.sleep(0.1)
