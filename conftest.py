@@ -45,10 +45,11 @@ REALTIME: dict[str, tuple[str, ...] | None] = {
     "test_serial_can.py": ("test_serial_run_on_can_",),
 }
 """Tests paced by the wall clock (a second process, a busy core of their own, a host watchdog, signals to a study),
-by file and test-name prefix: `make test` runs them after the rest, alone (``-m realtime``), since a second xdist
-worker beside them starves what they time (measured on this 2-core machine under -n 2: the first two files failed
-in two runs of two, the last two once in a fresh clone's run, the serial runs against an emulator once each under
-load). The other tests of those files run virtual and stay with the rest."""
+by file and test-name prefix: `make test` runs them one at a time in a run of their own (``-m realtime``) beside the
+rest, which runs under ``nice -n 10`` (Makefile), since a second xdist worker at their priority starves what they time
+(measured on this 2-core machine under -n 2: the first two files failed in two runs of two, the last two once in a
+fresh clone's run, the serial runs against an emulator once each under load). The other tests of those files run
+virtual and stay with the rest."""
 
 
 FIRST = ("test_plant_fit.py", "test_output_failures.py", "test_plant_fit_serial.py", "test_serial_stop.py",
