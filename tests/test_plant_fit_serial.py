@@ -83,7 +83,7 @@ def record_serial(d: Path, experiment: str = SHORT) -> tuple[Path, Path]:
 FITTED = "current_time_constant_s,encoder_offset_deg"
 # the experiment recorded here: 3 s (the tests' 10 s one's holds, its sweep a quarter as wide, its chirp and PRBS a
 # fifth and a quarter as long; the benchmark's fit of the whole plant keeps the 10 s one). A serial run spins both
-# processes through it: recording and fit took 10-14 s of CPU against 21-23 s for the 10 s one. Measured on six
+# processes through it: one recording and its fit took 10-15 s of CPU against 21-23 s for the 10 s one. Measured on six
 # recordings at load 9-11 (two of them recorded twice: a stall latched a link fault): 2292-2317 samples of each
 # signal (asserted: > 1000), all of them and every reply's request matched (0.99), the median command arrival
 # 0.06-3.6 us off the fit's (50), the IMU's start -30.4 to -31.0 deg (-34 to -26), the writes' window 0.600-0.603 ms
