@@ -125,7 +125,8 @@ def test_a_run_on_a_disk_that_fills_is_one_line_exit_74_and_out_keeps_the_previo
         in (0, 1)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     capsys.readouterr()
-    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "6", "--no-plot", "--no-trace", "--out", str(out))
+    # 2 strides: telemetry.csv passes the limit (about 225 kB a stride), telemetry.bin (74 kB a stride) does not
+    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "2", "--no-plot", "--no-trace", "--out", str(out))
     assert r.returncode == EXIT_WRITE_FAILED, r.stderr
     line = _one_line(r.stderr)
     assert "cannot write" in line and "telemetry.csv" in line and os.strerror(errno.EFBIG) in line, line
@@ -256,7 +257,8 @@ def test_a_serial_run_whose_disk_fills_stops_the_motor_first_then_one_line_exit_
 
 
 def test_a_virtual_run_whose_capture_fills_the_disk_is_one_line_exit_74(tmp_path):
-    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "6", "--no-plot", "--no-trace",
+    # 2 strides: the capture's index.csv passes the limit (about 240 kB a stride)
+    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "2", "--no-plot", "--no-trace",
                       "--capture", str(tmp_path / "cap"), "--out", str(tmp_path / "run"))
     assert r.returncode == EXIT_WRITE_FAILED, r.stderr
     line = _one_line(r.stderr)
@@ -303,7 +305,7 @@ def test_a_serial_capture_that_fills_the_disk_stops_the_motor_writes_the_run_and
     real = WireCapture._file
     monkeypatch.setattr(WireCapture, "_file", lambda self, name: _Filling(real(self, name), room))
     out, cap = tmp_path / "run", tmp_path / "cap"
-    code = main(["run", *SIM, "--duration", "2", "--out", str(out), "--capture", str(cap)])
+    code = main(["run", *SIM, "--duration", "2", "--out", str(out), "--capture", str(cap), "--no-plot"])
     _, err = capsys.readouterr()
     assert code == EXIT_WRITE_FAILED, err
     line = _one_line(err)
