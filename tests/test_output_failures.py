@@ -125,8 +125,7 @@ def test_a_run_on_a_disk_that_fills_is_one_line_exit_74_and_out_keeps_the_previo
         in (0, 1)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     capsys.readouterr()
-    # 2 strides: telemetry.csv passes the limit (about 225 kB a stride), telemetry.bin (74 kB a stride) does not
-    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "2", "--no-plot", "--no-trace", "--out", str(out))
+    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "6", "--no-plot", "--no-trace", "--out", str(out))
     assert r.returncode == EXIT_WRITE_FAILED, r.stderr
     line = _one_line(r.stderr)
     assert "cannot write" in line and "telemetry.csv" in line and os.strerror(errno.EFBIG) in line, line
@@ -257,8 +256,7 @@ def test_a_serial_run_whose_disk_fills_stops_the_motor_first_then_one_line_exit_
 
 
 def test_a_virtual_run_whose_capture_fills_the_disk_is_one_line_exit_74(tmp_path):
-    # 2 strides: the capture's index.csv passes the limit (about 240 kB a stride)
-    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "2", "--no-plot", "--no-trace",
+    r = _pafp_limited(150_000, "run", "--quiet", "--strides", "6", "--no-plot", "--no-trace",
                       "--capture", str(tmp_path / "cap"), "--out", str(tmp_path / "run"))
     assert r.returncode == EXIT_WRITE_FAILED, r.stderr
     line = _one_line(r.stderr)
