@@ -1,7 +1,7 @@
 """`pafp design`: the search spec, a point's walking run and figures, the Pareto front, the report, resume.
 
 Clusters are LocalClusters of worker threads (processes=False); the command test runs the command's own cluster
-code on a worker thread too (tests/study_clusters.py): the worker processes are tests/test_sweep.py's.
+code on a worker thread too (tests/study_clusters.py). A study command on worker processes: tests/test_sweep.py.
 """
 
 from __future__ import annotations
