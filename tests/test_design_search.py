@@ -1,6 +1,7 @@
 """`pafp design`: the search spec, a point's walking run and figures, the Pareto front, the report, resume.
 
-Clusters are LocalClusters of worker threads (processes=False) except the command test (one worker process).
+Clusters are LocalClusters of worker threads (processes=False); the command test runs the command's own cluster
+code on a worker thread too (tests/study_clusters.py). A study command on worker processes: tests/test_sweep.py.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from host_tools.studies.design_spec import SpecError, WalkCriteria, load_design_
 from host_tools.studies.sweep_engine import dask_client, run_tasks
 from host_tools.studies.sweep_table import TIMING_COLUMNS
 from host_tools.walk import adult_moment_scale
+from tests.study_clusters import threads_cluster  # noqa: F401 - a fixture
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORT_BELT = "[[belt]]\ndriver_teeth = 30\ndriven_teeth = 140\npitch_mm = 2.0\n"
@@ -179,6 +181,7 @@ def test_same_table_on_one_or_two_workers_and_after_an_interrupted_run(tmp_path)
     assert c.ran == 1 and c.skipped == 1 and strip(c.rows) == strip(a)
 
 
+@pytest.mark.usefixtures("threads_cluster")
 def test_the_command_writes_the_table_report_and_plot(tmp_path, capsys):
     spec = spec_file(tmp_path, 'motors = ["ak60_6"]\nbody_masses_kg = [20]\nstrides = 1\nmin_moment_share = 0.0\n'
                      'max_tracking_rms_deg = 90\nmin_thermal_margin_c = -200\nbelt_within_rating = false\n')

@@ -303,7 +303,7 @@ def test_a_serial_capture_that_fills_the_disk_stops_the_motor_writes_the_run_and
     real = WireCapture._file
     monkeypatch.setattr(WireCapture, "_file", lambda self, name: _Filling(real(self, name), room))
     out, cap = tmp_path / "run", tmp_path / "cap"
-    code = main(["run", *SIM, "--duration", "2", "--out", str(out), "--capture", str(cap)])
+    code = main(["run", *SIM, "--duration", "2", "--out", str(out), "--capture", str(cap), "--no-plot"])
     _, err = capsys.readouterr()
     assert code == EXIT_WRITE_FAILED, err
     line = _one_line(err)

@@ -179,7 +179,8 @@ def test_task_overrunning_its_budget_tenfold_is_seen_by_the_kernel():
 
 
 def test_cli_warns_before_running_a_link_too_slow_for_the_control_rate(tmp_path, capsys):
-    code = main(["run", "--baud", "115200", "--strides", "1", "--quiet", "--out", str(tmp_path)])
+    code = main(["run", "--baud", "115200", "--strides", "1", "--quiet", "--no-plot", "--no-trace", "--out",
+                 str(tmp_path)])
     out = capsys.readouterr().out
     assert "warning: at 115200 baud" in out and "245 times per second" in out
     assert code == 1  # the run completed and reported the motor timeout it led to

@@ -76,7 +76,7 @@ def test_bad_heat_options_stop_before_the_run(tmp_path: Path, capsys, args: list
 
 
 def test_the_report_and_the_plot_show_the_walk(tmp_path: Path) -> None:
-    assert main(["run", "--strides", "1", "--battery", "molicel_p42a_6s1p", "--out", str(tmp_path)]) == 0
+    assert main(["run", "--strides", "1", "--battery", "molicel_p42a_6s1p", "--no-trace", "--out", str(tmp_path)]) == 0
     md = (tmp_path / "report.md").read_text()
     assert "## Winding temperature and battery" in md and "energy per stride at the battery" in md
     assert (tmp_path / "thermal.png").stat().st_size > 0

@@ -168,7 +168,8 @@ def test_unplug_is_attributed_and_files_are_complete(tmp_path: Path, capsys: pyt
     timer = threading.Timer(1.5, proc.kill)  # the whole emulator dies: both ports go
     timer.start()
     try:
-        code = main(["run", "--motor", motor, "--imu", imu, "--duration", "3", "--out", str(tmp_path), "--quiet"])
+        code = main(["run", "--motor", motor, "--imu", imu, "--duration", "3", "--out", str(tmp_path), "--quiet",
+                     "--no-plot"])  # the files read below: the telemetry and the trace
     finally:
         timer.cancel()
         _stop(proc)

@@ -152,9 +152,7 @@ def test_telemetry_pty_is_printed_and_a_monitor_attaches(tmp_path: Path) -> None
         line = run.stdout.readline()  # type: ignore[union-attr]
         assert line.startswith("telemetry: /dev/"), line
         path = line.split()[1]
-        mon = subprocess.run([sys.executable, "-m", "host_tools", "monitor", path, "--duration", "1", "--csv",
-                              str(tmp_path / "live.csv")], cwd=ROOT, capture_output=True, text=True, timeout=30)
-        assert mon.returncode == 0, mon.stderr
+        assert main(["monitor", path, "--duration", "1", "--csv", str(tmp_path / "live.csv")]) == 0  # in-process
         assert run.poll() is None, "the run ended before the monitor was done"
         run.send_signal(signal.SIGINT)
         run.communicate(timeout=20)

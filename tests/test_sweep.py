@@ -7,6 +7,7 @@ machine); one CLI test runs the real thing, a LocalCluster of one worker process
 import io
 import json
 import math
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -67,6 +68,15 @@ def _table(out: Path) -> list[dict]:
 def _sweep(spec, out, workers, plant=plant_double, resume=False):
     with dask_client(workers=workers, processes=False) as client:
         return run_sweep(spec, out, client, resume=resume, plant_options=plant, progress=False)
+
+
+@pytest.fixture(scope="module")
+def mc_sweeps(tmp_path_factory):
+    """MC_SPEC swept on one worker and on two: {workers: (spec, result, out)}, made once for the tests that read
+    them (copy an out before writing into it)."""
+    d = tmp_path_factory.mktemp("mc")
+    spec = load_spec(spec_file(d, MC_SPEC))
+    return {n: (spec, _sweep(spec, d / f"w{n}", n), d / f"w{n}") for n in (1, 2)}
 
 
 @pytest.mark.parametrize("text, words", [
@@ -138,12 +148,11 @@ def test_points_and_seeds_come_from_the_spec(tmp_path):
     assert load_spec(spec_file(tmp_path, MC_SPEC, "again.toml")).points() == pts
 
 
-def test_rows_are_the_same_whatever_the_worker_count(tmp_path):
-    spec = load_spec(spec_file(tmp_path, MC_SPEC))
-    a = _sweep(spec, tmp_path / "one", 1)
-    b = _sweep(spec, tmp_path / "two", 2)
+def test_rows_are_the_same_whatever_the_worker_count(tmp_path, mc_sweeps):
+    (spec, a, one), (_, b, two) = mc_sweeps[1], mc_sweeps[2]
+    shutil.copytree(one, tmp_path / "one")  # the report below writes into it
     assert a.ran == b.ran == 4
-    ta, tb = _table(tmp_path / "one"), _table(tmp_path / "two")
+    ta, tb = _table(tmp_path / "one"), _table(two)
     assert ta == tb
     assert [r["point"] for r in ta] == [0, 1, 2, 3]
     assert all(r["status"] == "ok" for r in ta)
@@ -198,10 +207,10 @@ values = [921600, 115200]
     assert row["status"] == "timeout" and "timeout" in row["error"]
 
 
-def test_resume_runs_only_the_missing_points(tmp_path):
-    spec = load_spec(spec_file(tmp_path, MC_SPEC))
+def test_resume_runs_only_the_missing_points(tmp_path, mc_sweeps):
+    spec, full, swept = mc_sweeps[2]
     out = tmp_path / "out"
-    full = _sweep(spec, out, 2)
+    shutil.copytree(swept, out)  # a whole sweep on two workers, then cut short below
     whole = _table(out)
     # as if killed after two points: the journal keeps two rows and a torn third line, no tables yet
     lines = (out / JOURNAL).read_text().splitlines()

@@ -14,9 +14,15 @@ from host_tools.studies.sweep_engine import dask_client
 from tests.study_clusters import threads_cluster  # noqa: F401 - a fixture
 
 
-def test_search_is_deterministic_whatever_the_worker_count():
+@pytest.fixture(scope="module")
+def search_seed_5() -> tuning.TuneResult:
+    """An in-process search of 5 candidates, seed 5 (two tests read it)."""
+    return tuning.search(load_firmware_config(), budget=5, strides=1, seed=5)
+
+
+def test_search_is_deterministic_whatever_the_worker_count(search_seed_5):
     base = load_firmware_config()
-    a = tuning.search(base, budget=5, strides=1, seed=5)  # in-process
+    a = search_seed_5  # in-process
     with dask_client(workers=2, processes=False) as client:  # two Dask worker threads
         b = tuning.search(base, budget=5, strides=1, seed=5, client=client)
     assert [e.as_dict() for e in a.evaluations] == [e.as_dict() for e in b.evaluations]
@@ -26,10 +32,9 @@ def test_search_is_deterministic_whatever_the_worker_count():
     assert a.best.score == min(e.score for e in a.evaluations)
 
 
-def test_seed_changes_the_candidates():
-    base = load_firmware_config()
-    rng_a = tuning.search(base, budget=5, strides=1, seed=1).evaluations[1].gains
-    rng_b = tuning.search(base, budget=5, strides=1, seed=2).evaluations[1].gains
+def test_seed_changes_the_candidates(search_seed_5):
+    rng_a = search_seed_5.evaluations[1].gains
+    rng_b = tuning.search(load_firmware_config(), budget=5, strides=1, seed=2).evaluations[1].gains
     assert rng_a != rng_b
     for k, (lo, hi) in tuning.BOUNDS.items():
         assert lo <= rng_a[k] <= hi
