@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified
 
+import host_tools.commands.run_serial  # noqa: F401  # imported here, not inside a run while a relay streams to it
+import host_tools.reports.timeline  # noqa: F401  # (imported by a serial run between its start-up check and loop)
 from host_tools.cli import main
 from host_tools.runner import board_profile
 from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
