@@ -10,7 +10,7 @@ import sys
 import time
 
 MISBEHAVE_AFTER_S = 0.3  # of RUN (the first update), then the controller misbehaves
-BLOCK_S = 1.5  # longer than the motor's own 1 s timeout (tests/test_controller_exit.py)
+BLOCK_S = 2.0
 
 
 class Tracks:
