@@ -9,7 +9,7 @@ import math
 import sys
 import time
 
-MISBEHAVE_AFTER_S = 0.8  # of RUN (the first update), then the controller misbehaves
+MISBEHAVE_AFTER_S = 0.3  # of RUN (the first update), then the controller misbehaves
 BLOCK_S = 2.0
 
 

@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DESIGN = ROOT / "profiles" / "designs" / "adult_80kg.toml"
 DURATION_S = "2"  # past the 0.5 s start-up grace and the start-up move; 10 s runs: docs/design.md
 ALLOWED = set(STALL_FAULTS)  # a stall of the host
+LEAN = ("--quiet", "--no-plot", "--no-trace")  # no assertion here reads the plot or the trace
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 
 
@@ -58,7 +59,7 @@ def test_uart_design_profile_against_the_emulated_design_keeps_the_encoder_check
     out = tmp_path / "out"
     try:
         main(["run", "--motor", motor, "--imu", imu, "--profile", str(DESIGN), "--duration", DURATION_S,
-              "--out", str(out), "--quiet"])
+              "--out", str(out), *LEAN])
     finally:
         _stop(proc)
     _assert_encoder_check_holds(out, ratios)
@@ -75,7 +76,7 @@ def test_can_design_profile_against_the_emulated_design_keeps_the_encoder_check(
     out = tmp_path / "out"
     try:
         main(["run", "--motor", url, "--imu", imu, "--profile", str(DESIGN), "--duration", DURATION_S,
-              "--out", str(out), "--quiet"])
+              "--out", str(out), *LEAN])
     finally:
         stop_bench(bench)
     _assert_encoder_check_holds(out, ratios)

@@ -103,7 +103,7 @@ def test_serial_run_on_can_reaches_run_against_the_emulated_bench_and_stops_with
     out, capture = tmp_path / "out", tmp_path / "capture"
     try:
         code = main(["run", "--motor", url, "--imu", imu, "--duration", "2", "--out", str(out), "--quiet",
-                     "--capture", str(capture)])
+                     "--no-plot", "--no-trace", "--capture", str(capture)])  # neither is read here
     finally:
         line = stop_bench(bench)
     import json

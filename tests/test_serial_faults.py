@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 from test_serial_run import _emulator, _stop, _summary, assert_faults_justified
 
+import host_tools.commands.run_serial  # noqa: F401  # imported here, not inside a run while a relay streams to it
+import host_tools.reports.timeline  # noqa: F401  # (imported by a serial run between its start-up check and loop)
 from host_tools.cli import main
 from host_tools.runner import board_profile
 from protocol.telemetry import FaultReason, SupervisorState, TelemetryDecoder
@@ -29,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MITM = Path(__file__).resolve().parent / "serial_mitm.py"
 F_CPU_HZ = int(board_profile("stm32f4")["f_cpu_hz"])  # the board `pafp run` uses by default
 CLEAN = ["--garbage-every-s", "0", "--drop-p", "0", "--delay-every-s", "0"]
+LEAN = ("--quiet", "--no-plot", "--no-trace")  # no assertion here reads the plot or the trace
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="ptys")
 
 
@@ -132,7 +135,7 @@ def _unplugged_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     out = tmp_path / "out"
     try:
         code = main(["run", "--motor", str(motor), "--imu", imu, "--duration", "3", "--reconnect", "--out", str(out),
-                     "--quiet"])
+                     *LEAN])
     finally:
         timer.join()
         _stop(bench)
@@ -189,7 +192,7 @@ def test_garbage_drops_and_late_replies_are_counted_and_survived(tmp_path: Path)
                           "--drop-p", "0.002", "--delay-every-s", "0.1", "--delay-s", "0.005", "--lossy", "motor")
     try:
         code = main(["run", "--motor", paths["motor"], "--imu", paths["imu"], "--duration", "3", "--out",
-                     str(tmp_path), "--quiet"])
+                     str(tmp_path), *LEAN])
     finally:
         counts = _relay_counts(relay)
         _stop(bench)
