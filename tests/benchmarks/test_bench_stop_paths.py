@@ -32,8 +32,8 @@ from host_tools.cli import main  # noqa: E402
 RUNS = 3
 
 
-def _can_stop(tmp: Path, mode: str, k: int) -> dict:
-    url = can_url(mode, 3 + k)
+def _can_stop(tmp: Path, mode: str) -> dict:
+    url = can_url(mode)
     bench, imu = can_bench(url, tmp / "device")
     try:
         main(["run", "--motor", url, "--imu", imu, "--duration", "1.5", "--out", str(tmp / "out"), "--quiet"])
@@ -42,8 +42,8 @@ def _can_stop(tmp: Path, mode: str, k: int) -> dict:
     return json.loads((tmp / "out" / "summary.json").read_text())["stop"]
 
 
-def _watchdog(tmp: Path, link: str, k: int) -> tuple[float, float]:
-    _, s, device = run_against_emulator(tmp, link, "Blocks", 3.5, "servo", 6 + k)
+def _watchdog(tmp: Path, link: str) -> tuple[float, float]:
+    _, s, device = run_against_emulator(tmp, link, "Blocks", 3.5, "servo")
     return s["host_watchdog"]["silent_ms"], watchdog_on_the_wire(device, link)[0]
 
 
@@ -51,12 +51,12 @@ def test_can_stop_latency_and_host_watchdog_bound(benchmark, tmp_path: Path) -> 
     def table() -> dict:
         rows: dict[str, dict] = {}
         for mode in ("servo", "mit"):
-            stops = [_can_stop(tmp_path / f"can-{mode}-{k}", mode, k) for k in range(RUNS)]
+            stops = [_can_stop(tmp_path / f"can-{mode}-{k}", mode) for k in range(RUNS)]
             latencies = [s["latency_ms"] for s in stops]
             rows[f"CAN {mode} stop latency"] = {"median_ms": statistics.median(latencies),
                                                 "goal_ms": stops[0]["goal_ms"], "runs": latencies}
         for link in ("uart", "can"):
-            runs = [_watchdog(tmp_path / f"wd-{link}-{k}", link, k) for k in range(RUNS)]
+            runs = [_watchdog(tmp_path / f"wd-{link}-{k}", link) for k in range(RUNS)]
             rows[f"host watchdog over {link}"] = {
                 "median_ms": statistics.median(r[0] for r in runs), "goal_ms": 105.0,
                 "wire_gap_median_ms": round(statistics.median(r[1] for r in runs), 3),
