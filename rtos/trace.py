@@ -223,20 +223,19 @@ class Trace:
         a ``deque(maxlen=...)`` would)."""
         self._move()
         self._forget(len(self._jobs) - self.maxlen)
-        first, counts = len(self._irqs) - self.maxlen, self._irqs.fields[3]
-        while self._irq0 < first:
-            self._times0 += counts[self._irq0]
-            self._irq0 += 1
+        self._drop_irqs(len(self._irqs) - self.maxlen)
 
     def _forget(self, k: int) -> None:
         """Move _job0 on to ``k`` (when later), carrying the values of the exceptions passed."""
+        if k <= self._job0:
+            return
         positions, carried = self._exc.fields[0], self._carried0
         e = bisect_left(positions, self._dropped + self._job0)
         while e < len(positions) and positions[e] < self._dropped + k:
             _pos, _job, _release, _ready, preempted, cost = self._exc.row(e)
             carried[self._jobs.fields[0][positions[e] - self._dropped]] = (preempted, cost)
             e += 1
-        self._job0 = max(self._job0, k)
+        self._job0 = k
 
     def _move(self) -> None:
         """Move the records the hot loop appended into the arrays."""
@@ -299,23 +298,33 @@ class Trace:
     def prune_before(self, t: int) -> None:
         """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t.
 
-        The records the hot loop appended since the last :meth:`compact` are moved into the arrays only when every
-        record there is older than t (the timeline prunes every 100 ms: moving a few records each time would cost
-        more than the records)."""
-        while True:
-            n = len(self._jobs)
-            while self._job0 < n and self._finish(self._job0) < t:
-                self._forget(self._job0 + 1)
-            starts, counts = self._irqs.fields[0], self._irqs.fields[3]
-            while self._irq0 < len(starts) and starts[self._irq0] < t:
-                self._times0 += counts[self._irq0]
-                self._irq0 += 1
-            if (self._job0 < n and self._irq0 < len(starts)) or not any(self._appended):
-                break
+        The jobs are taken as the scheduler records them: in the order they ran, one at a time (each finishes before
+        the next starts), which makes this a search, not a walk: the timeline prunes every 100 ms. The records the
+        hot loop appended since the last :meth:`compact` are moved into the arrays only when every kept record is
+        older than t and their first is too (moving a few records each time would cost more than the records)."""
+        self._prune_kept(t)
+        jobs, irqs = self._appended[0], self._appended[1]
+        if ((self._job0 == len(self._jobs) and jobs and jobs[1] < t)
+                or (self._irq0 == len(self._irqs) and irqs and irqs[0] < t)):
             self._move()
+            self._prune_kept(t)
         events = self._events
         while events and events[0][1] < t:
             events.popleft()
+
+    def _prune_kept(self, t: int) -> None:
+        """:meth:`prune_before` in the arrays."""
+        starts = self._jobs.fields[1]
+        self._forget(bisect_left(starts, t, self._job0) - 1)  # those before the last one that started before t
+        if self._job0 < len(starts) and starts[self._job0] < t and self._finish(self._job0) < t:
+            self._forget(self._job0 + 1)
+        self._drop_irqs(bisect_left(self._irqs.fields[0], t, self._irq0))
+
+    def _drop_irqs(self, k: int) -> None:
+        """Move _irq0 on to ``k`` (when later), and _times0 past their firing times."""
+        if k > self._irq0:
+            self._times0 += sum(self._irqs.fields[3][self._irq0:k])
+            self._irq0 = k
 
     def add_event(self, kind: str, time: int, source: str, job: int = -1) -> None:
         """Record one instant event."""
