@@ -92,13 +92,26 @@ class JobRecord(NamedTuple):
 class IrqRecord(NamedTuple):
     """The firings of one interrupt source inside one job (the job that started at ``job_start``).
 
-    ``times`` are the firing cycles when the source tells them (:meth:`CountingSource.fired_at`), else empty.
+    ``times`` are the firing cycles when the source tells them (:meth:`CountingSource.fired_at`, or for a periodic
+    source :func:`firings_from` its pattern), else empty.
     """
 
     job_start: int
     source: int
     firings: int
     times: tuple[int, ...]
+
+
+def firings_from(pattern: tuple[int, int], t0: int, n: int) -> tuple[int, ...]:
+    """The first ``n`` firing cycles from ``t0`` on of a source firing at ``first + k * period`` (``pattern``:
+    (period, first), :meth:`CountingSource.periodic`).
+
+    >>> firings_from((1000, 0), 1, 2), firings_from((1000, 1000), 0, 1)
+    ((1000, 2000), (1000,))
+    """
+    period, first = pattern
+    k = max(0, -((first - t0) // period))
+    return tuple(first + j * period for j in range(k, k + n))
 
 
 class TraceEvent(NamedTuple):
@@ -146,7 +159,8 @@ class Trace:
         # before _job0 (by task id; absent: (0, 0))
         self._carried: tuple[list[int], list[int]] = ([], [])
         self._carried0: dict[int, tuple[int, int]] = {}
-        # (job start, source index, firings, number of firing times) per record, and the firing times
+        # (job start, source index, firings, number of firing times) per record, and the firing times (none of a
+        # periodic source's)
         self._irqs = _Columns(IRQ_FIELDS)
         self._irq_times = _Columns(1)
         self._appended: tuple[list[int], list[int], list[int], list[int]] = ([], [], [], [])  # (flat_records)
@@ -157,6 +171,9 @@ class Trace:
         self._task_id: dict[tuple[str, int, int, int], int] = {}
         self.task_names: list[str] = []
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
+        # by source index: (period, first firing) of a periodic source, whose firing times the hot loop leaves out
+        # (no firing times in its records: firings_from gives them), else None
+        self.periodic: list[tuple[int, int] | None] = []
 
     def task_ids(self, tasks: Iterable[tuple[str, int, int, int]]) -> list[int]:
         """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles); -1
@@ -187,11 +204,11 @@ class Trace:
     def flat_records(self) -> tuple[list[int], list[int], list[int], list[int]]:
         """The lists a hot loop appends the records to: jobs, :data:`JOB_FIELDS` ints each (task id (:meth:`task_ids`),
         start); interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing
-        times); the firing times (see IrqRecord); the jobs' exceptions, :data:`EXC_FIELDS` ints each (the job's
-        position in the jobs list (its index there // JOB_FIELDS), job, release - offset - job * period, ready -
-        release, finish - start - cost, cost - nominal cost), appended for each job that is not as predicted (see
-        the class), and then its last two stored into :meth:`carried` lists. The loop calls :meth:`compact` each time
-        it has appended :meth:`room` jobs since."""
+        times: 0 for a source in :attr:`periodic`); the firing times (see IrqRecord); the jobs' exceptions,
+        :data:`EXC_FIELDS` ints each (the job's position in the jobs list (its index there // JOB_FIELDS), job,
+        release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost), appended for
+        each job that is not as predicted (see the class), and then its last two stored into :meth:`carried` lists.
+        The loop calls :meth:`compact` each time it has appended :meth:`room` jobs since."""
         return self._appended
 
     def carried(self) -> tuple[list[int], list[int]]:
@@ -229,12 +246,12 @@ class Trace:
         """Move _job0 on to ``k`` (when later), carrying the values of the exceptions passed."""
         if k <= self._job0:
             return
-        positions, carried = self._exc.fields[0], self._carried0
-        e = bisect_left(positions, self._dropped + self._job0)
-        while e < len(positions) and positions[e] < self._dropped + k:
-            _pos, _job, _release, _ready, preempted, cost = self._exc.row(e)
-            carried[self._jobs.fields[0][positions[e] - self._dropped]] = (preempted, cost)
-            e += 1
+        positions, _job, _release, _ready, preempted, cost = self._exc.fields
+        tasks, dropped, carried = self._jobs.fields[0], self._dropped, self._carried0
+        e = bisect_left(positions, dropped + self._job0)
+        end = bisect_left(positions, dropped + k, e)
+        for position, values in zip(positions[e:end], zip(preempted[e:end], cost[e:end], strict=True), strict=True):
+            carried[tasks[position - dropped]] = values
         self._job0 = k
 
     def _move(self) -> None:
@@ -289,9 +306,11 @@ class Trace:
         """The recorded interrupt firings inside jobs, oldest first."""
         self._trim()
         times, t, k = self._irq_times.fields[0], self._times0, self._irq0
-        out = []
+        out, periodic = [], self.periodic
         for start, source, firings, n in zip(*(f[k:] for f in self._irqs.fields), strict=True):
-            out.append(IrqRecord(start, source, firings, tuple(times[t:t + n])))
+            pattern = periodic[source]
+            out.append(IrqRecord(start, source, firings, tuple(times[t:t + n]) if pattern is None
+                                 else firings_from(pattern, start, firings)))
             t += n
         return out
 
