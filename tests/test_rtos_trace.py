@@ -110,8 +110,8 @@ def test_a_bounded_trace_keeps_what_an_unbounded_one_ends_with_and_frees_the_res
 
 def test_a_periodic_sources_firing_times_derived_on_reading_are_those_it_tells():
     """The hot loop keeps no firing times of a periodic source (CountingSource.periodic): reading derives them."""
-    from rtos import PeriodicInterrupt
     from hal.virtual.timer import SysTick
+    from rtos import PeriodicInterrupt
 
     tr = _irq_run(10_000)
     assert tr.periodic == [(40, 0), (170, 11)] and len(tr._irq_times) == 0
