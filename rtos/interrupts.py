@@ -55,6 +55,12 @@ class CountingSource:
         """The firing cycles in [t0, t1), right after ``count_in(t0, t1)`` (for the trace); () when unknown."""
         return ()
 
+    def periodic(self) -> tuple[int, int] | None:
+        """(period, first firing cycle) of a source that fires at ``first + k * period`` for k = 0, 1, ... and at
+        no other time, else None: its firings in a window follow from the window's start and their count, which
+        the trace derives on export (``rtos.trace.firings_from``) instead of the hot loop asking ``fired_at``."""
+        return None
+
 
 def _check_cost(name: str, cost: object) -> int:
     """Return ``cost`` if it is an int >= 0, else raise ValueError naming the source."""
@@ -101,6 +107,10 @@ class PeriodicInterrupt(CountingSource):
         """
         first = self._fired_before(t0)
         return tuple(self.offset + k * self.period for k in range(first, first + self.count_in(t0, t1)))
+
+    def periodic(self) -> tuple[int, int] | None:
+        """(period, offset): it fires at offset + k * period."""
+        return self.period, self.offset
 
     def __repr__(self) -> str:
         """Show the firing pattern."""
@@ -181,7 +191,8 @@ class BoundSource:
     """One interrupt source as :func:`solve_bound` reads it: its index, the source and its cost.
 
     ``src`` is a :class:`CountingSource` (any other source is wrapped once), so the compiled solver
-    counts it with a direct call; ``hits`` is scratch space of the solver (firings in the window of the
+    counts it with a direct call; ``periodic`` tells whether its firing times follow from a window's start
+    (:meth:`CountingSource.periodic`); ``hits`` is scratch space of the solver (firings in the window of the
     current pass).
     """
 
@@ -191,6 +202,7 @@ class BoundSource:
         self.src = src
         self.cost = cost
         self.hits = 0
+        self.periodic = src.periodic() is not None  # its firing times follow from a window's start: not asked
 
 
 BoundSources = list[BoundSource]

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable
 from typing import Final
 
 from rtos.clock import Clock, VirtualClock
-from rtos.interrupts import InterruptSource, bind_sources, is_interrupt_source, solve_bound
+from rtos.interrupts import CountingSource, InterruptSource, bind_sources, is_interrupt_source, solve_bound
 from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
 from rtos.task import Body, Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
 from rtos.trace import Trace
@@ -121,6 +121,7 @@ class Scheduler:
         if trace is not None:
             trace.task_names = [t.name for t in self._tasks]
             trace.interrupts = [(src.name, src.cost_cycles) for src in self._interrupts]
+            trace.periodic = [src.periodic() if isinstance(src, CountingSource) else None for src in self._interrupts]
         self.on_fault = on_fault
         self._rng = random.Random(seed)
         self._now = 0
@@ -438,12 +439,15 @@ class Scheduler:
                     if trace is not None and f != start + c:  # the firings the solve counted, each source's
                         for b in irqs:
                             if b.hits:
-                                times = b.src.fired_at(start, f)
                                 tr_irqs.append(start)
                                 tr_irqs.append(b.index)
                                 tr_irqs.append(b.hits)
-                                tr_irqs.append(len(times))
-                                tr_times.extend(times)
+                                if b.periodic:  # its times follow from start and hits (Trace.irqs)
+                                    tr_irqs.append(0)
+                                else:
+                                    times = b.src.fired_at(start, f)
+                                    tr_irqs.append(len(times))
+                                    tr_times.extend(times)
                 else:
                     f = start + c
                 self._account(slot, r, start, f, c)

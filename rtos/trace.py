@@ -92,13 +92,26 @@ class JobRecord(NamedTuple):
 class IrqRecord(NamedTuple):
     """The firings of one interrupt source inside one job (the job that started at ``job_start``).
 
-    ``times`` are the firing cycles when the source tells them (:meth:`CountingSource.fired_at`), else empty.
+    ``times`` are the firing cycles when the source tells them (:meth:`CountingSource.fired_at`, or for a periodic
+    source :func:`firings_from` its pattern), else empty.
     """
 
     job_start: int
     source: int
     firings: int
     times: tuple[int, ...]
+
+
+def firings_from(pattern: tuple[int, int], t0: int, n: int) -> tuple[int, ...]:
+    """The first ``n`` firing cycles from ``t0`` on of a source firing at ``first + k * period`` (``pattern``:
+    (period, first), :meth:`CountingSource.periodic`).
+
+    >>> firings_from((1000, 0), 1, 2), firings_from((1000, 1000), 0, 1)
+    ((1000, 2000), (1000,))
+    """
+    period, first = pattern
+    k = max(0, -((first - t0) // period))
+    return tuple(first + j * period for j in range(k, k + n))
 
 
 class TraceEvent(NamedTuple):
@@ -146,7 +159,8 @@ class Trace:
         # before _job0 (by task id; absent: (0, 0))
         self._carried: tuple[list[int], list[int]] = ([], [])
         self._carried0: dict[int, tuple[int, int]] = {}
-        # (job start, source index, firings, number of firing times) per record, and the firing times
+        # (job start, source index, firings, number of firing times) per record, and the firing times (none of a
+        # periodic source's)
         self._irqs = _Columns(IRQ_FIELDS)
         self._irq_times = _Columns(1)
         self._appended: tuple[list[int], list[int], list[int], list[int]] = ([], [], [], [])  # (flat_records)
@@ -157,6 +171,9 @@ class Trace:
         self._task_id: dict[tuple[str, int, int, int], int] = {}
         self.task_names: list[str] = []
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
+        # by source index: (period, first firing) of a periodic source, whose firing times the hot loop leaves out
+        # (no firing times in its records: firings_from gives them), else None
+        self.periodic: list[tuple[int, int] | None] = []
 
     def task_ids(self, tasks: Iterable[tuple[str, int, int, int]]) -> list[int]:
         """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles); -1
@@ -187,11 +204,11 @@ class Trace:
     def flat_records(self) -> tuple[list[int], list[int], list[int], list[int]]:
         """The lists a hot loop appends the records to: jobs, :data:`JOB_FIELDS` ints each (task id (:meth:`task_ids`),
         start); interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing
-        times); the firing times (see IrqRecord); the jobs' exceptions, :data:`EXC_FIELDS` ints each (the job's
-        position in the jobs list (its index there // JOB_FIELDS), job, release - offset - job * period, ready -
-        release, finish - start - cost, cost - nominal cost), appended for each job that is not as predicted (see
-        the class), and then its last two stored into :meth:`carried` lists. The loop calls :meth:`compact` each time
-        it has appended :meth:`room` jobs since."""
+        times: 0 for a source in :attr:`periodic`); the firing times (see IrqRecord); the jobs' exceptions,
+        :data:`EXC_FIELDS` ints each (the job's position in the jobs list (its index there // JOB_FIELDS), job,
+        release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost), appended for
+        each job that is not as predicted (see the class), and then its last two stored into :meth:`carried` lists.
+        The loop calls :meth:`compact` each time it has appended :meth:`room` jobs since."""
         return self._appended
 
     def carried(self) -> tuple[list[int], list[int]]:
@@ -223,20 +240,19 @@ class Trace:
         a ``deque(maxlen=...)`` would)."""
         self._move()
         self._forget(len(self._jobs) - self.maxlen)
-        first, counts = len(self._irqs) - self.maxlen, self._irqs.fields[3]
-        while self._irq0 < first:
-            self._times0 += counts[self._irq0]
-            self._irq0 += 1
+        self._drop_irqs(len(self._irqs) - self.maxlen)
 
     def _forget(self, k: int) -> None:
         """Move _job0 on to ``k`` (when later), carrying the values of the exceptions passed."""
-        positions, carried = self._exc.fields[0], self._carried0
-        e = bisect_left(positions, self._dropped + self._job0)
-        while e < len(positions) and positions[e] < self._dropped + k:
-            _pos, _job, _release, _ready, preempted, cost = self._exc.row(e)
-            carried[self._jobs.fields[0][positions[e] - self._dropped]] = (preempted, cost)
-            e += 1
-        self._job0 = max(self._job0, k)
+        if k <= self._job0:
+            return
+        positions, _job, _release, _ready, preempted, cost = self._exc.fields
+        tasks, dropped, carried = self._jobs.fields[0], self._dropped, self._carried0
+        e = bisect_left(positions, dropped + self._job0)
+        end = bisect_left(positions, dropped + k, e)
+        for position, values in zip(positions[e:end], zip(preempted[e:end], cost[e:end], strict=True), strict=True):
+            carried[tasks[position - dropped]] = values
+        self._job0 = k
 
     def _move(self) -> None:
         """Move the records the hot loop appended into the arrays."""
@@ -290,32 +306,44 @@ class Trace:
         """The recorded interrupt firings inside jobs, oldest first."""
         self._trim()
         times, t, k = self._irq_times.fields[0], self._times0, self._irq0
-        out = []
+        out, periodic = [], self.periodic
         for start, source, firings, n in zip(*(f[k:] for f in self._irqs.fields), strict=True):
-            out.append(IrqRecord(start, source, firings, tuple(times[t:t + n])))
+            pattern = periodic[source]
+            out.append(IrqRecord(start, source, firings, tuple(times[t:t + n]) if pattern is None
+                                 else firings_from(pattern, start, firings)))
             t += n
         return out
 
     def prune_before(self, t: int) -> None:
         """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t.
 
-        The records the hot loop appended since the last :meth:`compact` are moved into the arrays only when every
-        record there is older than t (the timeline prunes every 100 ms: moving a few records each time would cost
-        more than the records)."""
-        while True:
-            n = len(self._jobs)
-            while self._job0 < n and self._finish(self._job0) < t:
-                self._forget(self._job0 + 1)
-            starts, counts = self._irqs.fields[0], self._irqs.fields[3]
-            while self._irq0 < len(starts) and starts[self._irq0] < t:
-                self._times0 += counts[self._irq0]
-                self._irq0 += 1
-            if (self._job0 < n and self._irq0 < len(starts)) or not any(self._appended):
-                break
+        The jobs are taken as the scheduler records them: in the order they ran, one at a time (each finishes before
+        the next starts), which makes this a search, not a walk: the timeline prunes every 100 ms. The records the
+        hot loop appended since the last :meth:`compact` are moved into the arrays only when every kept record is
+        older than t and their first is too (moving a few records each time would cost more than the records)."""
+        self._prune_kept(t)
+        jobs, irqs = self._appended[0], self._appended[1]
+        if ((self._job0 == len(self._jobs) and jobs and jobs[1] < t)
+                or (self._irq0 == len(self._irqs) and irqs and irqs[0] < t)):
             self._move()
+            self._prune_kept(t)
         events = self._events
         while events and events[0][1] < t:
             events.popleft()
+
+    def _prune_kept(self, t: int) -> None:
+        """:meth:`prune_before` in the arrays."""
+        starts = self._jobs.fields[1]
+        self._forget(bisect_left(starts, t, self._job0) - 1)  # those before the last one that started before t
+        if self._job0 < len(starts) and starts[self._job0] < t and self._finish(self._job0) < t:
+            self._forget(self._job0 + 1)
+        self._drop_irqs(bisect_left(self._irqs.fields[0], t, self._irq0))
+
+    def _drop_irqs(self, k: int) -> None:
+        """Move _irq0 on to ``k`` (when later), and _times0 past their firing times."""
+        if k > self._irq0:
+            self._times0 += sum(self._irqs.fields[3][self._irq0:k])
+            self._irq0 = k
 
     def add_event(self, kind: str, time: int, source: str, job: int = -1) -> None:
         """Record one instant event."""

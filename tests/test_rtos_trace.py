@@ -9,6 +9,7 @@ import json
 import pytest
 
 from rtos import Fault, OverrunPolicy, Scheduler, Task, Trace, VirtualClock, Watchdog
+from rtos.trace import firings_from
 
 
 def _traced_run():
@@ -105,6 +106,24 @@ def test_a_bounded_trace_keeps_what_an_unbounded_one_ends_with_and_frees_the_res
     kept.compact()
     assert len(kept._jobs) == 7 and len(kept._irqs) == 7
     assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == whole.irqs()[-7:]
+
+
+def test_a_periodic_sources_firing_times_derived_on_reading_are_those_it_tells():
+    """The hot loop keeps no firing times of a periodic source (CountingSource.periodic): reading derives them."""
+    from hal.virtual.timer import SysTick
+    from rtos import PeriodicInterrupt
+
+    tr = _irq_run(10_000)
+    assert tr.periodic == [(40, 0), (170, 11)] and len(tr._irq_times) == 0
+    finish = {j.start: j.finish for j in tr.jobs()}
+    sources = [PeriodicInterrupt("tick", period=40, cost=3), PeriodicInterrupt("rx", period=170, cost=9, offset=11)]
+    assert all(i.times == sources[i.source].fired_at(i.job_start, finish[i.job_start]) and len(i.times) == i.firings
+               for i in tr.irqs())
+    tick = SysTick(1_000_000).interrupt(5)  # fires at k * 1000 cycles, k >= 1
+    assert tick.periodic() == (1000, 1000)
+    for t0, t1 in ((0, 3000), (1, 3001), (999, 3999), (1000, 3001), (5001, 8001)):
+        fired = tick.fired_at(t0, t1)
+        assert firings_from((1000, 1000), t0, len(fired)) == fired and fired
 
 
 def test_prune_before_forgets_the_jobs_finished_and_the_firings_in_jobs_started_before():

@@ -179,3 +179,7 @@ class _PeriodicInterrupt(InterruptSourceBase):
         period = self._period
         first = -(-t0 // period) or 1
         return tuple(k * period for k in range(first, -(-t1 // period)))
+
+    def periodic(self) -> tuple[int, int] | None:
+        """(period, period): it fires at k * period, k >= 1."""
+        return self._period, self._period
