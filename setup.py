@@ -88,6 +88,8 @@ COMPILED = [
     "protocol/cobs.py",
     "protocol/telemetry_frame.py",
     "host_tools/probe.py",
+    "host_tools/calibration/fit_gap.py",
+    "host_tools/calibration/fit_window.py",
     "hal/record/recorder.py",
     "hal/record/reader.py",
     "hal/record/streams.py",

@@ -165,15 +165,23 @@ def _wire(record: Path) -> _Wire:
     f_cpu = int(reader.header["f_cpu_hz"])
     baud = float(reader.header.get("ports", {}).get("motor", {}).get("baud", 921600))
     to_motor, from_motor = vesc.Decoder(direction="to-motor"), vesc.Decoder(direction="from-motor")
-    times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes, req_cmd = ([] for _ in range(9))
+    times: list[float] = []  # the _Wire's fields, as they are read
+    currents: list[float] = []
+    t_req: list[float] = []
+    t_req_job: list[float] = []
+    t_reply: list[float] = []
+    t_enc: list[float] = []
+    t_motor: list[float] = []
+    reply_bytes: list[int] = []
+    req_cmd: list[int] = []
     write_key, read_key = Kind.WRITE << 2, Kind.READ << 2
     tasks = list(reader.header.get("tasks", ()))
     encoder_task = tasks.index("encoder") if "encoder" in tasks else -1
     motor_task = tasks.index("motor") if "motor" in tasks else -1
 
     def wire() -> _Wire:
-        return _Wire(*(np.array(x) for x in (times, currents, t_req, t_req_job, t_reply, t_enc, t_motor, reply_bytes)),
-                     np.array(req_cmd, dtype=int), baud)
+        return _Wire(np.array(times), np.array(currents), np.array(t_req), np.array(t_req_job), np.array(t_reply),
+                     np.array(t_enc), np.array(t_motor), np.array(reply_bytes), np.array(req_cmd, dtype=int), baud)
 
     for s in reader.sections():
         t = s.start / f_cpu
@@ -377,9 +385,9 @@ def load_experiment(run_dir: Path) -> Experiment:
     ValueError (one line, naming the file) when a file is missing, damaged or holds too little.
     """
     record, tel = run_dir / RECORD_NAME, run_dir / "telemetry.csv"
-    for f in (record, tel):
-        if not f.is_file():
-            raise ValueError(f"{f}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
+    for path in (record, tel):
+        if not path.is_file():
+            raise ValueError(f"{path}: not found (pafp fit reads a run directory with record.bin and telemetry.csv: "
                              "`pafp run --experiment sysid`, or any serial run)")
     read_record_header(record)  # a damaged or foreign header: one line naming the key, not a KeyError
     w = _wire(record)

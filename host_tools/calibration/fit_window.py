@@ -3,7 +3,8 @@ by the recorded commands from the window's start, read as the bench reads it (th
 each reply carries); the IMU's lag and the window's projections are `fit_model`'s.
 
 The event loop runs on Python floats (`Events`: a numpy scalar per access cost most of a simulation's time), the same
-values, so the same arithmetic. Within one fit (`fit_memo.one_fit`) a window's run is taken from the memo when
+values, so the same arithmetic; the module is compiled (setup.py's COMPILED, docs/compiled.md), and calls the plant's
+methods directly (a bound method kept in a local would be a Python call from compiled code). Within one fit (`fit_memo.one_fit`) a window's run is taken from the memo when
 everything it depends on is the same (`window_key`): a fit asks for it again when only the IMU's lag or bias moved, or
 only the backlash in a window whose command never reverses (the rotor never leaves the teeth: every command passes
 whole), or only the start of another window (the stuck starts' draws).
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
+from typing import Any
 
 import numpy as np
 
@@ -28,20 +30,30 @@ class Events:
     as Python floats; the recording's arrays that a window's run reads (`keep`)."""
 
     def __init__(self, exp: Experiment, delay: float, params: PlantParams) -> None:
-        self.exp, self.delay, self.peak = exp, delay, params.peak_current_a
-        self.t_cmd, self.t_req = exp.t_cmd, exp.t_req + (delay - COMMAND_DELAY_S)
+        self.exp: Experiment = exp
+        self.delay: float = delay
+        self.peak: float = params.peak_current_a
+        self.t_cmd: Any = exp.t_cmd
+        self.t_req: Any = exp.t_req + (delay - COMMAND_DELAY_S)
         angle_of = exp.req_of if exp.angle_req_of is None else exp.angle_req_of  # the reply the encoder reads
-        self.band = GAP_BLEND * float(np.median(np.diff(exp.t_cmd))) if len(exp.t_cmd) > 1 else 1e-3
-        self.arrival_times = exp.t_cmd + delay
-        self.ts, self.arrivals, self.reqs = exp.t.tolist(), self.arrival_times.tolist(), self.t_req.tolist()
-        self.amps = exp.i_cmd.tolist()
-        self.targets = np.clip(exp.i_cmd, -self.peak, self.peak).tolist()  # as the plant clamps them
-        self.req_of, self.reply_of, self.measured = exp.req_of.tolist(), angle_of.tolist(), exp.current.tolist()
-        self.keep = (exp.t, exp.t_cmd, exp.i_cmd, exp.t_req, exp.req_of, exp.current, exp.angle_req_of)
+        self.band: float = GAP_BLEND * float(np.median(np.diff(exp.t_cmd))) if len(exp.t_cmd) > 1 else 1e-3
+        self.arrival_times: Any = exp.t_cmd + delay
+        self.ts: list[float] = exp.t.tolist()
+        self.arrivals: list[float] = self.arrival_times.tolist()
+        self.reqs: list[float] = self.t_req.tolist()
+        self.amps: list[float] = exp.i_cmd.tolist()
+        self.targets: list[float] = np.clip(exp.i_cmd, -self.peak, self.peak).tolist()  # as the plant clamps them
+        self.req_of: list[int] = exp.req_of.tolist()
+        self.reply_of: list[int] = angle_of.tolist()
+        self.measured: list[float] = exp.current.tolist()
+        self.keep: tuple[Any, ...] = (exp.t, exp.t_cmd, exp.i_cmd, exp.t_req, exp.req_of, exp.current,
+                                      exp.angle_req_of)
         # the commands of each sign before each command: a window whose commands all have one sign never reverses
         signs = np.sign(exp.i_cmd)
-        self.positive, self.negative = np.r_[0, np.cumsum(signs > 0)], np.r_[0, np.cumsum(signs < 0)]
-        self.plant_bits = tuple(_bits(getattr(params, f.name)) for f in fields(params) if f.name != "backlash_deg")
+        self.positive: Any = np.r_[0, np.cumsum(signs > 0)]
+        self.negative: Any = np.r_[0, np.cumsum(signs < 0)]
+        self.plant_bits: tuple[object, ...] = tuple(_bits(getattr(params, f.name)) for f in fields(params)
+                                                    if f.name != "backlash_deg")
 
     def acting(self, t0: float) -> int:
         """The command acting at t0 (-1: none yet)."""
@@ -85,7 +97,8 @@ def run_plant(ev: Events, params: PlantParams, backlash: float, k: int, end: int
     ts, arrivals, reqs, amps_of, targets = ev.ts, ev.arrivals, ev.reqs, ev.amps, ev.targets
     req_of, reply_of, measured, from_reply = ev.req_of, ev.reply_of, ev.measured, exp.angle_from_reply
     n_cmd, n_req = len(arrivals), len(reqs)
-    tau, ratio = params.current_time_constant_s, params.total_ratio
+    tau: float = params.current_time_constant_s
+    ratio: float = params.total_ratio
     i0 = measured[k]
     # the backlash is the fit's (`fit_gap`): the plant runs without it and is given the share of each command
     # that reaches the output; its friction switches where it happens, not on its step grid (a cost without
@@ -93,12 +106,10 @@ def run_plant(ev: Events, params: PlantParams, backlash: float, k: int, end: int
     plant = Plant(params, suspended(), initial_angle_rad=start_angle, initial_velocity_rad_s=v_start,
                   start_time_s=t0, initial_current_a=i0, located_switching=True)
     gap = GapShare(params, backlash, t0, ev.band) if ev.gap(c, end, backlash) else None
-    current_at, command_at, angle_at = plant.current_q_a, plant.set_current_command, plant.output_angle_rad
-    share = None if gap is None else gap.share
-    accel_at = plant.output_accel_rad_s2
     # the command clamped as the plant clamps it, and the share of it past the backlash (`fit_gap`)
     if c >= 0:
-        command_at(amps_of[c] if share is None else targets[c] * share(t0, targets[c], accel_at(t0)), t0)
+        plant.set_current_command(amps_of[c] if gap is None
+                                  else targets[c] * gap.share(t0, targets[c], plant.output_accel_rad_s2(t0)), t0)
     target = targets[c - 1] if c >= 1 else 0.0
     c += 1
     r = int(np.searchsorted(ev.t_req, t0, side="right"))  # the next request to reach the motor
@@ -109,7 +120,10 @@ def run_plant(ev: Events, params: PlantParams, backlash: float, k: int, end: int
     t_last, i_last = t0, i0
     ta = arrivals[c] if c < n_cmd else math.inf  # the next command's arrival
     tr = reqs[r] if r < n_req else math.inf  # the next request's
-    out_th, out_angle, out_current, out_heard = [], [], [], []
+    out_th: list[float] = []
+    out_angle: list[float] = []
+    out_current: list[float] = []
+    out_heard: list[bool] = []
     for j in range(k, end):
         tj = ts[j]
         while True:  # the events up to tj, in time order: commands arriving, requests arriving (first at a tie)
@@ -119,7 +133,7 @@ def run_plant(ev: Events, params: PlantParams, backlash: float, k: int, end: int
             span = te - t_last
             if span > 0:
                 acc += target * span + (i_last - target) * tau * -math.expm1(-span / tau)
-                i_last, t_last = current_at(te), te
+                i_last, t_last = plant.current_q_a(te), te
             if tr <= ta:
                 means[r] = acc / (te - t_mark) if te > t_mark else i_last
                 if from_reply:  # (a query changes nothing in the plant: skipped when not needed)
@@ -129,10 +143,11 @@ def run_plant(ev: Events, params: PlantParams, backlash: float, k: int, end: int
                 tr = reqs[r] if r < n_req else math.inf
             else:
                 target = targets[c]
-                command_at(amps_of[c] if share is None else target * share(te, target, accel_at(te)), te)
+                plant.set_current_command(amps_of[c] if gap is None
+                                          else target * gap.share(te, target, plant.output_accel_rad_s2(te)), te)
                 c += 1
                 ta = arrivals[c] if c < n_cmd else math.inf
-        th = angle_at(tj)
+        th = plant.output_angle_rad(tj)
         out_th.append(th)
         # through serial mode the encoder angle is a reply's position (one reply older than the current's), taken when
         # its request reached the motor; on the virtual bench the encoder reads the plant at the sample's time (the
