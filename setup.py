@@ -5,8 +5,9 @@ its task bodies read and its watchdog), the interrupt interference solve, the vi
 device models with their event base classes, the plant, the ADC with the ground sensors and the ground
 reaction, the firmware's tasks, drivers and codecs, the shipped controllers (cascade, impedance) with
 the observation they read, the load detector and the ground sensors' driver and event detector, the
-bench probe of a virtual run, and the input record's recorder and replay (every call the firmware makes
-goes through them in a recorded serial run and in `pafp replay`).
+bench probe of a virtual run, the input record's recorder and replay (every call the firmware makes
+goes through them in a recorded serial run and in `pafp replay`), and the plant's run over one window of
+`pafp fit`'s simulation with the fit's backlash (each of a fit's ~400 simulations runs every window).
 mypyc compiles the same typed Python source; the ``.py`` files stay the reference and run unchanged
 when the build is skipped. ``PAFP_PURE_PYTHON=1 pip install -e .`` (or a machine without a C
 compiler) gives the pure-Python package; ``host_tools.build_info`` tells which one is running.

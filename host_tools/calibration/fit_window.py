@@ -1,13 +1,12 @@
-"""The plant's run over one simulation window of `pafp fit`'s model (`fit_model.simulate`): the bench's plant driven
-by the recorded commands from the window's start, read as the bench reads it (the encoder's angle, the mean current
-each reply carries); the IMU's lag and the window's projections are `fit_model`'s.
-
-The event loop runs on Python floats (`Events`: a numpy scalar per access cost most of a simulation's time), the same
-values, so the same arithmetic; the module is compiled (setup.py's COMPILED, docs/compiled.md), and calls the plant's
-methods directly (a bound method kept in a local would be a Python call from compiled code). Within one fit (`fit_memo.one_fit`) a window's run is taken from the memo when
-everything it depends on is the same (`window_key`): a fit asks for it again when only the IMU's lag or bias moved, or
-only the backlash in a window whose command never reverses (the rotor never leaves the teeth: every command passes
-whole), or only the start of another window (the stuck starts' draws).
+"""The plant's run over one simulation window of `pafp fit`'s model (`fit_model.simulate`): the bench's plant driven by
+the recorded commands from the window's start, read as the bench reads it (the encoder's angle, the mean current each
+reply carries); the IMU's lag and the window's projections are `fit_model`'s. The event loop runs on Python floats
+(`Events`: a numpy scalar per access cost most of a simulation's time), the same values, so the same arithmetic; the
+module is compiled (setup.py's COMPILED, docs/compiled.md), and calls the plant's methods directly (a bound method
+kept in a local would be a Python call from compiled code). Within one fit (`fit_memo.one_fit`) a window's run is
+taken from the memo when everything it depends on is the same (`window_key`): a fit asks for it again when only the
+IMU's lag or bias moved, or only the backlash in a window whose command never reverses (the rotor never leaves the
+teeth: every command passes whole), or only the start of another window (the stuck starts' draws).
 """
 
 from __future__ import annotations
