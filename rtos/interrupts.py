@@ -58,8 +58,20 @@ class CountingSource:
     def periodic(self) -> tuple[int, int] | None:
         """(period, first firing cycle) of a source that fires at ``first + k * period`` for k = 0, 1, ... and at
         no other time, else None: its firings in a window follow from the window's start and their count, which
-        the trace derives on export (``rtos.trace.firings_from``) instead of the hot loop asking ``fired_at``."""
+        the trace derives on export (:func:`firings_from`) instead of the hot loop asking ``fired_at``."""
         return None
+
+
+def firings_from(pattern: tuple[int, int], t0: int, n: int) -> tuple[int, ...]:
+    """The first ``n`` firing cycles from ``t0`` on of a source firing at ``first + k * period`` (``pattern``:
+    (period, first), :meth:`CountingSource.periodic`).
+
+    >>> firings_from((1000, 0), 1, 2), firings_from((1000, 1000), 0, 1)
+    ((1000, 2000), (1000,))
+    """
+    period, first = pattern
+    k = max(0, -((first - t0) // period))
+    return tuple(first + j * period for j in range(k, k + n))
 
 
 def _check_cost(name: str, cost: object) -> int:
@@ -105,8 +117,7 @@ class PeriodicInterrupt(CountingSource):
         >>> PeriodicInterrupt("systick", period=1000, cost=80).fired_at(0, 2500)
         (0, 1000, 2000)
         """
-        first = self._fired_before(t0)
-        return tuple(self.offset + k * self.period for k in range(first, first + self.count_in(t0, t1)))
+        return firings_from((self.period, self.offset), t0, self.count_in(t0, t1))
 
     def periodic(self) -> tuple[int, int] | None:
         """(period, offset): it fires at offset + k * period."""

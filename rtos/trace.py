@@ -21,6 +21,8 @@ from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
+from rtos.interrupts import firings_from
+
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
 JOB_FIELDS = 2  # per job: task id, start
 EXC_FIELDS = 6  # per job its task's timing does not predict: position, job, and the differences (Trace.flat_records)
@@ -100,18 +102,6 @@ class IrqRecord(NamedTuple):
     source: int
     firings: int
     times: tuple[int, ...]
-
-
-def firings_from(pattern: tuple[int, int], t0: int, n: int) -> tuple[int, ...]:
-    """The first ``n`` firing cycles from ``t0`` on of a source firing at ``first + k * period`` (``pattern``:
-    (period, first), :meth:`CountingSource.periodic`).
-
-    >>> firings_from((1000, 0), 1, 2), firings_from((1000, 1000), 0, 1)
-    ((1000, 2000), (1000,))
-    """
-    period, first = pattern
-    k = max(0, -((first - t0) // period))
-    return tuple(first + j * period for j in range(k, k + n))
 
 
 class TraceEvent(NamedTuple):

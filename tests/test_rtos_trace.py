@@ -9,7 +9,7 @@ import json
 import pytest
 
 from rtos import Fault, OverrunPolicy, Scheduler, Task, Trace, VirtualClock, Watchdog
-from rtos.trace import firings_from
+from rtos.interrupts import firings_from
 
 
 def _traced_run():

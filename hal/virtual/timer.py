@@ -8,6 +8,7 @@ from collections.abc import Callable
 from hal.interfaces import EncoderTimer
 from hal.virtual.checks import check_int
 from hal.virtual.irq import InterruptSourceBase
+from rtos.interrupts import firings_from
 
 __all__ = ["SysTick", "VirtualEncoderTimer"]
 
@@ -169,6 +170,10 @@ class _PeriodicInterrupt(InterruptSourceBase):
         if t0 < self._last_t0 or t1 < t0 or t0 < 0:
             self._check_window(t0, t1)  # raises
         self._last_t0 = t0
+        return self._firings(t0, t1)
+
+    def _firings(self, t0: int, t1: int) -> int:
+        """Firings k * period with t0 <= k * period < t1 and k >= 1 (no check, no state)."""
         period = self._period
         first = -(-t0 // period) or 1
         n = -(-t1 // period) - first
@@ -176,9 +181,7 @@ class _PeriodicInterrupt(InterruptSourceBase):
 
     def fired_at(self, t0: int, t1: int) -> tuple[int, ...]:
         """The firing cycles k * period in [t0, t1), k >= 1 (for the trace)."""
-        period = self._period
-        first = -(-t0 // period) or 1
-        return tuple(k * period for k in range(first, -(-t1 // period)))
+        return firings_from((self._period, self._period), t0, self._firings(t0, t1))
 
     def periodic(self) -> tuple[int, int] | None:
         """(period, period): it fires at k * period, k >= 1."""
