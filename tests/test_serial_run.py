@@ -120,6 +120,16 @@ def assert_stopped_safely(motor_to_device: bytes) -> None:
     assert zero == SetCurrent(0.0) and (safe == SetDuty(0.0) or held), frames[-3:]
 
 
+def is_graded_stop(name: str, tripped: bool) -> bool:
+    """Whether a stop frame as summary.json names it (``stop.safe_frames``) is the shipped graded safe state's: the
+    phase short, or, only after a trip (``tripped``: a fault latched), the hold at a position (assert_stopped_safely).
+    """
+    hold = "SetPos(position_rad="
+    if tripped and name.startswith(hold) and name.endswith(")"):
+        return math.isfinite(float(name[len(hold):-1]))
+    return name == "SetDuty(duty=0.0)"
+
+
 def test_e2e_against_emulated_bench_tracks_like_virtual(tmp_path: Path) -> None:
     proc, motor, imu = _emulator(20.0, "--capture", str(tmp_path / "device"))
     out, capture = tmp_path / "out", tmp_path / "capture"
