@@ -11,7 +11,7 @@ from rtos.clock import Clock, VirtualClock
 from rtos.interrupts import CountingSource, InterruptSource, bind_sources, is_interrupt_source, solve_bound
 from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
 from rtos.task import Body, Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
-from rtos.trace import Trace
+from rtos.trace import AT_GIVEN, AT_NEXT_RELEASE, CODES, DIFFERS, NEW_INTERFERENCE, Trace
 from rtos.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
@@ -78,6 +78,12 @@ class _Slot:
         self.blocked_by = -1
         self.blocked_release = 0
         self.blocked_cycles = 0
+        # the trace's id of the task (-1: its jobs are not recorded), its codes' base (id * CODES) and the
+        # interference and cost - nominal cost of its last job recorded (Trace.carried), read at each run's start
+        self.trace_id = -1
+        self.trace_code = 0
+        self.carried_preempted = 0
+        self.carried_dcost = 0
 
     def index_of(self, release: int) -> int:
         """Release index k of the nominal release ``release`` (= offset + k * period)."""
@@ -121,7 +127,9 @@ class Scheduler:
         if trace is not None:
             trace.task_names = [t.name for t in self._tasks]
             trace.interrupts = [(src.name, src.cost_cycles) for src in self._interrupts]
-            trace.periodic = [src.periodic() if isinstance(src, CountingSource) else None for src in self._interrupts]
+            # on the wall clock interrupts are not modelled: no firings to derive
+            trace.periodic = [src.periodic() if isinstance(src, CountingSource) and not self.clock.realtime else None
+                              for src in self._interrupts]
         self.on_fault = on_fault
         self._rng = random.Random(seed)
         self._now = 0
@@ -342,22 +350,32 @@ class Scheduler:
         slots, trace = self._slots, self.trace
         jitter_draw = self._rng.randint  # bound once: the generator's draws, in the same order
         irqs = [] if realtime else bind_sources(self._interrupts)
+        traced_irqs = [b for b in irqs if not b.periodic]  # the sources whose firings the trace records
         irq_in_job, irq_idle = self._irq_in_job, self._irq_idle
         wd_due = self._wd_due()
         wds = self._watchdogs
         tr_jobs: list[int] = []  # the trace's flat records (Trace.flat_records), appended to natively
+        tr_given: list[int] = []
+        tr_interference: list[int] = []
+        tr_differs: list[int] = []
         tr_irqs: list[int] = []
         tr_times: list[int] = []
-        tr_exc: list[int] = []
         tr_preempted: list[int] = []  # by task id: the last job's interference and cost - nominal (Trace.carried)
         tr_cost: list[int] = []
-        trace_ids: list[int] = []
         trace_room = 0
+        tr_last = -1  # the finish of the last job recorded (Trace.take_last_finish)
+        for slot in slots:
+            slot.trace_id = -1
         if trace is not None:
-            tr_jobs, tr_irqs, tr_times, tr_exc = trace.flat_records()
-            trace_ids = trace.task_ids([(s.name, s.offset, s.period, s.cost) for s in slots])
+            tr_jobs, tr_given, tr_interference, tr_differs, tr_irqs, tr_times = trace.flat_records()
             tr_preempted, tr_cost = trace.carried()
+            ids = trace.task_ids([(s.name, s.offset, s.period, s.cost) for s in slots])
+            for slot, tid in zip(slots, ids):
+                if tid >= 0:
+                    slot.trace_id, slot.trace_code = tid, tid * CODES
+                    slot.carried_preempted, slot.carried_dcost = tr_preempted[tid], tr_cost[tid]
             trace_room = trace.room()
+            tr_last = trace.take_last_finish()
         now, mask, prev, nrel_prev = self._now, self._mask, self._prev, self._prev_release
         next_ready = -1  # the earliest ready time of a waiting slot (-1: not known yet, look)
         t_begin = now
@@ -436,41 +454,51 @@ class Scheduler:
                     c = f - start
                 elif irqs and c:  # a zero-cost job spans an empty window: nothing can fire in it
                     f = solve_bound(start, c, irqs, irq_in_job)
-                    if trace is not None and f != start + c:  # the firings the solve counted, each source's
-                        for b in irqs:
+                    if trace is not None and f != start + c:  # the firings the solve counted, of each source
+                        for b in traced_irqs:  # that is not periodic (Trace.irqs derives those)
                             if b.hits:
                                 tr_irqs.append(start)
                                 tr_irqs.append(b.index)
                                 tr_irqs.append(b.hits)
-                                if b.periodic:  # its times follow from start and hits (Trace.irqs)
-                                    tr_irqs.append(0)
-                                else:
-                                    times = b.src.fired_at(start, f)
-                                    tr_irqs.append(len(times))
-                                    tr_times.extend(times)
+                                times = b.src.fired_at(start, f)
+                                tr_irqs.append(len(times))
+                                tr_times.extend(times)
                 else:
                     f = start + c
                 self._account(slot, r, start, f, c)
-                if trace is not None and trace_ids[i] >= 0:  # the record as Trace.flat_records says (-1: skipped)
-                    tid = trace_ids[i]
-                    tr_jobs.append(tid)
-                    tr_jobs.append(start)
-                    # a side record when the job is not as its task predicts (its release is offset + k * period
-                    # always: nrel moves by periods from the offset; kept anyway, as Trace.add_job's are)
+                tid = slot.trace_id
+                if trace is not None and tid >= 0:  # the record as Trace.flat_records says (-1: skipped)
+                    code = slot.trace_code
+                    if start == tr_last:
+                        pass  # AT_LAST_FINISH
+                    elif start == r and r - slot.period <= tr_last < r:
+                        code += AT_NEXT_RELEASE
+                    else:
+                        code += AT_GIVEN
+                        tr_given.append(start)
+                    tr_last = f
                     preempted, dcost = f - start - c, c - slot.cost
-                    if (slot.ready != r or preempted != tr_preempted[tid] or dcost != tr_cost[tid]
-                            or start - r >= slot.period):
-                        tr_exc.append((len(tr_jobs) >> 1) - 1)  # the job's position in tr_jobs
-                        tr_exc.append(k)
-                        tr_exc.append(r - slot.offset - k * slot.period)
-                        tr_exc.append(slot.ready - r)
-                        tr_exc.append(preempted)
-                        tr_exc.append(dcost)
-                        tr_preempted[tid] = preempted
-                        tr_cost[tid] = dcost
+                    # its release is offset + k * period always (nrel moves by periods from the offset), kept
+                    # anyway, as Trace.add_job's are
+                    if slot.ready != r or dcost != slot.carried_dcost or start - r >= slot.period:
+                        code += DIFFERS
+                        tr_differs.append(k)
+                        tr_differs.append(r - slot.offset - k * slot.period)
+                        tr_differs.append(slot.ready - r)
+                        tr_differs.append(preempted)
+                        tr_differs.append(dcost)
+                        tr_preempted[tid] = slot.carried_preempted = preempted
+                        tr_cost[tid] = slot.carried_dcost = dcost
+                    elif preempted != slot.carried_preempted:
+                        code += NEW_INTERFERENCE
+                        tr_interference.append(preempted)
+                        tr_preempted[tid] = slot.carried_preempted = preempted
+                    tr_jobs.append(code)
                     trace_room -= 1
                     if not trace_room:
+                        trace.last_finish = tr_last
                         trace_room = trace.compact()
+                        trace.last_finish = None
                 # the task's next job: releases that came while this one was pending or running overran
                 nxt = slot.nnext
                 fault = None
@@ -496,5 +524,7 @@ class Scheduler:
                 now = t_end
         finally:
             self._now, self._mask, self._prev, self._prev_release = now, mask, prev, nrel_prev
+            if trace is not None:
+                trace.last_finish = tr_last
         if progress is not None and not stopped:
             progress(1.0)

@@ -2,9 +2,11 @@
 
 Besides the jobs it keeps, for each job that interrupts preempted, the firings of each interrupt source as the
 scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`), and instant
-events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends ints to short lists, which
-the trace moves into arrays (one per field, each as narrow as its values) every :data:`CHUNK_JOBS` jobs; formatting
-happens on export. ``prune_before`` drops what ended before a time (a window of the last seconds of a run).
+events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends a small int per job (its
+task and where its start is) to a list, and what its task's timing does not predict to side lists; the trace moves
+them into arrays (one per field, each as narrow as its values) every :data:`CHUNK_JOBS` jobs, with a checkpoint
+from which that chunk's jobs are read; formatting happens on export. ``prune_before`` drops what ended before a time
+(a window of the last seconds of a run).
 """
 
 from __future__ import annotations
@@ -15,47 +17,56 @@ import itertools
 import json
 import struct
 from array import array
-from bisect import bisect_left
+from bisect import bisect_left, bisect_right
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import NamedTuple, TextIO
+from typing import Final, NamedTuple, TextIO
 
 from rtos.interrupts import firings_from
 
 JOB_COLUMNS = ("task", "job", "release", "ready", "start", "finish", "cost")
-JOB_FIELDS = 2  # per job: task id, start
-EXC_FIELDS = 6  # per job its task's timing does not predict: position, job, and the differences (Trace.flat_records)
+CODES: Final = 9
+"""A job's code is its task id * CODES + 3 * where it started + which of its values are kept beside it."""
+AT_LAST_FINISH: Final = 0  # started at the finish of the job recorded before it (the CPU went from one to the next)
+AT_NEXT_RELEASE: Final = 3  # at its task's first release after that finish (the CPU was idle until then)
+AT_GIVEN: Final = 6  # anywhere else: its start is the next in the starts list
+AS_BEFORE: Final = 0  # its job, release, ready, interference and cost are as its task's timing predicts (Trace)
+NEW_INTERFERENCE: Final = 1  # ... but its interference, the next in the interference list
+DIFFERS: Final = 2  # its values are the next record of the side records (EXC_FIELDS)
+EXC_FIELDS = 5  # job, release - offset - job * period, ready - release, interference, cost - nominal cost
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
-CHUNK_JOBS = 1024
-"""Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists and the
-ints they box stay small and their memory is reused, what is kept takes a few bytes per job (6 in a 2-stride run),
-and what the window left behind is freed as the run goes (docs/telemetry.md, "Cost")."""
-_WIDER = {"b": "h", "h": "i", "i": "q"}
+CHUNK_JOBS = 4096
+"""Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists stay
+small and their memory is reused, what is kept takes about a byte per job, and what the window left behind is freed
+a chunk at a time as the run goes (docs/telemetry.md, "Cost")."""
+_WIDER = {"B": "h", "h": "i", "i": "q"}
 
 
 def _packed(code: str, values: Sequence[int]) -> bytes:
-    """``values`` as the bytes of an array of typecode ``code`` (struct packs ints ten times faster than
-    ``array.extend`` converts them); struct.error when one does not fit."""
-    return struct.pack(f"@{len(values)}{code}", *values)
+    """``values`` as the bytes of an array of typecode ``code`` (``bytes`` makes unsigned bytes, and struct packs
+    wider ints, ten times faster than ``array.extend`` converts them); ValueError or struct.error when one does not
+    fit."""
+    return bytes(values) if code == "B" else struct.pack(f"@{len(values)}{code}", *values)
 
 
 def _extended(column: array, values: list[int]) -> array:
-    """``column`` with ``values`` appended, first widened (8, 16, 32, 64 bits) until they fit."""
+    """``column`` with ``values`` appended, first widened (8 bits unsigned, then 16, 32, 64 bits) until they fit."""
     while True:
         try:
             column.frombytes(_packed(column.typecode, values))
             return column
-        except struct.error:
+        except (ValueError, struct.error):
             wide = _WIDER[column.typecode]
             column = array(wide, _packed(wide, column))
 
 
 class _Columns:
-    """Records of ``width`` ints, kept as one array per field (starting at 8 bits, widened when a value needs it)."""
+    """Records of ``width`` ints, kept as one array per field (starting at 8 bits unsigned, widened when a value
+    needs it)."""
 
     def __init__(self, width: int) -> None:
-        self.fields = [array("b") for _ in range(width)]
+        self.fields = [array("B") for _ in range(width)]
 
     def __len__(self) -> int:
         return len(self.fields[0])
@@ -104,6 +115,18 @@ class IrqRecord(NamedTuple):
     times: tuple[int, ...]
 
 
+class _Checkpoint(NamedTuple):
+    """Where a chunk of jobs begins, and what reading its jobs needs of those before it."""
+
+    position: int  # of its first job, counted from the first job ever recorded
+    given: int  # index of its first given start (AT_GIVEN), counted likewise
+    interference: int  # index of its first interference kept beside its job (NEW_INTERFERENCE), likewise
+    differs: int  # index of its first side record (DIFFERS), likewise
+    last_finish: int  # the finish of the job before it (-1: none)
+    preempted: tuple[int, ...]  # by task id: the interference of the task's last job before it
+    cost: tuple[int, ...]  # by task id: that job's cost - its task's nominal cost
+
+
 class TraceEvent(NamedTuple):
     """An instant: ``kind`` is "watchdog_reset", "watchdog_kick", "fault" or "deadline_miss"; ``source`` names who."""
 
@@ -114,16 +137,20 @@ class TraceEvent(NamedTuple):
 
 
 class Trace:
-    """Keeps the last ``maxlen`` jobs, the last ``maxlen`` interrupt records and the last ``maxlen`` instant events.
+    """Keeps the last ``maxlen`` jobs, the interrupts' firings in them and the last ``maxlen`` instant events.
 
-    The jobs and the interrupt records are kept as columns of ints, an array per field (the task as an index into a
-    table of tasks): no object per record or per field; they become :class:`JobRecord` and :class:`IrqRecord` when
-    read. The hot loop appends to lists (:meth:`flat_records`), which :meth:`compact` empties into the arrays. A job
-    is kept as its task and start; what its task's timing predicts from them is not kept: job ``(start - offset) //
-    period``, release ``offset + job * period``, ready at its release, and the interference (finish - start - cost)
-    and cost - nominal cost of the task's previous job (0 for its first). A job that differs (one that started a
-    period or more after its release, had jitter, or whose interference or modelled cost changed) is kept with its
-    values in a side record keyed by its position: one job in eleven in a 2-stride run.
+    A job is kept as a small int, its code: its task (an index into a table of tasks), where it started and which of
+    its values are kept beside it (:data:`CODES`). Its start is the finish of the job before it, or its task's first
+    release after that finish, or (rarely: jitter, a late start) given. What its task's timing predicts from the
+    start is not kept: job ``(start - offset) // period``, release ``offset + job * period``, ready at its release,
+    and the interference (finish - start - cost) and cost - nominal cost of the task's previous job (0 for its
+    first). A job whose interference differs keeps it beside it (a job in eleven in a 2-stride run); one that differs
+    otherwise (a late start, jitter, a modelled cost) keeps a side record. The interrupt records of sources that are
+    not periodic are kept as columns of ints; those of a periodic one (:attr:`periodic`) follow from the jobs'
+    starts and finishes and are derived when read. Every chunk of jobs the hot loop appends (:meth:`flat_records`)
+    is moved into arrays (one per field, each as narrow as its values) with a checkpoint from which its jobs are
+    read: the finish of the job before and the values carried over; so the trace forgets and frees whole chunks.
+    Records become :class:`JobRecord` and :class:`IrqRecord` when read.
 
     >>> tr = Trace(maxlen=2)
     >>> for k in range(3): tr.add_job("a", k, 10 * k, 10 * k, 10 * k, 10 * k + 4)
@@ -132,42 +159,44 @@ class Trace:
     """
 
     def __init__(self, maxlen: int = 100_000, skip: Iterable[str] = ()) -> None:
-        """Create an empty trace holding at most ``maxlen`` jobs, ``maxlen`` interrupt records and ``maxlen`` events;
-        the jobs of the tasks named in ``skip`` are not recorded by the scheduler."""
+        """Create an empty trace holding at most ``maxlen`` jobs (and the firings in them) and ``maxlen`` events; the
+        jobs of the tasks named in ``skip`` are not recorded by the scheduler."""
         if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen <= 0:
             raise ValueError(f"trace maxlen must be an int >= 1, got {maxlen!r}")
         self.maxlen = maxlen
         self.skip = frozenset(skip)
-        # per job: task id and start; the jobs before _job0 are dropped, and _dropped jobs were freed before the first
-        self._jobs = _Columns(JOB_FIELDS)
-        self._job0 = 0
-        self._dropped = 0
-        # per job its task's timing does not predict: its position (counted from the first job ever recorded), job
-        # and differences (see flat_records), in the order of the positions
-        self._exc = _Columns(EXC_FIELDS)
-        # (interference, cost - nominal cost) of each task's last job: appended (the hot loop's, by task id) and
-        # before _job0 (by task id; absent: (0, 0))
+        # the jobs' codes from the position of _checks[0] on, and beside them from its indices on: the given starts,
+        # the interferences and the side records
+        self._codes = _Columns(1)
+        self._given = _Columns(1)
+        self._interference = _Columns(1)
+        self._differs = _Columns(EXC_FIELDS)
+        self._checks = [_Checkpoint(0, 0, 0, 0, -1, (), ())]  # one per chunk, in order; the last is at the end
+        self._job0 = 0  # the position of the first job kept (the ring)
+        self._cut: tuple[int, int] | None = None  # (t, end): prune_before's, not applied yet (_settle_cut)
+        self.last_finish: int | None = -1
+        """The finish of the last job appended (-1: none); None while a scheduler's loop keeps it (take_last_finish)."""
+        # (interference, cost - nominal cost) of each task's last job appended, by task id
         self._carried: tuple[list[int], list[int]] = ([], [])
-        self._carried0: dict[int, tuple[int, int]] = {}
-        # (job start, source index, firings, number of firing times) per record, and the firing times (none of a
-        # periodic source's)
+        # (job start, source index, firings, number of firing times) per record of a source that is not periodic,
+        # and the firing times
         self._irqs = _Columns(IRQ_FIELDS)
         self._irq_times = _Columns(1)
-        self._appended: tuple[list[int], list[int], list[int], list[int]] = ([], [], [], [])  # (flat_records)
         self._irq0 = 0
         self._times0 = 0
+        self._appended: tuple[list[int], ...] = ([], [], [], [], [], [])  # (flat_records)
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
         self._task_table: list[tuple[str, int, int, int]] = []  # (name, offset, period, nominal cost) by task id
         self._task_id: dict[tuple[str, int, int, int], int] = {}
         self.task_names: list[str] = []
         self.interrupts: list[tuple[str, int]] = []  # (name, cycles per firing) by source index
-        # by source index: (period, first firing) of a periodic source, whose firing times the hot loop leaves out
-        # (no firing times in its records: firings_from gives them), else None
+        # by source index: (period, first firing) of a periodic source, whose records the hot loop leaves out (they
+        # are derived from the jobs when read), else None
         self.periodic: list[tuple[int, int] | None] = []
 
     def task_ids(self, tasks: Iterable[tuple[str, int, int, int]]) -> list[int]:
-        """The ids by which the job records name ``tasks``, each (name, offset, period, nominal cost in cycles); -1
-        for a task the trace skips."""
+        """The ids by which the job records name ``tasks``, each (name, offset, period > 0, nominal cost in cycles);
+        -1 for a task the trace skips."""
         return [-1 if t[0] in self.skip else self._task_of(t) for t in tasks]
 
     def _task_of(self, task: tuple[str, int, int, int]) -> int:
@@ -183,157 +212,208 @@ class Trace:
                 cost: int | None = None) -> None:
         """Record one job (``cost``: its own cycles; by default ``finish - start``, no interference)."""
         cost = finish - start if cost is None else cost
-        jobs, exceptions = self._appended[0], self._appended[3]
-        exceptions.extend((len(jobs) // JOB_FIELDS, job, release, ready - release, finish - start - cost, cost))
+        codes, given, _interference, differs = self._appended[:4]
         k = self._task_of((task, 0, 0, 0))
-        jobs.extend((k, start))
+        codes.append(k * CODES + AT_GIVEN + DIFFERS)
+        given.append(start)
+        differs.extend((job, release, ready - release, finish - start - cost, cost))
         self._carried[0][k], self._carried[1][k] = finish - start - cost, cost
-        if len(jobs) >= JOB_FIELDS * min(self.maxlen, CHUNK_JOBS):
+        self.last_finish = finish
+        if len(codes) >= min(self.maxlen, CHUNK_JOBS):
             self.compact()
 
-    def flat_records(self) -> tuple[list[int], list[int], list[int], list[int]]:
-        """The lists a hot loop appends the records to: jobs, :data:`JOB_FIELDS` ints each (task id (:meth:`task_ids`),
-        start); interrupt records, :data:`IRQ_FIELDS` ints each (job start, source index, firings, number of firing
-        times: 0 for a source in :attr:`periodic`); the firing times (see IrqRecord); the jobs' exceptions,
-        :data:`EXC_FIELDS` ints each (the job's position in the jobs list (its index there // JOB_FIELDS), job,
-        release - offset - job * period, ready - release, finish - start - cost, cost - nominal cost), appended for
-        each job that is not as predicted (see the class), and then its last two stored into :meth:`carried` lists.
-        The loop calls :meth:`compact` each time it has appended :meth:`room` jobs since."""
+    def flat_records(self) -> tuple[list[int], ...]:
+        """The lists a hot loop appends the records to:
+
+        - jobs, a code each: task id (:meth:`task_ids`) * :data:`CODES`, plus where it started: :data:`AT_LAST_FINISH`
+          at the finish of the job appended before it, :data:`AT_NEXT_RELEASE` at its task's first release after
+          that finish (release - period <= that finish < release), else :data:`AT_GIVEN`; plus which values it keeps
+          beside it: :data:`AS_BEFORE` none, :data:`NEW_INTERFERENCE` its interference, :data:`DIFFERS` a side record;
+        - the start of each AT_GIVEN job, in order;
+        - the interference (finish - start - cost) of each NEW_INTERFERENCE job;
+        - the side records, :data:`EXC_FIELDS` ints each (job, release - offset - job * period, ready - release,
+          interference, cost - nominal cost), of each DIFFERS job: one whose job, release, ready or cost is not as
+          its task's timing predicts (see the class);
+        - records of the interrupts that preempted a job, :data:`IRQ_FIELDS` ints each (job start, source index,
+          firings, number of firing times), of the sources not in :attr:`periodic`;
+        - their firing times (see IrqRecord).
+
+        A NEW_INTERFERENCE or DIFFERS job stores its interference and cost - nominal cost into the :meth:`carried`
+        lists. The loop takes :attr:`last_finish` with :meth:`take_last_finish`, calls :meth:`compact` each time it
+        has appended :meth:`room` jobs since, with :attr:`last_finish` set to the last one's finish, and sets it back
+        when it ends."""
         return self._appended
 
     def carried(self) -> tuple[list[int], list[int]]:
         """The interference and cost - nominal cost of each task's last job appended, by task id (see the class)."""
         return self._carried
 
+    def take_last_finish(self) -> int:
+        """:attr:`last_finish` for a loop that appends jobs from now on; it is None until the loop sets it back (the
+        trace reads it from the records if it needs it before)."""
+        if self.last_finish is None:
+            self._move()
+            self.last_finish = self._checks[-1].last_finish
+        last, self.last_finish = self.last_finish, None
+        return last
+
     def room(self) -> int:
         """Jobs that may be appended before :meth:`compact` must run (it keeps the lists short and the memory within
-        2 ``maxlen`` jobs)."""
-        return max(1, min(self.maxlen, CHUNK_JOBS) - len(self._appended[0]) // JOB_FIELDS)
+        ``maxlen`` jobs and a chunk)."""
+        return max(1, min(self.maxlen, CHUNK_JOBS) - len(self._appended[0]))
 
     def compact(self) -> int:
-        """Move the appended records into the arrays, drop all but the last ``maxlen`` records (and the pruned
-        ones), free them when they take as much memory as the kept ones; return :meth:`room`."""
+        """Move the appended records into the arrays, drop all but the last ``maxlen`` jobs (and the pruned ones) by
+        whole chunks with the interrupt records in them, free the interrupt records when they take as much memory
+        as the kept ones; return :meth:`room`."""
         self._trim()
-        if self._job0 * 2 >= len(self._jobs):
-            self._jobs.drop(self._job0)
-            self._dropped += self._job0
-            self._job0 = 0
-            self._exc.drop(bisect_left(self._exc.fields[0], self._dropped))
         if self._irq0 * 2 >= len(self._irqs):
             self._irqs.drop(self._irq0)
             self._irq_times.drop(self._times0)
             self._irq0 = self._times0 = 0
         return self.room()
 
-    def _trim(self) -> None:
-        """Move the appended records into the arrays; drop all but the last ``maxlen`` jobs and interrupt records (as
-        a ``deque(maxlen=...)`` would)."""
-        self._move()
-        self._forget(len(self._jobs) - self.maxlen)
-        self._drop_irqs(len(self._irqs) - self.maxlen)
+    def _end(self) -> int:
+        """The position after the last job in the arrays."""
+        return self._checks[0].position + len(self._codes)
 
-    def _forget(self, k: int) -> None:
-        """Move _job0 on to ``k`` (when later), carrying the values of the exceptions passed."""
-        if k <= self._job0:
+    def _trim(self) -> None:
+        """Move the appended records into the arrays; drop all but the last ``maxlen`` jobs (as a
+        ``deque(maxlen=...)`` would; their memory a chunk at a time)."""
+        self._move()
+        self._job0 = max(self._job0, self._end() - self.maxlen)
+        self._drop_chunks(bisect_right(self._checks, self._job0, key=_position) - 1)
+
+    def _drop_chunks(self, c: int) -> None:
+        """Free the jobs before the ``c``-th checkpoint and the interrupt records of jobs that started before the
+        last of them finished."""
+        if c <= 0:
             return
-        positions, _job, _release, _ready, preempted, cost = self._exc.fields
-        tasks, dropped, carried = self._jobs.fields[0], self._dropped, self._carried0
-        e = bisect_left(positions, dropped + self._job0)
-        end = bisect_left(positions, dropped + k, e)
-        for position, values in zip(positions[e:end], zip(preempted[e:end], cost[e:end], strict=True), strict=True):
-            carried[tasks[position - dropped]] = values
-        self._job0 = k
+        check, first = self._checks[c], self._checks[0]
+        self._codes.drop(check.position - first.position)
+        self._given.drop(check.given - first.given)
+        self._interference.drop(check.interference - first.interference)
+        self._differs.drop(check.differs - first.differs)
+        del self._checks[:c]
+        self._job0 = max(self._job0, check.position)
+        k = bisect_left(self._irqs.fields[0], check.last_finish, self._irq0)
+        if k > self._irq0:
+            self._times0 += sum(self._irqs.fields[3][self._irq0:k])
+            self._irq0 = k
 
     def _move(self) -> None:
-        """Move the records the hot loop appended into the arrays."""
-        exceptions = self._appended[3]
-        if exceptions:  # positions counted from the first job ever recorded
-            base = self._dropped + len(self._jobs)
-            exceptions[::EXC_FIELDS] = [base + k for k in exceptions[::EXC_FIELDS]]
+        """Move the records the hot loop appended into the arrays, with a checkpoint after the jobs."""
+        moved = len(self._appended[0])
         for kept, appended in zip(self._kept(), self._appended, strict=True):
             if appended:
                 kept.extend(appended)
+        if moved:
+            last = self.last_finish
+            if last is None:  # a scheduler's loop has it: the finish of the last job read back
+                last = self._checks[-1].last_finish
+                for row in self._rows(len(self._checks) - 1):
+                    last = row[6]
+            first = self._checks[0]
+            self._checks.append(_Checkpoint(
+                self._end(), first.given + len(self._given), first.interference + len(self._interference),
+                first.differs + len(self._differs), last, tuple(self._carried[0]), tuple(self._carried[1])))
 
-    def _kept(self) -> tuple[_Columns, _Columns, _Columns, _Columns]:
+    def _kept(self) -> tuple[_Columns, ...]:
         """The arrays :meth:`flat_records`' lists are moved into."""
-        return self._jobs, self._irqs, self._irq_times, self._exc
+        return self._codes, self._given, self._interference, self._differs, self._irqs, self._irq_times
+
+    def _rows(self, c: int) -> Iterator[tuple[int, str, int, int, int, int, int, int]]:
+        """The jobs in the arrays from the ``c``-th checkpoint on, as tuples (position, task name, job, release, ready,
+        start, finish, cost)."""
+        first, check = self._checks[0], self._checks[c]
+        tasks = self._task_table
+        preempted = [*check.preempted, *[0] * (len(tasks) - len(check.preempted))]
+        costs = [*check.cost, *[0] * (len(tasks) - len(check.cost))]
+        given, g = self._given.fields[0], check.given - first.given
+        interference, i = self._interference.fields[0], check.interference - first.interference
+        differs, d = self._differs.fields, check.differs - first.differs
+        last, position = check.last_finish, check.position
+        for code in self._codes.fields[0][check.position - first.position:]:
+            task, where = divmod(code, CODES)
+            where, values = divmod(where, 3)
+            name, offset, period, nominal = tasks[task]
+            if where == 0:
+                start = last
+            elif where == 1:
+                start = offset + ((last - offset) // period + 1) * period
+            else:
+                start = given[g]
+                g += 1
+            if values == DIFFERS:
+                job, release, ready, preempted[task], costs[task] = (f[d] for f in differs)
+                d += 1
+            else:
+                if values == NEW_INTERFERENCE:
+                    preempted[task] = interference[i]
+                    i += 1
+                job, release, ready = (start - offset) // period, 0, 0
+            release += offset + job * period
+            cost = nominal + costs[task]
+            last = start + cost + preempted[task]
+            yield position, name, job, release, release + ready, start, last, cost
+            position += 1
 
     def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
         """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
         self._trim()
-        tasks, k = self._task_table, self._job0
-        exceptions = self._exc.fields
-        e = bisect_left(exceptions[0], self._dropped + k)
-        at = exceptions[0][e] - self._dropped if e < len(exceptions[0]) else -1
-        carried = dict(self._carried0)
-        for task, start in zip(*(f[k:] for f in self._jobs.fields), strict=True):
-            name, offset, period, nominal = tasks[task]
-            if k == at:
-                _, job, release, ready, preempted, cost = (f[e] for f in exceptions)
-                carried[task] = preempted, cost
-                e += 1
-                at = exceptions[0][e] - self._dropped if e < len(exceptions[0]) else -1
-            else:
-                job, release, ready = (start - offset) // period, 0, 0
-                preempted, cost = carried.get(task, (0, 0))
-            k += 1
-            release += offset + job * period
-            cost += nominal
-            yield name, job, release, release + ready, start, start + cost + preempted, cost
-
-    def _finish(self, k: int) -> int:
-        """The finish of the ``k``-th job kept (``k``: _job0, which the values in _carried0 precede)."""
-        task, start = self._jobs.row(k)
-        positions = self._exc.fields[0]
-        e = bisect_left(positions, self._dropped + k)
-        if e < len(positions) and positions[e] == self._dropped + k:
-            _, _job, _release, _ready, preempted, cost = self._exc.row(e)
-        else:
-            preempted, cost = self._carried0.get(task, (0, 0))
-        return start + self._task_table[task][3] + preempted + cost
+        self._settle_cut()
+        job0 = self._job0
+        for position, *row in self._rows(bisect_right(self._checks, job0, key=_position) - 1):
+            if position >= job0:
+                yield tuple(row)  # type: ignore[misc]
 
     def irqs(self) -> list[IrqRecord]:
-        """The recorded interrupt firings inside jobs, oldest first."""
-        self._trim()
+        """The interrupt firings inside the kept jobs, oldest first (by job, then by source): a periodic source's
+        derived from each job's start and finish, the other sources' as recorded."""
+        jobs = [(start, finish) for *_, start, finish, _cost in self._job_rows()]
+        starts = {start for start, _finish in jobs}
         times, t, k = self._irq_times.fields[0], self._times0, self._irq0
-        out, periodic = [], self.periodic
+        out: list[tuple[int, int, int, tuple[int, ...]]] = []
         for start, source, firings, n in zip(*(f[k:] for f in self._irqs.fields), strict=True):
-            pattern = periodic[source]
-            out.append(IrqRecord(start, source, firings, tuple(times[t:t + n]) if pattern is None
-                                 else firings_from(pattern, start, firings)))
+            if start in starts:
+                out.append((start, source, firings, tuple(times[t:t + n])))
             t += n
-        return out
+        periodic = [(k, p) for k, p in enumerate(self.periodic) if p is not None]
+        for start, finish in jobs if periodic else ():
+            for source, (period, first) in periodic:
+                firings = _before(finish, period, first) - _before(start, period, first)
+                if firings:
+                    out.append((start, source, firings, firings_from((period, first), start, firings)))
+        out.sort(key=lambda r: r[:2])
+        return [IrqRecord(*r) for r in out]
 
     def prune_before(self, t: int) -> None:
-        """Forget the jobs that finished, the firings in jobs that started, and the instants that happened before t.
+        """Forget the jobs that finished (and the firings in them) and the instants that happened before t.
 
         The jobs are taken as the scheduler records them: in the order they ran, one at a time (each finishes before
-        the next starts), which makes this a search, not a walk: the timeline prunes every 100 ms. The records the
-        hot loop appended since the last :meth:`compact` are moved into the arrays only when every kept record is
-        older than t and their first is too (moving a few records each time would cost more than the records)."""
-        self._prune_kept(t)
-        jobs, irqs = self._appended[0], self._appended[1]
-        if ((self._job0 == len(self._jobs) and jobs and jobs[1] < t)
-                or (self._irq0 == len(self._irqs) and irqs and irqs[0] < t)):
-            self._move()
-            self._prune_kept(t)
+        the next starts), which makes this a search, not a walk: the timeline prunes every 100 ms. Whole chunks of
+        jobs are freed at once (a search over the checkpoints); the jobs of the chunk t falls in are found when the
+        trace is next read, as are those the hot loop appended since the last :meth:`compact`."""
+        self._drop_chunks(bisect_left(self._checks, t, key=_last_finish) - 1)
+        end = self._end() + len(self._appended[0])
+        if self._cut is not None and (t < self._cut[0] or end < self._cut[1]):
+            self._settle_cut()  # this prune does not cover the one before: apply that first
+        self._cut = (t, end)
         events = self._events
         while events and events[0][1] < t:
             events.popleft()
 
-    def _prune_kept(self, t: int) -> None:
-        """:meth:`prune_before` in the arrays."""
-        starts = self._jobs.fields[1]
-        self._forget(bisect_left(starts, t, self._job0) - 1)  # those before the last one that started before t
-        if self._job0 < len(starts) and starts[self._job0] < t and self._finish(self._job0) < t:
-            self._forget(self._job0 + 1)
-        self._drop_irqs(bisect_left(self._irqs.fields[0], t, self._irq0))
-
-    def _drop_irqs(self, k: int) -> None:
-        """Move _irq0 on to ``k`` (when later), and _times0 past their firing times."""
-        if k > self._irq0:
-            self._times0 += sum(self._irqs.fields[3][self._irq0:k])
-            self._irq0 = k
+    def _settle_cut(self) -> None:
+        """Apply the prune not applied yet: move _job0 past the jobs before its end that finished before its t."""
+        if self._cut is None:
+            return
+        t, end = self._cut
+        self._cut = None
+        self._move()
+        for position, *_, finish, _cost in self._rows(0):
+            if position >= end or finish >= t:
+                break
+            self._job0 = max(self._job0, position + 1)
 
     def add_event(self, kind: str, time: int, source: str, job: int = -1) -> None:
         """Record one instant event."""
@@ -349,11 +429,13 @@ class Trace:
 
     def clear(self) -> None:
         """Forget every record."""
-        for kept, appended in zip(self._kept(), self._appended, strict=True):
-            del appended[:]
-            kept.drop(len(kept))
-        self._job0 = self._irq0 = self._times0 = self._dropped = 0
-        self._carried0 = {k: v for k, v in enumerate(zip(*self._carried, strict=True)) if v != (0, 0)}
+        self._trim()
+        self._cut = None
+        self._job0 = self._end()
+        self._drop_chunks(len(self._checks) - 1)
+        self._irqs.drop(len(self._irqs))
+        self._irq_times.drop(len(self._irq_times))
+        self._irq0 = self._times0 = 0
         self._events.clear()
 
     def write_csv(self, out: TextIO) -> None:
@@ -436,7 +518,8 @@ class Trace:
         """Task names in tid order: the declared ones, then any other seen in the jobs."""
         names = list(self.task_names)
         self._trim()
-        for task in dict.fromkeys(self._jobs.fields[0][self._job0:]):
+        self._settle_cut()
+        for task in dict.fromkeys(code // CODES for code in self._codes.fields[0][self._job0 - self._checks[0].position:]):
             name = self._task_table[task][0]
             if name not in names:
                 names.append(name)
@@ -445,4 +528,18 @@ class Trace:
     def __len__(self) -> int:
         """Number of recorded jobs."""
         self._trim()
-        return len(self._jobs) - self._job0
+        self._settle_cut()
+        return self._end() - self._job0
+
+
+def _position(check: _Checkpoint) -> int:
+    return check.position
+
+
+def _last_finish(check: _Checkpoint) -> int:
+    return check.last_finish
+
+
+def _before(t: int, period: int, first: int) -> int:
+    """How many times a source firing at ``first + k * period``, k >= 0, fired before ``t``."""
+    return max(0, -((first - t) // period))

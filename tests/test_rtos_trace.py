@@ -88,24 +88,34 @@ def test_write_chrome_writes_the_bytes_of_to_chrome(tmp_path):
 
 
 def _irq_run(maxlen: int) -> Trace:
-    """Two tasks preempted by two periodic interrupts (one whose firings land inside jobs at several times)."""
-    from rtos import PeriodicInterrupt
+    """Two tasks preempted by two periodic interrupts (one whose firings land inside jobs at several times) and one
+    that fires at given times."""
+    from rtos import PeriodicInterrupt, TimestampedInterrupt
 
     tr = Trace(maxlen=maxlen)
     tasks = [Task("fast", 1, 100, cost=30), Task("slow", 2, 250, cost=70, offset=5)]
-    irqs = [PeriodicInterrupt("tick", period=40, cost=3), PeriodicInterrupt("rx", period=170, cost=9, offset=11)]
+    irqs = [PeriodicInterrupt("tick", period=40, cost=3), PeriodicInterrupt("rx", period=170, cost=9, offset=11),
+            TimestampedInterrupt("uart", cost=5, times=range(7, 20_000, 230))]
     Scheduler(tasks, VirtualClock(1_000_000), interrupts=irqs, trace=tr).run_until(20_000)
     return tr
 
 
+def _in(irqs, jobs):
+    """The interrupt records of ``jobs``."""
+    starts = {j.start for j in jobs}
+    return [i for i in irqs if i.job_start in starts]
+
+
 def test_a_bounded_trace_keeps_what_an_unbounded_one_ends_with_and_frees_the_rest():
     whole, kept = _irq_run(10_000), _irq_run(7)
-    assert len(kept._jobs) <= 2 * 7  # freed as the run went, not only when read
+    assert len(kept._codes) <= 2 * 7  # freed as the run went (a chunk of 7 jobs at a time), not only when read
+    assert len(kept._irqs) - kept._irq0 <= 7  # the uart's records, of those jobs at most
     assert len(whole.irqs()) > 100 and any(len(i.times) > 1 for i in whole.irqs())
-    assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == whole.irqs()[-7:] and len(kept) == 7
+    assert {i.source for i in whole.irqs()} == {0, 1, 2}
+    assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == _in(whole.irqs(), kept.jobs()) and len(kept) == 7
     kept.compact()
-    assert len(kept._jobs) == 7 and len(kept._irqs) == 7
-    assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == whole.irqs()[-7:]
+    assert len(kept._codes) < 2 * 7
+    assert kept.jobs() == whole.jobs()[-7:] and kept.irqs() == _in(whole.irqs(), kept.jobs())
 
 
 def test_a_periodic_sources_firing_times_derived_on_reading_are_those_it_tells():
@@ -114,11 +124,16 @@ def test_a_periodic_sources_firing_times_derived_on_reading_are_those_it_tells()
     from rtos import PeriodicInterrupt
 
     tr = _irq_run(10_000)
-    assert tr.periodic == [(40, 0), (170, 11)] and len(tr._irq_times) == 0
+    assert tr.periodic == [(40, 0), (170, 11), None]
+    uart = [i for i in tr.irqs() if i.source == 2]
+    assert len(tr._irqs) == len(uart) > 10  # the records kept: the uart's
     finish = {j.start: j.finish for j in tr.jobs()}
     sources = [PeriodicInterrupt("tick", period=40, cost=3), PeriodicInterrupt("rx", period=170, cost=9, offset=11)]
     assert all(i.times == sources[i.source].fired_at(i.job_start, finish[i.job_start]) and len(i.times) == i.firings
-               for i in tr.irqs())
+               for i in tr.irqs() if i.source < 2)
+    interference = {j.start: j.finish - j.start - j.cost for j in tr.jobs()}  # as the scheduler solved it
+    for start, preempted in interference.items():
+        assert preempted == sum(i.firings * (3, 9, 5)[i.source] for i in tr.irqs() if i.job_start == start)
     tick = SysTick(1_000_000).interrupt(5)  # fires at k * 1000 cycles, k >= 1
     assert tick.periodic() == (1000, 1000)
     for t0, t1 in ((0, 3000), (1, 3001), (999, 3999), (1000, 3001), (5001, 8001)):
@@ -126,13 +141,13 @@ def test_a_periodic_sources_firing_times_derived_on_reading_are_those_it_tells()
         assert firings_from((1000, 1000), t0, len(fired)) == fired and fired
 
 
-def test_prune_before_forgets_the_jobs_finished_and_the_firings_in_jobs_started_before():
+def test_prune_before_forgets_the_jobs_finished_and_the_firings_in_them_before():
     tr, whole = _irq_run(10_000), _irq_run(10_000)
     tr.prune_before(12_345)
     assert tr.jobs() == [j for j in whole.jobs() if j.finish >= 12_345]
-    assert tr.irqs() == [i for i in whole.irqs() if i.job_start >= 12_345]
+    assert tr.irqs() == _in(whole.irqs(), tr.jobs()) and {i.source for i in tr.irqs()} == {0, 1, 2}
     tr.compact()
-    assert tr.irqs() == [i for i in whole.irqs() if i.job_start >= 12_345] and len(tr) == len(tr.jobs())
+    assert tr.irqs() == _in(whole.irqs(), tr.jobs()) and len(tr) == len(tr.jobs())
 
 
 def test_records_keep_values_of_any_width_exactly():
@@ -184,7 +199,9 @@ def test_jobs_their_task_does_not_predict_read_back_as_they_ran():
     late = [j for j in jobs if j.start - j.release >= 300 and j.task == "modelled"]
     assert late and s.stats["slow"].skipped and any(j.ready > j.release for j in jobs)
     tr.compact()
-    assert len(tr._exc) < len(tr)  # the side records: the jobs that differ from their task's previous one
+    # beside the jobs: the side records of the jobs whose job, release, ready or cost differ from their task's
+    # timing (all of the jittered task's), the interference of others, the starts of the jittered ones
+    assert 0 < len(tr._interference) and 0 < len(tr._differs) < len(tr) and 0 < len(tr._given) < len(tr)
 
 
 def test_a_ring_and_a_prune_keep_the_jobs_a_whole_trace_ends_with():
@@ -196,3 +213,27 @@ def test_a_ring_and_a_prune_keep_the_jobs_a_whole_trace_ends_with():
     assert pruned.jobs() == rest and pruned.jobs()[0].finish >= 12_345
     pruned.compact()
     assert pruned.jobs() == rest
+
+
+def test_jobs_are_kept_as_a_code_each_and_read_back_mid_run_as_after_it():
+    """A periodic task set's jobs start at the previous job's finish or at their own release: no start is kept for
+    them; a body that reads the trace while the loop appends (the loop holds the last finish) changes nothing."""
+    from rtos import PeriodicInterrupt
+
+    def run(read_every: int) -> tuple[Trace, list[int]]:
+        tr = Trace(maxlen=60)  # read from a checkpoint of the loop's or of a read mid-run
+        lengths: list[int] = []
+
+        def body(job) -> None:
+            if read_every and job.index % read_every == 0:
+                lengths.append(len(tr.jobs()))
+
+        tasks = [Task("fast", 1, 100, cost=30, body=body), Task("slow", 2, 250, cost=70, offset=5)]
+        irqs = [PeriodicInterrupt("tick", period=40, cost=3)]
+        Scheduler(tasks, VirtualClock(1_000_000), interrupts=irqs, trace=tr).run_until(20_000)
+        return tr, lengths
+
+    quiet, _ = run(0)
+    read, lengths = run(7)
+    assert read.jobs() == quiet.jobs() and len(lengths) > 20 and lengths[-1] == 60
+    assert len(quiet._given) == 0 and len(quiet.jobs()) == 60 and quiet.jobs()[-1].finish > 19_000

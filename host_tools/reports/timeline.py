@@ -100,7 +100,7 @@ class Timeline:
         fb = self.firmware.motor.feedback
         model = self.winding() if self.winding is not None else math.nan
         self.samples.append((now, float(fb.temp_motor_c), float(fb.v_in_v), cpu, model))
-        if self.window_cycles is not None:
+        if self.window_cycles is not None and now > self.window_cycles:  # the run is longer than the window
             cut = now - self.window_cycles
             while self.samples and self.samples[0][0] < cut:
                 self.samples.popleft()
