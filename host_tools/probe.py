@@ -82,6 +82,9 @@ class ProbeBody:
         self.listeners: list[Callable[[float], None]] = []  # called with the time of every listen_every-th sample
         self.listen_every = 10  # the heat log at 50 Hz: per-stride rows to 20 ms, at a tenth of the calls
         self._until_listen = 1
+        self.slow_listeners: list[Callable[[float], None]] = []  # ... of every slow_every-th of those
+        self.slow_every = 5  # the trace's timeline at 10 Hz (its SAMPLE_S)
+        self._until_slow = 1
 
     def __call__(self, job: Job) -> None:
         """Run the actions due, advance the world to job.start, record one sample."""
@@ -92,9 +95,13 @@ class ProbeBody:
             actions.pop(0)[1](self.bench, self.fw)
         self.world.advance_to(start)
         self.probe.sample(t, self.fw, self.plant.output_angle_rad(t))
-        if self.listeners:
-            self._until_listen -= 1
-            if self._until_listen <= 0:
-                self._until_listen = self.listen_every
-                for listener in self.listeners:
+        self._until_listen -= 1
+        if self._until_listen <= 0:
+            self._until_listen = self.listen_every
+            for listener in self.listeners:
+                listener(t)
+            self._until_slow -= 1
+            if self._until_slow <= 0:
+                self._until_slow = self.slow_every
+                for listener in self.slow_listeners:
                     listener(t)

@@ -371,7 +371,7 @@ def run_virtual(cfg: RunConfig, progress: Callable[[float], None] | None = None,
     now.bind(sched)
     timeline = _timeline(cfg, sched, fw, bench, rig, f_cpu) if trace is not None else None
     if timeline is not None:
-        probe_body.listeners.append(timeline.sample)
+        probe_body.slow_listeners.append(timeline.sample)
     fw.kernel_health = kernel_health(sched, fw)
     if recording is not None:
         fw.kernel_health = recording.health(fw.kernel_health)

@@ -50,7 +50,7 @@ voltage at about 10 Hz (with the full status reply), and a sample costs the run 
 class Timeline:
     """What the trace needs beyond the scheduler's records: slow counters, the safe commands on the wire, the window.
 
-    :meth:`sample` is the bench probe's listener (``ProbeBody.listeners``): it samples the slow counters and prunes
+    :meth:`sample` is the bench probe's listener (``ProbeBody.slow_listeners``): it samples the slow counters and prunes
     the scheduler's trace to the window. ``watch`` (an observer of the motor's received commands, gated by
     :meth:`watching`) is armed at the first trip (:meth:`watch_from_trip`).
     """
@@ -89,7 +89,7 @@ class Timeline:
         return last is None or not (last[2] and last[0] >= trips[-1][0])
 
     def sample(self, t_s: float) -> None:
-        """Called by the probe (50 Hz): every SAMPLE_S, one sample of the slow counters; forget what left the window."""
+        """Called by the probe (10 Hz): every SAMPLE_S, one sample of the slow counters; forget what left the window."""
         now = self.scheduler.now
         t0, b0 = self._busy
         if now - t0 < self.sample_cycles:

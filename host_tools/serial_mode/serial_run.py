@@ -407,7 +407,7 @@ def _run(cfg: SerialRunConfig, ports: _Ports, capture: CaptureUart, wire: WireCa
                      else fw.out.fused_angle_rad)
         if link.step(t):
             sched.request_stop()
-        if timeline is not None and job.index % 10 == 0:  # the trace's slow counters at 50 Hz, as a virtual run's
+        if timeline is not None and job.index % 50 == 0:  # the trace's slow counters at 10 Hz, as a virtual run's
             timeline.sample(t)
         if job.index % GC_EVERY_TICKS == 0:
             section.collect_young()  # young objects only: tens of µs, never a full scan in the loop
