@@ -161,7 +161,7 @@ class Scheduler:
     def add_watchdog(self, watchdog: Watchdog) -> Watchdog:
         """Attach ``watchdog``: it is armed now and its kicks use this scheduler's ``now``."""
         watchdog.bind(self)
-        watchdog.trace = self.trace
+        watchdog.kick_log = self.trace.kick_log() if self.trace is not None else None
         self._watchdogs.append(watchdog)
         return watchdog
 
@@ -370,7 +370,7 @@ class Scheduler:
             tr_jobs, tr_given, tr_interference, tr_differs, tr_irqs, tr_times = trace.flat_records()
             tr_preempted, tr_cost = trace.carried()
             ids = trace.task_ids([(s.name, s.offset, s.period, s.cost) for s in slots])
-            for slot, tid in zip(slots, ids):
+            for slot, tid in zip(slots, ids, strict=True):
                 if tid >= 0:
                     slot.trace_id, slot.trace_code = tid, tid * CODES
                     slot.carried_preempted, slot.carried_dcost = tr_preempted[tid], tr_cost[tid]

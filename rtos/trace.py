@@ -186,6 +186,7 @@ class Trace:
         self._times0 = 0
         self._appended: tuple[list[int], ...] = ([], [], [], [], [], [])  # (flat_records)
         self._events: deque[tuple[str, int, str, int]] = deque(maxlen=maxlen)
+        self._kicks: deque[int] = deque(maxlen=maxlen)  # the watchdog kicks' times (kick_log)
         self._task_table: list[tuple[str, int, int, int]] = []  # (name, offset, period, nominal cost) by task id
         self._task_id: dict[tuple[str, int, int, int], int] = {}
         self.task_names: list[str] = []
@@ -399,9 +400,9 @@ class Trace:
         if self._cut is not None and (t < self._cut[0] or end < self._cut[1]):
             self._settle_cut()  # this prune does not cover the one before: apply that first
         self._cut = (t, end)
-        events = self._events
-        while events and events[0][1] < t:
-            events.popleft()
+        for events in (self._events, self._kicks):
+            while events and _time(events[0]) < t:
+                events.popleft()
 
     def _settle_cut(self) -> None:
         """Apply the prune not applied yet: move _job0 past the jobs before its end that finished before its t."""
@@ -425,7 +426,17 @@ class Trace:
 
     def events(self) -> list[TraceEvent]:
         """The recorded instant events, oldest first."""
-        return [TraceEvent(*e) for e in self._events]
+        return [TraceEvent(*e) for e in self._instants()]
+
+    def kick_log(self) -> deque[int]:
+        """Where a watchdog appends the time of each kick (an instant "watchdog_kick" of source "watchdog"): an int
+        appended natively costs the loop less than a call."""
+        return self._kicks
+
+    def _instants(self) -> list[tuple[str, int, str, int]]:
+        """The instant events and the kicks, by time (in the order they were recorded at the same time)."""
+        kicks = [("watchdog_kick", t, "watchdog", -1) for t in self._kicks]
+        return sorted([*self._events, *kicks], key=_time) if kicks else list(self._events)
 
     def clear(self) -> None:
         """Forget every record."""
@@ -437,6 +448,7 @@ class Trace:
         self._irq_times.drop(len(self._irq_times))
         self._irq0 = self._times0 = 0
         self._events.clear()
+        self._kicks.clear()
 
     def write_csv(self, out: TextIO) -> None:
         """Write the jobs as CSV with a header row (times in cycles)."""
@@ -472,7 +484,7 @@ class Trace:
                 "args": {"job": job, "release_cycles": release, "ready_cycles": ready,
                          "response_cycles": finish - release},
             }
-        for kind, time, source, job in self._events:
+        for kind, time, source, job in self._instants():
             yield {
                 "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
                 "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": job},
@@ -503,7 +515,7 @@ class Trace:
                     f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
                                                    ready, finish - release)
                                      for t, j, release, ready, start, finish, _c in batch]))
-                for kind, time, source, j in self._events:
+                for kind, time, source, j in self._instants():
                     f.write(", " + encode({
                         "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
                         "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": j},
@@ -519,7 +531,8 @@ class Trace:
         names = list(self.task_names)
         self._trim()
         self._settle_cut()
-        for task in dict.fromkeys(code // CODES for code in self._codes.fields[0][self._job0 - self._checks[0].position:]):
+        codes = self._codes.fields[0][self._job0 - self._checks[0].position:]
+        for task in dict.fromkeys(code // CODES for code in codes):
             name = self._task_table[task][0]
             if name not in names:
                 names.append(name)
@@ -538,6 +551,11 @@ def _position(check: _Checkpoint) -> int:
 
 def _last_finish(check: _Checkpoint) -> int:
     return check.last_finish
+
+
+def _time(event: tuple[str, int, str, int] | int) -> int:
+    """An instant's time (a kick's is the int itself)."""
+    return event if isinstance(event, int) else event[1]
 
 
 def _before(t: int, period: int, first: int) -> int:

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from typing import Protocol
-
-from rtos.trace import Trace
 
 
 class _TimeSource(Protocol):
@@ -42,7 +41,7 @@ class Watchdog:
         self.resets = 0
         self.kicks = 0
         self._time: _TimeSource | None = None
-        self.trace: Trace | None = None  # set by Scheduler.add_watchdog: each kick is an instant there
+        self.kick_log: deque[int] | None = None  # set by Scheduler.add_watchdog: a trace's (Trace.kick_log)
 
     def bind(self, time_source: _TimeSource) -> None:
         """Use ``time_source.now`` for kicks without an explicit time, and arm at its present."""
@@ -65,8 +64,8 @@ class Watchdog:
             return  # too late: the reset at self.due is still pending and will fire first
         self.kicks += 1
         self.due = now + self.timeout_cycles
-        if self.trace is not None:
-            self.trace.add_event("watchdog_kick", now, "watchdog")
+        if self.kick_log is not None:
+            self.kick_log.append(now)
 
     def expire(self) -> int:
         """Fire the pending reset at ``due``: count it, call ``on_reset``, re-arm; return the reset cycle."""
