@@ -1,12 +1,13 @@
 """Optional job trace in a bounded ring buffer, exported as CSV or Chrome trace-event JSON (Perfetto).
 
 Besides the jobs it keeps, for each job that interrupts preempted, the firings of each interrupt source as the
-scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`), and instant
-events (deadline misses, overrun faults, watchdog kicks and resets). The hot loop appends a small int per job (its
-task and where its start is) to a list, and what its task's timing does not predict to side lists; the trace moves
-them into arrays (one per field, each as narrow as its values) every :data:`CHUNK_JOBS` jobs, with a checkpoint
-from which that chunk's jobs are read; formatting happens on export. ``prune_before`` drops what ended before a time
-(a window of the last seconds of a run).
+scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`; a periodic
+source's are derived from the job when read), and instant events (deadline misses, overrun faults, watchdog kicks
+and resets). The hot loop appends a small int per job (its task, where it started, which of its values it keeps
+beside it) to a list, and what its task's timing does not predict to side lists; the trace moves them into arrays
+(one per field, each as narrow as its values) every :data:`CHUNK_JOBS` jobs, with a checkpoint from which that
+chunk's jobs are read; formatting happens on export. ``prune_before`` drops what ended before a time (a window of
+the last seconds of a run).
 """
 
 from __future__ import annotations
@@ -30,11 +31,11 @@ CODES: Final = 9
 """A job's code is its task id * CODES + 3 * where it started + which of its values are kept beside it."""
 AT_LAST_FINISH: Final = 0  # started at the finish of the job recorded before it (the CPU went from one to the next)
 AT_NEXT_RELEASE: Final = 3  # at its task's first release after that finish (the CPU was idle until then)
-AT_GIVEN: Final = 6  # anywhere else: its start is the next in the starts list
+AT_GIVEN: Final = 6  # anywhere else: its start is the next given start
 AS_BEFORE: Final = 0  # its job, release, ready, interference and cost are as its task's timing predicts (Trace)
 NEW_INTERFERENCE: Final = 1  # ... but its interference, the next in the interference list
-DIFFERS: Final = 2  # its values are the next record of the side records (EXC_FIELDS)
-EXC_FIELDS = 5  # job, release - offset - job * period, ready - release, interference, cost - nominal cost
+DIFFERS: Final = 2  # its values are the next side record
+SIDE_FIELDS = 5  # the ints of a side record (Trace.flat_records)
 IRQ_FIELDS = 4  # job start, source index, firings, number of firing times
 CHUNK_JOBS = 4096
 """Jobs the hot loop appends to its lists before :meth:`Trace.compact` moves them into the arrays: the lists stay
@@ -144,7 +145,7 @@ class Trace:
     release after that finish, or (rarely: jitter, a late start) given. What its task's timing predicts from the
     start is not kept: job ``(start - offset) // period``, release ``offset + job * period``, ready at its release,
     and the interference (finish - start - cost) and cost - nominal cost of the task's previous job (0 for its
-    first). A job whose interference differs keeps it beside it (a job in eleven in a 2-stride run); one that differs
+    first). A job whose interference differs keeps it beside it (809 of a 2-stride run's 19,125 jobs); one that differs
     otherwise (a late start, jitter, a modelled cost) keeps a side record. The interrupt records of sources that are
     not periodic are kept as columns of ints; those of a periodic one (:attr:`periodic`) follow from the jobs'
     starts and finishes and are derived when read. Every chunk of jobs the hot loop appends (:meth:`flat_records`)
@@ -170,7 +171,7 @@ class Trace:
         self._codes = _Columns(1)
         self._given = _Columns(1)
         self._interference = _Columns(1)
-        self._differs = _Columns(EXC_FIELDS)
+        self._differs = _Columns(SIDE_FIELDS)
         self._checks = [_Checkpoint(0, 0, 0, 0, -1, (), ())]  # one per chunk, in order; the last is at the end
         self._job0 = 0  # the position of the first job kept (the ring)
         self._cut: tuple[int, int] | None = None  # (t, end): prune_before's, not applied yet (_settle_cut)
@@ -232,7 +233,7 @@ class Trace:
           beside it: :data:`AS_BEFORE` none, :data:`NEW_INTERFERENCE` its interference, :data:`DIFFERS` a side record;
         - the start of each AT_GIVEN job, in order;
         - the interference (finish - start - cost) of each NEW_INTERFERENCE job;
-        - the side records, :data:`EXC_FIELDS` ints each (job, release - offset - job * period, ready - release,
+        - the side records, :data:`SIDE_FIELDS` ints each (job, release - offset - job * period, ready - release,
           interference, cost - nominal cost), of each DIFFERS job: one whose job, release, ready or cost is not as
           its task's timing predicts (see the class);
         - records of the interrupts that preempted a job, :data:`IRQ_FIELDS` ints each (job start, source index,
@@ -336,11 +337,12 @@ class Trace:
         last, position = check.last_finish, check.position
         for code in self._codes.fields[0][check.position - first.position:]:
             task, where = divmod(code, CODES)
-            where, values = divmod(where, 3)
+            values = where % 3
+            where -= values
             name, offset, period, nominal = tasks[task]
-            if where == 0:
+            if where == AT_LAST_FINISH:
                 start = last
-            elif where == 1:
+            elif where == AT_NEXT_RELEASE:
                 start = offset + ((last - offset) // period + 1) * period
             else:
                 start = given[g]
