@@ -129,15 +129,15 @@ def check_params(names: tuple[str, ...], given: str = "") -> None:
 
 
 def fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...] = DEFAULT_FIT,
-              held_out: float = 0.2, max_nfev: int = 60) -> FitResult:
-    """Least squares on the windowed simulation error over the first (1 - held_out) of the experiment (a simulation
-    asked for again taken from the fit's memo: `fit_memo`)."""
+              max_nfev: int = 60) -> FitResult:
+    """Least squares on the windowed simulation error over the fitting part of the experiment (`fit_parts`: one
+    stretch in HELD_OUT_EVERY is held out to check the fit); a simulation asked for again is taken from the fit's
+    memo (`fit_memo`)."""
     with one_fit():
-        return _fit_plant(base, exp, names, held_out, max_nfev)
+        return _fit_plant(base, exp, names, max_nfev)
 
 
-def _fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...], held_out: float,
-               max_nfev: int) -> FitResult:
+def _fit_plant(base: PlantParams, exp: Experiment, names: tuple[str, ...], max_nfev: int) -> FitResult:
     """`fit_plant`'s work."""
     import time
 
