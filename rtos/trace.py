@@ -75,7 +75,7 @@ class _Columns:
     def extend(self, flat: list[int]) -> None:
         """Append the records of ``flat`` (``width`` ints each), and empty it."""
         width = len(self.fields)
-        self.fields = [_extended(f, flat[k::width]) for k, f in enumerate(self.fields)]
+        self.fields = [_extended(f, flat if width == 1 else flat[k::width]) for k, f in enumerate(self.fields)]
         del flat[:]
 
     def drop(self, n: int) -> None:
