@@ -1,6 +1,6 @@
 """Build hook: compile the simulation's hot path to C extensions with mypyc (everything else is in pyproject.toml).
 
-The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop (with the job record
+The modules listed in ``COMPILED`` run every virtual cycle: the scheduler loop (with its task slots, the job record
 its task bodies read and its watchdog), the interrupt interference solve, the virtual peripherals and
 device models with their event base classes, the plant, the ADC with the ground sensors and the ground
 reaction, the firmware's tasks, drivers and codecs, the shipped controllers (cascade, impedance) with
@@ -29,6 +29,7 @@ from setuptools.command.build_ext import build_ext
 
 COMPILED = [
     "rtos/scheduler.py",
+    "rtos/slot.py",
     "rtos/interrupts.py",
     "rtos/stats.py",
     "rtos/job.py",

@@ -9,8 +9,9 @@ from typing import Final
 
 from rtos.clock import Clock, VirtualClock
 from rtos.interrupts import CountingSource, InterruptSource, bind_sources, is_interrupt_source, solve_bound
+from rtos.slot import Slot
 from rtos.stats import Blocker, InterruptStats, TaskStats, Utilisation
-from rtos.task import Body, Fault, Job, OverrunError, OverrunPolicy, Task, by_priority
+from rtos.task import Fault, OverrunError, OverrunPolicy, Task, by_priority
 from rtos.trace import AT_GIVEN, AT_NEXT_RELEASE, CODES, DIFFERS, NEW_INTERFERENCE, Trace
 from rtos.watchdog import Watchdog
 
@@ -20,7 +21,6 @@ _MAX_TASKS: Final = 256  # tasks per scheduler (a wider ready bitmask works, but
 _FAR: Final = 1 << 61  # later than any event (435 years at 168 MHz); an unboxed int in compiled code
 _LATE: Final = OverrunPolicy.LATE
 _FAULT: Final = OverrunPolicy.FAULT
-_QUEUE: Final = OverrunPolicy.QUEUE
 
 
 class SchedulerNow:
@@ -44,50 +44,6 @@ class SchedulerNow:
         if s is None:
             raise RuntimeError("SchedulerNow called before a scheduler was bound to it")
         return s._now
-
-
-class _Slot:
-    """One task as the dispatch loop sees it: its constants and release state in native fields.
-
-    A task is either waiting for its next ready time (``waiting``) or pending in the scheduler's
-    ready bitmask (or running).
-    """
-
-    def __init__(self, rank: int, task: Task, stats: TaskStats, ready: int) -> None:
-        """Take the task's (frozen) parameters; the first release is at its offset, ready at ``ready``."""
-        self.rank = rank
-        self.task = task
-        self.name = task.name
-        self.period = task.period
-        self.offset = task.offset
-        self.deadline = task.relative_deadline
-        self.jitter = task.jitter
-        cost = task.cost
-        self.cost_model: Callable[[object], object] | None = cost if callable(cost) else None
-        self.cost = 0 if callable(cost) else cost
-        self.body: Body | None = task.body
-        self.plain = task.overrun is not _QUEUE  # a policy that drops releases
-        self.job = Job(task)
-        self.stats = stats
-        self.nrel = task.offset  # nominal release of the pending (or next) job
-        self.nnext = task.offset + task.period  # the release after it
-        self.ready = ready  # nrel after jitter
-        self.waiting = True
-        # what delayed the pending job: the blocking slot's rank (-1: nothing), its job's release, the delay;
-        # a Blocker is built from them only when the job sets a new worst response
-        self.blocked_by = -1
-        self.blocked_release = 0
-        self.blocked_cycles = 0
-        # the trace's id of the task (-1: its jobs are not recorded), its codes' base (id * CODES) and the
-        # interference and cost - nominal cost of its last job recorded (Trace.carried), read at each run's start
-        self.trace_id = -1
-        self.trace_code = 0
-        self.carried_preempted = 0
-        self.carried_dcost = 0
-
-    def index_of(self, release: int) -> int:
-        """Release index k of the nominal release ``release`` (= offset + k * period)."""
-        return (release - self.offset) // self.period
 
 
 class Scheduler:
@@ -143,10 +99,10 @@ class Scheduler:
         self._mask = 0
         self._prev = -1  # rank of the job that ran last (-1: the CPU was idle)
         self._prev_release = 0  # its nominal release
-        self._slots: list[_Slot] = []
+        self._slots: list[Slot] = []
         for i, t in enumerate(self._tasks):
             ready = t.offset + (self._rng.randint(0, t.jitter) if t.jitter else 0)
-            self._slots.append(_Slot(i, t, self._stat_list[i], ready))
+            self._slots.append(Slot(i, t, self._stat_list[i], ready))
 
     @property
     def now(self) -> int:
@@ -241,7 +197,7 @@ class Scheduler:
             if self.trace is not None:
                 self.trace.add_event("watchdog_reset", t, "watchdog")
 
-    def _overrun(self, slot: _Slot, release: int, nxt: int, finish: int) -> Fault | None:
+    def _overrun(self, slot: Slot, release: int, nxt: int, finish: int) -> Fault | None:
         """Apply the slot's policy to its releases in [nxt, finish); set its next job; maybe a Fault."""
         task, st = slot.task, slot.stats
         period = slot.period
@@ -290,7 +246,7 @@ class Scheduler:
                     earliest = r
         return bits, earliest
 
-    def _account(self, slot: _Slot, release: int, start: int, finish: int, cost: int) -> None:
+    def _account(self, slot: Slot, release: int, start: int, finish: int, cost: int) -> None:
         """Add a finished job (nominal release, start, finish, cycles of its own) to the slot's statistics."""
         st = slot.stats
         resp = finish - release

@@ -1,4 +1,4 @@
-"""Optional job trace in a bounded ring buffer, exported as CSV or Chrome trace-event JSON (Perfetto).
+"""Optional job trace in a bounded ring buffer (exported as CSV or Chrome trace-event JSON: rtos/trace_export.py).
 
 Besides the jobs it keeps, for each job that interrupts preempted, the firings of each interrupt source as the
 scheduler counted them (their times when the source can tell them, :meth:`CountingSource.fired_at`; a periodic
@@ -12,17 +12,12 @@ the last seconds of a run).
 
 from __future__ import annotations
 
-import csv
-import io
-import itertools
-import json
 import struct
 from array import array
 from bisect import bisect_left, bisect_right
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
-from pathlib import Path
-from typing import Final, NamedTuple, TextIO
+from typing import Final, NamedTuple
 
 from rtos.interrupts import firings_from
 
@@ -361,8 +356,9 @@ class Trace:
             yield position, name, job, release, release + ready, start, last, cost
             position += 1
 
-    def _job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
-        """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first."""
+    def job_rows(self) -> Iterator[tuple[str, int, int, int, int, int, int]]:
+        """The kept jobs as tuples (task name, job, release, ready, start, finish, cost), oldest first, one at a
+        time (:meth:`jobs` as a list of JobRecord)."""
         self._trim()
         self._settle_cut()
         job0 = self._job0
@@ -373,7 +369,7 @@ class Trace:
     def irqs(self) -> list[IrqRecord]:
         """The interrupt firings inside the kept jobs, oldest first (by job, then by source): a periodic source's
         derived from each job's start and finish, the other sources' as recorded."""
-        jobs = [(start, finish) for *_, start, finish, _cost in self._job_rows()]
+        jobs = [(start, finish) for *_, start, finish, _cost in self.job_rows()]
         starts = {start for start, _finish in jobs}
         times, t, k = self._irq_times.fields[0], self._times0, self._irq0
         out: list[tuple[int, int, int, tuple[int, ...]]] = []
@@ -424,21 +420,18 @@ class Trace:
 
     def jobs(self) -> list[JobRecord]:
         """The recorded jobs, oldest first."""
-        return [JobRecord(*r) for r in self._job_rows()]
+        return [JobRecord(*r) for r in self.job_rows()]
 
     def events(self) -> list[TraceEvent]:
-        """The recorded instant events, oldest first."""
-        return [TraceEvent(*e) for e in self._instants()]
+        """The recorded instant events and the kicks (kick_log), by time (in the order they were recorded at the same
+        time)."""
+        kicks = [("watchdog_kick", t, "watchdog", -1) for t in self._kicks]
+        return [TraceEvent(*e) for e in (sorted([*self._events, *kicks], key=_time) if kicks else self._events)]
 
     def kick_log(self) -> deque[int]:
         """Where a watchdog appends the time of each kick (an instant "watchdog_kick" of source "watchdog"): an int
         appended natively costs the loop less than a call."""
         return self._kicks
-
-    def _instants(self) -> list[tuple[str, int, str, int]]:
-        """The instant events and the kicks, by time (in the order they were recorded at the same time)."""
-        kicks = [("watchdog_kick", t, "watchdog", -1) for t in self._kicks]
-        return sorted([*self._events, *kicks], key=_time) if kicks else list(self._events)
 
     def clear(self) -> None:
         """Forget every record."""
@@ -452,84 +445,8 @@ class Trace:
         self._events.clear()
         self._kicks.clear()
 
-    def write_csv(self, out: TextIO) -> None:
-        """Write the jobs as CSV with a header row (times in cycles)."""
-        w = csv.writer(out, lineterminator="\n")
-        w.writerow(JOB_COLUMNS)
-        w.writerows(self._job_rows())
-
-    def to_csv(self) -> str:
-        """Return the jobs as CSV text."""
-        buf = io.StringIO()
-        self.write_csv(buf)
-        return buf.getvalue()
-
-    def to_chrome(self, f_cpu_hz: int) -> dict[str, list[dict[str, object]]]:
-        """Return a Chrome trace-event document: one "X" event per job (ts/dur in µs), one tid per task."""
-        return {"traceEvents": list(self.chrome_events(f_cpu_hz))}
-
-    def chrome_events(self, f_cpu_hz: int) -> Iterator[dict[str, object]]:
-        """The events of :meth:`to_chrome` one at a time (metadata, jobs, then instants)."""
-        if f_cpu_hz <= 0:
-            raise ValueError(f"f_cpu_hz must be > 0 Hz, got {f_cpu_hz!r}")
-        us = 1e6 / f_cpu_hz
-        names = self._names()
-        tid = {n: k + 1 for k, n in enumerate(names)}
-        yield {"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": "rtos"}}
-        for n in names:
-            yield {"name": "thread_name", "ph": "M", "pid": 1, "tid": tid[n], "args": {"name": n}}
-            yield {"name": "thread_sort_index", "ph": "M", "pid": 1, "tid": tid[n], "args": {"sort_index": tid[n]}}
-        for task, job, release, ready, start, finish, _cost in self._job_rows():
-            yield {
-                "name": task, "cat": "job", "ph": "X", "pid": 1, "tid": tid[task],
-                "ts": start * us, "dur": (finish - start) * us,
-                "args": {"job": job, "release_cycles": release, "ready_cycles": ready,
-                         "response_cycles": finish - release},
-            }
-        for kind, time, source, job in self._instants():
-            yield {
-                "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
-                "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": job},
-            }
-
-    def write_chrome(self, path: str | Path, f_cpu_hz: int) -> None:
-        """Write the Chrome trace-event JSON to ``path`` (open it in Perfetto or chrome://tracing).
-
-        The same bytes as ``json.dumps(self.to_chrome(f_cpu_hz))``, written a batch of events at a time (no
-        document in memory; the job events from a template, which is several times faster than encoding
-        dicts) to a temporary name that is renamed when done.
-        """
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp")
-        encode = json.JSONEncoder().encode
-        events = self.chrome_events(f_cpu_hz)
-        head = [encode(e) for e in itertools.islice(events, 1 + 2 * len(self._names()))]  # the metadata
-        us = 1e6 / f_cpu_hz
-        tid = {n: k + 1 for k, n in enumerate(self._names())}
-        name = {n: encode(n) for n in tid}
-        job = ('{"name": %s, "cat": "job", "ph": "X", "pid": 1, "tid": %d, "ts": %r, "dur": %r, "args": '
-               '{"job": %d, "release_cycles": %d, "ready_cycles": %d, "response_cycles": %d}}')
-        try:
-            with tmp.open("w", encoding="utf-8") as f:
-                f.write('{"traceEvents": [' + ", ".join(head))
-                jobs = self._job_rows()
-                while batch := list(itertools.islice(jobs, 10_000)):
-                    f.write("".join([", " + job % (name[t], tid[t], start * us, (finish - start) * us, j, release,
-                                                   ready, finish - release)
-                                     for t, j, release, ready, start, finish, _c in batch]))
-                for kind, time, source, j in self._instants():
-                    f.write(", " + encode({
-                        "name": f"{kind}:{source}", "cat": kind, "ph": "i", "s": "g" if source not in tid else "t",
-                        "pid": 1, "tid": tid.get(source, 0), "ts": time * us, "args": {"job": j},
-                    }))
-                f.write("]}")
-            tmp.replace(path)
-        except BaseException:  # a failed write leaves no partial file behind
-            tmp.unlink(missing_ok=True)
-            raise
-
-    def _names(self) -> list[str]:
-        """Task names in tid order: the declared ones, then any other seen in the jobs."""
+    def task_order(self) -> list[str]:
+        """The task names: the declared ones (priority order), then any other seen in the kept jobs."""
         names = list(self.task_names)
         self._trim()
         self._settle_cut()

@@ -10,6 +10,7 @@ import pytest
 
 from rtos import Fault, OverrunPolicy, Scheduler, Task, Trace, VirtualClock, Watchdog
 from rtos.interrupts import firings_from
+from rtos.trace_export import to_chrome, to_csv, write_chrome
 
 
 def _traced_run():
@@ -32,7 +33,7 @@ def test_ring_buffer_keeps_the_last_jobs_only():
 
 def test_csv_has_header_and_one_row_per_job():
     s, tr = _traced_run()
-    rows = list(csv.reader(io.StringIO(tr.to_csv())))
+    rows = list(csv.reader(io.StringIO(to_csv(tr))))
     assert rows[0] == ["task", "job", "release", "ready", "start", "finish", "cost"]
     assert len(rows) - 1 == sum(st.jobs for st in s.stats.values())
     assert rows[1] == ["log", "0", "0", "0", "0", "450", "450"]
@@ -40,7 +41,7 @@ def test_csv_has_header_and_one_row_per_job():
 
 def test_chrome_trace_has_complete_events_per_task_and_instants():
     s, tr = _traced_run()
-    doc = json.loads(json.dumps(tr.to_chrome(1_000_000)))
+    doc = json.loads(json.dumps(to_chrome(tr, 1_000_000)))
     events = doc["traceEvents"]
     jobs = [e for e in events if e["ph"] == "X"]
     assert len(jobs) == len(tr.jobs())
@@ -64,7 +65,7 @@ def test_fault_events_are_traced(tmp_path):
     events = [(e.kind, e.time, e.source, e.job) for e in tr.events()]
     assert events[:2] == [("deadline_miss", 10, "x", 0), ("fault", 10, "x", 0)]
     path = tmp_path / "t.json"
-    tr.write_chrome(path, 168_000_000)
+    write_chrome(tr, path, 168_000_000)
     doc = json.loads(path.read_text())
     x = [e for e in doc["traceEvents"] if e["ph"] == "X"]
     assert x[0]["dur"] == pytest.approx(15 / 168)
@@ -82,8 +83,8 @@ def test_write_chrome_writes_the_bytes_of_to_chrome(tmp_path):
     tr.add_event("fault", 12345, "ctl", 4)
     tr.add_event("watchdog_reset", 99999, "board")
     path = tmp_path / "trace.json"
-    tr.write_chrome(path, 168_000_000)
-    assert path.read_text(encoding="utf-8") == json.dumps(tr.to_chrome(168_000_000))
+    write_chrome(tr, path, 168_000_000)
+    assert path.read_text(encoding="utf-8") == json.dumps(to_chrome(tr, 168_000_000))
     assert [p.name for p in tmp_path.iterdir()] == ["trace.json"]
 
 
